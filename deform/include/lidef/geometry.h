@@ -1,0 +1,32 @@
+// Small geometric primitives shared by the basis, the validator and the sampler.
+#pragma once
+#include <cmath>
+
+#include "lidef/types.h"
+
+namespace lidef {
+
+// Signed solid angle of triangle (a,b,c) seen from p, divided by 4π (van Oosterom & Strackee 1983).
+// Positive when p lies on the side opposite to the normal (b-a)x(c-a), i.e. inside a closed
+// outward-oriented surface; the sum over a closed surface is the winding number.
+inline double solid_angle_fraction(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& p) {
+  const Vec3 la = a - p, lb = b - p, lc = c - p;
+  const double na = la.norm(), nb = lb.norm(), nc = lc.norm();
+  const double num = la.dot(lb.cross(lc));
+  const double den = na * nb * nc + la.dot(lb) * nc + lb.dot(lc) * na + lc.dot(la) * nb;
+  return std::atan2(num, den) / (2.0 * M_PI);
+}
+
+// Squared distance from p to the closed segment [a,b].
+inline double point_segment_dist2(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 d = b - a;
+  const double dd = d.squaredNorm();
+  double t = dd > 0 ? (p - a).dot(d) / dd : 0.0;
+  t = std::min(1.0, std::max(0.0, t));
+  return (a + t * d - p).squaredNorm();
+}
+
+// Squared distance from p to the closed triangle (a,b,c) (Ericson, Real-Time Collision Detection 5.1.5).
+double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+}  // namespace lidef

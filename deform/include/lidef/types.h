@@ -1,0 +1,13 @@
+// Common array types. Shapes are documented at every use ("#V by 3").
+#pragma once
+#include <Eigen/Core>
+
+namespace lidef {
+using MatX3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;  // one point per row
+using MatX3i = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;     // one triangle per row
+using MatXd = Eigen::MatrixXd;
+using VecXd = Eigen::VectorXd;
+using VecXi = Eigen::VectorXi;
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+}  // namespace lidef
