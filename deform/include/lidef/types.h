@@ -1,6 +1,7 @@
 // Common array types. Shapes are documented at every use ("#V by 3").
 #pragma once
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 namespace lidef {
 using MatX3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;  // one point per row

@@ -1,0 +1,78 @@
+// The cage-based harmonic basis of Ben-Chen et al. 2009 / Lipman et al. 2008 (paper Sec. 3.2, App. A):
+//   f(p) = Σ_v y_v φ_v(p) + Σ_t y_t ψ_t(p)
+// with ψ_t(p) = 1/(4π) ∫_t 1/|ξ−p| dA and φ_v(p) = 1/(4π) ∫ hat_v(ξ) (ξ−p)·n/|ξ−p|³ dA.
+// Closed forms (with the sign corrections of docs/math.md) for values, gradients and Hessians.
+#pragma once
+#include <array>
+#include <vector>
+
+#include "lidef/cage.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+// Number of stored entries of a symmetric 3x3 Hessian, in the order xx, xy, xz, yy, yz, zz.
+constexpr int kSym = 6;
+
+// f, J and H of a map at one point: J(a,b) = ∂f_a/∂p_b, H[a](b,c) = ∂²f_a/∂p_b∂p_c.
+struct MapJet {
+  Vec3 f = Vec3::Zero();
+  Mat3 J = Mat3::Zero();
+  std::array<Mat3, 3> H{Mat3::Zero(), Mat3::Zero(), Mat3::Zero()};
+  // Full Frobenius norm of the 3x3x3 Hessian tensor (all 27 entries; MATH-NOTES).
+  double hessian_norm() const { return std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm()); }
+};
+
+// Per-edge functions of the differential representation (paper Thm. 5.2, App. A (42)) for one
+// directed edge e = (u -> w) of triangle t, opposite vertex v: α_e and β_e at a point p.
+// ∇ω_t = −Σ_e α_e (MATH-NOTES erratum of (51)), ∇C_e = β_e.
+struct EdgeAlphaBeta {
+  Vec3 alpha, beta;
+};
+EdgeAlphaBeta edge_alpha_beta(const Vec3& u, const Vec3& w, const Vec3& p);
+
+// The basis of one cage. Construction precomputes all per-face constants once; evaluation is
+// thread-safe (const) and allocation-free when the caller provides buffers.
+class HarmonicBasis {
+ public:
+  explicit HarmonicBasis(const Cage& cage);
+
+  int num_vertices() const { return nv_; }
+  int num_faces() const { return nf_; }
+  int size() const { return nv_ + nf_; }  // #V+#F basis functions, vertex functions first
+
+  // Evaluates all basis functions at p. order 0: values; 1: + gradients; 2: + Hessians.
+  // Buffers (may be null when not wanted; otherwise sized as noted, overwritten):
+  //   value #V+#F;  grad (#V+#F) by 3 row-major;  hess (#V+#F) by 6 row-major (xx,xy,xz,yy,yz,zz).
+  void evaluate(const Vec3& p, int order, double* value, double* grad, double* hess) const;
+
+  // Map jet for coefficients y (#V+#F by 3) at p; order as in evaluate().
+  MapJet map_jet(const MatX3d& y, const Vec3& p, int order = 2) const;
+
+  // Batched matrices for many points P (#P by 3), evaluated in parallel:
+  //   values    #P by #V+#F                 (row i: basis values at p_i; f(P) = D y)
+  //   gradients 3#P by #V+#F                (row 3i+b: ∂/∂p_b at p_i;   J(p_i)ᵀ = rows 3i..3i+2 times y)
+  //   hessians  6#P by #V+#F                (row 6i+k: k-th symmetric entry at p_i)
+  MatXd value_matrix(const MatX3d& P) const;
+  MatXd gradient_matrix(const MatX3d& P) const;
+  MatXd hessian_matrix(const MatX3d& P) const;
+
+  // Map values at many points: #P by 3.
+  MatX3d map_values(const MatX3d& y, const MatX3d& P) const;
+
+ private:
+  struct Face {
+    int vid[3];
+    Vec3 x[3];        // vertex positions
+    Vec3 n;           // unit outward normal
+    double two_area;  // 2 s_t
+    Vec3 d[3];        // d_k = x_{k+1} − x_{k−1}: edge opposite vertex k, in cage order
+    double dlen[3];
+    Vec3 dhat[3];
+    Vec3 n_x_dhat[3];  // n × d̂_k
+  };
+  int nv_, nf_;
+  std::vector<Face> faces_;
+};
+
+}  // namespace lidef
