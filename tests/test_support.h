@@ -1,6 +1,7 @@
 // Helpers shared by the test files: where data lives, temp dirs, running the CLI.
 #pragma once
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -42,7 +43,7 @@ struct TempDir {
 
 // Runs a shell command, returns its exit code; stdout+stderr go to `output`.
 inline int run_command(const std::string& cmd, std::string* output = nullptr) {
-  const std::string tmp = std::filesystem::temp_directory_path() / ("lidef_cmd_" + std::to_string(std::rand()));
+  const std::string tmp = std::filesystem::temp_directory_path() / ("lidef_cmd_" + std::to_string(::getpid()) + "_" + std::to_string(std::rand()));
   const int status = std::system((cmd + " > " + tmp + " 2>&1").c_str());
   if (output) {
     FILE* f = std::fopen(tmp.c_str(), "rb");

@@ -1,0 +1,48 @@
+// Reading and writing triangle meshes and point lists in plain text formats.
+//
+// Accepted formats (chosen by the file extension, case-insensitive):
+//   .obj  `v x y z [extra numbers ignored]` and `f a b c` lines. Face corners may be written `a`, `a/t`,
+//         `a//n` or `a/t/n`; only the vertex index is used. Indices are 1-based; negative indices count back
+//         from the last vertex defined so far (-1 = previous vertex). Faces with more than 3 corners are
+//         rejected rather than triangulated: the choice of diagonal changes a non-planar cage's geometry, and
+//         keeping one triangle per `f` line keeps face numbers in messages equal to the file's `f` order.
+//         vt/vn/vp/g/o/s/l/p/usemtl/mtllib lines and `#` comments are ignored; any other statement is an
+//         error.
+//   .off  `[C|N|ST...]OFF` header, `nv nf ne`, nv vertex lines (extra numbers such as colors ignored) and nf
+//         face lines `3 a b c [color]` with 0-based indices; `#` comments.
+// Every failure throws InputError(file, message, line) naming the file and, where it applies, the line.
+#pragma once
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "lidef/tri_mesh.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+// 1-based line numbers of the records a mesh was read from, so validators can point at the right line.
+struct MeshLines {
+  std::vector<long> vertex;  // #V: line of each `v` record
+  std::vector<long> face;    // #F: line of each `f` record
+};
+
+// Reads a triangle mesh (.obj or .off). Returns V (#V by 3), F (#F by 3, 0-based) and source = path.
+// Checks syntax, finite coordinates, index range and face arity; at least one vertex and one face.
+// Does no topological or geometric validation (see model_check.h). `lines`, when given, receives the
+// line of every vertex and face.
+TriMesh read_mesh(const std::string& path, MeshLines* lines = nullptr);
+
+// Writes V (#V by 3) and F (#F by 3, 0-based) as OBJ with 1-based `f` lines. Coordinates use the shortest
+// decimal form that reads back to the identical double (std::to_chars), so write/read round-trips exactly
+// and the output is deterministic. `comment`, when non-empty, is written first as `# ...` lines.
+void write_obj(std::ostream& out, const MatX3d& V, const MatX3i& F, const std::string& comment = "");
+
+// Reads a point list: one `x y z` per line; blank lines and `#` comments are skipped. Returns #P by 3.
+// Throws InputError for a missing/empty/binary file, a line without exactly 3 numbers, or a non-finite value.
+MatX3d read_points_xyz(const std::string& path);
+
+// Formats a double in the shortest form that round-trips (as write_obj does).
+std::string format_double(double x);
+
+}  // namespace lidef

@@ -1,0 +1,109 @@
+// The local-injectivity certificate (paper Sec. 3.3, 4, 5, 7.2; docs/certificate.md).
+//
+// A map f is certified on the union of the voxels when every leaf voxel (center c, circumradius r)
+// satisfies   σ3(c) − r·L > τ,   where L is a Lipschitz constant of σ3 on the voxel's ball:
+//   first order  (17): L = Σ_e ‖δ_A^e‖_F Γ_e,  Γ_e = max_ball sqrt(|α_e|²+|β_e|²)
+//   third order  (21): L = ‖H(c)‖ + r Σ_e ‖δ_A^e‖_F Θ_e,  Θ_e = max_ball sqrt(‖∇α_e‖²+‖∇β_e‖²)  ((20),(66),(67))
+// (sums over undirected edges; the paper's ½ Σ over directed edges counts each edge twice), and τ is a
+// floating-point allowance (see Tolerance below). Failing voxels are split into 8 children, each with its
+// own exact σ3 and ‖H‖ at its center and the smaller of the parent's and its own third-order bound.
+// Depth exhausted, or σ3 ≤ 0 at any center, means NOT certified.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "lidef/cage.h"
+#include "lidef/green_coordinates.h"
+#include "lidef/sampling.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+enum class LipschitzBound { kFirstOrder, kThirdOrder };
+const char* to_string(LipschitzBound b);           // "first" / "third"
+LipschitzBound lipschitz_bound_from_string(const std::string& s);  // throws InputError
+
+struct CertifyParams {
+  LipschitzBound bound = LipschitzBound::kThirdOrder;
+  int max_depth = 6;                 // subdivision levels below the base voxels
+  long max_refined_voxels = 200000;  // budget of child voxels evaluated in all; exhausted = not certified
+  long max_children_per_voxel = 4096;  // budget per base voxel (a full depth-4 subtree); exhausted = not certified
+  bool stop_on_failure = false;      // return as soon as the verdict is "not certified" (line search)
+  bool keep_leaves = true;           // fill Certificate::leaves (reports); the verdict never depends on it
+  int max_failing_reported = 20;
+};
+
+// One leaf of the certification octree.
+struct CertLeaf {
+  Vec3 center;
+  double side;
+  int depth;
+  double sigma3;  // signed σ3 at the center
+  double L;       // Lipschitz constant of σ3 on the voxel's ball
+  double margin;  // σ3 − r L − τ (> 0: certified)
+  bool certified;
+  int base;       // index of the base voxel it refines
+};
+
+struct Certificate {
+  bool certified = false;
+  std::string reason;  // why not certified (empty when certified)
+  LipschitzBound bound = LipschitzBound::kThirdOrder;
+  double voxel_side = 0;
+  int voxels = 0;          // base voxels
+  long num_leaves = 0;     // leaf voxels (= voxels + 7 × refined when complete)
+  long refined = 0;        // voxels subdivided
+  int max_depth_used = 0;
+  double min_sigma3_center = 0;  // over all evaluated centers
+  double min_margin = 0;         // over leaves: σ3 − r L − τ
+  double min_lower_bound = 0;    // over leaves: σ3 − r L, a lower bound of σ3 on the covered region
+  std::vector<CertLeaf> leaves;  // when keep_leaves (in base-voxel order, children depth-first)
+  std::vector<CertLeaf> failing; // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
+  double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
+};
+
+// Precomputes everything that depends only on the cage and the voxels (per-voxel per-edge bound factors,
+// basis derivatives at the centers) once; certify() then does only map-dependent work.
+class OctreeCertifier {
+ public:
+  // `reduction` (#V+#F by s, optional): the subspace y = Ξ ỹ in which certify_reduced() is called; the
+  // basis Jacobians/Hessians at the centers are then precomputed in that space (3|I| by s and 6|I| by s).
+  // Without it, full-space matrices are precomputed when they fit in `max_matrix_bytes`, else the
+  // centers are evaluated on the fly.
+  OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction = nullptr,
+                  double max_matrix_bytes = 1.5e9);
+  ~OctreeCertifier();
+
+  // Certifies the map with full coefficients y (#V+#F by 3).
+  Certificate certify(const MatX3d& y, const CertifyParams& params = {}) const;
+  // Same map given in the reduced space (ỹ: s by 3, y = Ξ ỹ); uses the precomputed reduced matrices.
+  Certificate certify_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& y_reduced,
+                              const CertifyParams& params = {}) const;
+
+  // ‖δ_A^e‖_F for every undirected cage edge (#E): zero for affine maps.
+  VecXd edge_delta_norms(const MatX3d& y) const;
+
+  const VoxelSampling& sampling() const { return sampling_; }
+  const HarmonicBasis& basis() const { return basis_; }
+  double precompute_seconds() const { return precompute_seconds_; }
+
+  // Floating-point allowance τ added to condition (6): relative to the magnitudes that enter σ3 and L.
+  static constexpr double kRoundingRel = 1e-9;
+
+ private:
+  struct Impl;
+  Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows, const CertifyParams& p) const;
+
+  const Cage& cage_;
+  VoxelSampling sampling_;
+  HarmonicBasis basis_;
+  std::unique_ptr<Impl> impl_;
+  double precompute_seconds_ = 0;
+};
+
+// One-shot convenience: precompute and certify once.
+Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y,
+                        const CertifyParams& params = {});
+
+}  // namespace lidef

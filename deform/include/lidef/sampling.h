@@ -1,0 +1,72 @@
+// Voxel sampling of the cage interior (Liao et al. 2021, Sec. 3.3 and 7.1): the set I of cube centers on
+// which the energy is evaluated and condition (6) is certified, and the Hessian subset H ⊂ I.
+//
+// A voxel is kept only if its center has winding number exactly 1 and its circumscribed ball
+// B(center, r), r = (√3/2) side, stays at distance ≥ (safety − 1) r from the cage (center distance
+// ≥ safety · r). The winding number is constant off the cage surface, so the whole ball then lies in the
+// winding-number-1 region — never in a self-intersection pocket, where the identity coefficients give
+// f = 2p — and the third-order bound (66)/(67) of the certificate, which needs ‖l‖ − r > 0 and grows without
+// bound as a ball nears the cage, stays finite on every voxel.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "lidef/cage.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+struct SamplingParams {
+  // Desired |I|; the voxel side is searched until |I| is within count_tolerance of it (relative).
+  int target_count = 30000;
+  double count_tolerance = 0.03;
+  // > 0: use exactly this voxel side and skip the search (target_count is then ignored).
+  double voxel_side = 0;
+  // Center-to-cage distance ≥ safety · r. Must be > 1 (at 1 the ball touches the cage and the third-order
+  // bound is infinite); 1.5 leaves every ball r/2 clear of the cage while losing only a thin layer.
+  double safety = 1.5;
+  // |H| = round(hessian_fraction · |I|) (paper: 5%), spread evenly over the volume (see select_hessian_subset).
+  double hessian_fraction = 0.05;
+  int max_search_iterations = 40;
+};
+
+struct VoxelSampling {
+  MatX3d centers;                   // #I by 3 voxel centers, grid order (z slowest, x fastest)
+  double side = 0;                  // cube side h
+  double radius() const;            // (√3/2) h, center-to-corner: the radius condition (6) uses
+  std::vector<int> hessian_subset;  // ascending indices into centers (the set H)
+  Vec3 origin = Vec3::Zero();       // grid origin: center of cell (i,j,k) = origin + ((i,j,k) + 0.5) h
+  MatX3i grid_index;                // #I by 3 cell indices (i,j,k); empty when the centers are not on one grid
+  double safety = 0;                // clearance factor the centers satisfy (0 = unknown, e.g. published samples)
+  int search_iterations = 0;        // voxel-side evaluations the count search used
+  bool target_met = true;           // false if the search ended without reaching the count tolerance
+  int size() const { return static_cast<int>(centers.rows()); }
+};
+
+// Samples the interior of `cage` on a regular grid aligned with the cage's bounding-box minimum.
+// Deterministic: the same cage and parameters give bit-identical output, whatever the thread count.
+// When the count search cannot reach the tolerance (tiny targets), returns the closest count found with
+// target_met = false. Throws InputError on bad parameters or a cage with non-positive volume.
+VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& params = SamplingParams());
+
+// The Hessian subset rule: samples ordered along a Morton (Z-order) curve of their grid indices, cut into
+// |H| = round(fraction · #I) strata of consecutive ranks, one pick per stratum at a golden-ratio offset
+// (stratified sampling along a space-filling curve). H is spread evenly in 3D without the aliasing of
+// "every k-th in scan order", which can put all of H on one plane. Without grid indices the stored order
+// is used instead of the curve.
+// Returns ascending indices into sampling.centers; at least one when fraction > 0 and #I > 0.
+std::vector<int> select_hessian_subset(const VoxelSampling& sampling, double fraction);
+
+// For each point (#P by 3), the index of a voxel (closed cube of side h) containing it, or -1.
+VecXi containing_voxel(const VoxelSampling& sampling, const MatX3d& points);
+
+// Fraction of mesh vertices (#V by 3) inside the union of the voxels (closed cubes).
+double mesh_coverage(const VoxelSampling& sampling, const MatX3d& mesh_V);
+
+// Reads the paper's samples.xyz (one "x y z" per line; blank lines and '#' comments skipped) as cubes of
+// side voxel_side (model.json: samples.voxel_side) centered at the points. grid_index is filled when the
+// points lie on one grid of that spacing. Throws InputError with the line number on malformed input.
+VoxelSampling load_published_samples(const std::string& samples_xyz, double voxel_side,
+                                     double hessian_fraction = 0.05);
+
+}  // namespace lidef

@@ -1,0 +1,429 @@
+#include "lidef/octree_certifier.h"
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+
+#include "lidef/errors.h"
+#include "lidef/lipschitz_bound.h"
+#include "lidef/signed_svd.h"
+
+namespace lidef {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+constexpr double kInf = std::numeric_limits<double>::infinity();
+using RowMatXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// Full 27-entry Frobenius norm of a Hessian tensor given as 3 symmetric 6-entry rows (xx,xy,xz,yy,yz,zz).
+inline double hessian_norm_sym(const double* h0, int stride_a) {
+  double s = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double* h = h0 + a * stride_a;
+    s += h[0] * h[0] + h[3] * h[3] + h[5] * h[5] + 2 * (h[1] * h[1] + h[2] * h[2] + h[4] * h[4]);
+  }
+  return std::sqrt(s);
+}
+
+}  // namespace
+
+const char* to_string(LipschitzBound b) { return b == LipschitzBound::kFirstOrder ? "first" : "third"; }
+
+LipschitzBound lipschitz_bound_from_string(const std::string& s) {
+  if (s == "first") return LipschitzBound::kFirstOrder;
+  if (s == "third") return LipschitzBound::kThirdOrder;
+  throw InputError("", "unknown bound '" + s + "' (expected 'first' or 'third')");
+}
+
+struct OctreeCertifier::Impl {
+  enum class Mode { kReduced, kFull, kOnTheFly } mode = Mode::kOnTheFly;
+  const MatXd* reduction = nullptr;  // #V+#F by s
+  MatXd G, H;                        // 3|I| by m and 6|I| by m (m = s or #V+#F), unless on the fly
+  VecXd scale_J, scale_H;            // per voxel: Σ_k Σ_rows |G|, |H| (rounding allowance)
+  // Per-face constants of Lemma 5.1: A_t = y_t nᵀ − Σ_k y_{v_k} g_kᵀ, g_k = (n × d_k) / (2 s_t).
+  std::vector<std::array<Vec3, 3>> g;
+  std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
+  // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
+  mutable std::once_flag first_once, third_once;
+  mutable RowMatXd first, third;
+};
+
+OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
+                                 double max_matrix_bytes)
+    : cage_(cage), sampling_(sampling), basis_(cage), impl_(std::make_unique<Impl>()) {
+  const auto t0 = Clock::now();
+  if (!(sampling.side > 0)) throw InputError("", "voxel side must be > 0");
+  if (sampling.size() == 0) throw InputError("", "no voxels to certify");
+  Impl& im = *impl_;
+  im.reduction = reduction;
+  const int nf = cage.num_faces();
+  im.g.resize(nf);
+  for (int t = 0; t < nf; ++t) {
+    const Vec3 n = cage.N.row(t);
+    const double two_s = 2 * cage.area(t);
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 d = cage.V.row(cage.F(t, (k + 1) % 3)) - cage.V.row(cage.F(t, (k + 2) % 3));
+      im.g[t][k] = n.cross(d) / two_s;
+    }
+  }
+  for (const CageEdge& e : cage.edges) {
+    im.eu.push_back(cage.V.row(e.v0));
+    im.ew.push_back(cage.V.row(e.v1));
+  }
+  const long N = sampling.size(), n = basis_.size();
+  const long m = reduction ? reduction->cols() : n;
+  if (reduction && reduction->rows() != n)
+    throw InputError("", "reduction basis has " + std::to_string(reduction->rows()) + " rows, expected #V+#F = " +
+                             std::to_string(n));
+  const double bytes = 9.0 * N * m * sizeof(double);
+  if (reduction || bytes <= max_matrix_bytes) {
+    im.mode = reduction ? Impl::Mode::kReduced : Impl::Mode::kFull;
+    im.G.resize(3 * N, m);
+    im.H.resize(6 * N, m);
+    const long chunk = 1024;
+    for (long s = 0; s < N; s += chunk) {
+      const long c = std::min(chunk, N - s);
+      const MatX3d P = sampling.centers.middleRows(s, c);
+      if (reduction) {
+        im.G.middleRows(3 * s, 3 * c).noalias() = basis_.gradient_matrix(P) * (*reduction);
+        im.H.middleRows(6 * s, 6 * c).noalias() = basis_.hessian_matrix(P) * (*reduction);
+      } else {
+        im.G.middleRows(3 * s, 3 * c) = basis_.gradient_matrix(P);
+        im.H.middleRows(6 * s, 6 * c) = basis_.hessian_matrix(P);
+      }
+    }
+    im.scale_J.resize(N);
+    im.scale_H.resize(N);
+    for (long i = 0; i < N; ++i) {
+      im.scale_J(i) = im.G.middleRows(3 * i, 3).cwiseAbs().sum();
+      im.scale_H(i) = im.H.middleRows(6 * i, 6).cwiseAbs().sum();
+    }
+  }
+  precompute_seconds_ = ms_since(t0) / 1000.0;
+}
+
+OctreeCertifier::~OctreeCertifier() = default;
+
+VecXd OctreeCertifier::edge_delta_norms(const MatX3d& y) const {
+  const Impl& im = *impl_;
+  const int nv = cage_.num_vertices(), nf = cage_.num_faces();
+  std::vector<Mat3> A(nf);
+  for (int t = 0; t < nf; ++t) {
+    Mat3 a = y.row(nv + t).transpose() * cage_.N.row(t);
+    for (int k = 0; k < 3; ++k) a.noalias() -= y.row(cage_.F(t, k)).transpose() * im.g[t][k].transpose();
+    A[t] = a;
+  }
+  VecXd out(cage_.num_edges());
+  for (int e = 0; e < cage_.num_edges(); ++e) out(e) = (A[cage_.edges[e].f0] - A[cage_.edges[e].f1]).norm();
+  return out;
+}
+
+Certificate OctreeCertifier::certify(const MatX3d& y, const CertifyParams& params) const {
+  if (y.rows() != basis_.size())
+    throw InputError("", "coefficients have " + std::to_string(y.rows()) + " rows, expected #V+#F = " +
+                             std::to_string(basis_.size()));
+  if (!y.allFinite()) throw InputError("", "coefficients contain NaN or Inf");
+  return run(y, nullptr, 0, params);
+}
+
+Certificate OctreeCertifier::certify_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& yr,
+                                             const CertifyParams& params) const {
+  if (!impl_->reduction) throw Error("certify_reduced needs a certifier built with a reduction basis");
+  if (yr.rows() != impl_->reduction->cols())
+    throw InputError("", "reduced coefficients have " + std::to_string(yr.rows()) + " rows, expected " +
+                             std::to_string(impl_->reduction->cols()));
+  if (!yr.allFinite()) throw InputError("", "reduced coefficients contain NaN or Inf");
+  const MatX3d y = (*impl_->reduction) * yr;
+  return run(y, yr.data(), yr.rows(), params);
+}
+
+Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_rows, const CertifyParams& p) const {
+  const auto t_start = Clock::now();
+  if (p.max_depth < 0) throw InputError("", "max depth must be >= 0");
+  const Impl& im = *impl_;
+  const long N = sampling_.size(), E = cage_.num_edges();
+  const double side = sampling_.side, r = sampling_.radius();
+  const bool third = p.bound == LipschitzBound::kThirdOrder;
+  Certificate cert;
+  cert.bound = p.bound;
+  cert.voxel_side = side;
+  cert.voxels = static_cast<int>(N);
+
+  // --- 1. J and H at the base centers.
+  auto t0 = Clock::now();
+  Eigen::Matrix<double, Eigen::Dynamic, 3> Jt(3 * N, 3), Hs(6 * N, 3);  // rows: ∂/∂p_b; columns: f_a
+  VecXd scaleJ(N), scaleH(N);
+  const double ymax = y.cwiseAbs().maxCoeff();
+  if (im.mode != Impl::Mode::kOnTheFly) {
+    const bool red = im.mode == Impl::Mode::kReduced;
+    if (red && !yr_ptr) {
+      // Full coefficients on a reduced certifier: evaluate on the fly below instead.
+    } else {
+      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3>> Y(red ? yr_ptr : y.data(), red ? yr_rows : y.rows(), 3);
+      const double cmax = red ? Y.cwiseAbs().maxCoeff() : ymax;
+      if (red) {
+        Jt.noalias() = im.G * Y;
+        Hs.noalias() = im.H * Y;
+      } else {
+        const Eigen::Matrix<double, Eigen::Dynamic, 3> Yc = y;  // y is row-major; GEMM wants col-major
+        Jt.noalias() = im.G * Yc;
+        Hs.noalias() = im.H * Yc;
+      }
+      scaleJ = im.scale_J * cmax;
+      scaleH = im.scale_H * cmax;
+    }
+  }
+  const bool on_the_fly = im.mode == Impl::Mode::kOnTheFly || (im.mode == Impl::Mode::kReduced && !yr_ptr);
+  const int n = basis_.size();
+  // Exact J, ‖H‖ and rounding scales at any point from the full coefficients.
+  auto eval_point = [&](const Vec3& c, Mat3& J, double& hnorm, double& sJ, double& sH, std::vector<double>& gb,
+                        std::vector<double>& hb) {
+    basis_.evaluate(c, third ? 2 : 1, nullptr, gb.data(), third ? hb.data() : nullptr);
+    J.setZero();
+    double H6[3][6] = {};
+    sJ = sH = 0;
+    for (int k = 0; k < n; ++k) {
+      const Vec3 yk = y.row(k).transpose();
+      const double* gk = &gb[3 * k];
+      J.noalias() += yk * Eigen::Map<const Eigen::RowVector3d>(gk);
+      sJ += std::abs(gk[0]) + std::abs(gk[1]) + std::abs(gk[2]);
+      if (third) {
+        const double* hk = &hb[kSym * k];
+        for (int a = 0; a < 3; ++a)
+          for (int q = 0; q < 6; ++q) H6[a][q] += yk(a) * hk[q];
+        for (int q = 0; q < 6; ++q) sH += std::abs(hk[q]);
+      }
+    }
+    sJ *= ymax;
+    sH *= ymax;
+    hnorm = third ? hessian_norm_sym(&H6[0][0], 6) : 0.0;
+  };
+  std::vector<Mat3> Jc(N);
+  VecXd hnorm(N);
+  if (on_the_fly) {
+#pragma omp parallel
+    {
+      std::vector<double> gb(3 * n), hb(kSym * n);
+#pragma omp for schedule(dynamic, 64)
+      for (long i = 0; i < N; ++i)
+        eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), gb, hb);
+    }
+  } else {
+    for (long i = 0; i < N; ++i) {
+      Jc[i] = Jt.middleRows(3 * i, 3).transpose();
+      double H6[3][6];
+      for (int a = 0; a < 3; ++a)
+        for (int q = 0; q < 6; ++q) H6[a][q] = Hs(6 * i + q, a);
+      hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
+    }
+  }
+  cert.ms_jacobian = ms_since(t0);
+
+  // --- 2. σ3 at the centers.
+  t0 = Clock::now();
+  VecXd sigma3(N);
+#pragma omp parallel for schedule(static)
+  for (long i = 0; i < N; ++i) sigma3(i) = signed_singular_values(Jc[i])(2);
+  cert.ms_sigma = ms_since(t0);
+  cert.min_sigma3_center = sigma3.minCoeff();
+
+  // --- 3. Lipschitz constants: δ norms (map) times the per-voxel per-edge factors (cage only).
+  t0 = Clock::now();
+  const VecXd delta = edge_delta_norms(y);
+  const RowMatXd* factors;
+  if (third) {
+    std::call_once(im.third_once, [&] {
+      im.third.resize(N, E);
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < N; ++i)
+        for (long e = 0; e < E; ++e)
+          im.third(i, e) = third_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r);
+    });
+    factors = &im.third;
+  } else {
+    std::call_once(im.first_once, [&] {
+      im.first.resize(N, E);
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < N; ++i)
+        for (long e = 0; e < E; ++e)
+          im.first(i, e) = first_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r);
+    });
+    factors = &im.first;
+  }
+  // 0 · ∞ must stay ∞ only where the map bends at that edge; an affine part (δ = 0) contributes nothing.
+  VecXd T(N);
+#pragma omp parallel for schedule(static)
+  for (long i = 0; i < N; ++i) {
+    double s = 0;
+    const double* f = factors->row(i).data();
+    for (long e = 0; e < E; ++e)
+      if (delta(e) != 0) s += delta(e) * f[e];
+    T(i) = s;
+  }
+  auto lipschitz = [&](double hn, double t, double rad) { return third ? hn + rad * t : t; };
+  auto tolerance = [&](double sJ, double sH, double s3, double L, double rad) {
+    return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L);
+  };
+  std::vector<CertLeaf> base(N);
+  std::vector<long> failing_base;
+  for (long i = 0; i < N; ++i) {
+    const double L = lipschitz(hnorm(i), T(i), r);
+    const double lb = sigma3(i) - r * L;
+    const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r);
+    base[i] = {sampling_.centers.row(i).transpose(), side, 0, sigma3(i), L, margin, margin > 0, static_cast<int>(i)};
+    if (!(margin > 0)) failing_base.push_back(i);
+  }
+  cert.ms_bound = ms_since(t0);
+
+  // --- 4. Adaptive refinement of the failing voxels.
+  t0 = Clock::now();
+  std::atomic<long> budget_used{0};
+  std::atomic<bool> abort{false};
+  std::atomic<bool> budget_hit{false};
+  std::vector<std::vector<CertLeaf>> sub(failing_base.size());
+  std::vector<char> sub_ok(failing_base.size(), 0);
+  std::vector<long> sub_refined(failing_base.size(), 0);
+  std::vector<int> sub_depth(failing_base.size(), 0);
+  std::vector<double> sub_min_sigma(failing_base.size(), kInf);
+#pragma omp parallel
+  {
+    std::vector<double> gb(3 * n), hb(kSym * n);
+#pragma omp for schedule(dynamic, 1)
+    for (long fi = 0; fi < static_cast<long>(failing_base.size()); ++fi) {
+      const long i = failing_base[fi];
+      std::vector<CertLeaf>& out = sub[fi];
+      if (sigma3(i) <= 0 || p.max_depth == 0 || (p.stop_on_failure && abort.load())) {
+        out.push_back(base[i]);  // σ3 ≤ 0 at a center: no subdivision can certify it
+        if (p.stop_on_failure) abort = true;
+        continue;
+      }
+      // Depth-first refinement with an explicit stack; children keep the parent's third-order bound
+      // unless their own (smaller ball) is tighter.
+      struct Node {
+        Vec3 c;
+        double side;
+        int depth;
+        double bound;  // third: Σ δ Θ over the node's ball; first: L over the node's ball
+      };
+      std::vector<Node> stack;
+            bool ok = true, definite_fail = false;
+      long refined = 1, evaluated = 0;
+      int depth_used = 0;
+      double min_sigma = kInf;
+      auto push_children = [&](const Node& nd) {
+        for (int k = 7; k >= 0; --k) {
+          const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
+          stack.push_back({nd.c + nd.side * off, nd.side / 2, nd.depth + 1, nd.bound});
+        }
+      };
+      push_children({base[i].center, side, 0, T(i)});
+      while (!stack.empty()) {
+        if (p.stop_on_failure && abort.load()) {
+          ok = false;
+          break;
+        }
+        const Node nd = stack.back();
+        stack.pop_back();
+        if (definite_fail || ++evaluated > p.max_children_per_voxel ||
+            budget_used.fetch_add(1) >= p.max_refined_voxels) {
+          // Unresolved: left uncertified (a leaf with unknown σ3 keeps the leaves a tiling of the voxel).
+          ok = false;
+          if (!definite_fail) budget_hit = true;
+          if (p.stop_on_failure) abort = true;
+          out.push_back({nd.c, nd.side, nd.depth, std::numeric_limits<double>::quiet_NaN(), kInf, -kInf, false,
+                         static_cast<int>(i)});
+          continue;
+        }
+        depth_used = std::max(depth_used, nd.depth);
+        const double rad = 0.5 * std::sqrt(3.0) * nd.side;
+        Mat3 J;
+        double hn, sJ, sH;
+        eval_point(nd.c, J, hn, sJ, sH, gb, hb);
+        const double s3 = signed_singular_values(J)(2);
+        min_sigma = std::min(min_sigma, s3);
+        double own = 0;
+        for (long e = 0; e < E; ++e)
+          if (delta(e) != 0)
+            own += delta(e) * (third ? third_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad)
+                                     : first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad));
+        const double bnd = std::min(nd.bound, own);
+        const double L = lipschitz(hn, bnd, rad);
+        const double margin = s3 - rad * L - tolerance(sJ, sH, s3, L, rad);
+        if (margin > 0) {
+          out.push_back({nd.c, nd.side, nd.depth, s3, L, margin, true, static_cast<int>(i)});
+        } else if (s3 <= 0 || nd.depth >= p.max_depth) {
+          out.push_back({nd.c, nd.side, nd.depth, s3, L, margin, false, static_cast<int>(i)});
+          ok = false;
+          // σ3 ≤ 0 at a center settles this voxel: refining its siblings cannot change the verdict.
+          if (s3 <= 0) definite_fail = true;
+          if (p.stop_on_failure) abort = true;
+        } else {
+          ++refined;
+          push_children({nd.c, nd.side, nd.depth, bnd});
+        }
+      }
+      sub_ok[fi] = ok;
+      sub_refined[fi] = refined;
+      sub_depth[fi] = depth_used;
+      sub_min_sigma[fi] = min_sigma;
+    }
+  }
+  cert.ms_refine = ms_since(t0);
+
+  // --- 5. Assemble, in base-voxel order (deterministic whatever the thread schedule).
+  bool all_ok = true;
+  cert.min_margin = kInf;
+  cert.min_lower_bound = kInf;
+  size_t fi = 0;
+  long leaves = 0;
+  for (long i = 0; i < N; ++i) {
+    const bool refined_here = fi < failing_base.size() && failing_base[fi] == i;
+    const std::vector<CertLeaf> single{base[i]};
+    const std::vector<CertLeaf>& ls = refined_here ? sub[fi] : single;
+    if (refined_here) {
+      all_ok = all_ok && sub_ok[fi];
+      cert.refined += (sigma3(i) <= 0 || p.max_depth == 0) ? 0 : sub_refined[fi];
+      cert.max_depth_used = std::max(cert.max_depth_used, sub_depth[fi]);
+      cert.min_sigma3_center = std::min(cert.min_sigma3_center, sub_min_sigma[fi]);
+      ++fi;
+    }
+    for (const CertLeaf& l : ls) {
+      ++leaves;
+      cert.min_margin = std::min(cert.min_margin, l.margin);
+      cert.min_lower_bound = std::min(cert.min_lower_bound, l.sigma3 - 0.5 * std::sqrt(3.0) * l.side * l.L);
+      if (!l.certified) {
+        all_ok = false;
+        if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
+      }
+      if (p.keep_leaves) cert.leaves.push_back(l);
+    }
+  }
+  cert.certified = all_ok;
+  cert.num_leaves = leaves;
+  if (!cert.certified) {
+    if (cert.min_sigma3_center <= 0)
+      cert.reason = "sigma3 <= 0 at a sampled center: the map is not locally injective there";
+    else if (budget_hit.load())
+      cert.reason = "refinement budget exhausted (" + std::to_string(p.max_children_per_voxel) + " per voxel, " +
+                    std::to_string(p.max_refined_voxels) + " in all)";
+    else if (p.stop_on_failure && abort.load())
+      cert.reason = "a voxel failed at maximum depth " + std::to_string(p.max_depth);
+    else
+      cert.reason = "condition (6) fails on " + std::to_string(cert.failing.size()) +
+                    (cert.failing.size() == static_cast<size_t>(p.max_failing_reported) ? "+" : "") +
+                    " leaf voxel(s) at maximum depth " + std::to_string(p.max_depth);
+  }
+  cert.ms_total = ms_since(t_start);
+  return cert;
+}
+
+Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y, const CertifyParams& params) {
+  return OctreeCertifier(cage, sampling).certify(y, params);
+}
+
+}  // namespace lidef

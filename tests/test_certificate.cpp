@@ -1,0 +1,290 @@
+// The certificate against ground truth: the voxel bounds against sampled maxima, the differential
+// representation of H against the basis Hessians, and whole certificates against dense sampling.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "lidef/certificate_verification.h"
+#include "lidef/errors.h"
+#include "lidef/lipschitz_bound.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/sampling.h"
+#include "lidef/subspace.h"
+#include "test_cages.h"
+#include "test_support.h"
+
+using namespace lidef;
+
+namespace {
+
+std::mt19937 rng_for(unsigned s) { return std::mt19937(s); }
+
+Vec3 random_unit(std::mt19937& rng) {
+  std::normal_distribution<double> N01;
+  return Vec3(N01(rng), N01(rng), N01(rng)).normalized();
+}
+
+// A smooth non-affine map: identity plus `amp` times a fixed random mix of the smoothest non-affine
+// subspace directions (columns 4..11 of Ξ), one mix per coordinate.
+MatX3d smooth_map(const Cage& cage, const SpectralSubspace& sub, double amp, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  const double size = (cage.bbox_max - cage.bbox_min).norm();
+  for (int k = 4; k < std::min(12, sub.size()); ++k)
+    for (int a = 0; a < 3; ++a) y.col(a) += amp * size * N01(rng) * sub.basis.col(k);
+  return y;
+}
+
+struct CertCase {
+  Cage cage;
+  VoxelSampling sampling;
+  SpectralSubspace sub;
+};
+
+CertCase make_setup(const TriMesh& m, int voxels, int s = 40) {
+  Cage cage(m);
+  SamplingParams sp;
+  sp.target_count = voxels;
+  sp.count_tolerance = 0.1;
+  VoxelSampling samp = sample_voxels(cage, sp);
+  SpectralSubspace sub = compute_subspace(cage, s);
+  return {std::move(cage), std::move(samp), std::move(sub)};
+}
+
+}  // namespace
+
+TEST(CertificateBounds, ClosedForms64And65MatchFiniteDifferences) {
+  // (64) and (65) (with the erratum "−2n d² sin²θ") against central differences of α and β.
+  auto rng = rng_for(3);
+  std::normal_distribution<double> N01;
+  for (int trial = 0; trial < 50; ++trial) {
+    const Vec3 u(N01(rng), N01(rng), N01(rng)), w(N01(rng), N01(rng), N01(rng));
+    const Vec3 q = 0.5 * (u + w) + 1.5 * random_unit(rng) * (0.3 + std::abs(N01(rng)));
+    const double h = 1e-6;
+    double ga = 0, gb = 0;
+    for (int b = 0; b < 3; ++b) {
+      const EdgeAlphaBeta p = edge_alpha_beta(u, w, q + h * Vec3::Unit(b));
+      const EdgeAlphaBeta m = edge_alpha_beta(u, w, q - h * Vec3::Unit(b));
+      ga += ((p.alpha - m.alpha) / (2 * h)).squaredNorm();
+      gb += ((p.beta - m.beta) / (2 * h)).squaredNorm();
+    }
+    EXPECT_NEAR(grad_alpha_norm2_closed_form(u, w, q), ga, 1e-6 * ga);
+    EXPECT_NEAR(grad_beta_norm2_closed_form(u, w, q), gb, 1e-6 * gb);
+  }
+}
+
+TEST(CertificateBounds, VoxelBoundsHoldOnSampledPointsOfRandomBalls) {
+  // (66)/(67) and the first-order factor are upper bounds of the pointwise quantities over the ball.
+  auto rng = rng_for(4);
+  std::normal_distribution<double> N01;
+  std::uniform_real_distribution<double> U(0, 1);
+  int finite = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const Vec3 u(N01(rng), N01(rng), N01(rng)), w = u + random_unit(rng) * (0.2 + U(rng));
+    const Vec3 p = u + (w - u) * (U(rng) * 1.6 - 0.3) + random_unit(rng) * (0.1 + 1.5 * U(rng));
+    const double r = 0.02 + 0.3 * U(rng);
+    const double f1 = first_order_edge_factor(u, w, p, r), f3 = third_order_edge_factor(u, w, p, r);
+    if (!std::isfinite(f3)) continue;
+    ++finite;
+    for (int k = 0; k < 400; ++k) {
+      // Points in the ball, half of them on its boundary sphere where the maxima tend to sit.
+      const Vec3 q = p + random_unit(rng) * r * (k % 2 ? 1.0 : std::cbrt(U(rng)));
+      ASSERT_LE(alpha_beta_norm2(u, w, q), f1 * f1 * (1 + 1e-12));
+      ASSERT_LE(grad_alpha_norm2_closed_form(u, w, q) + grad_beta_norm2_closed_form(u, w, q), f3 * f3 * (1 + 1e-12));
+    }
+  }
+  EXPECT_GT(finite, 100);
+}
+
+TEST(CertificateBounds, DifferentialRepresentationEqualsMinusBasisHessian) {
+  // (53) with the MATH-NOTES sign: H = −Σ_t Σ_k (A_t ∘ α_k + A_t[d̂_k]× ∘ β_k); so ‖H‖ is what (15)-(21) bound.
+  const Cage cage(lidef::test::icosphere(1, 0.2, 3));
+  const HarmonicBasis B(cage);
+  const VoxelSampling dummy = [&] {
+    VoxelSampling v;
+    v.centers = lidef::test::interior_points(cage, 1, 0.1);
+    v.side = 0.1;
+    return v;
+  }();
+  auto rng = rng_for(5);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  for (int i = 0; i < y.rows(); ++i) y.row(i) += 0.2 * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
+  const MatX3d P = lidef::test::interior_points(cage, 10, 0.05);
+  const int nv = cage.num_vertices();
+  for (int i = 0; i < P.rows(); ++i) {
+    const Vec3 p = P.row(i);
+    std::array<Mat3, 3> H{Mat3::Zero(), Mat3::Zero(), Mat3::Zero()};
+    for (int t = 0; t < cage.num_faces(); ++t) {
+      const Vec3 n = cage.N.row(t);
+      Mat3 A = y.row(nv + t).transpose() * n.transpose();
+      Vec3 X[3];
+      for (int k = 0; k < 3; ++k) X[k] = cage.V.row(cage.F(t, k));
+      for (int k = 0; k < 3; ++k) {
+        const Vec3 d = X[(k + 1) % 3] - X[(k + 2) % 3];
+        A -= y.row(cage.F(t, k)).transpose() * (n.cross(d) / (2 * cage.area(t))).transpose();
+      }
+      for (int k = 0; k < 3; ++k) {
+        const Vec3 d = X[(k + 1) % 3] - X[(k + 2) % 3];
+        const EdgeAlphaBeta ab = edge_alpha_beta(X[(k + 2) % 3], X[(k + 1) % 3], p);
+        Mat3 dx;
+        const Vec3 dh = d.normalized();
+        dx << 0, -dh.z(), dh.y(), dh.z(), 0, -dh.x(), -dh.y(), dh.x(), 0;
+        const Mat3 Ad = A * dx;
+        for (int a = 0; a < 3; ++a)  // (M ∘ v)_{a b c} = M_{a b} v_c
+          H[a] -= A.row(a).transpose() * ab.alpha.transpose() + Ad.row(a).transpose() * ab.beta.transpose();
+      }
+    }
+    const MapJet jet = B.map_jet(y, p);
+    double diff = 0;
+    for (int a = 0; a < 3; ++a) diff += (H[a] - jet.H[a]).squaredNorm();
+    EXPECT_LT(std::sqrt(diff), 1e-9 * jet.hessian_norm()) << "at " << p.transpose();
+  }
+  (void)dummy;
+}
+
+TEST(Certificate, IdentityCertifiesAtDepthZero) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 3000);
+  OctreeCertifier cert(s.cage, s.sampling);
+  for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder}) {
+    CertifyParams p;
+    p.bound = b;
+    const Certificate c = cert.certify(s.cage.identity_coefficients(), p);
+    EXPECT_TRUE(c.certified) << c.reason;
+    EXPECT_EQ(c.refined, 0);
+    EXPECT_EQ(c.max_depth_used, 0);
+    EXPECT_EQ(c.num_leaves, s.sampling.size());
+    EXPECT_NEAR(c.min_sigma3_center, 1.0, 1e-9);
+  }
+}
+
+TEST(Certificate, CertifiedMapsHaveNoNonPositiveSigma3UnderDenseSampling) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 1500);
+  OctreeCertifier cert(s.cage, s.sampling);
+  const HarmonicBasis& B = cert.basis();
+  auto rng = rng_for(6);
+  std::normal_distribution<double> N01;
+  int certified = 0, refused = 0;
+  std::vector<MatX3d> maps;
+  for (int k = 0; k < 2; ++k) {  // random maps near the identity (all coefficients perturbed)
+    MatX3d y = s.cage.identity_coefficients();
+    for (int i = 0; i < y.rows(); ++i) y.row(i) += 0.01 * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
+    maps.push_back(y);
+  }
+  {  // the same composed with a random affine map (orientation preserving)
+    Mat3 A = Mat3::Identity() + 0.4 * Mat3::Random();
+    if (A.determinant() < 0) A.col(0) *= -1;
+    MatX3d y = maps[0];
+    for (int i = 0; i < y.rows(); ++i) y.row(i) = (A * y.row(i).transpose()).transpose();
+    for (int i = 0; i < s.cage.num_vertices(); ++i) y.row(i) += Vec3(1, -2, 0.5).transpose();
+    maps.push_back(y);
+  }
+  for (double amp : {0.05, 0.45, 0.9, 1.3}) maps.push_back(smooth_map(s.cage, s.sub, amp, 11));
+  for (size_t mi = 0; mi < maps.size(); ++mi)
+    for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder}) {
+      // The weak first-order bound refines strongly bent maps into very many leaves: check it on the
+      // milder maps only, to keep the dense verification affordable.
+      if (b == LipschitzBound::kFirstOrder && mi + 2 >= maps.size()) continue;
+      const MatX3d& y = maps[mi];
+      CertifyParams p;
+      p.bound = b;
+      p.max_depth = 2;
+      const Certificate c = cert.certify(y, p);
+      const VerificationResult v = verify_certificate(B, y, c.leaves, 8, 3);
+
+      EXPECT_EQ(v.violations, 0) << "the Lipschitz bound is wrong somewhere";
+      if (c.certified) {
+        ++certified;
+        EXPECT_EQ(v.nonpositive_in_certified, 0);
+        EXPECT_GT(v.min_sigma3, 0);
+        EXPECT_GE(c.min_lower_bound, 0);
+      } else {
+        ++refused;
+        EXPECT_FALSE(c.failing.empty());
+      }
+    }
+  // The family must exercise both verdicts, or the test proves nothing.
+  EXPECT_GT(certified, 3);
+  EXPECT_GT(refused, 0);
+}
+
+TEST(Certificate, FoldedMapIsNeverCertified) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 1500);
+  OctreeCertifier cert(s.cage, s.sampling);
+  // Grow a smooth map until some voxel center has det J < 0: a fold inside the sampled domain.
+  for (double amp = 0.2; amp < 20; amp *= 1.4) {
+    const MatX3d y = smooth_map(s.cage, s.sub, amp, 12);
+    bool fold = false;
+    for (int i = 0; i < s.sampling.size() && !fold; i += 7)
+      fold = cert.basis().map_jet(y, s.sampling.centers.row(i).transpose(), 1).J.determinant() < 0;
+    if (!fold) continue;
+    std::cout << "fold at amplitude " << amp << "\n";
+    for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder}) {
+      CertifyParams p;
+      p.bound = b;
+      const Certificate c = cert.certify(y, p);
+      EXPECT_FALSE(c.certified);
+      EXPECT_LE(c.min_sigma3_center, 0);
+      EXPECT_FALSE(c.reason.empty());
+    }
+    return;
+  }
+  FAIL() << "no folded map found";
+}
+
+TEST(Certificate, ThirdOrderBoundIsTighterThanFirstOrder) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 2000);
+  OctreeCertifier cert(s.cage, s.sampling);
+  const MatX3d y = smooth_map(s.cage, s.sub, 0.2, 13);
+  CertifyParams p;
+  p.max_depth = 0;
+  p.bound = LipschitzBound::kFirstOrder;
+  const Certificate c1 = cert.certify(y, p);
+  p.bound = LipschitzBound::kThirdOrder;
+  const Certificate c3 = cert.certify(y, p);
+  ASSERT_EQ(c1.leaves.size(), c3.leaves.size());
+  double sum1 = 0, sum3 = 0;
+  for (size_t i = 0; i < c1.leaves.size(); ++i) {
+    sum1 += c1.leaves[i].L;
+    sum3 += c3.leaves[i].L;
+  }
+  std::cout << "mean L first-order / third-order = " << sum1 / sum3 << "\n";
+  EXPECT_LT(sum3, sum1);
+}
+
+TEST(Certificate, DeterministicAndReducedPathAgrees) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 1500);
+  OctreeCertifier full(s.cage, s.sampling);
+  OctreeCertifier red(s.cage, s.sampling, &s.sub.basis);
+  Eigen::Matrix<double, Eigen::Dynamic, 3> yr = s.sub.basis.transpose() * smooth_map(s.cage, s.sub, 0.3, 14);
+  const MatX3d y = s.sub.basis * yr;
+  CertifyParams p;
+  p.max_depth = 3;
+  const Certificate a = full.certify(y, p), b = full.certify(y, p), c = red.certify_reduced(yr, p);
+  ASSERT_EQ(a.leaves.size(), b.leaves.size());
+  for (size_t i = 0; i < a.leaves.size(); ++i) {
+    EXPECT_EQ(a.leaves[i].sigma3, b.leaves[i].sigma3);
+    EXPECT_EQ(a.leaves[i].L, b.leaves[i].L);
+    EXPECT_EQ(a.leaves[i].margin, b.leaves[i].margin);
+  }
+  EXPECT_EQ(a.certified, c.certified);
+  EXPECT_EQ(a.num_leaves, c.num_leaves);
+  EXPECT_NEAR(a.min_sigma3_center, c.min_sigma3_center, 1e-10);
+}
+
+TEST(Certificate, BadInputIsRejected) {
+  const CertCase s = make_setup(lidef::test::icosphere(1, 0.1, 8), 300);
+  OctreeCertifier cert(s.cage, s.sampling);
+  MatX3d y = s.cage.identity_coefficients();
+  EXPECT_THROW(cert.certify(y.topRows(y.rows() - 1)), InputError);
+  y(3, 1) = std::nan("");
+  EXPECT_THROW(cert.certify(y), InputError);
+  CertifyParams p;
+  p.max_depth = -1;
+  EXPECT_THROW(cert.certify(s.cage.identity_coefficients(), p), InputError);
+  VoxelSampling bad = s.sampling;
+  bad.side = 0;
+  EXPECT_THROW(OctreeCertifier(s.cage, bad), InputError);
+  EXPECT_THROW(lipschitz_bound_from_string("second"), InputError);
+}
