@@ -155,7 +155,7 @@ TEST(Certificate, IdentityCertifiesAtDepthZero) {
     EXPECT_EQ(c.refined, 0);
     EXPECT_EQ(c.max_depth_used, 0);
     EXPECT_EQ(c.num_leaves, s.sampling.size());
-    EXPECT_NEAR(c.min_sigma3_center, 1.0, 1e-9);
+    EXPECT_NEAR(c.min_sigma3_center, 1.0, 1e-5);  // basis derivatives are stored as float
   }
 }
 

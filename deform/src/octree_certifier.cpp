@@ -18,7 +18,13 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 constexpr double kInf = std::numeric_limits<double>::infinity();
-using RowMatXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// The smallest float ≥ x (upper bounds stay upper bounds when stored as float).
+inline float round_up(double x) {
+  float f = static_cast<float>(x);
+  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
 
 // Full 27-entry Frobenius norm of a Hessian tensor given as 3 symmetric 6-entry rows (xx,xy,xz,yy,yz,zz).
 inline double hessian_norm_sym(const double* h0, int stride_a) {
@@ -43,14 +49,20 @@ LipschitzBound lipschitz_bound_from_string(const std::string& s) {
 struct OctreeCertifier::Impl {
   enum class Mode { kReduced, kFull, kOnTheFly } mode = Mode::kOnTheFly;
   const MatXd* reduction = nullptr;  // #V+#F by s
-  MatXd G, H;                        // 3|I| by m and 6|I| by m (m = s or #V+#F), unless on the fly
-  VecXd scale_J, scale_H;            // per voxel: Σ_k Σ_rows |G|, |H| (rounding allowance)
+  // Basis derivatives at the centers in the coefficient space (m = s or #V+#F), unless on the fly: per voxel
+  // one contiguous block of 9 rows of m floats — the 3 gradient rows (∂/∂x, ∂/∂y, ∂/∂z), then the 6 Hessian
+  // rows (xx,xy,xz,yy,yz,zz) — so one certification streams the array once. Float halves the bytes of this
+  // bandwidth-bound stage; the storage rounding is covered by the allowance kFloatStorageRel (see run()).
+  std::vector<float> GH;
+  long m = 0;
+  VecXd scale_J, scale_H;  // per voxel: Σ over the rows and k of |stored value| (rounding allowance)
   // Per-face constants of Lemma 5.1: A_t = y_t nᵀ − Σ_k y_{v_k} g_kᵀ, g_k = (n × d_k) / (2 s_t).
   std::vector<std::array<Vec3, 3>> g;
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
-  mutable RowMatXd first, third;
+  // Stored as floats rounded *up*, so that they stay upper bounds.
+  mutable Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> first, third;
 };
 
 OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
@@ -80,28 +92,38 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
   if (reduction && reduction->rows() != n)
     throw InputError("", "reduction basis has " + std::to_string(reduction->rows()) + " rows, expected #V+#F = " +
                              std::to_string(n));
-  const double bytes = 9.0 * N * m * sizeof(double);
+  const double bytes = 9.0 * N * m * sizeof(float);
   if (reduction || bytes <= max_matrix_bytes) {
     im.mode = reduction ? Impl::Mode::kReduced : Impl::Mode::kFull;
-    im.G.resize(3 * N, m);
-    im.H.resize(6 * N, m);
+    im.m = m;
+    im.GH.resize(static_cast<size_t>(9 * N * m));
+    im.scale_J.resize(N);
+    im.scale_H.resize(N);
     const long chunk = 1024;
     for (long s = 0; s < N; s += chunk) {
       const long c = std::min(chunk, N - s);
       const MatX3d P = sampling.centers.middleRows(s, c);
+      MatXd Gc, Hc;
       if (reduction) {
-        im.G.middleRows(3 * s, 3 * c).noalias() = basis_.gradient_matrix(P) * (*reduction);
-        im.H.middleRows(6 * s, 6 * c).noalias() = basis_.hessian_matrix(P) * (*reduction);
+        Gc.noalias() = basis_.gradient_matrix(P) * (*reduction);
+        Hc.noalias() = basis_.hessian_matrix(P) * (*reduction);
       } else {
-        im.G.middleRows(3 * s, 3 * c) = basis_.gradient_matrix(P);
-        im.H.middleRows(6 * s, 6 * c) = basis_.hessian_matrix(P);
+        Gc = basis_.gradient_matrix(P);
+        Hc = basis_.hessian_matrix(P);
       }
-    }
-    im.scale_J.resize(N);
-    im.scale_H.resize(N);
-    for (long i = 0; i < N; ++i) {
-      im.scale_J(i) = im.G.middleRows(3 * i, 3).cwiseAbs().sum();
-      im.scale_H(i) = im.H.middleRows(6 * i, 6).cwiseAbs().sum();
+#pragma omp parallel for schedule(static)
+      for (long j = 0; j < c; ++j) {
+        float* blk = im.GH.data() + static_cast<size_t>((s + j) * 9 * m);
+        double sj = 0, sh = 0;
+        for (int row = 0; row < 9; ++row)
+          for (long k = 0; k < m; ++k) {
+            const float v = static_cast<float>(row < 3 ? Gc(3 * j + row, k) : Hc(6 * j + row - 3, k));
+            blk[row * m + k] = v;
+            (row < 3 ? sj : sh) += std::abs(static_cast<double>(v));
+          }
+        im.scale_J(s + j) = sj;
+        im.scale_H(s + j) = sh;
+      }
     }
   }
   precompute_seconds_ = ms_since(t0) / 1000.0;
@@ -156,29 +178,52 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 
   // --- 1. J and H at the base centers.
   auto t0 = Clock::now();
-  Eigen::Matrix<double, Eigen::Dynamic, 3> Jt(3 * N, 3), Hs(6 * N, 3);  // rows: ∂/∂p_b; columns: f_a
   VecXd scaleJ(N), scaleH(N);
+  std::vector<Mat3> Jc(N);
+  VecXd hnorm(N);
   const double ymax = y.cwiseAbs().maxCoeff();
-  if (im.mode != Impl::Mode::kOnTheFly) {
-    const bool red = im.mode == Impl::Mode::kReduced;
-    if (red && !yr_ptr) {
-      // Full coefficients on a reduced certifier: evaluate on the fly below instead.
-    } else {
-      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3>> Y(red ? yr_ptr : y.data(), red ? yr_rows : y.rows(), 3);
-      const double cmax = red ? Y.cwiseAbs().maxCoeff() : ymax;
-      if (red) {
-        Jt.noalias() = im.G * Y;
-        Hs.noalias() = im.H * Y;
-      } else {
-        const Eigen::Matrix<double, Eigen::Dynamic, 3> Yc = y;  // y is row-major; GEMM wants col-major
-        Jt.noalias() = im.G * Yc;
-        Hs.noalias() = im.H * Yc;
+  const bool use_stored = im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr_ptr);
+  if (use_stored) {
+    // Coefficients as 3 contiguous columns of m doubles.
+    const long m = im.m;
+    std::vector<double> Ycols(3 * m);
+    for (long k = 0; k < m; ++k)
+      for (int a = 0; a < 3; ++a) Ycols[a * m + k] = yr_ptr ? yr_ptr[a * yr_rows + k] : y(k, a);
+    double cmax = 0;
+    for (double v : Ycols) cmax = std::max(cmax, std::abs(v));
+    const double* y0 = Ycols.data();
+    const double* y1 = y0 + m;
+    const double* y2 = y1 + m;
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
+      double out[9][3];
+      for (int row = 0; row < 9; ++row) {
+        const float* g = blk + row * m;
+        double a0 = 0, a1 = 0, a2 = 0;
+#pragma omp simd reduction(+ : a0, a1, a2)
+        for (long k = 0; k < m; ++k) {
+          const double gk = g[k];
+          a0 += gk * y0[k];
+          a1 += gk * y1[k];
+          a2 += gk * y2[k];
+        }
+        out[row][0] = a0;
+        out[row][1] = a1;
+        out[row][2] = a2;
       }
-      scaleJ = im.scale_J * cmax;
-      scaleH = im.scale_H * cmax;
+      Mat3& J = Jc[i];
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];
+      double H6[3][6];
+      for (int a = 0; a < 3; ++a)
+        for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
+      hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
+      scaleJ(i) = im.scale_J(i) * cmax;
+      scaleH(i) = im.scale_H(i) * cmax;
     }
   }
-  const bool on_the_fly = im.mode == Impl::Mode::kOnTheFly || (im.mode == Impl::Mode::kReduced && !yr_ptr);
+  const bool on_the_fly = !use_stored;
   const int n = basis_.size();
   // Exact J, ‖H‖ and rounding scales at any point from the full coefficients.
   auto eval_point = [&](const Vec3& c, Mat3& J, double& hnorm, double& sJ, double& sH, std::vector<double>& gb,
@@ -203,8 +248,6 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     sH *= ymax;
     hnorm = third ? hessian_norm_sym(&H6[0][0], 6) : 0.0;
   };
-  std::vector<Mat3> Jc(N);
-  VecXd hnorm(N);
   if (on_the_fly) {
 #pragma omp parallel
     {
@@ -212,14 +255,6 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 #pragma omp for schedule(dynamic, 64)
       for (long i = 0; i < N; ++i)
         eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), gb, hb);
-    }
-  } else {
-    for (long i = 0; i < N; ++i) {
-      Jc[i] = Jt.middleRows(3 * i, 3).transpose();
-      double H6[3][6];
-      for (int a = 0; a < 3; ++a)
-        for (int q = 0; q < 6; ++q) H6[a][q] = Hs(6 * i + q, a);
-      hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
     }
   }
   cert.ms_jacobian = ms_since(t0);
@@ -235,14 +270,14 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   // --- 3. Lipschitz constants: δ norms (map) times the per-voxel per-edge factors (cage only).
   t0 = Clock::now();
   const VecXd delta = edge_delta_norms(y);
-  const RowMatXd* factors;
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>* factors;
   if (third) {
     std::call_once(im.third_once, [&] {
       im.third.resize(N, E);
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
         for (long e = 0; e < E; ++e)
-          im.third(i, e) = third_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r);
+          im.third(i, e) = round_up(third_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
     });
     factors = &im.third;
   } else {
@@ -251,7 +286,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
         for (long e = 0; e < E; ++e)
-          im.first(i, e) = first_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r);
+          im.first(i, e) = round_up(first_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
     });
     factors = &im.first;
   }
@@ -260,21 +295,26 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 #pragma omp parallel for schedule(static)
   for (long i = 0; i < N; ++i) {
     double s = 0;
-    const double* f = factors->row(i).data();
+    const float* f = factors->row(i).data();
     for (long e = 0; e < E; ++e)
-      if (delta(e) != 0) s += delta(e) * f[e];
+      if (delta(e) != 0) s += delta(e) * static_cast<double>(f[e]);
     T(i) = s;
   }
   auto lipschitz = [&](double hn, double t, double rad) { return third ? hn + rad * t : t; };
-  auto tolerance = [&](double sJ, double sH, double s3, double L, double rad) {
-    return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L);
+  // Allowance for rounding: kRoundingRel covers the double-precision evaluation and summation (relative to
+  // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
+  // within 2⁻²⁴ of the exact one, so Σ|ΔJ_ab| ≤ 2⁻²⁴·3·cmax·Σ|G| and ‖ΔH‖_F ≤ 2⁻²⁴·6·cmax·Σ|H|, and by
+  // Weyl |Δσ3| ≤ ‖ΔJ‖₂ ≤ Σ|ΔJ_ab|, |Δ‖H‖| ≤ ‖ΔH‖_F.
+  auto tolerance = [&](double sJ, double sH, double s3, double L, double rad, double storage) {
+    return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
   };
+  const double base_storage = use_stored ? kFloatStorageRel : 0.0;
   std::vector<CertLeaf> base(N);
   std::vector<long> failing_base;
   for (long i = 0; i < N; ++i) {
     const double L = lipschitz(hnorm(i), T(i), r);
     const double lb = sigma3(i) - r * L;
-    const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r);
+    const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage);
     base[i] = {sampling_.centers.row(i).transpose(), side, 0, sigma3(i), L, margin, margin > 0, static_cast<int>(i)};
     if (!(margin > 0)) failing_base.push_back(i);
   }
@@ -353,7 +393,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
                                      : first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad));
         const double bnd = std::min(nd.bound, own);
         const double L = lipschitz(hn, bnd, rad);
-        const double margin = s3 - rad * L - tolerance(sJ, sH, s3, L, rad);
+        const double margin = s3 - rad * L - tolerance(sJ, sH, s3, L, rad, 0.0);
         if (margin > 0) {
           out.push_back({nd.c, nd.side, nd.depth, s3, L, margin, true, static_cast<int>(i)});
         } else if (s3 <= 0 || nd.depth >= p.max_depth) {

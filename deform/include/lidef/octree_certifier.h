@@ -90,6 +90,8 @@ class OctreeCertifier {
 
   // Floating-point allowance τ added to condition (6): relative to the magnitudes that enter σ3 and L.
   static constexpr double kRoundingRel = 1e-9;
+  // Allowance factor for float storage of the precomputed basis derivatives: 6 · 2⁻²⁴ (see run()).
+  static constexpr double kFloatStorageRel = 6.0 / 16777216.0;
 
  private:
   struct Impl;
