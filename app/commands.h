@@ -16,8 +16,10 @@ enum ExitCode : int {
 // A sub-command sets `action` in its parse callback; main() runs it inside its try/catch.
 using Action = std::function<int()>;
 
+void add_certify_command(CLI::App& app, Action& action);
 void add_check_command(CLI::App& app, Action& action);
 void add_eval_command(CLI::App& app, Action& action);
 void add_make_model_command(CLI::App& app, Action& action);
+void add_verify_command(CLI::App& app, Action& action);
 
 }  // namespace lidef::cli

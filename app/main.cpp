@@ -11,9 +11,11 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "lidef 0.1.0");
   Action action;
+  add_certify_command(app, action);
   add_check_command(app, action);
   add_eval_command(app, action);
   add_make_model_command(app, action);
+  add_verify_command(app, action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -8,6 +8,7 @@ PKGS=(
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd libclblast-dev
   libsuitesparse-dev libcgal-dev libtet1.5-dev
   libvtk9-dev libvtk9-qt-dev qtbase5-dev
+  gnuplot-nox
   xvfb xauth
 )
 missing=()

@@ -1,0 +1,76 @@
+// The certificate as files: certificate.json (verdict, counts, parameters, the first failing leaves) and
+// voxels.csv (one row per octree leaf), plus the reader `lidef verify` uses. No VTK here (see vtk_export.h).
+// Every field and column is documented in docs/certificate-outputs.md.
+//
+// Determinism: both files are a pure function of the model, the coefficients and the parameters — byte-identical
+// for the same input whatever the thread count. Wall-clock timings are therefore NOT part of them; `lidef
+// certify` writes them to a separate timings.json. Doubles use the shortest decimal form that reads back to the
+// identical double (format_double), so the files round-trip exactly; non-finite values (the NaN σ3 and infinite
+// L of a leaf left unevaluated when the refinement budget ran out) are written as nan / inf / -inf in the CSV
+// and as the JSON strings "nan" / "inf" / "-inf".
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lidef/cage.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/sampling.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+// Everything certificate.json records: the certifier's result plus its provenance.
+struct CertificateReport {
+  Certificate cert;               // verdict, counts, minima, failing leaves; leaves go to voxels.csv
+  std::string model;              // model folder as given on the command line
+  std::string coefficients;       // coefficient file as given, or "identity"
+  std::uint64_t cage_hash = 0;    // FNV-1a 64 of the cage (subspace_cage_hash)
+  std::uint64_t coefficients_hash = 0;  // coefficients_hash(y)
+  int cage_vertices = 0, cage_faces = 0, cage_edges = 0;
+  long mesh_vertices = 0;
+  double mesh_coverage = 0;             // fraction of mesh vertices inside the union of the base voxels
+  long mesh_vertices_uncovered = 0;
+  SamplingParams sampling_params;       // as requested (voxel_side 0 = searched from target_count)
+  // As obtained (the VoxelSampling fields that the report needs; the centers are not stored).
+  double sampling_radius = 0;
+  Vec3 sampling_origin = Vec3::Zero();
+  bool sampling_target_met = true;
+  int sampling_search_iterations = 0;
+  int hessian_subset = 0;
+  CertifyParams params;                 // bound, max_depth, budgets
+  std::string voxels_csv = "voxels.csv";  // leaf table, relative to the certificate's folder
+  std::uint64_t voxels_csv_hash = 0;      // FNV-1a 64 of the exact bytes of voxels.csv
+};
+
+// FNV-1a 64 of the exact bytes of `data`.
+std::uint64_t fnv1a64(const std::string& data);
+// FNV-1a 64 of the coefficient doubles (#V+#F by 3, row by row, native byte order) and the row count.
+std::uint64_t coefficients_hash(const MatX3d& y);
+
+// Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
+CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const MatX3d& mesh_V,
+                                          const MatX3d& y, const std::string& model, const std::string& coefficients,
+                                          const SamplingParams& sampling_params, const VoxelSampling& sampling,
+                                          const CertifyParams& params);
+
+// voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified`, one row per leaf in leaf order
+// (base-voxel order, children depth-first), certified = 1/0.
+const char* voxels_csv_header();
+std::string voxels_csv(const std::vector<CertLeaf>& leaves);
+// Parses voxels.csv (strictly: header, 9 fields per row, numbers). Throws InputError(path, message, line).
+std::vector<CertLeaf> read_voxels_csv(const std::string& path);
+
+// certificate.json text (2-space indented, keys in a fixed order, trailing newline). Sets nothing in `r`:
+// voxels_csv_hash must already be the hash of the voxels.csv that goes with it.
+std::string certificate_json(const CertificateReport& r);
+
+// Writes DIR/certificate.json and DIR/voxels.csv (each atomically; DIR must exist). Fills r.voxels_csv_hash.
+void write_certificate_files(const std::string& dir, CertificateReport& r);
+
+// Reads certificate.json and the voxels.csv named in it (relative to the JSON's folder) into a report whose
+// cert.leaves holds the leaves. Checks the format tag, the leaf count and the voxels.csv hash, so a stale or
+// edited voxels.csv is refused. Throws InputError naming the file.
+CertificateReport read_certificate_json(const std::string& path);
+
+}  // namespace lidef

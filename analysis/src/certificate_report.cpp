@@ -1,0 +1,373 @@
+#include "lidef/certificate_report.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "lidef/atomic_file.h"
+#include "lidef/errors.h"
+#include "lidef/mesh_io.h"
+#include "lidef/subspace.h"
+
+namespace lidef {
+namespace {
+
+using ojson = nlohmann::ordered_json;
+constexpr const char* kFormat = "lidef-certificate";
+constexpr int kVersion = 1;
+
+// A double as a JSON value: a number when finite, else the string "nan" / "inf" / "-inf".
+ojson num(double x) {
+  if (std::isfinite(x)) return x;
+  return format_double(x);
+}
+
+std::string hex64(std::uint64_t h) {
+  char buf[20];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
+}
+
+ojson leaf_json(const CertLeaf& l) {
+  ojson j;
+  j["center"] = ojson::array({num(l.center.x()), num(l.center.y()), num(l.center.z())});
+  j["side"] = num(l.side);
+  j["depth"] = l.depth;
+  j["sigma3"] = num(l.sigma3);
+  j["L"] = num(l.L);
+  j["margin"] = num(l.margin);
+  return j;
+}
+
+// Typed access to certificate.json with errors that name the file and the key.
+struct Reader {
+  const std::string& path;
+  const nlohmann::json& root;
+
+  const nlohmann::json& at(const nlohmann::json& obj, const char* key) const {
+    if (!obj.is_object() || !obj.contains(key)) throw InputError(path, std::string("missing key '") + key + "'");
+    return obj.at(key);
+  }
+  double number(const nlohmann::json& obj, const char* key) const { return value(at(obj, key), key); }
+  double value(const nlohmann::json& v, const char* key) const {
+    if (v.is_number()) return v.get<double>();
+    if (v.is_string()) {
+      const std::string s = v.get<std::string>();
+      if (s == "nan") return std::numeric_limits<double>::quiet_NaN();
+      if (s == "inf") return std::numeric_limits<double>::infinity();
+      if (s == "-inf") return -std::numeric_limits<double>::infinity();
+    }
+    throw InputError(path, std::string("key '") + key + "' is not a number");
+  }
+  long integer(const nlohmann::json& obj, const char* key) const {
+    const nlohmann::json& v = at(obj, key);
+    if (!v.is_number_integer()) throw InputError(path, std::string("key '") + key + "' is not an integer");
+    return v.get<long>();
+  }
+  bool boolean(const nlohmann::json& obj, const char* key) const {
+    const nlohmann::json& v = at(obj, key);
+    if (!v.is_boolean()) throw InputError(path, std::string("key '") + key + "' is not true/false");
+    return v.get<bool>();
+  }
+  std::string string(const nlohmann::json& obj, const char* key) const {
+    const nlohmann::json& v = at(obj, key);
+    if (!v.is_string()) throw InputError(path, std::string("key '") + key + "' is not a string");
+    return v.get<std::string>();
+  }
+  std::uint64_t hash(const nlohmann::json& obj, const char* key) const {
+    const std::string s = string(obj, key);
+    char* end = nullptr;
+    const unsigned long long h = std::strtoull(s.c_str(), &end, 16);
+    if (s.size() != 16 || *end != '\0') throw InputError(path, std::string("key '") + key + "' is not a 16-digit hex hash");
+    return h;
+  }
+  Vec3 vec3(const nlohmann::json& obj, const char* key) const {
+    const nlohmann::json& v = at(obj, key);
+    if (!v.is_array() || v.size() != 3) throw InputError(path, std::string("key '") + key + "' is not [x, y, z]");
+    Vec3 p;
+    for (int k = 0; k < 3; ++k) p(k) = value(v[k], key);
+    return p;
+  }
+};
+
+std::string read_all(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, std::filesystem::exists(path) ? "cannot open for reading" : "file not found");
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+}  // namespace
+
+std::uint64_t fnv1a64(const std::string& data) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (const unsigned char c : data) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
+std::uint64_t coefficients_hash(const MatX3d& y) {
+  std::string bytes(sizeof(long long) + sizeof(double) * static_cast<size_t>(y.size()), '\0');
+  const long long rows = y.rows();
+  std::memcpy(&bytes[0], &rows, sizeof rows);
+  size_t pos = sizeof rows;
+  for (Eigen::Index i = 0; i < y.rows(); ++i)
+    for (int k = 0; k < 3; ++k, pos += sizeof(double)) {
+      const double v = y(i, k);
+      std::memcpy(&bytes[pos], &v, sizeof v);
+    }
+  return fnv1a64(bytes);
+}
+
+CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const MatX3d& mesh_V,
+                                          const MatX3d& y, const std::string& model, const std::string& coefficients,
+                                          const SamplingParams& sampling_params, const VoxelSampling& sampling,
+                                          const CertifyParams& params) {
+  CertificateReport r;
+  r.cert = cert;
+  r.model = model;
+  r.coefficients = coefficients;
+  r.cage_hash = subspace_cage_hash(cage);
+  r.coefficients_hash = coefficients_hash(y);
+  r.cage_vertices = cage.num_vertices();
+  r.cage_faces = cage.num_faces();
+  r.cage_edges = cage.num_edges();
+  r.mesh_vertices = mesh_V.rows();
+  const VecXi where = containing_voxel(sampling, mesh_V);
+  long uncovered = 0;
+  for (Eigen::Index i = 0; i < where.size(); ++i) uncovered += where(i) < 0;
+  r.mesh_vertices_uncovered = uncovered;
+  r.mesh_coverage = mesh_V.rows() > 0 ? static_cast<double>(mesh_V.rows() - uncovered) / mesh_V.rows() : 1.0;
+  r.sampling_params = sampling_params;
+  r.sampling_radius = sampling.radius();
+  r.sampling_origin = sampling.origin;
+  r.sampling_target_met = sampling.target_met;
+  r.sampling_search_iterations = sampling.search_iterations;
+  r.hessian_subset = static_cast<int>(sampling.hessian_subset.size());
+  r.params = params;
+  return r;
+}
+
+const char* voxels_csv_header() { return "cx,cy,cz,side,depth,sigma3,L,margin,certified"; }
+
+std::string voxels_csv(const std::vector<CertLeaf>& leaves) {
+  std::string s = voxels_csv_header();
+  s += '\n';
+  s.reserve(s.size() + leaves.size() * 120);
+  for (const CertLeaf& l : leaves) {
+    for (int k = 0; k < 3; ++k) s += format_double(l.center(k)) + ',';
+    s += format_double(l.side) + ',' + std::to_string(l.depth) + ',' + format_double(l.sigma3) + ',' +
+         format_double(l.L) + ',' + format_double(l.margin) + ',' + (l.certified ? "1" : "0") + '\n';
+  }
+  return s;
+}
+
+namespace {
+std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::string& path) {
+  std::istringstream in(text);
+  std::string line;
+  long lineno = 1;
+  if (!std::getline(in, line) || line != voxels_csv_header())
+    throw InputError(path, std::string("bad header (expected '") + voxels_csv_header() + "')", 1);
+  std::vector<CertLeaf> leaves;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty()) throw InputError(path, "empty line", lineno);
+    double f[9];
+    int k = 0;
+    size_t start = 0;
+    while (true) {
+      const size_t comma = line.find(',', start);
+      const std::string field = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      if (k >= 9) throw InputError(path, "more than 9 fields", lineno);
+      char* end = nullptr;
+      f[k] = std::strtod(field.c_str(), &end);
+      if (field.empty() || *end != '\0') throw InputError(path, "field " + std::to_string(k + 1) + " is not a number: '" + field + "'", lineno);
+      ++k;
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+    if (k != 9) throw InputError(path, "expected 9 fields, found " + std::to_string(k), lineno);
+    if (!(f[3] > 0) || !std::isfinite(f[3])) throw InputError(path, "side must be a positive number", lineno);
+    if (f[4] != std::floor(f[4]) || f[4] < 0 || f[4] > 64) throw InputError(path, "depth must be an integer in 0..64", lineno);
+    if (f[8] != 0 && f[8] != 1) throw InputError(path, "certified must be 0 or 1", lineno);
+    for (int c = 0; c < 3; ++c)
+      if (!std::isfinite(f[c])) throw InputError(path, "center is not finite", lineno);
+    CertLeaf l;
+    l.center = Vec3(f[0], f[1], f[2]);
+    l.side = f[3];
+    l.depth = static_cast<int>(f[4]);
+    l.sigma3 = f[5];
+    l.L = f[6];
+    l.margin = f[7];
+    l.certified = f[8] == 1;
+    l.base = -1;  // not stored
+    leaves.push_back(l);
+  }
+  return leaves;
+}
+}  // namespace
+
+std::vector<CertLeaf> read_voxels_csv(const std::string& path) { return parse_voxels_csv(read_all(path), path); }
+
+std::string certificate_json(const CertificateReport& r) {
+  const Certificate& c = r.cert;
+  ojson j;
+  j["format"] = kFormat;
+  j["version"] = kVersion;
+  j["certified"] = c.certified;
+  j["reason"] = c.reason;
+  j["model"] = r.model;
+  j["coefficients"] = r.coefficients;
+  j["cage"] = {{"vertices", r.cage_vertices}, {"faces", r.cage_faces}, {"edges", r.cage_edges},
+               {"fnv1a64", hex64(r.cage_hash)}};
+  j["coefficients_fnv1a64"] = hex64(r.coefficients_hash);
+  j["bound"] = to_string(c.bound);
+  j["max_depth"] = r.params.max_depth;
+  j["max_refined_voxels"] = r.params.max_refined_voxels;
+  j["max_children_per_voxel"] = r.params.max_children_per_voxel;
+  j["rounding_allowance"] = num(OctreeCertifier::kRoundingRel);
+  ojson s;
+  s["target_count"] = r.sampling_params.target_count;
+  s["count_tolerance"] = num(r.sampling_params.count_tolerance);
+  s["voxel_side_requested"] = num(r.sampling_params.voxel_side);
+  s["safety"] = num(r.sampling_params.safety);
+  s["hessian_fraction"] = num(r.sampling_params.hessian_fraction);
+  s["voxel_side"] = num(c.voxel_side);
+  s["radius"] = num(r.sampling_radius);
+  s["origin"] = ojson::array({num(r.sampling_origin.x()), num(r.sampling_origin.y()), num(r.sampling_origin.z())});
+  s["voxels"] = c.voxels;
+  s["hessian_subset"] = r.hessian_subset;
+  s["target_met"] = r.sampling_target_met;
+  s["search_iterations"] = r.sampling_search_iterations;
+  j["sampling"] = s;
+  j["voxel_side"] = num(c.voxel_side);
+  j["voxels"] = c.voxels;
+  j["leaves"] = c.num_leaves;
+  long certified_leaves = 0;
+  for (const CertLeaf& l : c.leaves) certified_leaves += l.certified;
+  j["leaves_certified"] = c.leaves.size() == static_cast<size_t>(c.num_leaves) ? ojson(certified_leaves) : ojson();
+  j["refined"] = c.refined;
+  j["max_depth_used"] = c.max_depth_used;
+  j["min_sigma3_center"] = num(c.min_sigma3_center);
+  j["min_margin"] = num(c.min_margin);
+  j["min_lower_bound"] = num(c.min_lower_bound);
+  j["mesh_vertices"] = r.mesh_vertices;
+  j["mesh_coverage"] = num(r.mesh_coverage);
+  j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
+  ojson failing = ojson::array();
+  for (const CertLeaf& l : c.failing) failing.push_back(leaf_json(l));
+  j["failing"] = failing;
+  j["voxels_csv"] = r.voxels_csv;
+  j["voxels_csv_fnv1a64"] = hex64(r.voxels_csv_hash);
+  return j.dump(2) + "\n";
+}
+
+void write_certificate_files(const std::string& dir, CertificateReport& r) {
+  const std::string csv = voxels_csv(r.cert.leaves);
+  r.voxels_csv_hash = fnv1a64(csv);
+  const std::filesystem::path d(dir);
+  write_file_atomic((d / r.voxels_csv).string(), [&](std::ostream& out) { out << csv; });
+  const std::string json = certificate_json(r);
+  write_file_atomic((d / "certificate.json").string(), [&](std::ostream& out) { out << json; });
+}
+
+CertificateReport read_certificate_json(const std::string& path) {
+  const std::string text = read_all(path);
+  nlohmann::json root;
+  try {
+    root = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw InputError(path, std::string("not valid JSON: ") + e.what());
+  }
+  const Reader rd{path, root};
+  if (!root.is_object() || !root.contains("format") || root["format"] != kFormat)
+    throw InputError(path, std::string("not a lidef certificate (missing \"format\": \"") + kFormat + "\")");
+  if (rd.integer(root, "version") != kVersion)
+    throw InputError(path, "unsupported certificate version " + std::to_string(rd.integer(root, "version")));
+
+  CertificateReport r;
+  Certificate& c = r.cert;
+  c.certified = rd.boolean(root, "certified");
+  c.reason = rd.string(root, "reason");
+  r.model = rd.string(root, "model");
+  r.coefficients = rd.string(root, "coefficients");
+  const nlohmann::json& cage = rd.at(root, "cage");
+  r.cage_vertices = static_cast<int>(rd.integer(cage, "vertices"));
+  r.cage_faces = static_cast<int>(rd.integer(cage, "faces"));
+  r.cage_edges = static_cast<int>(rd.integer(cage, "edges"));
+  r.cage_hash = rd.hash(cage, "fnv1a64");
+  r.coefficients_hash = rd.hash(root, "coefficients_fnv1a64");
+  try {
+    c.bound = lipschitz_bound_from_string(rd.string(root, "bound"));
+  } catch (const InputError& e) {
+    throw InputError(path, e.message());
+  }
+  r.params.bound = c.bound;
+  r.params.max_depth = static_cast<int>(rd.integer(root, "max_depth"));
+  r.params.max_refined_voxels = rd.integer(root, "max_refined_voxels");
+  r.params.max_children_per_voxel = rd.integer(root, "max_children_per_voxel");
+  const nlohmann::json& s = rd.at(root, "sampling");
+  r.sampling_params.target_count = static_cast<int>(rd.integer(s, "target_count"));
+  r.sampling_params.count_tolerance = rd.number(s, "count_tolerance");
+  r.sampling_params.voxel_side = rd.number(s, "voxel_side_requested");
+  r.sampling_params.safety = rd.number(s, "safety");
+  r.sampling_params.hessian_fraction = rd.number(s, "hessian_fraction");
+  r.sampling_radius = rd.number(s, "radius");
+  r.sampling_origin = rd.vec3(s, "origin");
+  r.hessian_subset = static_cast<int>(rd.integer(s, "hessian_subset"));
+  r.sampling_target_met = rd.boolean(s, "target_met");
+  r.sampling_search_iterations = static_cast<int>(rd.integer(s, "search_iterations"));
+  c.voxel_side = rd.number(root, "voxel_side");
+  c.voxels = static_cast<int>(rd.integer(root, "voxels"));
+  c.num_leaves = rd.integer(root, "leaves");
+  c.refined = rd.integer(root, "refined");
+  c.max_depth_used = static_cast<int>(rd.integer(root, "max_depth_used"));
+  c.min_sigma3_center = rd.number(root, "min_sigma3_center");
+  c.min_margin = rd.number(root, "min_margin");
+  c.min_lower_bound = rd.number(root, "min_lower_bound");
+  r.mesh_vertices = rd.integer(root, "mesh_vertices");
+  r.mesh_coverage = rd.number(root, "mesh_coverage");
+  r.mesh_vertices_uncovered = rd.integer(root, "mesh_vertices_uncovered");
+  const nlohmann::json& failing = rd.at(root, "failing");
+  if (!failing.is_array()) throw InputError(path, "key 'failing' is not a list");
+  for (const nlohmann::json& f : failing) {
+    CertLeaf l;
+    l.center = rd.vec3(f, "center");
+    l.side = rd.number(f, "side");
+    l.depth = static_cast<int>(rd.integer(f, "depth"));
+    l.sigma3 = rd.number(f, "sigma3");
+    l.L = rd.number(f, "L");
+    l.margin = rd.number(f, "margin");
+    l.certified = false;
+    l.base = -1;
+    c.failing.push_back(l);
+  }
+  r.voxels_csv = rd.string(root, "voxels_csv");
+  r.voxels_csv_hash = rd.hash(root, "voxels_csv_fnv1a64");
+
+  // The leaves, from the CSV beside the JSON; refused when it is not the file the certificate was written with.
+  const std::filesystem::path csv_rel(r.voxels_csv);
+  if (r.voxels_csv.empty() || csv_rel.is_absolute() || csv_rel.has_parent_path())
+    throw InputError(path, "key 'voxels_csv' must be a plain file name");
+  const std::string csv_path = (std::filesystem::path(path).parent_path() / csv_rel).string();
+  const std::string csv = read_all(csv_path);
+  if (fnv1a64(csv) != r.voxels_csv_hash)
+    throw InputError(csv_path, "does not match " + path + " (hash differs: stale or edited file)");
+  c.leaves = parse_voxels_csv(csv, csv_path);
+  if (static_cast<long>(c.leaves.size()) != c.num_leaves)
+    throw InputError(csv_path, "has " + std::to_string(c.leaves.size()) + " leaves, " + path + " says " +
+                                   std::to_string(c.num_leaves));
+  return r;
+}
+
+}  // namespace lidef

@@ -1,0 +1,243 @@
+// VTK writers for ParaView (VTK 9.1). The only translation unit of lidef_analysis that includes VTK.
+#include "lidef/vtk_export.h"
+
+#include <unistd.h>
+#include <vtkCellArray.h>
+#include <vtkCellData.h>
+#include <vtkCellType.h>
+#include <vtkCommand.h>
+#include <vtkDoubleArray.h>
+#include <vtkFloatArray.h>
+#include <vtkIdTypeArray.h>
+#include <vtkImageData.h>
+#include <vtkIntArray.h>
+#include <vtkNew.h>
+#include <vtkPointData.h>
+#include <vtkPoints.h>
+#include <vtkSmartPointer.h>
+#include <vtkUnsignedCharArray.h>
+#include <vtkUnstructuredGrid.h>
+#include <vtkXMLImageDataWriter.h>
+#include <vtkXMLUnstructuredGridWriter.h>
+#include <vtkXMLWriter.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "lidef/errors.h"
+#include "lidef/signed_svd.h"
+
+namespace lidef {
+namespace {
+
+// Collects VTK error messages of one object instead of printing them, so that failures become InputError.
+class ErrorCatcher : public vtkCommand {
+ public:
+  static ErrorCatcher* New() { return new ErrorCatcher; }
+  void Execute(vtkObject*, unsigned long, void* data) override {
+    if (data && message.empty()) message = static_cast<const char*>(data);
+  }
+  std::string message;
+};
+
+// Configures `writer` (compressed appended raw binary), writes to a temporary beside `path`, renames it into
+// place. On failure removes the temporary and throws InputError(path, ...).
+void write_atomic(vtkXMLWriter* writer, const std::string& path, const char* ext) {
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid()) + ext;
+  vtkNew<ErrorCatcher> errors;
+  writer->AddObserver(vtkCommand::ErrorEvent, errors);
+  writer->AddObserver(vtkCommand::WarningEvent, errors);
+  writer->SetFileName(tmp.c_str());
+  writer->SetDataModeToAppended();
+  writer->EncodeAppendedDataOff();
+  writer->SetCompressorTypeToZLib();
+  writer->SetHeaderTypeToUInt64();
+  const int ok = writer->Write();
+  if (ok != 1 || writer->GetErrorCode() != 0) {
+    std::remove(tmp.c_str());
+    std::string why = errors->message;
+    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+    throw InputError(path, "cannot write VTK file" + (why.empty() ? std::string() : ": " + why));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw InputError(path, "cannot rename temporary file into place");
+  }
+}
+
+vtkSmartPointer<vtkDoubleArray> double_array(const char* name, vtkIdType n) {
+  auto a = vtkSmartPointer<vtkDoubleArray>::New();
+  a->SetName(name);
+  a->SetNumberOfComponents(1);
+  a->SetNumberOfTuples(n);
+  return a;
+}
+
+vtkSmartPointer<vtkFloatArray> float_array(const char* name, const std::vector<float>& v) {
+  auto a = vtkSmartPointer<vtkFloatArray>::New();
+  a->SetName(name);
+  a->SetNumberOfComponents(1);
+  a->SetNumberOfTuples(static_cast<vtkIdType>(v.size()));
+  std::copy(v.begin(), v.end(), a->GetPointer(0));
+  return a;
+}
+
+vtkSmartPointer<vtkUnsignedCharArray> uchar_array(const char* name, const std::vector<unsigned char>& v) {
+  auto a = vtkSmartPointer<vtkUnsignedCharArray>::New();
+  a->SetName(name);
+  a->SetNumberOfComponents(1);
+  a->SetNumberOfTuples(static_cast<vtkIdType>(v.size()));
+  std::copy(v.begin(), v.end(), a->GetPointer(0));
+  return a;
+}
+
+}  // namespace
+
+void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leaves) {
+  const vtkIdType n = static_cast<vtkIdType>(leaves.size());
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToDouble();
+  points->SetNumberOfPoints(8 * n);
+  vtkNew<vtkIdTypeArray> offsets, connectivity;
+  offsets->SetNumberOfTuples(n + 1);
+  connectivity->SetNumberOfTuples(8 * n);
+  auto depth = vtkSmartPointer<vtkIntArray>::New();
+  depth->SetName("depth");
+  depth->SetNumberOfTuples(n);
+  auto side = double_array("side", n), sigma3 = double_array("sigma3", n), L = double_array("L", n),
+       margin = double_array("margin", n);
+  auto status = vtkSmartPointer<vtkUnsignedCharArray>::New();
+  status->SetName("status");
+  status->SetNumberOfTuples(n);
+  // VTK_HEXAHEDRON order: the bottom face counter-clockwise seen from +z, then the top face above it.
+  static const int corner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                   {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+  for (vtkIdType i = 0; i < n; ++i) {
+    const CertLeaf& l = leaves[i];
+    for (int k = 0; k < 8; ++k) {
+      const Vec3 p = l.center + l.side * (Vec3(corner[k][0], corner[k][1], corner[k][2]) - Vec3::Constant(0.5));
+      points->SetPoint(8 * i + k, p.x(), p.y(), p.z());
+      connectivity->SetValue(8 * i + k, 8 * i + k);
+    }
+    offsets->SetValue(i, 8 * i);
+    depth->SetValue(i, l.depth);
+    side->SetValue(i, l.side);
+    sigma3->SetValue(i, l.sigma3);
+    L->SetValue(i, l.L);
+    margin->SetValue(i, l.margin);
+    status->SetValue(i, l.certified ? 1 : 0);
+  }
+  offsets->SetValue(n, 8 * n);
+  vtkNew<vtkCellArray> cells;
+  cells->SetData(offsets, connectivity);
+  vtkNew<vtkUnstructuredGrid> grid;
+  grid->SetPoints(points);
+  grid->SetCells(VTK_HEXAHEDRON, cells);
+  vtkCellData* cd = grid->GetCellData();
+  cd->AddArray(depth);
+  cd->AddArray(side);
+  cd->AddArray(sigma3);
+  cd->AddArray(L);
+  cd->AddArray(margin);
+  cd->AddArray(status);
+  cd->SetActiveScalars("margin");
+  vtkNew<vtkXMLUnstructuredGridWriter> writer;
+  writer->SetInputData(grid);
+  write_atomic(writer, path, ".vtu");
+}
+
+long FieldGrid::count_inside_cage() const {
+  return static_cast<long>(std::count(inside_cage.begin(), inside_cage.end(), 1));
+}
+long FieldGrid::count_inside_sampled() const {
+  return static_cast<long>(std::count(inside_sampled.begin(), inside_sampled.end(), 1));
+}
+
+FieldGrid compute_field_grid(const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
+                             const VoxelSampling& sampling, int resolution) {
+  if (resolution < 2) throw InputError("", "field grid resolution must be >= 2 (got " + std::to_string(resolution) + ")");
+  if (y.rows() != basis.size())
+    throw InputError("", "coefficients have " + std::to_string(y.rows()) + " rows, expected #V+#F = " +
+                             std::to_string(basis.size()));
+  FieldGrid g;
+  const Vec3 ext = cage.bbox_max - cage.bbox_min;
+  g.spacing = ext.maxCoeff() / (resolution - 1);
+  if (!(g.spacing > 0)) throw InputError(cage.source, "cage bounding box is empty");
+  const Vec3 center = 0.5 * (cage.bbox_min + cage.bbox_max);
+  for (int k = 0; k < 3; ++k) {
+    // Enough points to cover the extent, centred on the box (the longest axis gets exactly `resolution`).
+    const double cells = std::ceil(ext(k) / g.spacing - 1e-9);
+    g.dims[k] = std::max(2, static_cast<int>(cells) + 1);
+    g.origin(k) = center(k) - 0.5 * (g.dims[k] - 1) * g.spacing;
+  }
+  const long np = g.points();
+  MatX3d P(np, 3);
+  for (long i = 0; i < np; ++i) {
+    const long ix = i % g.dims[0], iy = (i / g.dims[0]) % g.dims[1], iz = i / (static_cast<long>(g.dims[0]) * g.dims[1]);
+    P.row(i) = (g.origin + g.spacing * Vec3(ix, iy, iz)).transpose();
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  g.sigma1.assign(np, nan);
+  g.sigma3.assign(np, nan);
+  g.det_j.assign(np, nan);
+  g.e_iso.assign(np, nan);
+  g.inside_cage.assign(np, 0);
+  g.inside_sampled.assign(np, 0);
+  const VecXi vox = containing_voxel(sampling, P);
+  const int n = basis.size();
+#pragma omp parallel
+  {
+    std::vector<double> gb(3 * static_cast<size_t>(n));
+#pragma omp for schedule(dynamic, 256)
+    for (long i = 0; i < np; ++i) {
+      g.inside_sampled[i] = vox(i) >= 0 ? 1 : 0;
+      const Vec3 p = P.row(i).transpose();
+      const double w = cage.winding_number(p);
+      if (!(w >= 0.5)) continue;
+      g.inside_cage[i] = 1;
+      basis.evaluate(p, 1, nullptr, gb.data(), nullptr);
+      Mat3 J = Mat3::Zero();
+      for (int k = 0; k < n; ++k) J.noalias() += y.row(k).transpose() * Eigen::Map<const Eigen::RowVector3d>(&gb[3 * k]);
+      const Vec3 s = signed_singular_values(J);
+      const double det = J.determinant();
+      g.sigma1[i] = static_cast<float>(s(0));
+      g.sigma3[i] = static_cast<float>(s(2));
+      g.det_j[i] = static_cast<float>(det);
+      if (det > 0) {
+        double e = 0;
+        for (int k = 0; k < 3; ++k) e += s(k) * s(k) + 1.0 / (s(k) * s(k));
+        g.e_iso[i] = static_cast<float>(e);
+      }
+    }
+  }
+  return g;
+}
+
+void write_field_vti(const std::string& path, const FieldGrid& g) {
+  vtkNew<vtkImageData> image;
+  image->SetDimensions(g.dims[0], g.dims[1], g.dims[2]);
+  image->SetOrigin(g.origin.x(), g.origin.y(), g.origin.z());
+  image->SetSpacing(g.spacing, g.spacing, g.spacing);
+  vtkPointData* pd = image->GetPointData();
+  pd->AddArray(float_array("sigma1", g.sigma1));
+  pd->AddArray(float_array("sigma3", g.sigma3));
+  pd->AddArray(float_array("detJ", g.det_j));
+  pd->AddArray(float_array("E_iso", g.e_iso));
+  pd->AddArray(uchar_array("inside_cage", g.inside_cage));
+  pd->AddArray(uchar_array("inside_sampled", g.inside_sampled));
+  pd->SetActiveScalars("sigma3");
+  vtkNew<vtkXMLImageDataWriter> writer;
+  writer->SetInputData(image);
+  write_atomic(writer, path, ".vti");
+}
+
+FieldGrid write_field_vti(const std::string& path, const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
+                          const VoxelSampling& sampling, int resolution) {
+  FieldGrid g = compute_field_grid(cage, basis, y, sampling, resolution);
+  write_field_vti(path, g);
+  return g;
+}
+
+}  // namespace lidef
