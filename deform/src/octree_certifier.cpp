@@ -61,6 +61,7 @@ struct OctreeCertifier::Impl {
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
+  mutable std::vector<char> first_finite, third_finite;  // per voxel: no factor is +∞
   // Stored as floats rounded *up*, so that they stay upper bounds.
   mutable Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> first, third;
 };
@@ -271,33 +272,49 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   t0 = Clock::now();
   const VecXd delta = edge_delta_norms(y);
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>* factors;
+  const std::vector<char>* row_finite;
   if (third) {
     std::call_once(im.third_once, [&] {
       im.third.resize(N, E);
+      im.third_finite.assign(N, 1);
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
-        for (long e = 0; e < E; ++e)
+        for (long e = 0; e < E; ++e) {
           im.third(i, e) = round_up(third_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
+          if (!std::isfinite(im.third(i, e))) im.third_finite[i] = 0;
+        }
     });
     factors = &im.third;
+    row_finite = &im.third_finite;
   } else {
     std::call_once(im.first_once, [&] {
       im.first.resize(N, E);
+      im.first_finite.assign(N, 1);
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
-        for (long e = 0; e < E; ++e)
+        for (long e = 0; e < E; ++e) {
           im.first(i, e) = round_up(first_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
+          if (!std::isfinite(im.first(i, e))) im.first_finite[i] = 0;
+        }
     });
     factors = &im.first;
+    row_finite = &im.first_finite;
   }
-  // 0 · ∞ must stay ∞ only where the map bends at that edge; an affine part (δ = 0) contributes nothing.
+  // An edge whose factor is +∞ (the voxel's ball may touch it) makes L infinite unless δ_e = 0 exactly (then
+  // H does not depend on it). Rows without an infinite factor take a branch-free, vectorized dot product.
   VecXd T(N);
+  const double* dl = delta.data();
 #pragma omp parallel for schedule(static)
   for (long i = 0; i < N; ++i) {
     double s = 0;
     const float* f = factors->row(i).data();
-    for (long e = 0; e < E; ++e)
-      if (delta(e) != 0) s += delta(e) * static_cast<double>(f[e]);
+    if ((*row_finite)[i]) {
+#pragma omp simd reduction(+ : s)
+      for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
+    } else {
+      for (long e = 0; e < E; ++e)
+        if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
+    }
     T(i) = s;
   }
   auto lipschitz = [&](double hn, double t, double rad) { return third ? hn + rad * t : t; };
