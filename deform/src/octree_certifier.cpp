@@ -271,35 +271,23 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   // --- 3. Lipschitz constants: δ norms (map) times the per-voxel per-edge factors (cage only).
   t0 = Clock::now();
   const VecXd delta = edge_delta_norms(y);
-  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>* factors;
-  const std::vector<char>* row_finite;
-  if (third) {
-    std::call_once(im.third_once, [&] {
-      im.third.resize(N, E);
-      im.third_finite.assign(N, 1);
+  // The factor matrix of the chosen bound, built on first use (it depends only on the cage and the voxels).
+  auto build_factors = [&](auto& mat, std::vector<char>& finite, double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
+    mat.resize(N, E);
+    finite.assign(N, 1);
 #pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i)
-        for (long e = 0; e < E; ++e) {
-          im.third(i, e) = round_up(third_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
-          if (!std::isfinite(im.third(i, e))) im.third_finite[i] = 0;
-        }
-    });
-    factors = &im.third;
-    row_finite = &im.third_finite;
-  } else {
-    std::call_once(im.first_once, [&] {
-      im.first.resize(N, E);
-      im.first_finite.assign(N, 1);
-#pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i)
-        for (long e = 0; e < E; ++e) {
-          im.first(i, e) = round_up(first_order_edge_factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
-          if (!std::isfinite(im.first(i, e))) im.first_finite[i] = 0;
-        }
-    });
-    factors = &im.first;
-    row_finite = &im.first_finite;
-  }
+    for (long i = 0; i < N; ++i)
+      for (long e = 0; e < E; ++e) {
+        mat(i, e) = round_up(factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
+        if (!std::isfinite(mat(i, e))) finite[i] = 0;
+      }
+  };
+  if (third)
+    std::call_once(im.third_once, [&] { build_factors(im.third, im.third_finite, &third_order_edge_factor); });
+  else
+    std::call_once(im.first_once, [&] { build_factors(im.first, im.first_finite, &first_order_edge_factor); });
+  const auto* factors = third ? &im.third : &im.first;
+  const std::vector<char>* row_finite = third ? &im.third_finite : &im.first_finite;
   // An edge whose factor is +∞ (the voxel's ball may touch it) makes L infinite unless δ_e = 0 exactly (then
   // H does not depend on it). Rows without an infinite factor take a branch-free, vectorized dot product.
   VecXd T(N);
