@@ -179,10 +179,14 @@ TEST(GreenCoordinates, BatchedMatricesAgreeWithPointwise) {
   const MatX3d F = B.map_values(y, P);
   for (int i = 0; i < P.rows(); ++i) {
     const Eval e = eval(B, P.row(i));
-    EXPECT_EQ((D.row(i).transpose() - e.val).cwiseAbs().maxCoeff(), 0.0);
-    for (int b = 0; b < 3; ++b) EXPECT_EQ((G.row(3 * i + b).transpose() - e.grad.col(b)).cwiseAbs().maxCoeff(), 0.0);
+    // Same function, but inlined with a constant order the compiler may contract multiply-adds differently
+    // (FMA), so agreement is to rounding, not bitwise.
+    const double tv = 1e-14 * e.val.cwiseAbs().maxCoeff(), tg = 1e-14 * e.grad.cwiseAbs().maxCoeff(),
+                 th = 1e-14 * e.hess.cwiseAbs().maxCoeff();
+    EXPECT_LE((D.row(i).transpose() - e.val).cwiseAbs().maxCoeff(), tv);
+    for (int b = 0; b < 3; ++b) EXPECT_LE((G.row(3 * i + b).transpose() - e.grad.col(b)).cwiseAbs().maxCoeff(), tg);
     for (int k = 0; k < kSym; ++k)
-      EXPECT_EQ((Hm.row(kSym * i + k).transpose() - e.hess.col(k)).cwiseAbs().maxCoeff(), 0.0);
+      EXPECT_LE((Hm.row(kSym * i + k).transpose() - e.hess.col(k)).cwiseAbs().maxCoeff(), th);
     const MapJet jet = B.map_jet(y, P.row(i));
     EXPECT_LT((F.row(i).transpose() - jet.f).norm(), 1e-12 * jet.f.norm());
     const Mat3 Jt = G.middleRows(3 * i, 3) * y;  // rows: ∂/∂p_b, columns: components
@@ -218,4 +222,29 @@ TEST(GreenCoordinates, EdgeAlphaBetaAreGradientsOfSolidAngleAndEdgeLog) {
     for (int b = 0; b < 3; ++b) fd(b) = (omega(p + h * Vec3::Unit(b)) - omega(p - h * Vec3::Unit(b))) / (2 * h);
     EXPECT_LT((fd + sum_alpha).norm(), 1e-6 * (1 + sum_alpha.norm()));
   }
+}
+
+TEST(GreenCoordinates, DifferentialJetEqualsBasisJet) {
+  // (49) and (53) with the MATH-NOTES signs against the basis-function evaluation, for random coefficients.
+  const Cage cage = test_cage();
+  const HarmonicBasis B(cage);
+  std::mt19937 rng(17);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  for (int i = 0; i < y.rows(); ++i) y.row(i) += 0.3 * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
+  const HarmonicBasis::FaceMatrices fm = B.face_matrices(y);
+  const MatX3d P = interior_points(cage, 15, 0.03);
+  for (int i = 0; i < P.rows(); ++i) {
+    const MapJet a = B.map_jet(y, P.row(i)), b = B.differential_jet(fm, P.row(i), 2);
+    EXPECT_LT((a.J - b.J).norm(), 1e-11 * a.J.norm()) << P.row(i);
+    double dh = 0;
+    for (int k = 0; k < 3; ++k) dh += (a.H[k] - b.H[k]).squaredNorm();
+    EXPECT_LT(std::sqrt(dh), 1e-10 * a.hessian_norm()) << P.row(i);
+  }
+  // Affine maps: J = A and H = 0 exactly up to rounding.
+  Mat3 A;
+  for (int k = 0; k < 9; ++k) A(k / 3, k % 3) = N01(rng);
+  const MapJet c = B.differential_jet(B.face_matrices(cage.affine_coefficients(A, Vec3(1, 2, 3))), P.row(0), 2);
+  EXPECT_LT((c.J - A).norm(), 1e-12 * A.norm());
+  EXPECT_LT(c.hessian_norm(), 1e-12 * A.norm());
 }

@@ -148,6 +148,72 @@ MapJet HarmonicBasis::map_jet(const MatX3d& y, const Vec3& p, int order) const {
   return jet;
 }
 
+HarmonicBasis::FaceMatrices HarmonicBasis::face_matrices(const MatX3d& y) const {
+  FaceMatrices fm;
+  fm.A.resize(nf_);
+  fm.AD.resize(nf_);
+  fm.A_abs.resize(nf_);
+  for (int t = 0; t < nf_; ++t) {
+    const Face& fc = faces_[t];
+    // Lemma 5.1: A_t = y_t nᵀ − Σ_k y_k (n × d_k)ᵀ / (2 s_t), d_k = x_{k+1} − x_{k−1}.
+    Mat3 A = y.row(nv_ + t).transpose() * fc.n.transpose();
+    double abs_sum = y.row(nv_ + t).cwiseAbs().sum() * fc.n.cwiseAbs().sum();
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 g = fc.n.cross(fc.d[k]) / fc.two_area;
+      A.noalias() -= y.row(fc.vid[k]).transpose() * g.transpose();
+      abs_sum += y.row(fc.vid[k]).cwiseAbs().sum() * g.cwiseAbs().sum();
+    }
+    fm.A[t] = A;
+    fm.A_abs[t] = abs_sum;
+    for (int k = 0; k < 3; ++k) fm.AD[t][k] = A * cross_matrix(fc.dhat[k]);
+  }
+  return fm;
+}
+
+MapJet HarmonicBasis::differential_jet(const FaceMatrices& fm, const Vec3& p, int order, double* scale_J,
+                                       double* scale_H) const {
+  MapJet jet;
+  double sJ = 0, sH = 0;
+  for (int t = 0; t < nf_; ++t) {
+    const Face& fc = faces_[t];
+    Vec3 l[3];
+    double L[3];
+    for (int k = 0; k < 3; ++k) {
+      l[k] = fc.x[k] - p;
+      L[k] = l[k].norm();
+    }
+    const double triple = l[0].dot(l[1].cross(l[2]));
+    const double den = L[0] * L[1] * L[2] + l[0].dot(l[1]) * L[2] + l[1].dot(l[2]) * L[0] + l[2].dot(l[0]) * L[1];
+    const double omega = std::atan2(triple, den) * (2.0 * kInv4Pi);
+    const Mat3& A = fm.A[t];
+    // Magnitudes for the rounding scale: A_t's own rounding is relative to the terms that formed it.
+    const double a1 = std::max(A.cwiseAbs().sum(), fm.A_abs[t]);
+    jet.J.noalias() += omega * A;
+    sJ += std::abs(omega) * a1;
+    for (int k = 0; k < 3; ++k) {
+      const int u = (k + 2) % 3, w = (k + 1) % 3;
+      const double m = L[u] + L[w];
+      const double md = 2.0 * (L[u] * L[w] + l[u].dot(l[w]));
+      const double d = fc.dlen[k];
+      const double C = kInv4Pi * std::log((m + d) * (m + d) / md);
+      const Mat3& AD = fm.AD[t][k];
+      const double ad1 = std::max(AD.cwiseAbs().sum(), 2.0 * fm.A_abs[t]);
+      jet.J.noalias() -= C * AD;
+      sJ += std::abs(C) * ad1;
+      if (order >= 2) {
+        const Vec3 alpha = (m * kInv2Pi / (md * L[u] * L[w])) * l[u].cross(l[w]);
+        const Vec3 beta = (d * kInv2Pi / md) * (l[u] / L[u] + l[w] / L[w]);
+        for (int a = 0; a < 3; ++a)
+          jet.H[a].noalias() -= A.row(a).transpose() * alpha.transpose() + AD.row(a).transpose() * beta.transpose();
+        sH += a1 * alpha.cwiseAbs().sum() + ad1 * beta.cwiseAbs().sum();
+      }
+    }
+  }
+  if (scale_J) *scale_J = sJ;
+  if (scale_H) *scale_H = sH;
+  return jet;
+}
+
 MatXd HarmonicBasis::value_matrix(const MatX3d& P) const {
   const int n = size();
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> D(P.rows(), n);

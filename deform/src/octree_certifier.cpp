@@ -182,7 +182,6 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   VecXd scaleJ(N), scaleH(N);
   std::vector<Mat3> Jc(N);
   VecXd hnorm(N);
-  const double ymax = y.cwiseAbs().maxCoeff();
   const bool use_stored = im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr_ptr);
   if (use_stored) {
     // Coefficients as 3 contiguous columns of m doubles.
@@ -225,38 +224,17 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     }
   }
   const bool on_the_fly = !use_stored;
-  const int n = basis_.size();
-  // Exact J, ‖H‖ and rounding scales at any point from the full coefficients.
-  auto eval_point = [&](const Vec3& c, Mat3& J, double& hnorm, double& sJ, double& sH, std::vector<double>& gb,
-                        std::vector<double>& hb) {
-    basis_.evaluate(c, third ? 2 : 1, nullptr, gb.data(), third ? hb.data() : nullptr);
-    J.setZero();
-    double H6[3][6] = {};
-    sJ = sH = 0;
-    for (int k = 0; k < n; ++k) {
-      const Vec3 yk = y.row(k).transpose();
-      const double* gk = &gb[3 * k];
-      J.noalias() += yk * Eigen::Map<const Eigen::RowVector3d>(gk);
-      sJ += std::abs(gk[0]) + std::abs(gk[1]) + std::abs(gk[2]);
-      if (third) {
-        const double* hk = &hb[kSym * k];
-        for (int a = 0; a < 3; ++a)
-          for (int q = 0; q < 6; ++q) H6[a][q] += yk(a) * hk[q];
-        for (int q = 0; q < 6; ++q) sH += std::abs(hk[q]);
-      }
-    }
-    sJ *= ymax;
-    sH *= ymax;
-    hnorm = third ? hessian_norm_sym(&H6[0][0], 6) : 0.0;
+  // Exact J, ‖H‖ and rounding scales at any point, from the full coefficients through the differential
+  // representation (one pass over the faces per point; see HarmonicBasis::differential_jet).
+  const HarmonicBasis::FaceMatrices fm = basis_.face_matrices(y);
+  auto eval_point = [&](const Vec3& c, Mat3& J, double& hnorm, double& sJ, double& sH) {
+    const MapJet jet = basis_.differential_jet(fm, c, third ? 2 : 1, &sJ, &sH);
+    J = jet.J;
+    hnorm = third ? jet.hessian_norm() : 0.0;
   };
   if (on_the_fly) {
-#pragma omp parallel
-    {
-      std::vector<double> gb(3 * n), hb(kSym * n);
-#pragma omp for schedule(dynamic, 64)
-      for (long i = 0; i < N; ++i)
-        eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), gb, hb);
-    }
+#pragma omp parallel for schedule(dynamic, 64)
+    for (long i = 0; i < N; ++i) eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i));
   }
   cert.ms_jacobian = ms_since(t0);
 
@@ -337,7 +315,6 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   std::vector<double> sub_min_sigma(failing_base.size(), kInf);
 #pragma omp parallel
   {
-    std::vector<double> gb(3 * n), hb(kSym * n);
 #pragma omp for schedule(dynamic, 1)
     for (long fi = 0; fi < static_cast<long>(failing_base.size()); ++fi) {
       const long i = failing_base[fi];
@@ -388,7 +365,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
         const double rad = 0.5 * std::sqrt(3.0) * nd.side;
         Mat3 J;
         double hn, sJ, sH;
-        eval_point(nd.c, J, hn, sJ, sH, gb, hb);
+        eval_point(nd.c, J, hn, sJ, sH);
         const double s3 = signed_singular_values(J)(2);
         min_sigma = std::min(min_sigma, s3);
         double own = 0;

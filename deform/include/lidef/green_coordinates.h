@@ -60,6 +60,21 @@ class HarmonicBasis {
   // Map values at many points: #P by 3.
   MatX3d map_values(const MatX3d& y, const MatX3d& P) const;
 
+  // --- The differential representation (paper (49) and (53) with the MATH-NOTES signs):
+  //   J(p) = Σ_t ω_t A_t − Σ_t Σ_k C_k A_t [d̂_k]×,   H(p) = −Σ_t Σ_k (A_t ∘ α_k + A_t [d̂_k]× ∘ β_k),
+  // with A_t the linear part of face t's affine map (Lemma 5.1). Per point it costs one pass over the faces and
+  // no per-coefficient work, so it is the fast way to evaluate one map at many new points (octree children).
+  struct FaceMatrices {
+    std::vector<Mat3> A;                   // #F: A_t
+    std::vector<std::array<Mat3, 3>> AD;   // #F: A_t [d̂_k]× for the edge opposite vertex k
+    std::vector<double> A_abs;             // #F: Σ of |terms| forming A_t (its rounding scale; large under translations)
+  };
+  FaceMatrices face_matrices(const MatX3d& y) const;  // y: #V+#F by 3
+  // J (order ≥ 1) and H (order 2) at p; `scale_J`/`scale_H` (optional) receive the sums of the magnitudes of
+  // the terms added (Σ|ω|‖A‖₁ + Σ|C|‖AD‖₁ and Σ ‖A‖₁‖α‖₁ + ‖AD‖₁‖β‖₁), which bound the rounding error.
+  MapJet differential_jet(const FaceMatrices& fm, const Vec3& p, int order, double* scale_J = nullptr,
+                          double* scale_H = nullptr) const;
+
  private:
   struct Face {
     int vid[3];
