@@ -102,12 +102,6 @@ TEST(CertificateBounds, DifferentialRepresentationEqualsMinusBasisHessian) {
   // (53) with the MATH-NOTES sign: H = −Σ_t Σ_k (A_t ∘ α_k + A_t[d̂_k]× ∘ β_k); so ‖H‖ is what (15)-(21) bound.
   const Cage cage(lidef::test::icosphere(1, 0.2, 3));
   const HarmonicBasis B(cage);
-  const VoxelSampling dummy = [&] {
-    VoxelSampling v;
-    v.centers = lidef::test::interior_points(cage, 1, 0.1);
-    v.side = 0.1;
-    return v;
-  }();
   auto rng = rng_for(5);
   std::normal_distribution<double> N01;
   MatX3d y = cage.identity_coefficients();
@@ -142,7 +136,6 @@ TEST(CertificateBounds, DifferentialRepresentationEqualsMinusBasisHessian) {
     for (int a = 0; a < 3; ++a) diff += (H[a] - jet.H[a]).squaredNorm();
     EXPECT_LT(std::sqrt(diff), 1e-9 * jet.hessian_norm()) << "at " << p.transpose();
   }
-  (void)dummy;
 }
 
 TEST(Certificate, IdentityCertifiesAtDepthZero) {

@@ -27,7 +27,18 @@ inline Mat3 cross_matrix(const Vec3& d) {
   return m;
 }
 
+// Per-face quantities at a point shared by the basis and the differential representation: l_k = x_k − p, the
+// solid angle ω_t, and per edge (opposite vertex k, (u, k, w) in cage order so d_k = x_w − x_u) C_k, l_u × l_w
+// and, when asked, α_k and β_k.
 }  // namespace
+
+struct HarmonicBasis::FaceAtPoint {
+  Vec3 l[3];
+  double L[3];
+  double triple, omega;
+  double C[3];
+  Vec3 luxlw[3], alpha[3], beta[3];
+};
 
 EdgeAlphaBeta edge_alpha_beta(const Vec3& u, const Vec3& w, const Vec3& p) {
   const Vec3 lu = u - p, lw = w - p;
@@ -57,6 +68,33 @@ HarmonicBasis::HarmonicBasis(const Cage& cage) : nv_(cage.num_vertices()), nf_(c
   }
 }
 
+void HarmonicBasis::face_at_point(int t, const Vec3& p, bool with_alpha_beta, FaceAtPoint& o) const {
+  const Face& fc = faces_[t];
+  for (int k = 0; k < 3; ++k) {
+    o.l[k] = fc.x[k] - p;
+    o.L[k] = o.l[k].norm();
+  }
+  const Vec3* l = o.l;
+  const double* L = o.L;
+  // Signed solid angle / 4π, positive on the inner side (van Oosterom & Strackee).
+  o.triple = l[0].dot(l[1].cross(l[2]));
+  const double den = L[0] * L[1] * L[2] + l[0].dot(l[1]) * L[2] + l[1].dot(l[2]) * L[0] + l[2].dot(l[0]) * L[1];
+  o.omega = std::atan2(o.triple, den) * (2.0 * kInv4Pi);
+  for (int k = 0; k < 3; ++k) {
+    const int u = (k + 2) % 3, w = (k + 1) % 3;
+    const double m = L[u] + L[w];
+    const double md = 2.0 * (L[u] * L[w] + l[u].dot(l[w]));  // m² − d², cancellation-free
+    const double d = fc.dlen[k];
+    // C_k = 1/(4π) ∫_edge 1/|ξ−p| ds = 1/(4π) log((m+d)/(m−d)), with m − d = (m² − d²)/(m + d).
+    o.C[k] = kInv4Pi * std::log((m + d) * (m + d) / md);
+    o.luxlw[k] = l[u].cross(l[w]);
+    if (with_alpha_beta) {
+      o.alpha[k] = (m * kInv2Pi / (md * L[u] * L[w])) * o.luxlw[k];
+      o.beta[k] = (d * kInv2Pi / md) * (l[u] / L[u] + l[w] / L[w]);
+    }
+  }
+}
+
 void HarmonicBasis::evaluate(const Vec3& p, int order, double* value, double* grad, double* hess) const {
   const int n = size();
   if (value) std::memset(value, 0, sizeof(double) * n);
@@ -66,35 +104,15 @@ void HarmonicBasis::evaluate(const Vec3& p, int order, double* value, double* gr
   const bool want_grad = order >= 1 && grad != nullptr;
   const bool want_hess = order >= 2 && hess != nullptr;
 
+  FaceAtPoint fp;
   for (int t = 0; t < nf_; ++t) {
     const Face& fc = faces_[t];
-    Vec3 l[3];
-    double L[3];
-    for (int k = 0; k < 3; ++k) {
-      l[k] = fc.x[k] - p;
-      L[k] = l[k].norm();
-    }
-    // Signed solid angle / 4π, positive on the inner side (van Oosterom & Strackee).
-    const double triple = l[0].dot(l[1].cross(l[2]));
-    const double den = L[0] * L[1] * L[2] + l[0].dot(l[1]) * L[2] + l[1].dot(l[2]) * L[0] + l[2].dot(l[0]) * L[1];
-    const double omega = std::atan2(triple, den) * (2.0 * kInv4Pi);
-
-    double C[3];
-    Vec3 alpha[3], beta[3];
-    Vec3 luxlw[3];
-    for (int k = 0; k < 3; ++k) {
-      const int u = (k + 2) % 3, w = (k + 1) % 3;  // (u, k, w) in cage order: d_k = x_w − x_u
-      const double m = L[u] + L[w];
-      const double md = 2.0 * (L[u] * L[w] + l[u].dot(l[w]));  // m² − d², cancellation-free
-      const double d = fc.dlen[k];
-      // C_k = 1/(4π) ∫_edge 1/|ξ−p| ds = 1/(4π) log((m+d)/(m−d)), with m − d = (m² − d²)/(m + d).
-      C[k] = kInv4Pi * std::log((m + d) * (m + d) / md);
-      luxlw[k] = l[u].cross(l[w]);
-      if (want_hess) {
-        alpha[k] = (m * kInv2Pi / (md * L[u] * L[w])) * luxlw[k];
-        beta[k] = (d * kInv2Pi / md) * (l[u] / L[u] + l[w] / L[w]);
-      }
-    }
+    face_at_point(t, p, want_hess, fp);
+    const double omega = fp.omega, triple = fp.triple;
+    const double* C = fp.C;
+    const Vec3* luxlw = fp.luxlw;
+    const Vec3* alpha = fp.alpha;
+    const Vec3* beta = fp.beta;
     // P_t = n × Σ_k d̂_k C_k − ω n;  ∇ψ_t = −P_t.
     const Vec3 P = fc.n.cross(C[0] * fc.dhat[0] + C[1] * fc.dhat[1] + C[2] * fc.dhat[2]) - omega * fc.n;
     const double inv2s = 1.0 / fc.two_area;
@@ -174,38 +192,23 @@ MapJet HarmonicBasis::differential_jet(const FaceMatrices& fm, const Vec3& p, in
                                        double* scale_H) const {
   MapJet jet;
   double sJ = 0, sH = 0;
+  FaceAtPoint fp;
   for (int t = 0; t < nf_; ++t) {
-    const Face& fc = faces_[t];
-    Vec3 l[3];
-    double L[3];
-    for (int k = 0; k < 3; ++k) {
-      l[k] = fc.x[k] - p;
-      L[k] = l[k].norm();
-    }
-    const double triple = l[0].dot(l[1].cross(l[2]));
-    const double den = L[0] * L[1] * L[2] + l[0].dot(l[1]) * L[2] + l[1].dot(l[2]) * L[0] + l[2].dot(l[0]) * L[1];
-    const double omega = std::atan2(triple, den) * (2.0 * kInv4Pi);
+    face_at_point(t, p, order >= 2, fp);
     const Mat3& A = fm.A[t];
     // Magnitudes for the rounding scale: A_t's own rounding is relative to the terms that formed it.
     const double a1 = std::max(A.cwiseAbs().sum(), fm.A_abs[t]);
-    jet.J.noalias() += omega * A;
-    sJ += std::abs(omega) * a1;
+    jet.J.noalias() += fp.omega * A;
+    sJ += std::abs(fp.omega) * a1;
     for (int k = 0; k < 3; ++k) {
-      const int u = (k + 2) % 3, w = (k + 1) % 3;
-      const double m = L[u] + L[w];
-      const double md = 2.0 * (L[u] * L[w] + l[u].dot(l[w]));
-      const double d = fc.dlen[k];
-      const double C = kInv4Pi * std::log((m + d) * (m + d) / md);
       const Mat3& AD = fm.AD[t][k];
       const double ad1 = std::max(AD.cwiseAbs().sum(), 2.0 * fm.A_abs[t]);
-      jet.J.noalias() -= C * AD;
-      sJ += std::abs(C) * ad1;
+      jet.J.noalias() -= fp.C[k] * AD;
+      sJ += std::abs(fp.C[k]) * ad1;
       if (order >= 2) {
-        const Vec3 alpha = (m * kInv2Pi / (md * L[u] * L[w])) * l[u].cross(l[w]);
-        const Vec3 beta = (d * kInv2Pi / md) * (l[u] / L[u] + l[w] / L[w]);
         for (int a = 0; a < 3; ++a)
-          jet.H[a].noalias() -= A.row(a).transpose() * alpha.transpose() + AD.row(a).transpose() * beta.transpose();
-        sH += a1 * alpha.cwiseAbs().sum() + ad1 * beta.cwiseAbs().sum();
+          jet.H[a].noalias() -= A.row(a).transpose() * fp.alpha[k].transpose() + AD.row(a).transpose() * fp.beta[k].transpose();
+        sH += a1 * fp.alpha[k].cwiseAbs().sum() + ad1 * fp.beta[k].cwiseAbs().sum();
       }
     }
   }

@@ -56,8 +56,6 @@ struct OctreeCertifier::Impl {
   std::vector<float> GH;
   long m = 0;
   VecXd scale_J, scale_H;  // per voxel: Σ over the rows and k of |stored value| (rounding allowance)
-  // Per-face constants of Lemma 5.1: A_t = y_t nᵀ − Σ_k y_{v_k} g_kᵀ, g_k = (n × d_k) / (2 s_t).
-  std::vector<std::array<Vec3, 3>> g;
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
@@ -74,16 +72,6 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
   if (sampling.size() == 0) throw InputError("", "no voxels to certify");
   Impl& im = *impl_;
   im.reduction = reduction;
-  const int nf = cage.num_faces();
-  im.g.resize(nf);
-  for (int t = 0; t < nf; ++t) {
-    const Vec3 n = cage.N.row(t);
-    const double two_s = 2 * cage.area(t);
-    for (int k = 0; k < 3; ++k) {
-      const Vec3 d = cage.V.row(cage.F(t, (k + 1) % 3)) - cage.V.row(cage.F(t, (k + 2) % 3));
-      im.g[t][k] = n.cross(d) / two_s;
-    }
-  }
   for (const CageEdge& e : cage.edges) {
     im.eu.push_back(cage.V.row(e.v0));
     im.ew.push_back(cage.V.row(e.v1));
@@ -133,16 +121,12 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
 OctreeCertifier::~OctreeCertifier() = default;
 
 VecXd OctreeCertifier::edge_delta_norms(const MatX3d& y) const {
-  const Impl& im = *impl_;
-  const int nv = cage_.num_vertices(), nf = cage_.num_faces();
-  std::vector<Mat3> A(nf);
-  for (int t = 0; t < nf; ++t) {
-    Mat3 a = y.row(nv + t).transpose() * cage_.N.row(t);
-    for (int k = 0; k < 3; ++k) a.noalias() -= y.row(cage_.F(t, k)).transpose() * im.g[t][k].transpose();
-    A[t] = a;
-  }
+  return delta_norms(basis_.face_matrices(y));
+}
+
+VecXd OctreeCertifier::delta_norms(const HarmonicBasis::FaceMatrices& fm) const {
   VecXd out(cage_.num_edges());
-  for (int e = 0; e < cage_.num_edges(); ++e) out(e) = (A[cage_.edges[e].f0] - A[cage_.edges[e].f1]).norm();
+  for (int e = 0; e < cage_.num_edges(); ++e) out(e) = (fm.A[cage_.edges[e].f0] - fm.A[cage_.edges[e].f1]).norm();
   return out;
 }
 
@@ -248,7 +232,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 
   // --- 3. Lipschitz constants: δ norms (map) times the per-voxel per-edge factors (cage only).
   t0 = Clock::now();
-  const VecXd delta = edge_delta_norms(y);
+  const VecXd delta = delta_norms(fm);
   // The factor matrix of the chosen bound, built on first use (it depends only on the cage and the voxels).
   auto build_factors = [&](auto& mat, std::vector<char>& finite, double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
     mat.resize(N, E);

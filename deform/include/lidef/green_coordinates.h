@@ -76,6 +76,10 @@ class HarmonicBasis {
                           double* scale_H = nullptr) const;
 
  private:
+  struct FaceAtPoint;  // per-face quantities at a point (green_coordinates.cpp)
+  // Fills `out` for face t at p; α, β only when asked.
+  void face_at_point(int t, const Vec3& p, bool with_alpha_beta, FaceAtPoint& out) const;
+
   struct Face {
     int vid[3];
     Vec3 x[3];        // vertex positions

@@ -95,6 +95,7 @@ class OctreeCertifier {
 
  private:
   struct Impl;
+  VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows, const CertifyParams& p) const;
 
   const Cage& cage_;
