@@ -10,6 +10,7 @@ namespace lidef::cli {
 enum ExitCode : int {
   kOk = 0,
   kNotCertified = 1,  // certify/verify: the map could not be certified (not an error)
+  kStoppedEarly = 1,  // deform: stopped before convergence; the output is still the last certified map
   kError = 2,         // bad input or a failure; nothing was written
 };
 
@@ -18,6 +19,7 @@ using Action = std::function<int()>;
 
 void add_certify_command(CLI::App& app, Action& action);
 void add_check_command(CLI::App& app, Action& action);
+void add_deform_command(CLI::App& app, Action& action);
 void add_eval_command(CLI::App& app, Action& action);
 void add_make_model_command(CLI::App& app, Action& action);
 void add_verify_command(CLI::App& app, Action& action);

@@ -1,29 +1,29 @@
 #!/usr/bin/env bash
-# The main job on the project's own default model (see README). Usage: demo.sh LIDEF_BINARY OUT_DIR
-# Until the deformation solver exists (issue: solver), the demo validates the default model, evaluates the
-# identity map at the mesh vertices, and certifies it.
+# The main job on the project's own default model (see README): deform data/models/beam with the handle
+# scenario data/scenarios/beam_bend.json; every accepted Newton step is certified locally injective.
+# Usage: demo.sh LIDEF_BINARY OUT_DIR
 set -euo pipefail
 LIDEF=$1
 OUT=$2
-MODEL=data/models/beam
-mkdir -p "$OUT"
-echo "== lidef check $MODEL"
-"$LIDEF" check "$MODEL"
+SCENARIO=data/scenarios/beam_bend.json
+echo "== lidef check data/models/beam"
+"$LIDEF" check data/models/beam
 echo
-echo "== lidef eval (identity map at the mesh vertices)"
-awk '$1 == "v" { print $2, $3, $4 }' "$MODEL/mesh.obj" > "$OUT/mesh_vertices.xyz"
-"$LIDEF" eval "$MODEL" --coeffs identity --points "$OUT/mesh_vertices.xyz" --out "$OUT/identity_eval.csv"
-echo
-echo "== lidef certify (identity map)"
+echo "== lidef deform $SCENARIO --out $OUT"
 rc=0
-"$LIDEF" certify "$MODEL" --coeffs identity --out "$OUT/certificate" || rc=$?
-if [ "$rc" -ne 0 ]; then
-  echo "demo: the identity map was not certified (exit $rc) — this is a bug" >&2
+"$LIDEF" deform "$SCENARIO" --out "$OUT" || rc=$?
+if [ "$rc" -eq 2 ]; then
+  echo "demo: lidef deform failed (exit 2)" >&2
   exit 1
 fi
 echo
-echo "Results are in $OUT/:"
-echo "  identity_eval.csv          f, J, signed singular values at the mesh vertices"
-echo "  certificate/certificate.json, voxels.csv   the certificate (see docs/certificate-outputs.md)"
-echo "  certificate/leaves.vtu, field.vti          open in ParaView: paraview $OUT/certificate/leaves.vtu"
-echo "     (colour leaves by 'margin' or 'depth'; Slice the .vti and colour by 'sigma3')"
+echo "Results are in $OUT/ (docs/solver.md describes every file):"
+echo "  summary.json       stop reason, iterations, handle error, global volume ratio, certified"
+echo "  iterations.csv     energy, weights, step, min sigma3 lower bound and stage times per Newton iteration"
+echo "  coefficients.txt   the certified map (lidef eval / lidef certify / lidef verify read it)"
+echo "  certificate.json, voxels.csv   its local-injectivity certificate (docs/certificate-outputs.md)"
+echo "Open in ParaView:"
+echo "  paraview $OUT/deformed.vtp    colour by E_iso_minus_6 (distortion), detJ (volume ratio) or sigma3"
+echo "  paraview $OUT/leaves.vtu      the certification octree: Threshold depth >= 1 shows the refined voxels"
+echo "Check the certificate independently by dense sampling:"
+echo "  $LIDEF verify data/models/beam --coeffs $OUT/coefficients.txt --certificate $OUT/certificate.json --out $OUT/verify"

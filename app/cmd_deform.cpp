@@ -1,0 +1,282 @@
+// lidef deform: the main job. Reads a handle scenario, runs the certified projected Newton solver and writes the
+// last certified map with its certificate, ready for ParaView.
+#include <omp.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "commands.h"
+#include "lidef/atomic_file.h"
+#include "lidef/certificate_report.h"
+#include "lidef/coefficients.h"
+#include "lidef/deform_params.h"
+#include "lidef/errors.h"
+#include "lidef/mesh_export.h"
+#include "lidef/mesh_io.h"
+#include "lidef/model_check.h"
+#include "lidef/projected_newton.h"
+#include "lidef/scenario.h"
+#include "lidef/signed_svd.h"
+#include "lidef/symmetric_dirichlet.h"
+#include "lidef/vtk_export.h"
+#include "staged_outputs.h"
+
+namespace lidef::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+std::string g(double x, int prec = 4) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*g", prec, x);
+  return buf;
+}
+
+std::atomic<bool> g_stop{false};
+extern "C" void on_sigint(int) {
+  g_stop.store(true);
+  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C kills at once
+}
+
+// Signed volume of a closed triangle mesh (divergence theorem); the ratio deformed/rest is the global volume
+// ratio of Fig. 12.
+double mesh_volume(const MatX3d& V, const MatX3i& F) {
+  double v = 0;
+  for (Eigen::Index t = 0; t < F.rows(); ++t)
+    v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
+  return v;
+}
+
+// Map values and per-vertex quantities at the mesh vertices.
+struct MeshFields {
+  MatX3d V;                 // deformed positions
+  VecXd e_iso, det_j, sigma3;
+};
+MeshFields mesh_fields(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P) {
+  MeshFields m;
+  const Eigen::Index n = P.rows();
+  m.V.resize(n, 3);
+  m.e_iso.resize(n);
+  m.det_j.resize(n);
+  m.sigma3.resize(n);
+#pragma omp parallel for schedule(dynamic, 64)
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const MapJet jet = basis.map_jet(y, P.row(i).transpose(), 1);
+    m.V.row(i) = jet.f.transpose();
+    const double e = sd_energy(jet.J);
+    m.e_iso(i) = std::isfinite(e) ? e - 6.0 : std::numeric_limits<double>::quiet_NaN();
+    m.det_j(i) = jet.J.determinant();
+    m.sigma3(i) = signed_singular_values(jet.J)(2);
+  }
+  return m;
+}
+
+const char* kIterationsHeader =
+    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_norm,"
+    "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
+    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total";
+
+std::string iteration_row(const IterationRecord& r) {
+  std::ostringstream s;
+  auto d = [](double x) { return format_double(x); };
+  s << r.iteration << ',' << d(r.energy_before) << ',' << d(r.terms.total) << ',' << d(r.terms.dis) << ','
+    << d(r.terms.p2p) << ',' << d(r.terms.smooth) << ',' << d(r.lambda_p2p) << ',' << d(r.lambda_smooth) << ','
+    << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections << ','
+    << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
+    << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error) << ','
+    << '"' << r.weight_action << '"' << ',' << g(r.ms_gradient, 6) << ',' << g(r.ms_hessian, 6) << ','
+    << g(r.ms_solve, 6) << ',' << g(r.ms_line_search, 6) << ',' << g(r.ms_certificate, 6) << ','
+    << g(r.ms_total, 6);
+  return s.str();
+}
+
+}  // namespace
+
+void add_deform_command(CLI::App& app, Action& action) {
+  struct Opts {
+    std::string scenario, out, models, cache_dir = "<default>";
+    int grid = 0;
+    bool quiet = false;
+    std::map<std::string, std::string> overrides;  // parameter name → text from the command line
+  };
+  auto opts = std::make_shared<Opts>();
+  auto* sub = app.add_subcommand("deform", "Deform a model to a handle scenario; every accepted step is certified");
+  sub->add_option("SCENARIO", opts->scenario, "Scenario JSON (model, handles, optional parameters)")->required();
+  sub->add_option("--out", opts->out, "Output folder (created if missing)")->required();
+  sub->add_option("--models", opts->models, "Folder that holds the model named in the scenario");
+  sub->add_option("--cache-dir", opts->cache_dir,
+                  "Subspace cache folder ('' = no cache; default $LIDEF_CACHE_DIR or ~/.cache/lidef)");
+  sub->add_option("--grid", opts->grid, "Also write field.vti with this many points along the longest axis (0 = no)")
+      ->capture_default_str();
+  sub->add_flag("--quiet", opts->quiet, "No per-iteration progress lines");
+  // One flag per row of the parameter table: the scenario's "parameters" and these flags use the same names.
+  for (const ParamInfo& p : deform_param_table()) {
+    const std::string name = p.name;
+    DeformParams defaults;
+    sub->add_option_function<std::string>(
+           param_flag(p), [opts, name](const std::string& v) { opts->overrides[name] = v; },
+           std::string(p.help) + " [default " + param_value_string(defaults, p) + "]")
+        ->group(std::string("Parameters: ") + p.group);
+  }
+  sub->footer(
+      "Writes into --out (all files appear together, or none): coefficients.txt (#V+#F rows, readable by\n"
+      "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3),\n"
+      "certificate.json + voxels.csv + leaves.vtu (certificate of the written map), iterations.csv, summary.json,\n"
+      "scenario.json (the scenario with the parameters used). Ctrl-C stops after the current line-search trial\n"
+      "and writes the last certified map. Exit code: 0 converged, 1 stopped early (the output is still the last\n"
+      "certified map), 2 error. Parameters: docs/parameters.md; solver: docs/solver.md.");
+  sub->callback([opts, &action] {
+    action = [opts]() -> int {
+      const Opts& o = *opts;
+      const auto t_start = Clock::now();
+      // --- Inputs and parameters; nothing is written before they all check out.
+      Scenario sc = read_scenario(o.scenario, o.models);
+      for (const auto& [name, text] : o.overrides) {
+        const ParamInfo* p = find_param(name);
+        nlohmann::json v;
+        if (p && std::holds_alternative<std::string DeformParams::*>(p->member)) {
+          v = text;
+        } else {
+          try {
+            v = nlohmann::json::parse(text);
+          } catch (const nlohmann::json::exception&) {
+            throw InputError("--" + name, "'" + text + "' is not a number or true/false");
+          }
+        }
+        set_param(sc.params, name, v, param_flag(*p));
+        sc.params_given.push_back(name);
+      }
+      validate_params(sc.params, o.scenario);
+      if (o.grid != 0 && (o.grid < 2 || o.grid > 1024)) throw InputError("--grid", "must be 0 or in 2..1024");
+      {
+        std::error_code ec;
+        if (std::filesystem::exists(o.out, ec) && !std::filesystem::is_directory(o.out, ec))
+          throw InputError(o.out, "exists and is not a folder");
+      }
+      if (sc.params.threads > 0) omp_set_num_threads(sc.params.threads);
+      const Model model = load_model(sc.model_dir);
+      for (size_t k = 0; k < model.report.warnings.size() && k < 5; ++k)
+        std::cerr << "lidef deform: warning: " << model.report.warnings[k].str() << "\n";
+
+      auto log = [&](const std::string& s) {
+        if (!o.quiet) std::cerr << "lidef deform: " << s << "\n";
+      };
+      const std::string cache = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
+      DeformationSolver solver(model.cage, sc.params, cache, log);
+      solver.set_handles(sc.sources, sc.targets, sc.path);
+
+      // --- Solve, one progress line per iteration; Ctrl-C stops cleanly.
+      g_stop.store(false);
+      std::signal(SIGINT, on_sigint);
+      int interrupt_after = 0;  // test hook: raise SIGINT after this many iterations (tests/test_deform_cli.cpp)
+      if (const char* e = std::getenv("LIDEF_TEST_INTERRUPT_AFTER")) interrupt_after = std::atoi(e);
+      if (!o.quiet)
+        std::cout << "  it       energy      step   min sigma3 LB  cert  handle err   lambda1   lambda2      ms\n";
+      auto on_iter = [&](const IterationRecord& r) {
+        if (!o.quiet) {
+          char line[256];
+          std::snprintf(line, sizeof line, "%4d  %11.7g  %8.3g  %13.4g  %4s  %10.3g  %8.3g  %8.3g  %6.0f %s\n", r.iteration,
+                        r.terms.total, r.step, r.min_lower_bound, r.certified ? "yes" : "NO", r.max_handle_error,
+                        r.lambda_p2p, r.lambda_smooth, r.ms_total, r.weight_action.c_str());
+          std::cout << line << std::flush;
+        }
+        if (interrupt_after > 0 && r.iteration == interrupt_after) std::raise(SIGINT);
+        return !g_stop.load();
+      };
+      const SolveResult res = solver.solve(on_iter, &g_stop);
+      std::signal(SIGINT, SIG_DFL);
+
+      // --- The written map is the solver's current (last certified) one; certify it again with leaves.
+      auto t0 = Clock::now();
+      const MatX3d y = solver.coefficients();
+      const Certificate cert = solver.certify_current(true);
+      if (!cert.certified)
+        throw NumericalError("internal: the final map is not certified although every accepted step was (" +
+                             cert.reason + ")");
+      const SamplingParams sp = solver.sampling_params();
+      CertificateReport report = make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir,
+                                                         "coefficients.txt", sp, solver.sampling(),
+                                                         solver.certify_params(false, true));
+      const MeshFields mf = mesh_fields(solver.basis(), y, model.mesh.V);
+      const double ms_final = ms_since(t0);
+      const VecXd herr = solver.handle_errors();
+      const double max_err = herr.size() ? herr.maxCoeff() : 0.0;
+      const double vol_ratio = mesh_volume(mf.V, model.mesh.F) / mesh_volume(model.mesh.V, model.mesh.F);
+
+      // --- Outputs, all or nothing.
+      StagedOutputs out(o.out);
+      write_file_atomic(out.path("coefficients.txt"), [&](std::ostream& s) { write_coefficients(s, y); });
+      write_file_atomic(out.path("deformed.obj"), [&](std::ostream& s) {
+        write_obj(s, mf.V, model.mesh.F, "lidef deform " + sc.name + ": last certified map");
+      });
+      write_mesh_vtp(out.path("deformed.vtp"), mf.V, model.mesh.F,
+                     {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
+      out.path("certificate.json");
+      out.path("voxels.csv");
+      write_certificate_files(out.staging_dir(), report);
+      write_leaves_vtu(out.path("leaves.vtu"), cert.leaves);
+      if (o.grid > 0)
+        write_field_vti(out.path("field.vti"), model.cage, solver.basis(), y, solver.sampling(), o.grid);
+      write_file_atomic(out.path("iterations.csv"), [&](std::ostream& s) {
+        s << kIterationsHeader << "\n";
+        for (const IterationRecord& r : solver.history()) s << iteration_row(r) << "\n";
+      });
+      Scenario used = sc;
+      write_scenario(out.path("scenario.json"), used);
+      const EnergyTerms et = solver.energy();
+      nlohmann::ordered_json sj;
+      sj["scenario"] = sc.name;
+      sj["model"] = sc.model;
+      sj["converged"] = res.converged();
+      sj["stop_reason"] = to_string(res.reason);
+      sj["message"] = res.message;
+      sj["iterations"] = static_cast<int>(solver.history().size());
+      sj["certified"] = cert.certified;
+      sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
+      sj["min_sigma3_sampled"] = cert.min_sigma3_center;
+      sj["mesh_coverage"] = report.mesh_coverage;
+      sj["max_handle_error"] = max_err;
+      sj["handles_reached"] = max_err <= sc.params.handle_tolerance;
+      sj["handle_tolerance"] = sc.params.handle_tolerance;
+      sj["global_volume_ratio"] = vol_ratio;
+      sj["energy"] = {{"total", et.total}, {"dis", et.dis}, {"p2p", et.p2p}, {"smooth", et.smooth}};
+      sj["final_weights"] = {{"lambda_p2p", solver.weights().p2p}, {"lambda_smooth", solver.weights().smooth}};
+      sj["dof"] = 3 * solver.subspace().size();
+      sj["samples"] = solver.sampling().size();
+      sj["hessian_samples"] = static_cast<int>(solver.sampling().hessian_subset.size());
+      sj["handles"] = sc.num_handles();
+      sj["time_s"] = {{"preprocess", solver.preprocess_seconds()},
+                      {"solve", res.seconds},
+                      {"final_certificate_and_fields", ms_final / 1000},
+                      {"total", ms_since(t_start) / 1000}};
+      sj["threads"] = omp_get_max_threads();
+      sj["parameters"] = params_to_json(sc.params);
+      const std::string summary = sj.dump(2) + "\n";
+      write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });
+      out.commit(o.grid > 0 ? std::vector<std::string>{} : std::vector<std::string>{"field.vti"});
+
+      std::cout << "lidef deform: " << sc.name << ": " << to_string(res.reason) << " (" << res.message << ") after "
+                << solver.history().size() << " iterations, " << g(res.seconds, 3) << " s\n"
+                << "  max handle error " << g(max_err, 3) << (max_err <= sc.params.handle_tolerance ? " (reached)" : " (NOT reached)")
+                << ", global volume ratio " << g(vol_ratio, 5) << "\n"
+                << "  CERTIFIED locally injective on the union of " << cert.voxels << " voxels, min lower bound of sigma3 "
+                << g(cert.min_lower_bound, 4) << ", mesh coverage " << g(100 * report.mesh_coverage, 3) << "%\n"
+                << "  wrote " << out.final_path("") << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
+                   "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"
+                << (o.grid > 0 ? ", field.vti" : "") << "}\n";
+      return res.converged() ? kOk : kStoppedEarly;
+    };
+  });
+}
+
+}  // namespace lidef::cli

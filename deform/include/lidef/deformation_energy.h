@@ -1,0 +1,91 @@
+// The deformation energy of Liao et al. 2021 (Sec. 3, 6, 7.1) in the reduced space y = Ξ ỹ:
+//
+//   E(ỹ) = E_dis + λ1 E_P2P + λ2 E_smooth
+//   E_dis    = (1/|I|) Σ_{i∈I} (E_iso(J_i) − 6)        mean symmetric Dirichlet excess over the voxel samples
+//   E_P2P    = Σ_h ‖D̃_h ỹ − q_h‖²                       soft handles (paper (29))
+//   E_smooth = (1/|E|) ‖K Ξ ỹ‖² = (1/|E|) Σ_j μ_j ‖ỹ_j‖²  (Ξ's columns are eigenvectors of KᵀK, eigenvalues μ)
+//
+// Weighting (MATH-NOTES leaves it open): all voxels have the same volume, so the mean over samples is the
+// paper's volume-weighted integral divided by the sampled volume — independent of the sampling density, and
+// 0 at rigid maps. Like the reference code, E_smooth is divided by the number of cage edges |E| so that λ2
+// means the same on coarse and fine cages. E_P2P is a plain sum (paper) so λ1 keeps the paper's meaning.
+//
+// Layouts. ỹ: s by 3 (column a = coordinate a). vec(ỹ) is column-major: index j + s·a. Jacobians at the
+// samples are stored as one 3|I| by 3 matrix JT with JT(3i+b, a) = J_i(a,b) = ∂f_a/∂p_b (J_iᵀ in rows 3i..3i+2),
+// which is exactly G ỹ for the reduced gradient matrix G (3|I| by s, row 3i+b = ∂/∂p_b of the reduced basis).
+//
+// Hessian: ∇²E_dis is approximated on the subset H ⊂ I (weight 1/|H|) with every per-sample 9x9 block
+// projected to PSD by the analytic eigensystem (symmetric_dirichlet.h). The block structure is Kronecker:
+// vec(J_i) = (I_3 ⊗ G_i) vec(ỹ) up to a permutation, so the (a, a') s-by-s block of the reduced Hessian is
+// G_Hᵀ diag_i(H̃_i^{aa'}) G_H with H̃_i^{aa'}(b,b') = H_i(a+3b, a'+3b'): six products of shape s × 3|H| × s
+// instead of one 3s × 9|H| × 3s SYRK. They run in single precision (BLAS sgemm): the Hessian only shapes the
+// search direction, never a certificate or an accepted energy.
+#pragma once
+#include <Eigen/Core>
+#include <vector>
+
+#include "lidef/types.h"
+
+namespace lidef {
+
+using MatS3 = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // s by 3 reduced coefficients (column-major)
+using MatJT = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // 3|I| by 3 stacked transposed Jacobians
+using MatXdR = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+struct EnergyWeights {
+  double p2p = 1e5;    // λ1
+  double smooth = 0.1; // λ2
+};
+
+struct EnergyTerms {
+  double dis = 0, p2p = 0, smooth = 0;  // unweighted terms
+  double total = 0;                     // dis + λ1 p2p + λ2 smooth; +∞ when some det J_i ≤ 0
+};
+
+class DeformationEnergy {
+ public:
+  // G: 3|I| by s reduced gradient matrix (see above). hessian_subset: indices into I (the set H; empty = all).
+  // smooth_eigenvalues: s eigenvalues μ_j of KᵀK for the basis columns. num_edges: |E| of the cage.
+  DeformationEnergy(MatXdR G, std::vector<int> hessian_subset, VecXd smooth_eigenvalues, int num_edges);
+
+  // D: #h by s reduced basis values at the handle sources (f(p_h) = D_h ỹ); Q: #h by 3 targets.
+  void set_handles(const MatXd& D, const MatX3d& Q);
+  void set_targets(const MatX3d& Q);
+
+  int reduced_size() const { return static_cast<int>(G_.cols()); }
+  int num_samples() const { return static_cast<int>(G_.rows() / 3); }
+  int num_handles() const { return static_cast<int>(D_.rows()); }
+  const MatXdR& gradient_matrix() const { return G_; }
+  const std::vector<int>& hessian_subset() const { return subset_; }
+
+  // JT = G ỹ (3|I| by 3).
+  MatJT jacobians(const MatS3& y) const;
+  // Handle images D ỹ (#h by 3) and their distances to the targets (#h).
+  MatX3d handle_positions(const MatS3& y) const;
+  VecXd handle_errors(const MatS3& y) const;
+
+  // Terms at ỹ given its Jacobians JT (= jacobians(y)). Deterministic: the sample sum runs in fixed chunks
+  // whose partial sums are added in order, whatever the thread count.
+  EnergyTerms evaluate(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const;
+  EnergyTerms evaluate(const MatS3& y, const EnergyWeights& w) const { return evaluate(jacobians(y), y, w); }
+  // ∇E (s by 3). Requires det J_i > 0 at every sample.
+  MatS3 gradient(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const;
+  // ∇²E as 3s by 3s (vec(ỹ) column-major). projected = PSD-projected blocks (the solver's matrix);
+  // all_samples = use every sample with weight 1/|I| in double precision (the exact Hessian when not
+  // projected; for tests) instead of the subset H in single precision.
+  MatXd hessian(const MatJT& JT, const EnergyWeights& w, bool projected = true, bool all_samples = false) const;
+  // Only the E_dis part of hessian(), for benchmarks.
+  MatXd distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const;
+
+ private:
+  MatXdR G_;
+  std::vector<int> subset_;
+  Eigen::MatrixXf GH_;  // 3|H| by s, the rows of G at the subset, single precision
+  VecXd mu_;
+  int num_edges_;
+  MatXd D_;      // #h by s
+  MatX3d Q_;     // #h by 3
+  MatXd DtD_;    // s by s
+};
+
+}  // namespace lidef

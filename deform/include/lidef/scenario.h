@@ -1,0 +1,41 @@
+// Handle scenarios: the JSON that `lidef deform` reads and the studio saves.
+//
+//   {"name": "...", "model": "bar", "description": "...",
+//    "handles": [{"source": [x,y,z], "target": [x,y,z]}, ...],
+//    "parameters": {"lambda_p2p": 1e5, ...}}            // optional; keys from deform_params.h
+//
+// `model` names a model folder. It resolves, in this order: <models_dir>/<model> when a models directory is
+// given; <model> itself when it is an absolute path; <scenario dir>/<model>; <scenario dir>/../models/<model>
+// (the layout of ../shared/data and of the project's data/). Unknown top-level keys are errors (a typo such
+// as "handels" must not silently run a scenario without handles).
+#pragma once
+#include <string>
+#include <vector>
+
+#include "lidef/deform_params.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+struct Scenario {
+  std::string path;         // the file it was read from ("" when built in memory)
+  std::string name;         // "name", else the file's stem
+  std::string description;
+  std::string model;        // as written in the file
+  std::string model_dir;    // resolved folder (exists; not yet validated as a model)
+  MatX3d sources;           // #handles by 3
+  MatX3d targets;           // #handles by 3
+  DeformParams params;      // defaults overridden by "parameters"
+  std::vector<std::string> params_given;  // names set by the file, in file order
+  int num_handles() const { return static_cast<int>(sources.rows()); }
+};
+
+// Reads and checks a scenario: JSON syntax (with the line), required keys, types, finite coordinates, at
+// least one handle, known parameters in range, the model folder found. Throws InputError naming the file.
+// Handle positions are checked against the cage later (check_handles), when the model is loaded.
+Scenario read_scenario(const std::string& path, const std::string& models_dir = "");
+
+// Writes a scenario (atomically) with all parameters that differ from the defaults.
+void write_scenario(const std::string& path, const Scenario& s);
+
+}  // namespace lidef

@@ -1,0 +1,263 @@
+#include "lidef/deform_params.h"
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "lidef/errors.h"
+#include "lidef/mesh_io.h"
+
+namespace lidef {
+
+namespace {
+
+using nlohmann::json;
+
+// Help lines are ASCII on purpose: CLI11 pads --help columns by bytes, so Greek letters would misalign them
+// (docs/parameters.md carries the typeset version).
+std::vector<ParamInfo> make_table() {
+  using D = DeformParams;
+  return {
+      // --- Subspace and sampling
+      {"reduced_dof", "sampling", &D::reduced_dof, 4, 100000,
+       "s: reduced coefficients per coordinate (3s unknowns)"},
+      {"samples", "sampling", &D::samples, 1, 5000000,
+       "|I|: target number of voxels (the voxel side is searched to match)"},
+      {"voxel_side", "sampling", &D::voxel_side, 0, 1e6,
+       "voxel side; > 0 uses it instead of searching from 'samples' (0 = search)"},
+      // Strictly above 1: at 1 a voxel may touch the cage, where the harmonic basis is singular.
+      {"safety", "sampling", &D::safety, 1.0000001, 100, "voxel center to cage >= safety * voxel radius"},
+      // Strictly positive: an empty Hessian subset leaves the Newton system without the distortion term.
+      {"hessian_fraction", "sampling", &D::hessian_fraction, 1e-9, 1,
+       "|H| / |I|: fraction of the voxels whose distortion Hessian is assembled"},
+      // --- Energy
+      {"lambda_p2p", "energy", &D::lambda_p2p, 0, 1e12, "lambda1: weight of the handle (point-to-point) energy"},
+      {"lambda_smooth", "energy", &D::lambda_smooth, 0, 1e12, "lambda2: weight of the smoothness energy"},
+      // --- Projected Newton
+      {"max_iterations", "newton", &D::max_iterations, 0, 100000, "Newton iterations at most"},
+      {"step_tolerance", "newton", &D::step_tolerance, 0, 1,
+       "converged when t*|delta| <= step_tolerance * max(1, |y|)"},
+      {"energy_tolerance", "newton", &D::energy_tolerance, 0, 1,
+       "... or when the relative energy decrease of a step is below this"},
+      {"armijo", "newton", &D::armijo, 1e-12, 0.5, "sufficient-decrease constant c1 of the line search"},
+      {"max_halvings", "newton", &D::max_halvings, 0, 200,
+       "line-search halvings before giving up with \"no certified step\""},
+      {"diagonal_shift", "newton", &D::diagonal_shift, 0, 1e6, "added to the reduced Hessian's diagonal"},
+      {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,
+       "handle error (distance, model units) reported as \"reached\""},
+      // --- Certificate
+      {"max_depth", "certificate", &D::max_depth, 0, 20, "octree levels of the certificate"},
+      {"bound", "certificate", &D::bound, 0, 0, "Lipschitz bound: \"first\" (17) or \"third\" (21) order"},
+      {"max_refined", "certificate", &D::max_refined, 0, 1e9,
+       "child voxels evaluated per certification of a result at most"},
+      {"line_search_max_refined", "certificate", &D::line_search_max_refined, 0, 1e9,
+       "the same budget for line-search trials (a trial needing more is rejected, the step halved)"},
+      // --- Dynamic weighting
+      {"dynamic_weighting", "weighting", &D::dynamic_weighting, 0, 0,
+       "adapt lambda1 and lambda2 during the solve (Sec. 7.3; kappa1, kappa2 below)"},
+      {"e0", "weighting", &D::e0, 0, 1e6, "E_P2P threshold, relative to the squared cage bounding-box diagonal"},
+      {"kappa1", "weighting", &D::kappa1, 1e-9, 1,
+       "lambda1 <- kappa1 * lambda1 when E_P2P >= E0 and condition (36) fails"},
+      {"kappa2", "weighting", &D::kappa2, 1, 1000, "lambda2 <- kappa2 * lambda2"},
+      {"epsilon", "weighting", &D::epsilon, 0, 1e6,
+       "margin of condition (36): min over leaves of sigma3 - r L >= epsilon"},
+      {"max_smooth_factor", "weighting", &D::max_smooth_factor, 1, 1e12,
+       "lambda2 stays <= this times its default"},
+      {"min_p2p_factor", "weighting", &D::min_p2p_factor, 0, 1, "lambda1 stays >= this times its default"},
+      {"max_weight_resets", "weighting", &D::max_weight_resets, 0, 100,
+       "times that convergence with changed weights resets them and continues"},
+      // --- Execution
+      {"threads", "execution", &D::threads, 0, 1024, "OpenMP threads (0 = all cores)"},
+  };
+}
+
+// Values allowed for string parameters; the table has no column for them since `bound` is the only one.
+const std::vector<std::string>* allowed_strings(const std::string& name) {
+  static const std::vector<std::string> bound = {"first", "third"};
+  return name == "bound" ? &bound : nullptr;
+}
+
+template <class T>
+constexpr bool is_integer_v = std::is_same_v<T, int> || std::is_same_v<T, long>;
+
+// Integers print as integers; a huge out-of-range value (no long long holds it) falls back to a double.
+std::string number_text(double x, bool integral) {
+  return integral && std::abs(x) < 1e18 ? std::to_string(static_cast<long long>(x)) : format_double(x);
+}
+
+std::string quoted(const std::string& s) { return "'" + s + "'"; }
+
+// A short description of a JSON value for messages ("string \"abc\"", "null", "array").
+std::string describe(const json& v) {
+  if (v.is_array() || v.is_object()) return v.type_name();
+  std::string text = v.dump();
+  if (text.size() > 40) text = text.substr(0, 37) + "...";
+  if (v.is_string()) return "string " + text;
+  return text;
+}
+
+// Optimal-string-alignment distance (Levenshtein plus adjacent transpositions, the commonest typo).
+int edit_distance(const std::string& a, const std::string& b) {
+  const size_t n = a.size(), m = b.size();
+  std::vector<std::vector<int>> d(n + 1, std::vector<int>(m + 1));
+  for (size_t i = 0; i <= n; ++i) d[i][0] = static_cast<int>(i);
+  for (size_t j = 0; j <= m; ++j) d[0][j] = static_cast<int>(j);
+  for (size_t i = 1; i <= n; ++i)
+    for (size_t j = 1; j <= m; ++j) {
+      const int cost = a[i - 1] == b[j - 1] ? 0 : 1;
+      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + cost});
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1])
+        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+    }
+  return d[n][m];
+}
+
+// Lower case with '-' read as '_', so that "Lambda-P2P" (a CLI spelling) is suggested its JSON name.
+std::string normalized(std::string s) {
+  for (char& c : s) {
+    if (c == '-') c = '_';
+    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
+  }
+  return s;
+}
+
+std::string unknown_message(const std::string& name) {
+  const std::string key = normalized(name);
+  // At most 3 edits and at most half the name, so that a short unrelated word gets no far-fetched suggestion.
+  const int limit = std::min(3, std::max(1, static_cast<int>(key.size()) / 2));
+  std::vector<std::pair<int, const char*>> close;  // (distance, name), table order within a distance
+  for (const ParamInfo& p : deform_param_table()) {
+    const int d = edit_distance(key, p.name);
+    if (d <= limit) close.emplace_back(d, p.name);
+  }
+  std::stable_sort(close.begin(), close.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::string msg = "unknown parameter " + quoted(name);
+  if (!close.empty()) {
+    msg += " (did you mean ";
+    const size_t shown = std::min<size_t>(close.size(), 3);
+    for (size_t i = 0; i < shown; ++i) {
+      if (i > 0) msg += i + 1 == shown ? " or " : ", ";
+      msg += quoted(close[i].second);
+    }
+    return msg + "?)";
+  }
+  msg += " (valid parameters:";
+  for (const ParamInfo& p : deform_param_table()) msg += std::string(" ") + p.name;
+  return msg + ")";
+}
+
+void check_range(const ParamInfo& p, double x, bool integral, const std::string& where) {
+  if (!(x >= p.min && x <= p.max))
+    throw InputError(where, "parameter " + quoted(p.name) + " = " + number_text(x, integral) +
+                                " is out of range [" + number_text(p.min, integral) + ", " +
+                                number_text(p.max, integral) + "]");
+}
+
+void check_string(const ParamInfo& p, const std::string& s, const std::string& where) {
+  const auto* allowed = allowed_strings(p.name);
+  if (!allowed || std::find(allowed->begin(), allowed->end(), s) != allowed->end()) return;
+  std::string list;
+  for (size_t i = 0; i < allowed->size(); ++i)
+    list += (i == 0 ? "" : i + 1 == allowed->size() ? " or " : ", ") + ("\"" + (*allowed)[i] + "\"");
+  throw InputError(where, "parameter " + quoted(p.name) + " must be " + list + " (got \"" + s + "\")");
+}
+
+template <class T>
+void assign(T& field, const ParamInfo& p, const json& v, const std::string& where) {
+  const std::string what = "parameter " + quoted(p.name);
+  if constexpr (std::is_same_v<T, bool>) {
+    if (!v.is_boolean()) throw InputError(where, what + ": expected true or false, got " + describe(v));
+    field = v.get<bool>();
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    if (!v.is_string()) throw InputError(where, what + ": expected a string, got " + describe(v));
+    check_string(p, v.get<std::string>(), where);
+    field = v.get<std::string>();
+  } else {
+    constexpr bool integral = is_integer_v<T>;
+    if (!v.is_number())
+      throw InputError(where, what + ": expected " + (integral ? "an integer" : "a number") + ", got " + describe(v));
+    const double x = v.get<double>();
+    if (!std::isfinite(x)) throw InputError(where, what + " is not a finite number");
+    if (integral && x != std::floor(x)) throw InputError(where, what + ": expected an integer, got " + v.dump());
+    check_range(p, x, integral, where);
+    // In range, hence exactly representable in T (every range fits an int).
+    field = static_cast<T>(x);
+  }
+}
+
+}  // namespace
+
+const std::vector<ParamInfo>& deform_param_table() {
+  static const std::vector<ParamInfo> table = make_table();
+  return table;
+}
+
+const ParamInfo* find_param(const std::string& name) {
+  for (const ParamInfo& p : deform_param_table())
+    if (name == p.name) return &p;
+  return nullptr;
+}
+
+std::string param_flag(const ParamInfo& p) {
+  std::string flag = std::string("--") + p.name;
+  std::replace(flag.begin(), flag.end(), '_', '-');
+  return flag;
+}
+
+void set_param(DeformParams& params, const std::string& name, const nlohmann::json& value,
+               const std::string& where) {
+  const ParamInfo* p = find_param(name);
+  if (!p) throw InputError(where, unknown_message(name));
+  std::visit([&](auto member) { assign(params.*member, *p, value, where); }, p->member);
+}
+
+void apply_params(DeformParams& params, const nlohmann::json& object, const std::string& where) {
+  if (!object.is_object())
+    throw InputError(where, "parameters must be a JSON object {\"name\": value, ...}, got " + describe(object));
+  for (const auto& [name, value] : object.items()) set_param(params, name, value, where);
+}
+
+void validate_params(const DeformParams& params, const std::string& where) {
+  // Each field on its own; no parameter constrains another so far (voxel_side > 0 simply wins over samples).
+  for (const ParamInfo& p : deform_param_table()) {
+    std::visit(
+        [&](auto member) {
+          using T = std::decay_t<decltype(params.*member)>;
+          const T& v = params.*member;
+          if constexpr (std::is_same_v<T, std::string>) {
+            check_string(p, v, where);
+          } else if constexpr (!std::is_same_v<T, bool>) {
+            const double x = static_cast<double>(v);
+            if (!std::isfinite(x)) throw InputError(where, "parameter " + quoted(p.name) + " is not a finite number");
+            check_range(p, x, is_integer_v<T>, where);
+          }
+        },
+        p.member);
+  }
+}
+
+nlohmann::ordered_json params_to_json(const DeformParams& params) {
+  nlohmann::ordered_json j = nlohmann::ordered_json::object();
+  for (const ParamInfo& p : deform_param_table())
+    std::visit([&](auto member) { j[p.name] = params.*member; }, p.member);
+  return j;
+}
+
+std::string param_value_string(const DeformParams& params, const ParamInfo& p) {
+  return std::visit(
+      [&](auto member) -> std::string {
+        using T = std::decay_t<decltype(params.*member)>;
+        const T& v = params.*member;
+        if constexpr (std::is_same_v<T, std::string>) return v;
+        else if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
+        else if constexpr (std::is_same_v<T, double>) return format_double(v);
+        else return std::to_string(v);
+      },
+      p.member);
+}
+
+}  // namespace lidef

@@ -1,0 +1,184 @@
+#include "lidef/deformation_energy.h"
+
+#include <cblas.h>
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "lidef/errors.h"
+#include "lidef/symmetric_dirichlet.h"
+
+namespace lidef {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Samples per chunk of the deterministic reductions: partial sums per chunk, added in chunk order.
+constexpr int kChunk = 256;
+
+Mat3 jacobian_at(const MatJT& JT, int i) { return JT.middleRows<3>(3 * i).transpose(); }
+
+}  // namespace
+
+DeformationEnergy::DeformationEnergy(MatXdR G, std::vector<int> hessian_subset, VecXd smooth_eigenvalues,
+                                     int num_edges)
+    : G_(std::move(G)), subset_(std::move(hessian_subset)), mu_(std::move(smooth_eigenvalues)), num_edges_(num_edges) {
+  const int s = reduced_size();
+  if (G_.rows() % 3 != 0 || G_.rows() == 0) throw Error("DeformationEnergy: G must have 3|I| > 0 rows");
+  if (mu_.size() != s) throw Error("DeformationEnergy: one smoothness eigenvalue per reduced coefficient needed");
+  if (num_edges_ <= 0) throw Error("DeformationEnergy: the cage has no edges");
+  if (subset_.empty()) {
+    subset_.resize(num_samples());
+    for (int i = 0; i < num_samples(); ++i) subset_[i] = i;
+  }
+  for (int i : subset_)
+    if (i < 0 || i >= num_samples()) throw Error("DeformationEnergy: Hessian subset index out of range");
+  GH_.resize(3 * static_cast<Eigen::Index>(subset_.size()), s);
+  for (size_t k = 0; k < subset_.size(); ++k) GH_.middleRows(3 * k, 3) = G_.middleRows(3 * subset_[k], 3).cast<float>();
+  D_.setZero(0, s);
+  Q_.setZero(0, 3);
+  DtD_.setZero(s, s);
+}
+
+void DeformationEnergy::set_handles(const MatXd& D, const MatX3d& Q) {
+  if (D.cols() != reduced_size() || D.rows() != Q.rows())
+    throw Error("DeformationEnergy::set_handles: D must be #h by s and Q #h by 3");
+  D_ = D;
+  Q_ = Q;
+  DtD_ = D_.transpose() * D_;
+}
+
+void DeformationEnergy::set_targets(const MatX3d& Q) {
+  if (Q.rows() != D_.rows()) throw Error("DeformationEnergy::set_targets: one target per handle needed");
+  Q_ = Q;
+}
+
+MatJT DeformationEnergy::jacobians(const MatS3& y) const {
+  MatJT JT(G_.rows(), 3);
+  const int n = num_samples();
+  const int chunks = (n + kChunk - 1) / kChunk;
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < chunks; ++c) {
+    const int b = c * kChunk, e = std::min(n, b + kChunk);
+    JT.middleRows(3 * b, 3 * (e - b)).noalias() = G_.middleRows(3 * b, 3 * (e - b)) * y;
+  }
+  return JT;
+}
+
+MatX3d DeformationEnergy::handle_positions(const MatS3& y) const { return D_ * y; }
+
+VecXd DeformationEnergy::handle_errors(const MatS3& y) const {
+  return (handle_positions(y) - Q_).rowwise().norm();
+}
+
+EnergyTerms DeformationEnergy::evaluate(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const {
+  const int n = num_samples();
+  const int chunks = (n + kChunk - 1) / kChunk;
+  std::vector<double> partial(chunks, 0.0);
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < chunks; ++c) {
+    const int b = c * kChunk, e = std::min(n, b + kChunk);
+    double sum = 0;
+    for (int i = b; i < e; ++i) sum += sd_energy(jacobian_at(JT, i)) - 6.0;
+    partial[c] = sum;
+  }
+  EnergyTerms t;
+  double dis = 0;
+  for (double p : partial) dis += p;
+  t.dis = dis / n;
+  t.p2p = D_.rows() > 0 ? (D_ * y - Q_).squaredNorm() : 0.0;
+  t.smooth = (mu_.asDiagonal() * y).cwiseProduct(y).sum() / num_edges_;
+  t.total = std::isfinite(t.dis) ? t.dis + w.p2p * t.p2p + w.smooth * t.smooth : kInf;
+  return t;
+}
+
+MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const {
+  const int n = num_samples(), s = reduced_size();
+  const int chunks = (n + kChunk - 1) / kChunk;
+  std::vector<MatS3> partial(chunks);
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < chunks; ++c) {
+    const int b = c * kChunk, e = std::min(n, b + kChunk);
+    // P rows 3i+b, column a = ∂E_iso/∂J_i(a,b): the same transposed layout as JT.
+    MatJT P(3 * (e - b), 3);
+    for (int i = b; i < e; ++i) P.middleRows<3>(3 * (i - b)) = sd_gradient(jacobian_at(JT, i)).transpose();
+    partial[c].noalias() = G_.middleRows(3 * b, 3 * (e - b)).transpose() * P;
+  }
+  MatS3 g = MatS3::Zero(s, 3);
+  for (const MatS3& p : partial) g += p;
+  g /= n;
+  if (D_.rows() > 0) g.noalias() += 2.0 * w.p2p * D_.transpose() * (D_ * y - Q_);
+  g += (2.0 * w.smooth / num_edges_) * (mu_.asDiagonal() * y);
+  return g;
+}
+
+MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const {
+  const int s = reduced_size();
+  MatXd H = MatXd::Zero(3 * s, 3 * s);
+  const std::vector<int>* idx = &subset_;
+  std::vector<int> all;
+  if (all_samples) {
+    all.resize(num_samples());
+    for (int i = 0; i < num_samples(); ++i) all[i] = i;
+    idx = &all;
+  }
+  const int m = static_cast<int>(idx->size());
+  const double weight = 1.0 / m;
+  // Per-sample 9x9 blocks (weighted), in vec(J) order a + 3b.
+  std::vector<Mat9> blocks(m);
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < m; ++k) {
+    const Mat3 J = jacobian_at(JT, (*idx)[k]);
+    blocks[k] = weight * (projected ? sd_hessian_psd(J) : sd_hessian(J));
+  }
+  for (int a = 0; a < 3; ++a) {
+    for (int a2 = a; a2 < 3; ++a2) {
+      MatXd block(s, s);
+      if (all_samples) {
+        // Double precision reference: Σ_i G_iᵀ H̃_i^{aa'} G_i.
+        MatXdR W(3 * m, s);
+#pragma omp parallel for schedule(static)
+        for (int k = 0; k < m; ++k) {
+          Mat3 Ht;
+          for (int b = 0; b < 3; ++b)
+            for (int b2 = 0; b2 < 3; ++b2) Ht(b, b2) = blocks[k](a + 3 * b, a2 + 3 * b2);
+          W.middleRows<3>(3 * k).noalias() = Ht * G_.middleRows<3>(3 * (*idx)[k]);
+        }
+        block.noalias() = G_.transpose() * W;  // idx = all samples in order, so G's rows match W's
+      } else {
+        Eigen::MatrixXf W(3 * m, s);
+#pragma omp parallel for schedule(static)
+        for (int k = 0; k < m; ++k) {
+          Eigen::Matrix3f Ht;
+          for (int b = 0; b < 3; ++b)
+            for (int b2 = 0; b2 < 3; ++b2) Ht(b, b2) = static_cast<float>(blocks[k](a + 3 * b, a2 + 3 * b2));
+          W.middleRows<3>(3 * k).noalias() = Ht * GH_.middleRows<3>(3 * k);
+        }
+        Eigen::MatrixXf Bf(s, s);
+        cblas_sgemm(CblasColMajor, CblasTrans, CblasNoTrans, s, s, 3 * m, 1.0f, GH_.data(), 3 * m, W.data(), 3 * m,
+                    0.0f, Bf.data(), s);
+        block = Bf.cast<double>();
+      }
+      H.block(a * s, a2 * s, s, s) = block;
+      if (a2 != a) H.block(a2 * s, a * s, s, s) = block.transpose();
+    }
+  }
+  // Exact symmetry of the diagonal blocks (float products of GHᵀ W are symmetric only up to rounding).
+  H = 0.5 * (H + H.transpose()).eval();
+  return H;
+}
+
+MatXd DeformationEnergy::hessian(const MatJT& JT, const EnergyWeights& w, bool projected, bool all_samples) const {
+  const int s = reduced_size();
+  MatXd H = distortion_hessian(JT, projected, all_samples);
+  for (int a = 0; a < 3; ++a) {
+    auto blk = H.block(a * s, a * s, s, s);
+    if (D_.rows() > 0) blk += (2.0 * w.p2p) * DtD_;
+    blk.diagonal() += (2.0 * w.smooth / num_edges_) * mu_;
+  }
+  return H;
+}
+
+}  // namespace lidef

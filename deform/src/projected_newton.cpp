@@ -1,0 +1,389 @@
+#include "lidef/projected_newton.h"
+
+#include <omp.h>
+
+#include <Eigen/Cholesky>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+#include "lidef/errors.h"
+
+namespace lidef {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+std::string fmt(double x) {
+  std::ostringstream s;
+  s.precision(4);
+  s << x;
+  return s.str();
+}
+
+bool stop_requested(const std::atomic<bool>* stop) { return stop && stop->load(std::memory_order_relaxed); }
+
+void check_finite(const MatX3d& P, const std::string& where, const char* what) {
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    for (int c = 0; c < 3; ++c)
+      if (!std::isfinite(P(i, c)))
+        throw InputError(where, "handle " + std::to_string(i + 1) + ": " + what + "[" + std::to_string(c) +
+                                    "] is not a finite number");
+}
+
+}  // namespace
+
+const char* to_string(StopReason r) {
+  switch (r) {
+    case StopReason::kConverged: return "converged";
+    case StopReason::kMaxIterations: return "max_iterations";
+    case StopReason::kBlocked: return "blocked_by_certificate";
+    case StopReason::kNoCertifiedStep: return "no_certified_step";
+    case StopReason::kInterrupted: return "interrupted";
+  }
+  return "?";
+}
+
+DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params, const std::string& cache_dir,
+                                     const std::function<void(const std::string&)>& log)
+    : cage_(cage), params_(params), basis_(cage) {
+  validate_params(params_, "parameters");
+  if (params_.threads > 0) omp_set_num_threads(params_.threads);
+  const auto t_all = Clock::now();
+  auto say = [&](const std::string& s) {
+    if (log) log(s);
+  };
+
+  auto t0 = Clock::now();
+  subspace_ = load_or_compute_subspace(cage_, params_.reduced_dof, cache_dir);
+  say("subspace: " + std::to_string(subspace_.size()) + " of " + std::to_string(cage_.num_coeffs()) +
+      " coefficients per coordinate (" + subspace_.solver + ", " + fmt(ms_since(t0)) + " ms)");
+
+  t0 = Clock::now();
+  sampling_ = sample_voxels(cage_, sampling_params());
+  if (sampling_.size() == 0)
+    throw InputError(cage_.source, "no voxel of side " + fmt(sampling_.side) +
+                                       " fits inside the cage (use a smaller voxel_side or more samples)");
+  say("sampling: " + std::to_string(sampling_.size()) + " voxels of side " + fmt(sampling_.side) + ", " +
+      std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" + fmt(ms_since(t0)) + " ms)");
+
+  // Reduced gradient matrix G = (∇basis at the centers) Ξ, in chunks so that the full-space matrix of a large
+  // cage never exists at once.
+  t0 = Clock::now();
+  const int n = sampling_.size(), s = subspace_.size();
+  MatXdR G(3 * static_cast<Eigen::Index>(n), s);
+  constexpr int kRows = 2048;
+  for (int b = 0; b < n; b += kRows) {
+    const int e = std::min(n, b + kRows);
+    const MatXd Gc = basis_.gradient_matrix(sampling_.centers.middleRows(b, e - b));
+    G.middleRows(3 * b, 3 * (e - b)).noalias() = Gc * subspace_.basis;
+  }
+  energy_ = std::make_unique<DeformationEnergy>(std::move(G), sampling_.hessian_subset, subspace_.eigenvalues,
+                                                cage_.num_edges());
+  say("reduced basis gradients at the samples: " + fmt(ms_since(t0)) + " ms");
+
+  t0 = Clock::now();
+  certifier_ = std::make_unique<OctreeCertifier>(cage_, sampling_, &subspace_.basis);
+  say("certificate precomputation: " + fmt(ms_since(t0)) + " ms");
+
+  bbox_diag2_ = (cage_.bbox_max - cage_.bbox_min).squaredNorm();
+  reset();
+  preprocess_seconds_ = ms_since(t_all) / 1000;
+}
+
+DeformationSolver::~DeformationSolver() = default;
+
+SamplingParams DeformationSolver::sampling_params() const {
+  SamplingParams sp;
+  sp.target_count = params_.samples;
+  sp.voxel_side = params_.voxel_side;
+  sp.safety = params_.safety;
+  sp.hessian_fraction = params_.hessian_fraction;
+  return sp;
+}
+
+CertifyParams DeformationSolver::certify_params(bool stop_on_failure, bool keep_leaves) const {
+  CertifyParams cp;
+  cp.bound = lipschitz_bound_from_string(params_.bound);
+  cp.max_depth = params_.max_depth;
+  cp.max_refined_voxels = params_.max_refined;
+  cp.stop_on_failure = stop_on_failure;
+  cp.keep_leaves = keep_leaves;
+  return cp;
+}
+
+void DeformationSolver::set_params(const DeformParams& p) {
+  validate_params(p, "parameters");
+  const bool weights_changed = p.lambda_p2p != params_.lambda_p2p || p.lambda_smooth != params_.lambda_smooth;
+  DeformParams q = p;
+  // Precomputation-shaping parameters cannot change here.
+  q.reduced_dof = params_.reduced_dof;
+  q.samples = params_.samples;
+  q.voxel_side = params_.voxel_side;
+  q.safety = params_.safety;
+  q.hessian_fraction = params_.hessian_fraction;
+  params_ = q;
+  if (weights_changed) {
+    weights_ = {params_.lambda_p2p, params_.lambda_smooth};
+    weight_resets_ = 0;
+  }
+}
+
+void DeformationSolver::reset() {
+  const MatX3d yid = cage_.identity_coefficients();
+  y_ = subspace_.basis.transpose() * yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
+  JT_ = energy_->jacobians(y_);
+  weights_ = {params_.lambda_p2p, params_.lambda_smooth};
+  weight_resets_ = 0;
+  history_.clear();
+  cert_ = certifier_->certify_reduced(y_, certify_params(false, false));
+  if (!cert_.certified)
+    throw NumericalError("the identity map is not certified on this sampling (" + cert_.reason +
+                         "); the voxels are too close to the cage — raise 'safety' or use smaller voxels");
+}
+
+void DeformationSolver::set_handles(const MatX3d& sources, const MatX3d& targets, const std::string& where) {
+  if (sources.rows() == 0) throw InputError(where, "no handles: at least one handle is needed");
+  if (sources.rows() != targets.rows()) throw InputError(where, "as many targets as sources are needed");
+  check_finite(sources, where, "source");
+  check_finite(targets, where, "target");
+  const double diag = std::sqrt(bbox_diag2_);
+  for (Eigen::Index i = 0; i < sources.rows(); ++i) {
+    const Vec3 p = sources.row(i).transpose();
+    const double w = cage_.winding_number(p);
+    std::ostringstream pos;
+    pos.precision(9);
+    pos << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
+    if (!(w > 0.5))
+      throw InputError(where, "handle " + std::to_string(i + 1) + ": source " + pos.str() +
+                                  " is outside the cage (winding number " + fmt(w) + ")");
+    if (cage_.distance(p) < 1e-9 * diag)
+      throw InputError(where, "handle " + std::to_string(i + 1) + ": source " + pos.str() +
+                                  " lies on the cage, where the harmonic map is undefined");
+  }
+  const MatXd D = basis_.value_matrix(sources) * subspace_.basis;
+  energy_->set_handles(D, targets);
+}
+
+void DeformationSolver::set_targets(const MatX3d& targets, const std::string& where) {
+  if (targets.rows() != energy_->num_handles()) throw InputError(where, "one target per handle is needed");
+  check_finite(targets, where, "target");
+  energy_->set_targets(targets);
+}
+
+MatX3d DeformationSolver::coefficients() const { return subspace_.basis * y_; }
+
+Certificate DeformationSolver::certify_current(bool keep_leaves) const {
+  return certifier_->certify_reduced(y_, certify_params(false, keep_leaves));
+}
+
+EnergyTerms DeformationSolver::energy() const { return energy_->evaluate(JT_, y_, weights_); }
+VecXd DeformationSolver::handle_errors() const { return energy_->handle_errors(y_); }
+MatX3d DeformationSolver::handle_positions() const { return energy_->handle_positions(y_); }
+
+IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
+  const auto t_iter = Clock::now();
+  IterationRecord rec;
+  rec.iteration = static_cast<int>(history_.size()) + 1;
+  rec.lambda_p2p = weights_.p2p;
+  rec.lambda_smooth = weights_.smooth;
+  const int s = subspace_.size();
+
+  auto t0 = Clock::now();
+  const EnergyTerms e0 = energy_->evaluate(JT_, y_, weights_);
+  rec.energy_before = e0.total;
+  const MatS3 g = energy_->gradient(JT_, y_, weights_);
+  rec.gradient_norm = g.norm();
+  rec.ms_gradient = ms_since(t0);
+
+  t0 = Clock::now();
+  MatXd H = energy_->hessian(JT_, weights_, true, false);
+  H.diagonal().array() += params_.diagonal_shift;
+  rec.ms_hessian = ms_since(t0);
+
+  t0 = Clock::now();
+  Eigen::LLT<MatXd> llt(H);
+  for (double extra = 1e-6; llt.info() != Eigen::Success && extra < 1e6; extra *= 100) {
+    // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision rounding
+    // can still break that, in which case the shift grows.
+    H.diagonal().array() += extra * (1.0 + H.diagonal().cwiseAbs().maxCoeff());
+    llt.compute(H);
+  }
+  if (llt.info() != Eigen::Success) throw NumericalError("projected Newton: the reduced Hessian is not positive definite");
+  const VecXd gvec = Eigen::Map<const VecXd>(g.data(), 3 * s);
+  const VecXd dvec = -llt.solve(gvec);
+  const MatS3 delta = Eigen::Map<const MatS3>(dvec.data(), s, 3);
+  rec.newton_decrement = -gvec.dot(dvec);
+  rec.ms_solve = ms_since(t0);
+
+  t0 = Clock::now();
+  const MatJT dJ = energy_->jacobians(delta);
+  const double slope = gvec.dot(dvec);  // < 0 for a descent direction
+  double t = 1;
+  bool interrupted = false;
+  static const bool trace = std::getenv("LIDEF_TRACE_LINE_SEARCH") != nullptr;  // debugging aid
+  for (int trial = 0; trial <= params_.max_halvings; ++trial, t *= 0.5) {
+    if (stop_requested(stop)) {
+      interrupted = true;
+      break;
+    }
+    const MatS3 yt = y_ + t * delta;
+    const MatJT JTt = JT_ + t * dJ;
+    const EnergyTerms et = energy_->evaluate(JTt, yt, weights_);
+    if (!(et.total <= e0.total + params_.armijo * t * slope)) {
+      if (trace) std::fprintf(stderr, "  trial t=%.4g E=%.6g > E0=%.6g (Armijo)\n", t, et.total, e0.total);
+      ++rec.armijo_rejections;
+      continue;
+    }
+    const auto tc = Clock::now();
+    CertifyParams cp = certify_params(true, false);
+    cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
+    Certificate c = certifier_->certify_reduced(yt, cp);
+    rec.ms_certificate += ms_since(tc);
+    if (trace)
+      std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld (%s) %.1f ms\n", t, et.total, c.certified ? 1 : 0,
+                   c.refined, c.reason.c_str(), ms_since(tc));
+    if (!c.certified) {
+      ++rec.certificate_rejections;
+      continue;
+    }
+    rec.accepted = true;
+    rec.step = t;
+    rec.step_norm = t * delta.norm();
+    rec.terms = et;
+    y_ = yt;
+    JT_ = JTt;
+    cert_ = std::move(c);
+    break;
+  }
+  rec.ms_line_search = ms_since(t0);
+  if (!rec.accepted) rec.terms = e0;
+  rec.certified = cert_.certified;
+  rec.min_sigma3 = cert_.min_sigma3_center;
+  rec.min_lower_bound = cert_.min_lower_bound;
+  rec.refined = cert_.refined;
+  const VecXd herr = energy_->handle_errors(y_);
+  rec.max_handle_error = herr.size() ? herr.maxCoeff() : 0.0;
+  if (rec.accepted && params_.dynamic_weighting) update_weights(rec);
+  if (interrupted) rec.weight_action = "interrupted";
+  rec.ms_total = ms_since(t_iter);
+  history_.push_back(rec);
+  return rec;
+}
+
+void DeformationSolver::update_weights(IterationRecord& rec) {
+  const double l1_min = params_.min_p2p_factor * params_.lambda_p2p;
+  const double l2_max = params_.max_smooth_factor * params_.lambda_smooth;
+  const double e0 = params_.e0 * bbox_diag2_;
+  std::string action;
+  auto smooth_up = [&] {
+    if (weights_.smooth < l2_max) {
+      weights_.smooth = std::min(l2_max, weights_.smooth * params_.kappa2);
+      action += action.empty() ? "smooth+" : ",smooth+";
+    }
+  };
+  if (rec.terms.p2p >= e0) {
+    // Far from the targets: the P2P term dominates and pulls toward the boundary of the injective maps.
+    smooth_up();
+    if (rec.min_lower_bound < params_.epsilon && weights_.p2p > l1_min) {
+      weights_.p2p = std::max(l1_min, weights_.p2p * params_.kappa1);
+      action += action.empty() ? "p2p-" : ",p2p-";
+    }
+  } else if (rec.certificate_rejections > 0) {
+    // Close to the targets, but the full Newton step failed condition (6): smooth more.
+    smooth_up();
+  } else if (weights_.smooth != params_.lambda_smooth || weights_.p2p != params_.lambda_p2p) {
+    // Nothing needed a change: move one factor back toward the user's weights, so that the run ends at them.
+    weights_.smooth = std::max(params_.lambda_smooth, weights_.smooth / params_.kappa2);
+    weights_.p2p = std::min(params_.lambda_p2p, weights_.p2p / params_.kappa1);
+    action = "relax";
+  }
+  rec.weight_action = action;
+}
+
+SolveResult DeformationSolver::solve(const std::function<bool(const IterationRecord&)>& on_iteration,
+                                     const std::atomic<bool>* stop) {
+  const auto t_start = Clock::now();
+  SolveResult res;
+  if (energy_->num_handles() == 0) throw InputError("handles", "no handles: set_handles() first");
+  for (int it = 0;; ++it) {
+    if (it >= params_.max_iterations) {
+      res.reason = StopReason::kMaxIterations;
+      res.message = "iteration limit (" + std::to_string(params_.max_iterations) + ") reached";
+      break;
+    }
+    if (stop_requested(stop)) {
+      res.reason = StopReason::kInterrupted;
+      res.message = "interrupted";
+      break;
+    }
+    IterationRecord rec = step(stop);
+    ++res.iterations;
+    if (rec.weight_action == "interrupted") {
+      // The cut-short iteration changed nothing; drop it from the history so that an interrupted run equals a
+      // run limited to the iterations it completed.
+      history_.pop_back();
+      --res.iterations;
+      res.reason = StopReason::kInterrupted;
+      res.message = "interrupted during the line search of iteration " + std::to_string(rec.iteration);
+      break;
+    }
+    bool done = false;
+    if (!rec.accepted) {
+      const bool can_adjust = params_.dynamic_weighting &&
+                              weights_.p2p > params_.min_p2p_factor * params_.lambda_p2p * (1 + 1e-12);
+      if (can_adjust) {
+        // No certified decrease with these weights: pull less, smooth more, and try again.
+        weights_.p2p = std::max(params_.min_p2p_factor * params_.lambda_p2p, weights_.p2p * params_.kappa1);
+        weights_.smooth = std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
+        history_.back().weight_action = "p2p*,smooth* (no step)";
+        rec.weight_action = history_.back().weight_action;
+      } else {
+        res.reason = StopReason::kNoCertifiedStep;
+        res.message = "no certified step of decreasing energy in " + std::to_string(params_.max_halvings) +
+                      " halvings (" + std::to_string(rec.armijo_rejections) + " energy, " +
+                      std::to_string(rec.certificate_rejections) + " certificate rejections)";
+        done = true;
+      }
+    } else {
+      const double ynorm = std::max(1.0, y_.norm());
+      const bool small_step = rec.step_norm <= params_.step_tolerance * ynorm;
+      const double decrease = rec.energy_before - rec.terms.total;
+      const bool small_decrease = decrease <= params_.energy_tolerance * std::max(std::abs(rec.energy_before), 1e-300);
+      if ((small_step || small_decrease) && rec.certificate_rejections > 0) {
+        res.reason = StopReason::kBlocked;
+        res.message = "the certificate limits the step to " + fmt(rec.step) +
+                      ": the map is at the boundary of the certified region";
+        done = true;
+      } else if (small_step || small_decrease) {
+        const bool changed = weights_.p2p != params_.lambda_p2p || weights_.smooth != params_.lambda_smooth;
+        if (changed && params_.dynamic_weighting && weight_resets_ < params_.max_weight_resets) {
+          weights_ = {params_.lambda_p2p, params_.lambda_smooth};
+          ++weight_resets_;
+          history_.back().weight_action = "reset";
+          rec.weight_action = "reset";
+        } else {
+          res.reason = StopReason::kConverged;
+          res.message = small_step ? "step below tolerance" : "energy decrease below tolerance";
+          done = true;
+        }
+      }
+    }
+    if (on_iteration && !on_iteration(rec)) {
+      if (!done) {
+        res.reason = StopReason::kInterrupted;
+        res.message = "stopped after iteration " + std::to_string(rec.iteration);
+      }
+      break;
+    }
+    if (done) break;
+  }
+  res.seconds = ms_since(t_start) / 1000;
+  return res;
+}
+
+}  // namespace lidef
