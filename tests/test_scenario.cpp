@@ -46,9 +46,9 @@ std::string input_error(F&& f) {
 // --- Parameter table
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
-  // Counted by hand in deform_params.h: 5 sampling + 2 energy + 7 newton + 4 certificate + 8 weighting +
+  // Counted by hand in deform_params.h: 5 sampling + 2 energy + 7 newton + 4 certificate + 9 weighting +
   // 1 execution. A new field must be added here and to the table.
-  const int kFields = 27;
+  const int kFields = 28;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -68,7 +68,7 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
       "handle_tolerance",                                                                          // newton
       "max_depth", "bound", "max_refined", "line_search_max_refined",                             // certificate
       "dynamic_weighting", "e0", "kappa1", "kappa2", "epsilon", "max_smooth_factor", "min_p2p_factor",
-      "max_weight_resets",                                                                         // weighting
+      "direction_retries", "max_weight_resets",                                                                       // weighting
       "threads"};
   ASSERT_EQ(expected.size(), table.size());
   for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(table[i].name, expected[i]);

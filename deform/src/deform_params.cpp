@@ -68,6 +68,8 @@ std::vector<ParamInfo> make_table() {
       {"max_smooth_factor", "weighting", &D::max_smooth_factor, 1, 1e12,
        "lambda2 stays <= this times its default"},
       {"min_p2p_factor", "weighting", &D::min_p2p_factor, 0, 1, "lambda1 stays >= this times its default"},
+      {"direction_retries", "weighting", &D::direction_retries, 0, 100,
+       "per iteration: recompute the direction with weaker handles when its full step fails the certificate"},
       {"max_weight_resets", "weighting", &D::max_weight_resets, 0, 100,
        "times that convergence with changed weights resets them and continues"},
       // --- Execution

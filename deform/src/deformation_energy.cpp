@@ -17,6 +17,8 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 // Samples per chunk of the deterministic reductions: partial sums per chunk, added in chunk order.
 constexpr int kChunk = 256;
+// Samples per block converted from float to double before a product (3 x 32 rows of s doubles stay in L2).
+constexpr int kBlock = 32;
 
 Mat3 jacobian_at(const MatJT& JT, int i) { return JT.middleRows<3>(3 * i).transpose(); }
 
@@ -24,8 +26,9 @@ Mat3 jacobian_at(const MatJT& JT, int i) { return JT.middleRows<3>(3 * i).transp
 
 DeformationEnergy::DeformationEnergy(MatXdR G, std::vector<int> hessian_subset, VecXd smooth_eigenvalues,
                                      int num_edges)
-    : G_(std::move(G)), subset_(std::move(hessian_subset)), mu_(std::move(smooth_eigenvalues)), num_edges_(num_edges) {
+    : G_(G.cast<float>()), subset_(std::move(hessian_subset)), mu_(std::move(smooth_eigenvalues)), num_edges_(num_edges) {
   const int s = reduced_size();
+  G.resize(0, 0);
   if (G_.rows() % 3 != 0 || G_.rows() == 0) throw Error("DeformationEnergy: G must have 3|I| > 0 rows");
   if (mu_.size() != s) throw Error("DeformationEnergy: one smoothness eigenvalue per reduced coefficient needed");
   if (num_edges_ <= 0) throw Error("DeformationEnergy: the cage has no edges");
@@ -36,7 +39,7 @@ DeformationEnergy::DeformationEnergy(MatXdR G, std::vector<int> hessian_subset, 
   for (int i : subset_)
     if (i < 0 || i >= num_samples()) throw Error("DeformationEnergy: Hessian subset index out of range");
   GH_.resize(3 * static_cast<Eigen::Index>(subset_.size()), s);
-  for (size_t k = 0; k < subset_.size(); ++k) GH_.middleRows(3 * k, 3) = G_.middleRows(3 * subset_[k], 3).cast<float>();
+  for (size_t k = 0; k < subset_.size(); ++k) GH_.middleRows(3 * k, 3) = G_.middleRows(3 * subset_[k], 3);
   D_.setZero(0, s);
   Q_.setZero(0, 3);
   DtD_.setZero(s, s);
@@ -62,7 +65,12 @@ MatJT DeformationEnergy::jacobians(const MatS3& y) const {
 #pragma omp parallel for schedule(static)
   for (int c = 0; c < chunks; ++c) {
     const int b = c * kChunk, e = std::min(n, b + kChunk);
-    JT.middleRows(3 * b, 3 * (e - b)).noalias() = G_.middleRows(3 * b, 3 * (e - b)) * y;
+    MatXdR Gd;
+    for (int bb = b; bb < e; bb += kBlock) {
+      const int ee = std::min(e, bb + kBlock);
+      Gd = G_.middleRows(3 * bb, 3 * (ee - bb)).cast<double>();
+      JT.middleRows(3 * bb, 3 * (ee - bb)).noalias() = Gd * y;
+    }
   }
   return JT;
 }
@@ -104,7 +112,13 @@ MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyW
     // P rows 3i+b, column a = ∂E_iso/∂J_i(a,b): the same transposed layout as JT.
     MatJT P(3 * (e - b), 3);
     for (int i = b; i < e; ++i) P.middleRows<3>(3 * (i - b)) = sd_gradient(jacobian_at(JT, i)).transpose();
-    partial[c].noalias() = G_.middleRows(3 * b, 3 * (e - b)).transpose() * P;
+    partial[c].setZero(s, 3);
+    MatXdR Gd;
+    for (int bb = b; bb < e; bb += kBlock) {
+      const int ee = std::min(e, bb + kBlock);
+      Gd = G_.middleRows(3 * bb, 3 * (ee - bb)).cast<double>();
+      partial[c].noalias() += Gd.transpose() * P.middleRows(3 * (bb - b), 3 * (ee - bb));
+    }
   }
   MatS3 g = MatS3::Zero(s, 3);
   for (const MatS3& p : partial) g += p;
@@ -133,37 +147,52 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
     const Mat3 J = jacobian_at(JT, (*idx)[k]);
     blocks[k] = weight * (projected ? sd_hessian_psd(J) : sd_hessian(J));
   }
-  for (int a = 0; a < 3; ++a) {
-    for (int a2 = a; a2 < 3; ++a2) {
-      MatXd block(s, s);
-      if (all_samples) {
-        // Double precision reference: Σ_i G_iᵀ H̃_i^{aa'} G_i.
-        MatXdR W(3 * m, s);
+  // The six (a ≤ a') blocks: W = [diag_k(H̃_k^{aa'}) G_k]_{(a,a')} side by side (3m by 6s), then one product
+  // G_Hᵀ W (s by 6s) — one large BLAS call blocks and threads better than six small ones.
+  constexpr int kPairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  auto pair_block = [&](const Mat9& Hk, int q) {
+    const int a = kPairs[q][0], a2 = kPairs[q][1];
+    Mat3 Ht;
+    for (int b = 0; b < 3; ++b)
+      for (int b2 = 0; b2 < 3; ++b2) Ht(b, b2) = Hk(a + 3 * b, a2 + 3 * b2);
+    return Ht;
+  };
+  MatXd Ball(s, 6 * s);
+  if (all_samples) {
+    // Double-precision reference over all samples (idx = 0..n-1, so G's rows match W's).
+    MatXdR W(3 * static_cast<Eigen::Index>(m), 6 * s);
+    const MatXdR Gd = G_.cast<double>();
 #pragma omp parallel for schedule(static)
-        for (int k = 0; k < m; ++k) {
-          Mat3 Ht;
-          for (int b = 0; b < 3; ++b)
-            for (int b2 = 0; b2 < 3; ++b2) Ht(b, b2) = blocks[k](a + 3 * b, a2 + 3 * b2);
-          W.middleRows<3>(3 * k).noalias() = Ht * G_.middleRows<3>(3 * (*idx)[k]);
-        }
-        block.noalias() = G_.transpose() * W;  // idx = all samples in order, so G's rows match W's
-      } else {
-        Eigen::MatrixXf W(3 * m, s);
-#pragma omp parallel for schedule(static)
-        for (int k = 0; k < m; ++k) {
-          Eigen::Matrix3f Ht;
-          for (int b = 0; b < 3; ++b)
-            for (int b2 = 0; b2 < 3; ++b2) Ht(b, b2) = static_cast<float>(blocks[k](a + 3 * b, a2 + 3 * b2));
-          W.middleRows<3>(3 * k).noalias() = Ht * GH_.middleRows<3>(3 * k);
-        }
-        Eigen::MatrixXf Bf(s, s);
-        cblas_sgemm(CblasColMajor, CblasTrans, CblasNoTrans, s, s, 3 * m, 1.0f, GH_.data(), 3 * m, W.data(), 3 * m,
-                    0.0f, Bf.data(), s);
-        block = Bf.cast<double>();
+    for (int k = 0; k < m; ++k)
+      for (int q = 0; q < 6; ++q) {
+        const Mat3 Ht = pair_block(blocks[k], q);
+        for (int b = 0; b < 3; ++b)  // row combinations (a 3x3 times 3 x s product; see the float branch)
+          W.block(3 * k + b, q * s, 1, s) = Ht(b, 0) * Gd.row(3 * k) + Ht(b, 1) * Gd.row(3 * k + 1) +
+                                            Ht(b, 2) * Gd.row(3 * k + 2);
       }
-      H.block(a * s, a2 * s, s, s) = block;
-      if (a2 != a) H.block(a2 * s, a * s, s, s) = block.transpose();
-    }
+    Ball.noalias() = Gd.transpose() * W;
+  } else {
+    MatXfR W(3 * static_cast<Eigen::Index>(m), 6 * s);  // row-major: the rows written below are contiguous
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < m; ++k)
+      for (int q = 0; q < 6; ++q) {
+        const Mat3 Ht = pair_block(blocks[k], q);
+        // Written as row combinations: Eigen's fixed 3x3 product kernel trips GCC 12's -Warray-bounds under AVX.
+        for (int b = 0; b < 3; ++b)
+          W.block(3 * k + b, q * s, 1, s) = static_cast<float>(Ht(b, 0)) * GH_.row(3 * k) +
+                                            static_cast<float>(Ht(b, 1)) * GH_.row(3 * k + 1) +
+                                            static_cast<float>(Ht(b, 2)) * GH_.row(3 * k + 2);
+      }
+    Eigen::MatrixXf Bf(s, 6 * s);
+    // Row-major GH (3m x s) is column-major GHᵀ (s x 3m); row-major W is column-major Wᵀ.
+    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasTrans, s, 6 * s, 3 * m, 1.0f, GH_.data(), s, W.data(), 6 * s, 0.0f,
+                Bf.data(), s);
+    Ball = Bf.cast<double>();
+  }
+  for (int q = 0; q < 6; ++q) {
+    const int a = kPairs[q][0], a2 = kPairs[q][1];
+    H.block(a * s, a2 * s, s, s) = Ball.middleCols(q * s, s);
+    if (a2 != a) H.block(a2 * s, a * s, s, s) = Ball.middleCols(q * s, s).transpose();
   }
   // Exact symmetry of the diagonal blocks (float products of GHᵀ W are symmetric only up to rounding).
   H = 0.5 * (H + H.transpose()).eval();

@@ -43,6 +43,8 @@ struct DeformParams {
   double epsilon = 0.05;          // margin of condition (36): min over leaves of σ3 − r L >= ε
   double max_smooth_factor = 1e3; // λ2 stays <= this times its default
   double min_p2p_factor = 1e-3;   // λ1 stays >= this times its default
+  int direction_retries = 3;      // per iteration: recompute the direction with weaker handles when its full
+                                  // step fails the certificate while E_P2P >= E0
   int max_weight_resets = 2;      // convergence with changed weights resets them and continues, at most this often
   // --- Execution
   int threads = 0;                // OpenMP threads (0 = all cores)

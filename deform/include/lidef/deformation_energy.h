@@ -31,6 +31,7 @@ namespace lidef {
 using MatS3 = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // s by 3 reduced coefficients (column-major)
 using MatJT = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // 3|I| by 3 stacked transposed Jacobians
 using MatXdR = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using MatXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 struct EnergyWeights {
   double p2p = 1e5;    // λ1
@@ -42,6 +43,11 @@ struct EnergyTerms {
   double total = 0;                     // dis + λ1 p2p + λ2 smooth; +∞ when some det J_i ≤ 0
 };
 
+// Storage: G is kept rounded to single precision (half the memory traffic of the two passes over it per
+// iteration, which are memory-bound); all arithmetic with it is double. The energy is then exactly that of the
+// map whose basis gradients are the rounded ones — a fixed smooth function of ỹ, so the line search and the
+// derivative checks are consistent; it differs from the true E_dis by ~1e-7 relative. Certificates never use
+// it (the certifier has its own bounds on its own storage).
 class DeformationEnergy {
  public:
   // G: 3|I| by s reduced gradient matrix (see above). hessian_subset: indices into I (the set H; empty = all).
@@ -55,7 +61,7 @@ class DeformationEnergy {
   int reduced_size() const { return static_cast<int>(G_.cols()); }
   int num_samples() const { return static_cast<int>(G_.rows() / 3); }
   int num_handles() const { return static_cast<int>(D_.rows()); }
-  const MatXdR& gradient_matrix() const { return G_; }
+  const MatXfR& gradient_matrix() const { return G_; }  // rounded to float (see above)
   const std::vector<int>& hessian_subset() const { return subset_; }
 
   // JT = G ỹ (3|I| by 3).
@@ -78,9 +84,9 @@ class DeformationEnergy {
   MatXd distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const;
 
  private:
-  MatXdR G_;
+  MatXfR G_;
   std::vector<int> subset_;
-  Eigen::MatrixXf GH_;  // 3|H| by s, the rows of G at the subset, single precision
+  MatXfR GH_;  // 3|H| by s, the rows of G at the subset, single precision
   VecXd mu_;
   int num_edges_;
   MatXd D_;      // #h by s
