@@ -142,7 +142,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       // --- Inputs and parameters; nothing is written before they all check out.
       Scenario sc = read_scenario(o.scenario, o.models);
       for (const auto& [name, text] : o.overrides) {
-        const ParamInfo* p = find_param(name);
+        const ParamInfo* p = find_param(name);  // never null: the flags are made from the table
         nlohmann::json v;
         if (p && std::holds_alternative<std::string DeformParams::*>(p->member)) {
           v = text;
@@ -150,7 +150,7 @@ void add_deform_command(CLI::App& app, Action& action) {
           try {
             v = nlohmann::json::parse(text);
           } catch (const nlohmann::json::exception&) {
-            throw InputError("--" + name, "'" + text + "' is not a number or true/false");
+            throw InputError(param_flag(*p), "'" + text + "' is not a number or true/false");
           }
         }
         set_param(sc.params, name, v, param_flag(*p));
@@ -162,6 +162,15 @@ void add_deform_command(CLI::App& app, Action& action) {
         std::error_code ec;
         if (std::filesystem::exists(o.out, ec) && !std::filesystem::is_directory(o.out, ec))
           throw InputError(o.out, "exists and is not a folder");
+        // A parent that is a file would only fail after the solve: check before spending the time.
+        for (std::filesystem::path q = std::filesystem::absolute(o.out, ec).parent_path(); !q.empty();
+             q = q.parent_path()) {
+          if (std::filesystem::exists(q, ec)) {
+            if (!std::filesystem::is_directory(q, ec)) throw InputError(o.out, q.string() + " is not a folder");
+            break;
+          }
+          if (q == q.parent_path()) break;
+        }
       }
       if (sc.params.threads > 0) omp_set_num_threads(sc.params.threads);
       const Model model = load_model(sc.model_dir);

@@ -213,6 +213,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   // (E_P2P >= E0) is recomputed with weaker handles and more smoothness before the step is shortened: this keeps
   // the path inside the certified region (paper Sec. 7.3, Fig. 9) instead of creeping along its boundary.
   const double p2p_far = params_.e0 * bbox_diag2_;
+  const EnergyWeights weights_at_start = weights_;  // restored if the iteration is interrupted
   const int max_attempts = params_.dynamic_weighting ? 1 + params_.direction_retries : 1;
   for (int attempt = 0; attempt < max_attempts && !interrupted; ++attempt) {
     rec.lambda_p2p = weights_.p2p;
@@ -314,7 +315,12 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   if (rec.accepted && params_.dynamic_weighting) update_weights(rec);
   rec.weight_action = retries + rec.weight_action;
   if (!rec.weight_action.empty() && rec.weight_action.back() == ',') rec.weight_action.pop_back();
-  if (interrupted) rec.weight_action = "interrupted";
+  if (interrupted) {
+    // An interrupted iteration changes nothing, weights included (an interrupted run must equal a run limited
+    // to the iterations it completed).
+    weights_ = weights_at_start;
+    rec.weight_action = "interrupted";
+  }
   rec.ms_total = ms_since(t_iter);
   history_.push_back(rec);
   return rec;
@@ -414,6 +420,9 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
         } else {
           res.reason = StopReason::kConverged;
           res.message = small_step ? "step below tolerance" : "energy decrease below tolerance";
+          if (changed)
+            res.message += " at adjusted weights (lambda_p2p " + fmt(weights_.p2p) + ", lambda_smooth " +
+                           fmt(weights_.smooth) + "; the reset limit max_weight_resets was reached)";
           done = true;
         }
       }

@@ -57,7 +57,8 @@ struct IterationRecord {
 };
 
 enum class StopReason {
-  kConverged,       // step below step_tolerance or energy decrease below energy_tolerance at the user's weights
+  kConverged,       // step below step_tolerance or energy decrease below energy_tolerance, at the user's weights —
+                    // or at adjusted ones once max_weight_resets is used up (SolveResult::message says so)
   kMaxIterations,
   kBlocked,         // the certificate shortened the step to below the tolerance: at the injectivity boundary
   kNoCertifiedStep, // no step length in max_halvings halvings was both decreasing and certified
