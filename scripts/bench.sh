@@ -3,6 +3,8 @@
 # Each program in BUILD_DIR/bench/ named bench_* and executable is run with the shared data folder as its first
 # argument: $LIDEF_SHARED_DATA if set, else ../shared/data beside the checkout. Results are printed (markdown);
 # docs/benchmarks.md records measured numbers with the command that produced them.
+# bench_deform (the solver on every scenario, ~10 min) takes the same DATA_DIR; run it alone with e.g.
+# BUILD_DIR/bench/bench_deform DATA_DIR --only bar_bend,animal_tail_lift.
 set -euo pipefail
 if [ $# -lt 1 ]; then
   echo "usage: $0 BUILD_DIR [args...]" >&2
