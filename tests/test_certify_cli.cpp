@@ -41,18 +41,8 @@ const char* const kVoxelsHeader = "cx,cy,cz,side,depth,sigma3,L,margin,certified
 const char* const kVerifyHeader =
     "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified";
 
-std::string read_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-  ASSERT_TRUE(out.good()) << path;
-}
+using lidef::test::read_text;
+using lidef::test::write_text;
 
 std::string quote(const std::string& s) { return "'" + s + "'"; }
 

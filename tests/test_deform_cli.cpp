@@ -46,18 +46,8 @@ const std::vector<std::string> kOutputs = {"certificate.json", "coefficients.txt
 // Small and quick: the beam with 4000 samples and 60 reduced coefficients per coordinate (180 unknowns).
 const char* const kSmall = "--samples 4000 --reduced-dof 60";
 
-std::string read_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-  ASSERT_TRUE(out.good()) << path;
-}
+using lidef::test::read_text;
+using lidef::test::write_text;
 
 std::string quote(const std::string& s) { return "'" + s + "'"; }
 

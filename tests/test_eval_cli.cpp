@@ -30,18 +30,8 @@ namespace {
 const char* const kHeader = "x,y,z,fx,fy,fz,J00,J01,J02,J10,J11,J12,J20,J21,J22,s1,s2,s3,detJ";
 constexpr int kColumns = 19;
 
-std::string read_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-  ASSERT_TRUE(out.good()) << path;
-}
+using lidef::test::read_text;
+using lidef::test::write_text;
 
 struct Csv {
   std::string header;

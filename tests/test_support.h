@@ -5,6 +5,8 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 namespace lidef::test {
@@ -18,6 +20,20 @@ inline std::string shared_data() {
 inline std::string shared_model(const std::string& name) { return shared_data() + "/models/" + name; }
 inline std::string project_data() { return LIDEF_DATA_DIR; }
 inline std::string cli() { return LIDEF_CLI; }
+
+// Whole file as bytes ("" when unreadable).
+inline std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+// Writes `text` to `path` (a gtest failure if that fails).
+inline void write_text(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  ASSERT_TRUE(out.good()) << path;
+}
 
 // Skips the current test with a clear message when ../shared/data is missing.
 #define LIDEF_REQUIRE_SHARED()                                                              \

@@ -20,56 +20,12 @@
 #include <set>
 
 #include "lidef/errors.h"
+#include "vtk_write_atomic.h"
 
 namespace lidef {
 namespace {
 
 namespace fs = std::filesystem;
-
-// Collects VTK's error messages instead of letting it print them, so that a failure becomes one InputError.
-// (The same as vtk_export.cpp's, which keeps its copy file-local.)
-class VtkErrorCatcher : public vtkCommand {
- public:
-  static VtkErrorCatcher* New() { return new VtkErrorCatcher; }
-  void Execute(vtkObject*, unsigned long, void* data) override {
-    if (data && message.empty()) message = static_cast<const char*>(data);
-  }
-  std::string message;
-};
-
-void write_vtp_atomic(vtkXMLPolyDataWriter* writer, const std::string& path) {
-  // The commonest failure, said plainly (VTK would only report that it cannot open the temporary).
-  const fs::path folder = fs::path(path).parent_path();
-  std::error_code ec;
-  if (!folder.empty() && !fs::is_directory(folder, ec))
-    throw InputError(path, "cannot write: folder " + folder.string() + " does not exist");
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid()) + ".vtp";
-  vtkNew<VtkErrorCatcher> errors;
-  writer->AddObserver(vtkCommand::ErrorEvent, errors);
-  writer->AddObserver(vtkCommand::WarningEvent, errors);
-  // A failed write is also reported by the pipeline's executive; without an observer VTK prints it to stderr.
-  writer->GetExecutive()->AddObserver(vtkCommand::ErrorEvent, errors);
-  writer->SetFileName(tmp.c_str());
-  writer->SetDataModeToAppended();
-  writer->EncodeAppendedDataOff();
-  writer->SetCompressorTypeToZLib();
-  writer->SetHeaderTypeToUInt64();
-  const int ok = writer->Write();
-  if (ok != 1 || writer->GetErrorCode() != 0) {
-    std::remove(tmp.c_str());
-    // VTK's message is "ERROR: In <source>, line N\n<Class> (0x...): <text>"; keep <text>, on one line.
-    std::string why = errors->message;
-    if (why.rfind("ERROR: In ", 0) == 0 && why.find('\n') != std::string::npos) why.erase(0, why.find('\n') + 1);
-    if (const size_t obj = why.find("): "); obj != std::string::npos) why.erase(0, obj + 3);
-    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
-    std::replace(why.begin(), why.end(), '\n', ' ');
-    throw InputError(path, "cannot write VTK file" + (why.empty() ? std::string() : ": " + why));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw InputError(path, "cannot rename temporary file into place");
-  }
-}
 
 }  // namespace
 
@@ -122,7 +78,7 @@ void write_mesh_vtp(const std::string& path, const MatX3d& V, const MatX3i& F,
   if (!point_data.empty()) pd->SetActiveScalars(point_data.front().name.c_str());
   vtkNew<vtkXMLPolyDataWriter> writer;
   writer->SetInputData(mesh);
-  write_vtp_atomic(writer, path);
+  detail::write_vtk_atomic(writer, path, ".vtp");
 }
 
 }  // namespace lidef

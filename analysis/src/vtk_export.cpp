@@ -1,4 +1,4 @@
-// VTK writers for ParaView (VTK 9.1). The only translation unit of lidef_analysis that includes VTK.
+// VTK writers for ParaView (VTK 9.1): the certification octree (.vtu) and map fields (.vti).
 #include "lidef/vtk_export.h"
 
 #include <unistd.h>
@@ -28,44 +28,10 @@
 
 #include "lidef/errors.h"
 #include "lidef/signed_svd.h"
+#include "vtk_write_atomic.h"
 
 namespace lidef {
 namespace {
-
-// Collects VTK error messages of one object instead of printing them, so that failures become InputError.
-class ErrorCatcher : public vtkCommand {
- public:
-  static ErrorCatcher* New() { return new ErrorCatcher; }
-  void Execute(vtkObject*, unsigned long, void* data) override {
-    if (data && message.empty()) message = static_cast<const char*>(data);
-  }
-  std::string message;
-};
-
-// Configures `writer` (compressed appended raw binary), writes to a temporary beside `path`, renames it into
-// place. On failure removes the temporary and throws InputError(path, ...).
-void write_atomic(vtkXMLWriter* writer, const std::string& path, const char* ext) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid()) + ext;
-  vtkNew<ErrorCatcher> errors;
-  writer->AddObserver(vtkCommand::ErrorEvent, errors);
-  writer->AddObserver(vtkCommand::WarningEvent, errors);
-  writer->SetFileName(tmp.c_str());
-  writer->SetDataModeToAppended();
-  writer->EncodeAppendedDataOff();
-  writer->SetCompressorTypeToZLib();
-  writer->SetHeaderTypeToUInt64();
-  const int ok = writer->Write();
-  if (ok != 1 || writer->GetErrorCode() != 0) {
-    std::remove(tmp.c_str());
-    std::string why = errors->message;
-    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
-    throw InputError(path, "cannot write VTK file" + (why.empty() ? std::string() : ": " + why));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw InputError(path, "cannot rename temporary file into place");
-  }
-}
 
 vtkSmartPointer<vtkDoubleArray> double_array(const char* name, vtkIdType n) {
   auto a = vtkSmartPointer<vtkDoubleArray>::New();
@@ -145,7 +111,7 @@ void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leav
   cd->SetActiveScalars("margin");
   vtkNew<vtkXMLUnstructuredGridWriter> writer;
   writer->SetInputData(grid);
-  write_atomic(writer, path, ".vtu");
+  detail::write_vtk_atomic(writer, path, ".vtu");
 }
 
 long FieldGrid::count_inside_cage() const {
@@ -230,7 +196,7 @@ void write_field_vti(const std::string& path, const FieldGrid& g) {
   pd->SetActiveScalars("sigma3");
   vtkNew<vtkXMLImageDataWriter> writer;
   writer->SetInputData(image);
-  write_atomic(writer, path, ".vti");
+  detail::write_vtk_atomic(writer, path, ".vti");
 }
 
 FieldGrid write_field_vti(const std::string& path, const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
