@@ -1,5 +1,5 @@
-// lidef deform: the main job. Reads a handle scenario, runs the certified projected Newton solver and writes the
-// last certified map with its certificate, ready for ParaView.
+// lidef deform: the main job. Reads a handle scenario, runs the certified projected Newton solver and writes
+// the last certified map with its certificate, ready for ParaView.
 #include <omp.h>
 
 #include <atomic>
@@ -34,7 +34,9 @@ namespace lidef::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
 
 std::string g(double x, int prec = 4) {
   char buf[40];
@@ -59,7 +61,7 @@ double mesh_volume(const MatX3d& V, const MatX3i& F) {
 
 // Map values and per-vertex quantities at the mesh vertices.
 struct MeshFields {
-  MatX3d V;                 // deformed positions
+  MatX3d V;  // deformed positions
   VecXd e_iso, det_j, sigma3;
 };
 MeshFields mesh_fields(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P) {
@@ -82,7 +84,8 @@ MeshFields mesh_fields(const HarmonicBasis& basis, const MatX3d& y, const MatX3d
 }
 
 const char* kIterationsHeader =
-    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_norm,"
+    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
+    "norm,"
     "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
     "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total";
 
@@ -90,11 +93,11 @@ std::string iteration_row(const IterationRecord& r) {
   std::ostringstream s;
   auto d = [](double x) { return format_double(x); };
   s << r.iteration << ',' << d(r.energy_before) << ',' << d(r.terms.total) << ',' << d(r.terms.dis) << ','
-    << d(r.terms.p2p) << ',' << d(r.terms.smooth) << ',' << d(r.lambda_p2p) << ',' << d(r.lambda_smooth) << ','
-    << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections << ','
-    << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
-    << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error) << ','
-    << '"' << r.weight_action << '"' << ',' << g(r.ms_gradient, 6) << ',' << g(r.ms_hessian, 6) << ','
+    << d(r.terms.p2p) << ',' << d(r.terms.smooth) << ',' << d(r.lambda_p2p) << ',' << d(r.lambda_smooth)
+    << ',' << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections
+    << ',' << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
+    << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error)
+    << ',' << '"' << r.weight_action << '"' << ',' << g(r.ms_gradient, 6) << ',' << g(r.ms_hessian, 6) << ','
     << g(r.ms_solve, 6) << ',' << g(r.ms_line_search, 6) << ',' << g(r.ms_certificate, 6) << ','
     << g(r.ms_total, 6);
   return s.str();
@@ -110,13 +113,16 @@ void add_deform_command(CLI::App& app, Action& action) {
     std::map<std::string, std::string> overrides;  // parameter name → text from the command line
   };
   auto opts = std::make_shared<Opts>();
-  auto* sub = app.add_subcommand("deform", "Deform a model to a handle scenario; every accepted step is certified");
-  sub->add_option("SCENARIO", opts->scenario, "Scenario JSON (model, handles, optional parameters)")->required();
+  auto* sub =
+      app.add_subcommand("deform", "Deform a model to a handle scenario; every accepted step is certified");
+  sub->add_option("SCENARIO", opts->scenario, "Scenario JSON (model, handles, optional parameters)")
+      ->required();
   sub->add_option("--out", opts->out, "Output folder (created if missing)")->required();
   sub->add_option("--models", opts->models, "Folder that holds the model named in the scenario");
   sub->add_option("--cache-dir", opts->cache_dir,
                   "Subspace cache folder ('' = no cache; default $LIDEF_CACHE_DIR or ~/.cache/lidef)");
-  sub->add_option("--grid", opts->grid, "Also write field.vti with this many points along the longest axis (0 = no)")
+  sub->add_option("--grid", opts->grid,
+                  "Also write field.vti with this many points along the longest axis (0 = no)")
       ->capture_default_str();
   sub->add_flag("--quiet", opts->quiet, "No per-iteration progress lines");
   // One flag per row of the parameter table: the scenario's "parameters" and these flags use the same names.
@@ -131,9 +137,12 @@ void add_deform_command(CLI::App& app, Action& action) {
   sub->footer(
       "Writes into --out (all files appear together, or none): coefficients.txt (#V+#F rows, readable by\n"
       "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3),\n"
-      "certificate.json + voxels.csv + leaves.vtu (certificate of the written map), iterations.csv, summary.json,\n"
-      "scenario.json (the scenario with the parameters used). Ctrl-C stops after the current line-search trial\n"
-      "and writes the last certified map. Exit code: 0 converged, 1 stopped early (the output is still the last\n"
+      "certificate.json + voxels.csv + leaves.vtu (certificate of the written map), iterations.csv, "
+      "summary.json,\n"
+      "scenario.json (the scenario with the parameters used). Ctrl-C stops after the current line-search "
+      "trial\n"
+      "and writes the last certified map. Exit code: 0 converged, 1 stopped early (the output is still the "
+      "last\n"
       "certified map), 2 error. Parameters: docs/parameters.md; solver: docs/solver.md.");
   sub->callback([opts, &action] {
     action = [opts]() -> int {
@@ -166,7 +175,8 @@ void add_deform_command(CLI::App& app, Action& action) {
         for (std::filesystem::path q = std::filesystem::absolute(o.out, ec).parent_path(); !q.empty();
              q = q.parent_path()) {
           if (std::filesystem::exists(q, ec)) {
-            if (!std::filesystem::is_directory(q, ec)) throw InputError(o.out, q.string() + " is not a folder");
+            if (!std::filesystem::is_directory(q, ec))
+              throw InputError(o.out, q.string() + " is not a folder");
             break;
           }
           if (q == q.parent_path()) break;
@@ -187,16 +197,19 @@ void add_deform_command(CLI::App& app, Action& action) {
       // --- Solve, one progress line per iteration; Ctrl-C stops cleanly.
       g_stop.store(false);
       std::signal(SIGINT, on_sigint);
-      int interrupt_after = 0;  // test hook: raise SIGINT after this many iterations (tests/test_deform_cli.cpp)
+      int interrupt_after =
+          0;  // test hook: raise SIGINT after this many iterations (tests/test_deform_cli.cpp)
       if (const char* e = std::getenv("LIDEF_TEST_INTERRUPT_AFTER")) interrupt_after = std::atoi(e);
       if (!o.quiet)
-        std::cout << "  it       energy      step   min sigma3 LB  cert  handle err   lambda1   lambda2      ms\n";
+        std::cout
+            << "  it       energy      step   min sigma3 LB  cert  handle err   lambda1   lambda2      ms\n";
       auto on_iter = [&](const IterationRecord& r) {
         if (!o.quiet) {
           char line[256];
-          std::snprintf(line, sizeof line, "%4d  %11.7g  %8.3g  %13.4g  %4s  %10.3g  %8.3g  %8.3g  %6.0f %s\n", r.iteration,
-                        r.terms.total, r.step, r.min_lower_bound, r.certified ? "yes" : "NO", r.max_handle_error,
-                        r.lambda_p2p, r.lambda_smooth, r.ms_total, r.weight_action.c_str());
+          std::snprintf(
+              line, sizeof line, "%4d  %11.7g  %8.3g  %13.4g  %4s  %10.3g  %8.3g  %8.3g  %6.0f %s\n",
+              r.iteration, r.terms.total, r.step, r.min_lower_bound, r.certified ? "yes" : "NO",
+              r.max_handle_error, r.lambda_p2p, r.lambda_smooth, r.ms_total, r.weight_action.c_str());
           std::cout << line << std::flush;
         }
         if (interrupt_after > 0 && r.iteration == interrupt_after) std::raise(SIGINT);
@@ -213,9 +226,9 @@ void add_deform_command(CLI::App& app, Action& action) {
         throw NumericalError("internal: the final map is not certified although every accepted step was (" +
                              cert.reason + ")");
       const SamplingParams sp = solver.sampling_params();
-      CertificateReport report = make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir,
-                                                         "coefficients.txt", sp, solver.sampling(),
-                                                         solver.certify_params(false, true));
+      CertificateReport report =
+          make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir, "coefficients.txt", sp,
+                                  solver.sampling(), solver.certify_params(false, true));
       const MeshFields mf = mesh_fields(solver.basis(), y, model.mesh.V);
       const double ms_final = ms_since(t0);
       const VecXd herr = solver.handle_errors();
@@ -259,7 +272,8 @@ void add_deform_command(CLI::App& app, Action& action) {
       sj["handle_tolerance"] = sc.params.handle_tolerance;
       sj["global_volume_ratio"] = vol_ratio;
       sj["energy"] = {{"total", et.total}, {"dis", et.dis}, {"p2p", et.p2p}, {"smooth", et.smooth}};
-      sj["final_weights"] = {{"lambda_p2p", solver.weights().p2p}, {"lambda_smooth", solver.weights().smooth}};
+      sj["final_weights"] = {{"lambda_p2p", solver.weights().p2p},
+                             {"lambda_smooth", solver.weights().smooth}};
       sj["dof"] = 3 * solver.subspace().size();
       sj["samples"] = solver.sampling().size();
       sj["hessian_samples"] = static_cast<int>(solver.sampling().hessian_subset.size());
@@ -274,13 +288,16 @@ void add_deform_command(CLI::App& app, Action& action) {
       write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });
       out.commit(o.grid > 0 ? std::vector<std::string>{} : std::vector<std::string>{"field.vti"});
 
-      std::cout << "lidef deform: " << sc.name << ": " << to_string(res.reason) << " (" << res.message << ") after "
-                << solver.history().size() << " iterations, " << g(res.seconds, 3) << " s\n"
-                << "  max handle error " << g(max_err, 3) << (max_err <= sc.params.handle_tolerance ? " (reached)" : " (NOT reached)")
+      std::cout << "lidef deform: " << sc.name << ": " << to_string(res.reason) << " (" << res.message
+                << ") after " << solver.history().size() << " iterations, " << g(res.seconds, 3) << " s\n"
+                << "  max handle error " << g(max_err, 3)
+                << (max_err <= sc.params.handle_tolerance ? " (reached)" : " (NOT reached)")
                 << ", global volume ratio " << g(vol_ratio, 5) << "\n"
-                << "  CERTIFIED locally injective on the union of " << cert.voxels << " voxels, min lower bound of sigma3 "
-                << g(cert.min_lower_bound, 4) << ", mesh coverage " << g(100 * report.mesh_coverage, 3) << "%\n"
-                << "  wrote " << out.final_path("") << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
+                << "  CERTIFIED locally injective on the union of " << cert.voxels
+                << " voxels, min lower bound of sigma3 " << g(cert.min_lower_bound, 4) << ", mesh coverage "
+                << g(100 * report.mesh_coverage, 3) << "%\n"
+                << "  wrote " << out.final_path("")
+                << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"
                 << (o.grid > 0 ? ", field.vti" : "") << "}\n";
       return res.converged() ? kOk : kStoppedEarly;

@@ -1,34 +1,39 @@
-// Benchmark of the deformation solver (DeformationSolver, projected_newton.h) on the handle scenarios: the numbers of
-// the paper's Table 1 (iterations, time to converge, ms per iteration) and Fig. 13 (per-iteration stage split), the
-// effect of dynamic weighting, the reduced Hessian against a plain SYRK, and the per-iteration targets.
+// Benchmark of the deformation solver (DeformationSolver, projected_newton.h) on the handle scenarios: the
+// numbers of the paper's Table 1 (iterations, time to converge, ms per iteration) and Fig. 13 (per-iteration
+// stage split), the effect of dynamic weighting, the reduced Hessian against a plain SYRK, and the
+// per-iteration targets.
 //
-// Scenarios: every *.json in the shared scenarios folder (DATA_DIR/scenarios; DATA_DIR = first positional argument,
-// else $LIDEF_SHARED_DATA, else ../shared/data beside the source tree; --scenarios DIR names the folder directly;
-// skipped with a message when absent) and the project's data/scenarios/beam_bend.json. --only a,b picks scenarios
-// by name (file stem) or by model. Scenarios of one model (with the same precomputation-shaping parameters) share one DeformationSolver:
-// its construction (subspace, sampling, reduced gradients, certificate precomputation) is timed once as the
-// model's preprocessing; the subspace is cached in --cache-dir (default /tmp/lidef-bench-cache), so only the very
-// first run of a model computes it. Before each solve the solver is reset() to the identity, so every run starts
-// from the rest pose exactly as a fresh solver would.
+// Scenarios: every *.json in the shared scenarios folder (DATA_DIR/scenarios; DATA_DIR = first positional
+// argument, else $LIDEF_SHARED_DATA, else ../shared/data beside the source tree; --scenarios DIR names the
+// folder directly; skipped with a message when absent) and the project's data/scenarios/beam_bend.json.
+// --only a,b picks scenarios by name (file stem) or by model. Scenarios of one model (with the same
+// precomputation-shaping parameters) share one DeformationSolver: its construction (subspace, sampling,
+// reduced gradients, certificate precomputation) is timed once as the model's preprocessing; the subspace is
+// cached in --cache-dir (default /tmp/lidef-bench-cache), so only the very first run of a model computes it.
+// Before each solve the solver is reset() to the identity, so every run starts from the rest pose exactly as
+// a fresh solver would.
 //
 // Per scenario:
-//  1. solve() with the scenario's parameters (the defaults: max_iterations 50, dynamic weighting on), except that
-//     bar_twist180 is capped at --cap iterations (default 8; its certificate refines a lot, seconds per iteration)
-//     and reported as capped; --iterations N sets max_iterations for every scenario. The per-iteration stage
-//     times are IterationRecord's ms_* fields, averaged over the iterations. The same scenario is solved again with
-//     dynamic_weighting = false (--no-compare skips it) for the on/off table.
-//  2. For the first scenario of the bar and the animal (--hessian-models), at the final map of the dynamic-weighting
-//     run: DeformationEnergy::distortion_hessian(JT, projected = true, all_samples = false) against a plain dense
-//     single-precision SYRK of the shape the Kronecker formula avoids (C = Mᵀ M, M: 9|H| by 3s random floats,
-//     cblas_ssyrk), and, for reference, one sgemm with the Kronecker block shape s × 3|H| × s and one with the
-//     shape the implementation calls (s × 3|H| × 6s: the six blocks in one product). Median and min of --reps
-//     timed repetitions after one warm-up, same process, same threads.
-//  3. Per-iteration time at 900 DOF on the bar and animal scenarios: the mean of ms_total over iterations 2..N
+//  1. solve() with the scenario's parameters (the defaults: max_iterations 50, dynamic weighting on), except
+//  that
+//     bar_twist180 is capped at --cap iterations (default 8; its certificate refines a lot, seconds per
+//     iteration) and reported as capped; --iterations N sets max_iterations for every scenario. The
+//     per-iteration stage times are IterationRecord's ms_* fields, averaged over the iterations. The same
+//     scenario is solved again with dynamic_weighting = false (--no-compare skips it) for the on/off table.
+//  2. For the first scenario of the bar and the animal (--hessian-models), at the final map of the
+//  dynamic-weighting
+//     run: DeformationEnergy::distortion_hessian(JT, projected = true, all_samples = false) against a plain
+//     dense single-precision SYRK of the shape the Kronecker formula avoids (C = Mᵀ M, M: 9|H| by 3s random
+//     floats, cblas_ssyrk), and, for reference, one sgemm with the Kronecker block shape s × 3|H| × s and one
+//     with the shape the implementation calls (s × 3|H| × 6s: the six blocks in one product). Median and min
+//     of --reps timed repetitions after one warm-up, same process, same threads.
+//  3. Per-iteration time at 900 DOF on the bar and animal scenarios: the mean of ms_total over
+//  iterations 2..N
 //     (iteration 1 takes the large first steps) against the targets (≤ 150 ms bar, ≤ 400 ms animal).
 //
 // Output: markdown on stdout (machine, then the tables; without --markdown also per-iteration details per
-// scenario); progress on stderr. Exit code 0, 2 on bad input, 3 when a solve failed (an exception) or a final map
-// is not certified.
+// scenario); progress on stderr. Exit code 0, 2 on bad input, 3 when a solve failed (an exception) or a final
+// map is not certified.
 //
 // Usage: bench_deform [DATA_DIR] [--scenarios DIR] [--only a,b] [--iterations N] [--cap N] [--threads T]
 //                     [--reps R] [--cache-dir DIR] [--hessian-models bar,animal] [--no-compare] [--markdown]
@@ -82,13 +87,13 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 struct Options {
-  std::string data;         // shared data folder
-  std::string scenarios;    // folder of scenario JSONs (default data/scenarios)
+  std::string data;       // shared data folder
+  std::string scenarios;  // folder of scenario JSONs (default data/scenarios)
   std::vector<std::string> only;
-  int iterations = 0;       // > 0: max_iterations for every scenario
-  int cap = 8;              // max_iterations of the capped scenarios
-  int threads = 0;          // > 0: OpenMP and OpenBLAS threads
-  int reps = 7;             // Hessian / SYRK repetitions
+  int iterations = 0;  // > 0: max_iterations for every scenario
+  int cap = 8;         // max_iterations of the capped scenarios
+  int threads = 0;     // > 0: OpenMP and OpenBLAS threads
+  int reps = 7;        // Hessian / SYRK repetitions
   std::string cache_dir = "/tmp/lidef-bench-cache";
   std::vector<std::string> hessian_models = {"bar", "animal"};
   bool compare = true;
@@ -97,13 +102,17 @@ struct Options {
 
 // Scenarios that get the iteration cap (their certificate refines heavily; seconds per iteration).
 const std::vector<std::string> kCapped = {"bar_twist180"};
-// Run order: the bar first (its Hessian comparison), the slow twist last among the bars, the project's beam last.
-const std::vector<std::string> kOrder = {"bar_bend",       "bar_twist90",    "bar_twist180", "animal_tail_lift",
-                                         "horse_leg_lift", "spot_head_turn", "beam_bend"};
+// Run order: the bar first (its Hessian comparison), the slow twist last among the bars, the project's beam
+// last.
+const std::vector<std::string> kOrder = {"bar_bend",         "bar_twist90",    "bar_twist180",
+                                         "animal_tail_lift", "horse_leg_lift", "spot_head_turn",
+                                         "beam_bend"};
 // Per-iteration targets at 900 DOF (ms, mean over iterations 2..N).
 const std::map<std::string, double> kTargets = {{"bar", 150.0}, {"animal", 400.0}};
 
-double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
 
 double median(std::vector<double> v) {
   if (v.empty()) return std::nan("");
@@ -287,9 +296,10 @@ struct HessRow {
   double checksum = 0;
 };
 
-// distortion_hessian at the solver's current map vs a dense SYRK of the same problem (see the header comment).
-HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scenario, const std::string& model,
-                        int reps) {
+// distortion_hessian at the solver's current map vs a dense SYRK of the same problem (see the header
+// comment).
+HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scenario,
+                        const std::string& model, int reps) {
   HessRow row;
   row.scenario = scenario;
   row.model = model;
@@ -333,8 +343,8 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
   row.block_flops = 2.0 * s * s * kb;
   // The six blocks as one product (the implementation's call shape): s x 6s = (s x 3|H|)(3|H| x 6s).
   row.fused = time_reps(reps, [&] {
-    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, s, 6 * s, kb, 1.0f, A.data(), s, B.data(), kb, 0.0f,
-                Cb.data(), s);
+    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, s, 6 * s, kb, 1.0f, A.data(), s, B.data(), kb,
+                0.0f, Cb.data(), s);
   });
   row.fused_flops = 2.0 * s * 6.0 * s * kb;
   row.hess_flops = row.fused_flops;  // the products only; the 9x9 projections and W are extra
@@ -347,9 +357,10 @@ struct ScenarioEntry {
 };
 
 void usage() {
-  std::cerr << "usage: bench_deform [DATA_DIR] [--scenarios DIR] [--only a,b] [--iterations N] [--cap N]\n"
-               "                    [--threads T] [--reps R] [--cache-dir DIR] [--hessian-models bar,animal]\n"
-               "                    [--no-compare] [--markdown]\n";
+  std::cerr
+      << "usage: bench_deform [DATA_DIR] [--scenarios DIR] [--only a,b] [--iterations N] [--cap N]\n"
+         "                    [--threads T] [--reps R] [--cache-dir DIR] [--hessian-models bar,animal]\n"
+         "                    [--no-compare] [--markdown]\n";
 }
 
 void print_iterations(const RunResult& r) {
@@ -358,18 +369,21 @@ void print_iterations(const RunResult& r) {
     std::cout << "ERROR: " << r.error << "\n";
     return;
   }
-  std::cout << "stop: " << stop_text(r) << " — " << r.res.message << "; solve " << fmt(r.res.seconds, 2) << " s\n\n";
-  std::cout << "| it | energy | t | armijo rej | cert rej | refined | min σ3 LB | min σ3 sampled | max handle err | λ1 | λ2 | action | "
+  std::cout << "stop: " << stop_text(r) << " — " << r.res.message << "; solve " << fmt(r.res.seconds, 2)
+            << " s\n\n";
+  std::cout << "| it | energy | t | armijo rej | cert rej | refined | min σ3 LB | min σ3 sampled | max "
+               "handle err | λ1 | λ2 | action | "
                "grad ms | Hess ms | solve ms | LS ms | cert ms | total ms |\n";
   std::cout << "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n";
   for (const IterationRecord& it : r.hist)
     std::cout << "| " << it.iteration << " | " << sci(it.terms.total, 6) << " | " << sci(it.step, 3) << " | "
               << it.armijo_rejections << " | " << it.certificate_rejections << " | " << it.refined << " | "
-              << fmt(it.min_lower_bound, 4) << " | " << fmt(it.min_sigma3, 4) << " | " << sci(it.max_handle_error, 3) << " | "
-              << sci(it.lambda_p2p, 3) << " | " << sci(it.lambda_smooth, 3) << " | " << it.weight_action << " | "
-              << fmt(it.ms_gradient, 1) << " | " << fmt(it.ms_hessian, 1) << " | " << fmt(it.ms_solve, 1) << " | "
-              << fmt(it.ms_line_search, 1) << " | " << fmt(it.ms_certificate, 1) << " | " << fmt(it.ms_total, 1)
-              << " |\n";
+              << fmt(it.min_lower_bound, 4) << " | " << fmt(it.min_sigma3, 4) << " | "
+              << sci(it.max_handle_error, 3) << " | " << sci(it.lambda_p2p, 3) << " | "
+              << sci(it.lambda_smooth, 3) << " | " << it.weight_action << " | " << fmt(it.ms_gradient, 1)
+              << " | " << fmt(it.ms_hessian, 1) << " | " << fmt(it.ms_solve, 1) << " | "
+              << fmt(it.ms_line_search, 1) << " | " << fmt(it.ms_certificate, 1) << " | "
+              << fmt(it.ms_total, 1) << " |\n";
 }
 
 }  // namespace
@@ -443,10 +457,12 @@ int main(int argc, char** argv) {
   std::error_code ec;
   if (fs::is_directory(scen_dir, ec)) {
     for (const auto& e : fs::directory_iterator(scen_dir, ec))
-      if (e.path().extension() == ".json") entries.push_back({e.path().string(), e.path().stem().string(), 0});
+      if (e.path().extension() == ".json")
+        entries.push_back({e.path().string(), e.path().stem().string(), 0});
   } else {
-    const std::string msg = "shared scenarios not found: " + scen_dir +
-                            " (set LIDEF_SHARED_DATA or pass DATA_DIR / --scenarios); only the project's scenario runs";
+    const std::string msg =
+        "shared scenarios not found: " + scen_dir +
+        " (set LIDEF_SHARED_DATA or pass DATA_DIR / --scenarios); only the project's scenario runs";
     std::cerr << "bench_deform: " << msg << "\n";
     notes.push_back(msg);
   }
@@ -471,7 +487,9 @@ int main(int argc, char** argv) {
   }
   if (!opt.only.empty()) {
     // --only takes scenario names (file stems) or model names (every scenario of that model).
-    auto picked = [&](const Scenario& sc) { return contains(opt.only, sc.name) || contains(opt.only, sc.model); };
+    auto picked = [&](const Scenario& sc) {
+      return contains(opt.only, sc.name) || contains(opt.only, sc.model);
+    };
     for (const std::string& n : opt.only)
       if (std::none_of(scenarios.begin(), scenarios.end(),
                        [&](const Scenario& sc) { return sc.name == n || sc.model == n; })) {
@@ -480,8 +498,9 @@ int main(int argc, char** argv) {
         std::cerr << "\n";
         return 2;
       }
-    scenarios.erase(std::remove_if(scenarios.begin(), scenarios.end(), [&](const Scenario& sc) { return !picked(sc); }),
-                    scenarios.end());
+    scenarios.erase(
+        std::remove_if(scenarios.begin(), scenarios.end(), [&](const Scenario& sc) { return !picked(sc); }),
+        scenarios.end());
   }
   fs::create_directories(opt.cache_dir, ec);
 
@@ -493,12 +512,16 @@ int main(int argc, char** argv) {
             << "; RAM " << mem_total() << "\n";
   std::cout << "- OpenMP: omp_get_max_threads() = " << omp_get_max_threads()
             << ", omp_get_num_procs() = " << omp_get_num_procs()
-            << (opt.threads > 0 ? " (--threads " + std::to_string(opt.threads) + ")" : std::string(" (all cores)"))
+            << (opt.threads > 0 ? " (--threads " + std::to_string(opt.threads) + ")"
+                                : std::string(" (all cores)"))
             << "\n";
   const int par = openblas_get_parallel();
   std::cout << "- OpenBLAS: " << openblas_get_config() << " (core " << openblas_get_corename() << "), "
             << openblas_get_num_threads() << " threads, "
-            << (par == 0 ? "sequential" : par == 1 ? "pthreads" : par == 2 ? "OpenMP" : "unknown")
+            << (par == 0   ? "sequential"
+                : par == 1 ? "pthreads"
+                : par == 2 ? "OpenMP"
+                           : "unknown")
             << " build" << (opt.threads > 0 ? " (openblas_set_num_threads(--threads))" : "") << "\n";
   std::cout << "- compiler: GCC-compatible " << __VERSION__ << "; projected_newton.cpp compiled with "
             << compile_flags("/deform/src/projected_newton.cpp") << "\n";
@@ -510,10 +533,11 @@ int main(int argc, char** argv) {
     std::cout << "- source: " << (head.empty() ? "unknown (no git)" : head.substr(0, 100))
               << (d.empty() ? "; deform/ unmodified" : "; deform/ has uncommitted changes: " + d) << "\n";
   }
-  std::cout << "- scenarios: " << (fs::is_directory(scen_dir, ec) ? scen_dir : "(shared folder absent)") << " + "
-            << beam << "; subspace cache " << opt.cache_dir << "\n";
+  std::cout << "- scenarios: " << (fs::is_directory(scen_dir, ec) ? scen_dir : "(shared folder absent)")
+            << " + " << beam << "; subspace cache " << opt.cache_dir << "\n";
   std::cout << "- runs: scenario parameters (defaults: max_iterations 50, dynamic weighting on)";
-  if (opt.iterations > 0) std::cout << ", max_iterations " << opt.iterations << " for every scenario (--iterations)";
+  if (opt.iterations > 0)
+    std::cout << ", max_iterations " << opt.iterations << " for every scenario (--iterations)";
   std::cout << "; capped at " << opt.cap << " iterations: ";
   for (size_t k = 0; k < kCapped.size(); ++k) std::cout << (k ? ", " : "") << kCapped[k];
   std::cout << (opt.compare ? "; each scenario again with dynamic_weighting = false" : "") << "\n";
@@ -535,8 +559,8 @@ int main(int argc, char** argv) {
     const DeformParams& p = sc.params;
     std::ostringstream k;
     k.precision(17);
-    k << sc.model_dir << '|' << p.reduced_dof << '|' << p.samples << '|' << p.voxel_side << '|' << p.safety << '|'
-      << p.hessian_fraction;
+    k << sc.model_dir << '|' << p.reduced_dof << '|' << p.samples << '|' << p.voxel_side << '|' << p.safety
+      << '|' << p.hessian_fraction;
     return k.str();
   };
 
@@ -561,7 +585,9 @@ int main(int argc, char** argv) {
             model->cage, p, opt.cache_dir, [](const std::string& s) { std::cerr << "  " << s << "\n"; });
         preprocess_s = ms_since(t0) / 1000;
         solver_key = key;
-        if (!cached) notes.push_back(model_name + ": the subspace was computed (not cached) in this run's preprocessing");
+        if (!cached)
+          notes.push_back(model_name +
+                          ": the subspace was computed (not cached) in this run's preprocessing");
       } catch (const std::exception& e) {
         RunResult r;
         r.scenario = sc.name;
@@ -596,20 +622,21 @@ int main(int argc, char** argv) {
       if (opt.iterations > 0) p.max_iterations = opt.iterations;
       if (r.capped) p.max_iterations = std::min(p.max_iterations, opt.cap);
       r.max_iterations = p.max_iterations;
-      std::cerr << "bench_deform: " << sc.name << " (dynamic weighting " << r.variant << ", max " << p.max_iterations
-                << " iterations)\n";
+      std::cerr << "bench_deform: " << sc.name << " (dynamic weighting " << r.variant << ", max "
+                << p.max_iterations << " iterations)\n";
       try {
         solver->set_params(p);
         solver->reset();
         solver->set_handles(sc.sources, sc.targets, sc.path);
         r.res = solver->solve([](const IterationRecord& it) {
           char line[256];
-          std::snprintf(line, sizeof line,
-                        "  it %2d  %7.0f ms (grad %.0f, Hess %.0f, solve %.0f, LS %.0f of which cert %.0f)  t %.3g  "
-                        "rej %d/%d  refined %ld  LB %.3g  err %.3g %s\n",
-                        it.iteration, it.ms_total, it.ms_gradient, it.ms_hessian, it.ms_solve, it.ms_line_search,
-                        it.ms_certificate, it.step, it.armijo_rejections, it.certificate_rejections, it.refined,
-                        it.min_lower_bound, it.max_handle_error, it.weight_action.c_str());
+          std::snprintf(
+              line, sizeof line,
+              "  it %2d  %7.0f ms (grad %.0f, Hess %.0f, solve %.0f, LS %.0f of which cert %.0f)  t %.3g  "
+              "rej %d/%d  refined %ld  LB %.3g  err %.3g %s\n",
+              it.iteration, it.ms_total, it.ms_gradient, it.ms_hessian, it.ms_solve, it.ms_line_search,
+              it.ms_certificate, it.step, it.armijo_rejections, it.certificate_rejections, it.refined,
+              it.min_lower_bound, it.max_handle_error, it.weight_action.c_str());
           std::cerr << line;
           return true;
         });
@@ -625,11 +652,13 @@ int main(int argc, char** argv) {
         r.lambda2 = solver->weights().smooth;
         r.ok = true;
         if (!r.certified) {
-          notes.push_back(sc.name + " (weighting " + r.variant + "): the final map's certificate says NOT certified");
+          notes.push_back(sc.name + " (weighting " + r.variant +
+                          "): the final map's certificate says NOT certified");
           exit_code = 3;
         }
-        std::cerr << "  -> " << stop_text(r) << ", " << r.hist.size() << " iterations, " << fmt(r.res.seconds, 2)
-                  << " s, max handle error " << sci(r.max_err) << ", min sigma3 LB " << fmt(r.min_lb, 4) << "\n";
+        std::cerr << "  -> " << stop_text(r) << ", " << r.hist.size() << " iterations, "
+                  << fmt(r.res.seconds, 2) << " s, max handle error " << sci(r.max_err) << ", min sigma3 LB "
+                  << fmt(r.min_lb, 4) << "\n";
       } catch (const std::exception& e) {
         r.error = e.what();
         std::cerr << "bench_deform: " << sc.name << ": " << e.what() << "\n";
@@ -638,7 +667,8 @@ int main(int argc, char** argv) {
       runs.push_back(r);
       // Hessian vs SYRK at this run's final map (first scenario of each listed model, weighting on).
       if (dyn && r.ok && contains(opt.hessian_models, model_name) && !contains(hess_done, model_name)) {
-        std::cerr << "bench_deform: " << model_name << ": distortion_hessian vs SYRK (" << opt.reps << " reps)\n";
+        std::cerr << "bench_deform: " << model_name << ": distortion_hessian vs SYRK (" << opt.reps
+                  << " reps)\n";
         hess_rows.push_back(hessian_vs_syrk(*solver, sc.name, model_name, opt.reps));
         hess_done.push_back(model_name);
       }
@@ -657,9 +687,10 @@ int main(int argc, char** argv) {
     if (r.variant == "on") on.push_back(&r);
 
   std::cout << "\n## Solver per scenario (Table 1 of the paper; dynamic weighting on)\n\n";
-  std::cout << "| scenario | model | cage V / F | DOF | samples \\|I\\| | \\|H\\| | handles | preprocessing s | "
-               "iterations | time to converge s | ms / iteration | stop reason | max handle error | final min σ3 "
-               "lower bound | final min σ3 sampled | certified |\n";
+  std::cout
+      << "| scenario | model | cage V / F | DOF | samples \\|I\\| | \\|H\\| | handles | preprocessing s | "
+         "iterations | time to converge s | ms / iteration | stop reason | max handle error | final min σ3 "
+         "lower bound | final min σ3 sampled | certified |\n";
   std::cout << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---|\n";
   for (const RunResult* r : on) {
     if (!r->ok && r->dof == 0) {
@@ -669,94 +700,113 @@ int main(int argc, char** argv) {
     }
     std::cout << "| " << r->scenario << " | " << r->model << " | " << r->cage_v << " / " << r->cage_f << " | "
               << r->dof << " | " << r->samples << " | " << r->hsub << " | " << r->handles << " | "
-              << fmt(r->preprocess_s, 1) << (r->preprocess_shared ? " (shared)" : "") << " | " << r->hist.size()
-              << (r->capped ? " (cap)" : "") << " | " << fmt(r->res.seconds, 2) << " | "
+              << fmt(r->preprocess_s, 1) << (r->preprocess_shared ? " (shared)" : "") << " | "
+              << r->hist.size() << (r->capped ? " (cap)" : "") << " | " << fmt(r->res.seconds, 2) << " | "
               << fmt(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | " << stop_text(*r) << " | "
               << sci(r->max_err) << " | " << fmt(r->min_lb, 4) << " | " << fmt(r->min_sigma3, 4) << " | "
               << (r->certified ? "yes" : "NO") << " |\n";
   }
-  std::cout << "\nPreprocessing = DeformationSolver construction (subspace from the cache, sampling, reduced basis "
-               "gradients at the samples, certificate precomputation, identity certificate); \"(shared)\": the "
-               "solver built for the previous scenario of the same model was reused (reset() to the identity). "
-               "Time to converge = SolveResult::seconds (for a capped run: the time of its iterations). "
-               "ms / iteration = mean IterationRecord::ms_total. Final min σ3 lower bound = min over leaves of "
-               "σ3 − rL of the last accepted map's line-search certificate (refinement stops as soon as a leaf's "
-               "bound is positive, so with refinement this is a small positive number by construction); final min σ3 "
-               "sampled = min σ3 at the evaluated voxel centers of that certificate.\n";
+  std::cout
+      << "\nPreprocessing = DeformationSolver construction (subspace from the cache, sampling, reduced basis "
+         "gradients at the samples, certificate precomputation, identity certificate); \"(shared)\": the "
+         "solver built for the previous scenario of the same model was reused (reset() to the identity). "
+         "Time to converge = SolveResult::seconds (for a capped run: the time of its iterations). "
+         "ms / iteration = mean IterationRecord::ms_total. Final min σ3 lower bound = min over leaves of "
+         "σ3 − rL of the last accepted map's line-search certificate (refinement stops as soon as a leaf's "
+         "bound is positive, so with refinement this is a small positive number by construction); final min "
+         "σ3 "
+         "sampled = min σ3 at the evaluated voxel centers of that certificate.\n";
 
-  std::cout << "\n## Per-iteration stage split (mean ms per iteration, like the paper's Fig. 13; dynamic weighting "
-               "on)\n\n";
-  std::cout << "| scenario | iterations | gradient | Hessian (assembly + projection) | solve | line search | of "
-               "which certificate | line search w/o certificate | other | total | certificate share | trials / "
-               "iteration (Armijo rej. + cert. rej. + accepted) | refined voxels / iteration |\n";
+  std::cout
+      << "\n## Per-iteration stage split (mean ms per iteration, like the paper's Fig. 13; dynamic weighting "
+         "on)\n\n";
+  std::cout
+      << "| scenario | iterations | gradient | Hessian (assembly + projection) | solve | line search | of "
+         "which certificate | line search w/o certificate | other | total | certificate share | trials / "
+         "iteration (Armijo rej. + cert. rej. + accepted) | refined voxels / iteration |\n";
   std::cout << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const RunResult* r : on) {
     if (!r->ok) continue;
     const auto& h = r->hist;
     const double g = mean_of(h, &IterationRecord::ms_gradient), H = mean_of(h, &IterationRecord::ms_hessian),
-                 so = mean_of(h, &IterationRecord::ms_solve), ls = mean_of(h, &IterationRecord::ms_line_search),
-                 ce = mean_of(h, &IterationRecord::ms_certificate), to = mean_of(h, &IterationRecord::ms_total);
+                 so = mean_of(h, &IterationRecord::ms_solve),
+                 ls = mean_of(h, &IterationRecord::ms_line_search),
+                 ce = mean_of(h, &IterationRecord::ms_certificate),
+                 to = mean_of(h, &IterationRecord::ms_total);
     const double trials = mean_count(h, &IterationRecord::armijo_rejections) +
                           mean_count(h, &IterationRecord::certificate_rejections) +
                           mean_count(h, &IterationRecord::accepted);
     std::cout << "| " << r->scenario << " | " << h.size() << " | " << fmt(g, 1) << " | " << fmt(H, 1) << " | "
               << fmt(so, 1) << " | " << fmt(ls, 1) << " | " << fmt(ce, 1) << " | " << fmt(ls - ce, 1) << " | "
-              << fmt(to - g - H - so - ls, 1) << " | " << fmt(to, 1) << " | " << fmt(100 * ce / to, 0) << "% | "
-              << fmt(trials, 2) << " | " << fmt(mean_count(h, &IterationRecord::refined), 0) << " |\n";
+              << fmt(to - g - H - so - ls, 1) << " | " << fmt(to, 1) << " | " << fmt(100 * ce / to, 0)
+              << "% | " << fmt(trials, 2) << " | " << fmt(mean_count(h, &IterationRecord::refined), 0)
+              << " |\n";
   }
-  std::cout << "\nColumns: means over all iterations of IterationRecord::ms_gradient (energy + gradient on all "
-               "samples), ms_hessian (9x9 PSD projections on H, the Kronecker products, quadratic terms), ms_solve "
-               "(dense Cholesky), ms_line_search (all trials: Armijo energy evaluations and certificates), "
-               "ms_certificate (the certificates of the line search only); other = total − the four stages "
-               "(handle errors, dynamic weighting, bookkeeping). Refined = voxels subdivided by the accepted map's "
-               "certificate.\n";
+  std::cout
+      << "\nColumns: means over all iterations of IterationRecord::ms_gradient (energy + gradient on all "
+         "samples), ms_hessian (9x9 PSD projections on H, the Kronecker products, quadratic terms), ms_solve "
+         "(dense Cholesky), ms_line_search (all trials: Armijo energy evaluations and certificates), "
+         "ms_certificate (the certificates of the line search only); other = total − the four stages "
+         "(handle errors, dynamic weighting, bookkeeping). Refined = voxels subdivided by the accepted map's "
+         "certificate.\n";
 
   if (opt.compare) {
     std::cout << "\n## Dynamic weighting on vs off\n\n";
-    std::cout << "| scenario | dynamic weighting | iterations | time s | ms / iteration | max handle error | final min σ3 "
+    std::cout << "| scenario | dynamic weighting | iterations | time s | ms / iteration | max handle error | "
+                 "final min σ3 "
                  "lower bound | stop reason | final λ1 / λ2 |\n";
     std::cout << "|---|---|---:|---:|---:|---:|---:|---|---|\n";
     for (const RunResult& r : runs) {
       if (!r.ok) {
-        std::cout << "| " << r.scenario << " | " << r.variant << " | ERROR: " << r.error << " | | | | | | |\n";
+        std::cout << "| " << r.scenario << " | " << r.variant << " | ERROR: " << r.error
+                  << " | | | | | | |\n";
         continue;
       }
-      std::cout << "| " << r.scenario << " | " << r.variant << " | " << r.hist.size() << (r.capped ? " (cap)" : "")
-                << " | " << fmt(r.res.seconds, 2) << " | " << fmt(mean_of(r.hist, &IterationRecord::ms_total), 0)
-                << " | " << sci(r.max_err) << " | " << fmt(r.min_lb, 4) << " | " << stop_text(r) << " | "
-                << sci(r.lambda1) << " / " << sci(r.lambda2) << " |\n";
+      std::cout << "| " << r.scenario << " | " << r.variant << " | " << r.hist.size()
+                << (r.capped ? " (cap)" : "") << " | " << fmt(r.res.seconds, 2) << " | "
+                << fmt(mean_of(r.hist, &IterationRecord::ms_total), 0) << " | " << sci(r.max_err) << " | "
+                << fmt(r.min_lb, 4) << " | " << stop_text(r) << " | " << sci(r.lambda1) << " / "
+                << sci(r.lambda2) << " |\n";
     }
   }
 
   if (!hess_rows.empty()) {
-    std::cout << "\n## Reduced Hessian (Kronecker, 6 sgemm blocks) vs a plain SYRK (same process, same threads)\n\n";
-    std::cout << "| model | at the final map of | s | \\|H\\| | distortion_hessian ms (median / min) | of which 9x9 PSD projections ms (timed alone) | SYRK 3s x 9\\|H\\| "
-                 "-> 3s x 3s ms (median / min) | ratio Hessian / SYRK | target | sgemm s x 3\\|H\\| x s (one block) ms "
-                 "| sgemm s x 3\\|H\\| x 6s (the six blocks, one call) ms | GFlop/s SYRK | GFlop/s six blocks | "
-                 "GFlop/s Hessian products |\n";
+    std::cout << "\n## Reduced Hessian (Kronecker, 6 sgemm blocks) vs a plain SYRK (same process, same "
+                 "threads)\n\n";
+    std::cout
+        << "| model | at the final map of | s | \\|H\\| | distortion_hessian ms (median / min) | of which "
+           "9x9 PSD projections ms (timed alone) | SYRK 3s x 9\\|H\\| "
+           "-> 3s x 3s ms (median / min) | ratio Hessian / SYRK | target | sgemm s x 3\\|H\\| x s (one "
+           "block) ms "
+           "| sgemm s x 3\\|H\\| x 6s (the six blocks, one call) ms | GFlop/s SYRK | GFlop/s six blocks | "
+           "GFlop/s Hessian products |\n";
     std::cout << "|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|\n";
     for (const HessRow& h : hess_rows) {
       const double ratio = h.hess.med() / h.syrk.med();
       std::cout << "| " << h.model << " | " << h.scenario << " | " << h.s << " | " << h.h << " | "
-                << fmt(h.hess.med(), 1) << " / " << fmt(h.hess.min(), 1) << " | " << fmt(h.psd.med(), 1) << " | "
-                << fmt(h.syrk.med(), 1) << " / "
-                << fmt(h.syrk.min(), 1) << " | " << fmt(ratio, 2) << " | ≤ 2: " << (ratio <= 2 ? "met" : "NOT met")
-                << " | " << fmt(h.block.med(), 1) << " | " << fmt(h.fused.med(), 1) << " | "
-                << fmt(h.syrk_flops / (h.syrk.med() * 1e6), 1) << " | "
+                << fmt(h.hess.med(), 1) << " / " << fmt(h.hess.min(), 1) << " | " << fmt(h.psd.med(), 1)
+                << " | " << fmt(h.syrk.med(), 1) << " / " << fmt(h.syrk.min(), 1) << " | " << fmt(ratio, 2)
+                << " | ≤ 2: " << (ratio <= 2 ? "met" : "NOT met") << " | " << fmt(h.block.med(), 1) << " | "
+                << fmt(h.fused.med(), 1) << " | " << fmt(h.syrk_flops / (h.syrk.med() * 1e6), 1) << " | "
                 << fmt(h.fused_flops / (h.fused.med() * 1e6), 1) << " | "
                 << fmt(h.hess_flops / (h.hess.med() * 1e6), 1) << " |\n";
     }
-    std::cout << "\nMedian / min of " << opt.reps
-              << " timed repetitions after one warm-up. distortion_hessian(JT, projected = true, all_samples = "
-                 "false): the 9x9 PSD projections on H (also timed alone: sd_hessian_psd at the |H| samples, the same "
-                 "OpenMP loop), the float W matrix (3|H| x 6s), one cblas_sgemm "
-                 "s x 3|H| x 6s and the symmetric assembly into 3s x 3s doubles. SYRK: cblas_ssyrk of random "
-                 "floats M (9|H| x 3s), upper triangle of Mᵀ M, n(n+1)k flops with n = 3s, k = 9|H|. GFlop/s of the "
-                 "Hessian products: 36 s² |H| flops (the six s x s blocks) over the whole distortion_hessian time.\n";
+    std::cout
+        << "\nMedian / min of " << opt.reps
+        << " timed repetitions after one warm-up. distortion_hessian(JT, projected = true, all_samples = "
+           "false): the 9x9 PSD projections on H (also timed alone: sd_hessian_psd at the |H| samples, the "
+           "same "
+           "OpenMP loop), the float W matrix (3|H| x 6s), one cblas_sgemm "
+           "s x 3|H| x 6s and the symmetric assembly into 3s x 3s doubles. SYRK: cblas_ssyrk of random "
+           "floats M (9|H| x 3s), upper triangle of Mᵀ M, n(n+1)k flops with n = 3s, k = 9|H|. GFlop/s of "
+           "the "
+           "Hessian products: 36 s² |H| flops (the six s x s blocks) over the whole distortion_hessian "
+           "time.\n";
   }
 
   std::cout << "\n## Per-iteration time at 900 DOF (targets: ≤ 150 ms bar, ≤ 400 ms animal)\n\n";
-  std::cout << "| scenario | model | DOF | iterations averaged | mean ms / iteration (2..N) | target | met | mean ms "
+  std::cout << "| scenario | model | DOF | iterations averaged | mean ms / iteration (2..N) | target | met | "
+               "mean ms "
                "/ iteration (1..N) | of which certificate (2..N) |\n";
   std::cout << "|---|---|---:|---|---:|---:|---|---:|---:|\n";
   bool any_target = false;
@@ -765,11 +815,14 @@ int main(int argc, char** argv) {
     if (t == kTargets.end() || !r->ok) continue;
     any_target = true;
     const double m2 = mean_of(r->hist, &IterationRecord::ms_total, 1);
-    const std::string avg = r->hist.size() >= 2 ? "2.." + std::to_string(r->hist.size()) : "none (1 iteration)";
-    std::cout << "| " << r->scenario << " | " << r->model << " | " << r->dof << " | " << avg << " | " << fmt(m2, 0)
-              << " | ≤ " << fmt(t->second, 0) << " | "
-              << (std::isnan(m2) ? "n/a" : m2 <= t->second ? "met" : "NOT met") << " | "
-              << fmt(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | "
+    const std::string avg =
+        r->hist.size() >= 2 ? "2.." + std::to_string(r->hist.size()) : "none (1 iteration)";
+    std::cout << "| " << r->scenario << " | " << r->model << " | " << r->dof << " | " << avg << " | "
+              << fmt(m2, 0) << " | ≤ " << fmt(t->second, 0) << " | "
+              << (std::isnan(m2)    ? "n/a"
+                  : m2 <= t->second ? "met"
+                                    : "NOT met")
+              << " | " << fmt(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | "
               << fmt(mean_of(r->hist, &IterationRecord::ms_certificate, 1), 0) << " |\n";
   }
   if (!any_target) std::cout << "| (no bar or animal scenario was run) | | | | | | | | |\n";

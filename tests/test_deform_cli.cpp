@@ -1,10 +1,10 @@
-// End-to-end tests of `lidef deform` (the real binary): the output files and their consistency, an independent
-// re-certification (and dense verification) of the written map, re-running the written scenario, determinism,
-// Ctrl-C (through the LIDEF_TEST_INTERRUPT_AFTER hook, which raises a real SIGINT), refused inputs (exit 2,
-// nothing written), parameter precedence (command line over scenario) and --help. The project's beam with a
-// small problem (4000 samples, 60 reduced coefficients per coordinate) keeps each run at about two seconds; the
-// DeformShared suite runs the paper's scenarios from ../shared/data with the default parameters (slow: ctest
-// label "slow", see tests/CMakeLists.txt).
+// End-to-end tests of `lidef deform` (the real binary): the output files and their consistency, an
+// independent re-certification (and dense verification) of the written map, re-running the written scenario,
+// determinism, Ctrl-C (through the LIDEF_TEST_INTERRUPT_AFTER hook, which raises a real SIGINT), refused
+// inputs (exit 2, nothing written), parameter precedence (command line over scenario) and --help. The
+// project's beam with a small problem (4000 samples, 60 reduced coefficients per coordinate) keeps each run
+// at about two seconds; the DeformShared suite runs the paper's scenarios from ../shared/data with the
+// default parameters (slow: ctest label "slow", see tests/CMakeLists.txt).
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <vtkDataArray.h>
@@ -35,7 +35,8 @@ namespace {
 
 // The columns of iterations.csv (docs/solver.md, "Outputs").
 const char* const kIterationsHeader =
-    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_norm,"
+    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
+    "norm,"
     "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
     "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total";
 
@@ -49,11 +50,19 @@ const char* const kSmall = "--samples 4000 --reduced-dof 60";
 using lidef::test::read_text;
 using lidef::test::write_text;
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+std::string quote(const std::string& s) {
+  return "'" + s + "'";
+}
 
-std::string models() { return lidef::test::project_data() + "/models"; }
-std::string beam() { return models() + "/beam"; }
-std::string beam_bend() { return lidef::test::project_data() + "/scenarios/beam_bend.json"; }
+std::string models() {
+  return lidef::test::project_data() + "/models";
+}
+std::string beam() {
+  return models() + "/beam";
+}
+std::string beam_bend() {
+  return lidef::test::project_data() + "/scenarios/beam_bend.json";
+}
 
 nlohmann::json read_json(const std::string& path) {
   std::ifstream in(path);
@@ -62,16 +71,18 @@ nlohmann::json read_json(const std::string& path) {
 }
 
 // `env` ("VAR=value ...") prefixes the command; with `stderr_only`, `output` holds only what went to stderr.
-int run_lidef(const std::string& args, std::string* output, const std::string& env = "", bool stderr_only = false) {
+int run_lidef(const std::string& args, std::string* output, const std::string& env = "",
+              bool stderr_only = false) {
   const std::string cmd = env + (env.empty() ? "" : " ") + quote(lidef::test::cli()) + " " + args;
   return lidef::test::run_command(stderr_only ? "(" + cmd + " 2>&1 1>/dev/null)" : cmd, output);
 }
 
 // `lidef deform SCENARIO --out OUT --quiet --cache-dir CACHE EXTRA`.
-int deform(const std::string& scenario, const std::string& out, const std::string& cache, const std::string& extra,
-           std::string* output, const std::string& env = "", bool stderr_only = false) {
-  return run_lidef("deform " + quote(scenario) + " --out " + quote(out) + " --quiet --cache-dir " + quote(cache) +
-                       " " + extra,
+int deform(const std::string& scenario, const std::string& out, const std::string& cache,
+           const std::string& extra, std::string* output, const std::string& env = "",
+           bool stderr_only = false) {
+  return run_lidef("deform " + quote(scenario) + " --out " + quote(out) + " --quiet --cache-dir " +
+                       quote(cache) + " " + extra,
                    output, env, stderr_only);
 }
 
@@ -88,9 +99,12 @@ std::vector<std::string> split_csv(const std::string& line) {
   std::vector<std::string> f(1);
   bool quoted = false;
   for (char c : line) {
-    if (c == '"') quoted = !quoted;
-    else if (c == ',' && !quoted) f.emplace_back();
-    else f.back() += c;
+    if (c == '"')
+      quoted = !quoted;
+    else if (c == ',' && !quoted)
+      f.emplace_back();
+    else
+      f.back() += c;
   }
   return f;
 }
@@ -112,8 +126,8 @@ double number(const std::string& field) {
   return x;
 }
 
-// The beam_bend scenario text with `parameters` (a JSON object text, "" = none) and the model as an absolute path,
-// so that the file may live anywhere.
+// The beam_bend scenario text with `parameters` (a JSON object text, "" = none) and the model as an absolute
+// path, so that the file may live anywhere.
 std::string beam_scenario(const std::string& parameters) {
   nlohmann::ordered_json j = nlohmann::ordered_json::parse(read_text(beam_bend()));
   j["model"] = beam();
@@ -121,7 +135,8 @@ std::string beam_scenario(const std::string& parameters) {
   return j.dump(2) + "\n";
 }
 
-// ctest runs each test in its own process, several at once: seed std::rand (TempDir, run_command) per process.
+// ctest runs each test in its own process, several at once: seed std::rand (TempDir, run_command) per
+// process.
 class DeformCli : public ::testing::Test {
  protected:
   void SetUp() override { std::srand(static_cast<unsigned>(::getpid()) * 2654435761u); }
@@ -155,13 +170,14 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
   const int iterations = s["iterations"].get<int>();
   EXPECT_GT(iterations, 1);
 
-  // iterations.csv: the documented columns, one row per iteration, numbered from 1; every accepted step certified.
+  // iterations.csv: the documented columns, one row per iteration, numbered from 1; every accepted step
+  // certified.
   std::string header;
   const auto rows = read_iterations(out + "/iterations.csv", &header);
   EXPECT_EQ(header, kIterationsHeader);
   const std::vector<std::string> columns = split_csv(header);
-  for (const char* c : {"iteration", "energy", "e_dis", "e_p2p", "e_smooth", "lambda_p2p", "lambda_smooth", "step",
-                        "min_sigma3_sampled", "min_lower_bound", "refined", "ms_total"})
+  for (const char* c : {"iteration", "energy", "e_dis", "e_p2p", "e_smooth", "lambda_p2p", "lambda_smooth",
+                        "step", "min_sigma3_sampled", "min_lower_bound", "refined", "ms_total"})
     EXPECT_NE(std::find(columns.begin(), columns.end(), c), columns.end()) << c;
   ASSERT_EQ(static_cast<int>(rows.size()), iterations);
   auto col = [&](const char* name) {
@@ -194,7 +210,8 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
   EXPECT_EQ(cj["certified"], true);
   EXPECT_EQ(cj["coefficients"], "coefficients.txt");
 
-  // deformed.obj: the model's mesh (same counts), moved; deformed.vtp: the same with the documented point data.
+  // deformed.obj: the model's mesh (same counts), moved; deformed.vtp: the same with the documented point
+  // data.
   const lidef::TriMesh rest = lidef::read_mesh(beam() + "/mesh.obj");
   const lidef::TriMesh moved = lidef::read_mesh(out + "/deformed.obj");
   ASSERT_EQ(moved.V.rows(), rest.V.rows());
@@ -217,8 +234,8 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
   EXPECT_NEAR(p[0], moved.V(17, 0), 1e-6);
   EXPECT_NEAR(p[1], moved.V(17, 1), 1e-6);
   EXPECT_NEAR(p[2], moved.V(17, 2), 1e-6);
-  // Sanity check: the beam's mesh lies 0.04 from its cage, outside the voxels at this sampling (the certificate
-  // says nothing there), but no mesh vertex of this mild bend should be inverted.
+  // Sanity check: the beam's mesh lies 0.04 from its cage, outside the voxels at this sampling (the
+  // certificate says nothing there), but no mesh vertex of this mild bend should be inverted.
   vtkDataArray* det = pd->GetPointData()->GetArray("detJ");
   vtkDataArray* s3 = pd->GetPointData()->GetArray("sigma3");
   for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); ++i) {
@@ -234,8 +251,8 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
 
   // A separate certification of the written map, from coefficients.txt by `lidef certify` (full coefficients,
   // not the solver's reduced ones; --voxels 4000 gives the solver's sampling), then dense sampling of it.
-  ASSERT_EQ(run_lidef("certify " + quote(beam()) + " --coeffs " + quote(out + "/coefficients.txt") + " --out " +
-                          quote(tmp / "cert") + " --voxels 4000 --grid 0",
+  ASSERT_EQ(run_lidef("certify " + quote(beam()) + " --coeffs " + quote(out + "/coefficients.txt") +
+                          " --out " + quote(tmp / "cert") + " --voxels 4000 --grid 0",
                       &output),
             0)
       << output;
@@ -247,12 +264,13 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
                       &output, "LIDEF_GNUPLOT=none"),
             0)
       << output;
-  EXPECT_NE(output.find("bound violations 0, samples with sigma3 <= 0 in certified leaves 0"), std::string::npos)
+  EXPECT_NE(output.find("bound violations 0, samples with sigma3 <= 0 in certified leaves 0"),
+            std::string::npos)
       << output;
   // The certificate the run wrote verifies too.
   ASSERT_EQ(run_lidef("verify " + quote(beam()) + " --coeffs " + quote(out + "/coefficients.txt") +
-                          " --certificate " + quote(out + "/certificate.json") + " --samples-per-voxel 2 --out " +
-                          quote(tmp / "verify_own"),
+                          " --certificate " + quote(out + "/certificate.json") +
+                          " --samples-per-voxel 2 --out " + quote(tmp / "verify_own"),
                       &output, "LIDEF_GNUPLOT=none"),
             0)
       << output;
@@ -267,7 +285,8 @@ TEST_F(DeformCli, WrittenScenarioRerunsToTheSameMap) {
   EXPECT_EQ(deform(tmp / "a/scenario.json", tmp / "b", cache, "", &output), 2) << output;
   EXPECT_NE(output.find("not found"), std::string::npos) << output;
   EXPECT_FALSE(fs::exists(tmp / "b"));
-  ASSERT_EQ(deform(tmp / "a/scenario.json", tmp / "b", cache, "--models " + quote(models()), &output), 0) << output;
+  ASSERT_EQ(deform(tmp / "a/scenario.json", tmp / "b", cache, "--models " + quote(models()), &output), 0)
+      << output;
   EXPECT_EQ(read_text(tmp / "a/coefficients.txt"), read_text(tmp / "b/coefficients.txt"));
   EXPECT_EQ(read_text(tmp / "a/scenario.json"), read_text(tmp / "b/scenario.json"));
   EXPECT_EQ(read_json(tmp / "b/summary.json")["parameters"], read_json(tmp / "a/summary.json")["parameters"]);
@@ -276,11 +295,13 @@ TEST_F(DeformCli, WrittenScenarioRerunsToTheSameMap) {
 TEST_F(DeformCli, SameInputGivesByteIdenticalOutputs) {
   TempDir tmp;
   std::string output;
-  // The first run computes the subspace and caches it; the second loads it: the cache must not change any bit.
+  // The first run computes the subspace and caches it; the second loads it: the cache must not change any
+  // bit.
   ASSERT_EQ(deform(beam_bend(), tmp / "a", tmp / "cache", kSmall, &output), 0) << output;
   ASSERT_FALSE(fs::is_empty(tmp / "cache")) << "no subspace cache file written";
   ASSERT_EQ(deform(beam_bend(), tmp / "b", tmp / "cache", kSmall, &output), 0) << output;
-  for (const char* f : {"coefficients.txt", "deformed.obj", "certificate.json", "voxels.csv", "scenario.json"}) {
+  for (const char* f :
+       {"coefficients.txt", "deformed.obj", "certificate.json", "voxels.csv", "scenario.json"}) {
     EXPECT_FALSE(read_text(tmp / ("a/" + std::string(f))).empty()) << f;
     EXPECT_EQ(read_text(tmp / ("a/" + std::string(f))), read_text(tmp / ("b/" + std::string(f)))) << f;
   }
@@ -292,7 +313,8 @@ TEST_F(DeformCli, InterruptWritesTheLastCertifiedMap) {
   const std::string cache = tmp / "cache";
   std::string output;
   // The hook raises SIGINT after iteration 2, through the same handler as a Ctrl-C.
-  ASSERT_EQ(deform(beam_bend(), tmp / "int", cache, kSmall, &output, "LIDEF_TEST_INTERRUPT_AFTER=2"), 1) << output;
+  ASSERT_EQ(deform(beam_bend(), tmp / "int", cache, kSmall, &output, "LIDEF_TEST_INTERRUPT_AFTER=2"), 1)
+      << output;
   EXPECT_EQ(entries(tmp / "int"), kOutputs);
   const nlohmann::json s = read_json(tmp / "int/summary.json");
   EXPECT_EQ(s["stop_reason"], "interrupted");
@@ -314,8 +336,8 @@ TEST_F(DeformCli, InterruptWritesTheLastCertifiedMap) {
   EXPECT_EQ(read_text(tmp / "int/certificate.json"), read_text(tmp / "max/certificate.json"));
 
   // An interrupted map certifies independently as well.
-  ASSERT_EQ(run_lidef("certify " + quote(beam()) + " --coeffs " + quote(tmp / "int/coefficients.txt") + " --out " +
-                          quote(tmp / "cert") + " --voxels 4000 --grid 0",
+  ASSERT_EQ(run_lidef("certify " + quote(beam()) + " --coeffs " + quote(tmp / "int/coefficients.txt") +
+                          " --out " + quote(tmp / "cert") + " --voxels 4000 --grid 0",
                       &output),
             0)
       << output;
@@ -335,11 +357,16 @@ TEST_F(DeformCli, BadInputsFailWithoutWritingAnything) {
   };
   const std::string missing_model =
       variant("missing_model", [&](auto& j) { j["model"] = (tmp / "no_such_model"); });
-  const std::string outside = variant("outside", [](auto& j) { j["handles"][3]["source"] = {50.0, 0.0, 0.0}; });
-  const std::string null_target = variant("null_target", [](auto& j) { j["handles"][6]["target"][1] = nullptr; });
-  const std::string no_handles = variant("no_handles", [](auto& j) { j["handles"] = nlohmann::ordered_json::array(); });
-  const std::string unknown_param =
-      variant("unknown_param", [](auto& j) { j["parameters"] = {{"lamda_p2p", 1e4}}; });
+  const std::string outside = variant("outside", [](auto& j) {
+    j["handles"][3]["source"] = {50.0, 0.0, 0.0};
+  });
+  const std::string null_target =
+      variant("null_target", [](auto& j) { j["handles"][6]["target"][1] = nullptr; });
+  const std::string no_handles =
+      variant("no_handles", [](auto& j) { j["handles"] = nlohmann::ordered_json::array(); });
+  const std::string unknown_param = variant("unknown_param", [](auto& j) {
+    j["parameters"] = {{"lamda_p2p", 1e4}};
+  });
   const std::string bad_range = variant("bad_range", [](auto& j) { j["parameters"] = {{"max_depth", 21}}; });
   const std::string syntax = tmp / "syntax.json";
   {
@@ -400,7 +427,8 @@ TEST_F(DeformCli, BadInputsFailWithoutWritingAnything) {
 TEST_F(DeformCli, CommandLineParametersOverrideTheScenario) {
   TempDir tmp;
   const std::string cache = tmp / "cache", path = tmp / "one.json";
-  write_text(path, beam_scenario(R"({"max_iterations": 1, "samples": 4000, "reduced_dof": 60, "lambda_smooth": 0.2})"));
+  write_text(path, beam_scenario(
+                       R"({"max_iterations": 1, "samples": 4000, "reduced_dof": 60, "lambda_smooth": 0.2})"));
   std::string output;
   ASSERT_EQ(deform(path, tmp / "a", cache, "--grid 8", &output), 1) << output;
   EXPECT_TRUE(fs::exists(tmp / "a/field.vti"));
@@ -438,9 +466,9 @@ TEST_F(DeformCli, CommandLineParametersOverrideTheScenario) {
 TEST_F(DeformCli, HelpListsTheParameters) {
   std::string output;
   EXPECT_EQ(run_lidef("deform --help", &output), 0) << output;
-  for (const char* s : {"--out", "--models", "--cache-dir", "--quiet", "--grid", "--lambda-p2p", "--lambda-smooth",
-                        "--max-depth", "--dynamic-weighting", "--max-iterations", "--samples", "--reduced-dof",
-                        "coefficients.txt", "summary.json", "Exit code"})
+  for (const char* s : {"--out", "--models", "--cache-dir", "--quiet", "--grid", "--lambda-p2p",
+                        "--lambda-smooth", "--max-depth", "--dynamic-weighting", "--max-iterations",
+                        "--samples", "--reduced-dof", "coefficients.txt", "summary.json", "Exit code"})
     EXPECT_NE(output.find(s), std::string::npos) << s << "\n" << output;
 }
 
@@ -458,8 +486,8 @@ std::string shared_scenario(const std::string& name) {
   return lidef::test::shared_data() + "/scenarios/" + name + ".json";
 }
 
-// Runs `name` with `extra`, prints iterations and times to the test log; returns summary.json (null on a bad exit
-// code, after a test failure).
+// Runs `name` with `extra`, prints iterations and times to the test log; returns summary.json (null on a bad
+// exit code, after a test failure).
 nlohmann::json run_shared(const TempDir& tmp, const std::string& name, const std::string& extra,
                           const std::vector<int>& exit_codes) {
   std::string output;
@@ -473,8 +501,8 @@ nlohmann::json run_shared(const TempDir& tmp, const std::string& name, const std
   const nlohmann::json s = read_json(tmp / "out/summary.json");
   std::cout << name << ": exit " << rc << ", " << s["stop_reason"] << " after " << s["iterations"]
             << " iterations, max handle error " << s["max_handle_error"] << ", min sigma3 lower bound "
-            << s["min_sigma3_lower_bound"] << ", " << s["samples"] << " samples, " << s["dof"] << " DOF; time_s "
-            << s["time_s"].dump() << "; wall " << wall << " s\n";
+            << s["min_sigma3_lower_bound"] << ", " << s["samples"] << " samples, " << s["dof"]
+            << " DOF; time_s " << s["time_s"].dump() << "; wall " << wall << " s\n";
   return s;
 }
 
@@ -487,7 +515,8 @@ void expect_converged(const std::string& name) {
   EXPECT_EQ(s["handles_reached"], true);
   EXPECT_LE(s["max_handle_error"].get<double>(), 1e-3);
   // 300 reduced coefficients per coordinate, clamped to #V+#F (horse's cage has fewer).
-  const lidef::TriMesh cage = lidef::read_mesh(lidef::test::shared_model(s["model"].get<std::string>()) + "/cage.obj");
+  const lidef::TriMesh cage =
+      lidef::read_mesh(lidef::test::shared_model(s["model"].get<std::string>()) + "/cage.obj");
   EXPECT_EQ(s["dof"].get<long>(), 3 * std::min<long>(300, cage.V.rows() + cage.F.rows()));
   EXPECT_EQ(read_json(tmp / "out/certificate.json")["certified"], true);
 }
@@ -526,15 +555,17 @@ TEST_F(DeformShared, BarTwist180ThreeIterationsStayCertified) {
   EXPECT_EQ(read_json(tmp / "cert/certificate.json")["certified"], true);
 }
 
-// Dynamic weighting (paper Sec. 7.3) on the project's beam twisted by 150 degrees: with fixed weights the P2P term
-// drives the map to the boundary of the certified region and the line search stalls far from the targets; with
-// dynamic weighting the run reaches the targets. Measured: on — converged in 15 iterations, handle error 3e-7;
-// off — blocked by the certificate after 7 iterations at handle error 0.30 (8000 samples). Slow (~50 s).
+// Dynamic weighting (paper Sec. 7.3) on the project's beam twisted by 150 degrees: with fixed weights the P2P
+// term drives the map to the boundary of the certified region and the line search stalls far from the
+// targets; with dynamic weighting the run reaches the targets. Measured: on — converged in 15 iterations,
+// handle error 3e-7; off — blocked by the certificate after 7 iterations at handle error 0.30 (8000 samples).
+// Slow (~50 s).
 TEST(DeformSlow, DynamicWeightingReachesTargetsWhereFixedWeightsStall) {
   TempDir tmp;
   const std::string scenario = lidef::test::project_data() + "/scenarios/beam_twist150.json";
   std::string out_on, out_off;
-  const int rc_on = deform(scenario, tmp / "on", tmp / "cache", "--samples 8000 --max-iterations 30", &out_on);
+  const int rc_on =
+      deform(scenario, tmp / "on", tmp / "cache", "--samples 8000 --max-iterations 30", &out_on);
   const int rc_off = deform(scenario, tmp / "off", tmp / "cache",
                             "--samples 8000 --max-iterations 12 --dynamic-weighting false", &out_off);
   ASSERT_EQ(rc_on, 0) << out_on;

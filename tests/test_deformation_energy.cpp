@@ -35,10 +35,10 @@ struct EnergySetup {
   SpectralSubspace sub;  // s = 40
   VoxelSampling sampling;
   std::unique_ptr<HarmonicBasis> basis;
-  MatXdR G;              // 3|I| by s, as in DeformationSolver's constructor
-  MatX3d sources;        // 4 handles
-  MatXd D;               // #h by s
-  MatS3 y_identity;      // Ξᵀ y_id
+  MatXdR G;          // 3|I| by s, as in DeformationSolver's constructor
+  MatX3d sources;    // 4 handles
+  MatXd D;           // #h by s
+  MatS3 y_identity;  // Ξᵀ y_id
 };
 
 const EnergySetup& setup() {
@@ -77,8 +77,8 @@ MatX3d offset_targets(unsigned seed) {
 }
 
 // Amplitude of the random reduced perturbation: large enough that the singular values of the test map's
-// Jacobians spread to about ±0.3 around 1 (so SD is far from its quadratic regime and some twist eigenvalues are
-// clearly negative), small enough that det J stays well above 0 at every sample.
+// Jacobians spread to about ±0.3 around 1 (so SD is far from its quadratic regime and some twist eigenvalues
+// are clearly negative), small enough that det J stays well above 0 at every sample.
 constexpr double kAmp = 0.3;
 
 // A smooth non-rigid map near the identity: ỹ = Ξᵀ y_id + amp · N(0,1) on every reduced coefficient (the
@@ -156,9 +156,10 @@ TEST(DeformationEnergy, TestMapIsOrientationPreservingAndNonTrivial) {
   const MatXd Hp = E.distortion_hessian(m.JT, true, true), Hu = E.distortion_hessian(m.JT, false, true);
   const double change = (Hp - Hu).cwiseAbs().maxCoeff() / Hu.cwiseAbs().maxCoeff();
   EXPECT_GT(change, 1e-3);
-  std::printf("samples %d, reduced size %d, min det J %.4f, max |sigma-1| %.4f, indefinite samples %d, "
-              "projection changes max|H| by %.3g\n", E.num_samples(), E.reduced_size(), min_det(m.JT), st, indefinite,
-              change);
+  std::printf(
+      "samples %d, reduced size %d, min det J %.4f, max |sigma-1| %.4f, indefinite samples %d, "
+      "projection changes max|H| by %.3g\n",
+      E.num_samples(), E.reduced_size(), min_det(m.JT), st, indefinite, change);
 }
 
 TEST(DeformationEnergy, GradientOfEachTermMatchesCentralDifferences) {
@@ -226,8 +227,8 @@ TEST(DeformationEnergy, ProjectedSinglePrecisionHessianEqualsBruteForceAssembly)
   //  (a) hessian(JT, w, true, false) on an energy whose subset H is every sample: float GHᵀ diag(H̃) GH;
   //  (b) hessian(JT, w, true, true): the same in double;
   //  (c) brute force Σ_i B_iᵀ H_i⁺ B_i / |I| with the explicit 9 x 3s matrices
-  //      B_i(a + 3b, j + s·a) = G(3i + b, j)   (vec(J_i)(a+3b) = Σ_j G(3i+b, j) ỹ(j,a), vec(ỹ) index j + s·a),
-  //      which checks the Kronecker block formula independently.
+  //      B_i(a + 3b, j + s·a) = G(3i + b, j)   (vec(J_i)(a+3b) = Σ_j G(3i+b, j) ỹ(j,a), vec(ỹ) index j +
+  //      s·a), which checks the Kronecker block formula independently.
   // (a) vs (b): float storage of G and of the blocks (2⁻²⁴ each) and float accumulation over 3|I| terms give
   // ~1e-6 relative to max|H|; 1e-5 is the float-precision tolerance. (b) vs (c): double, different summation
   // order only: 1e-12 relative.
@@ -239,8 +240,8 @@ TEST(DeformationEnergy, ProjectedSinglePrecisionHessianEqualsBruteForceAssembly)
   const EnergyWeights w{0, 0};
   const MatXd Hf = E.hessian(m.JT, w, true, false);
   const MatXd Hd = E.hessian(m.JT, w, true, true);
-  // B_i from the energy's own stored G (rounded to float by the implementation; see the storage test), so that
-  // B_i ỹ reproduces its Jacobians to double rounding.
+  // B_i from the energy's own stored G (rounded to float by the implementation; see the storage test), so
+  // that B_i ỹ reproduces its Jacobians to double rounding.
   const MatXdR Gs = E.gradient_matrix().template cast<double>();
   MatXd Hb = MatXd::Zero(3 * s, 3 * s);
   for (int i = 0; i < n; ++i) {
@@ -251,7 +252,8 @@ TEST(DeformationEnergy, ProjectedSinglePrecisionHessianEqualsBruteForceAssembly)
     // B reproduces vec(J_i) (a direct check of the index convention before using it).
     const Vec9 vecJ = B * Eigen::Map<const VecXd>(m.y.data(), 3 * s);
     const Mat3 Ji = m.JT.middleRows<3>(3 * i).transpose();
-    ASSERT_LT((vecJ - Eigen::Map<const Vec9>(Ji.data())).cwiseAbs().maxCoeff(), 1e-13 * (1 + Ji.cwiseAbs().maxCoeff()));
+    ASSERT_LT((vecJ - Eigen::Map<const Vec9>(Ji.data())).cwiseAbs().maxCoeff(),
+              1e-13 * (1 + Ji.cwiseAbs().maxCoeff()));
     Hb.noalias() += B.transpose() * sd_hessian_psd(Ji) * B;
   }
   Hb /= n;
@@ -259,7 +261,8 @@ TEST(DeformationEnergy, ProjectedSinglePrecisionHessianEqualsBruteForceAssembly)
   const double err_fd = (Hf - Hd).cwiseAbs().maxCoeff(), err_db = (Hd - Hb).cwiseAbs().maxCoeff();
   EXPECT_LT(err_fd, 1e-5 * scale);
   EXPECT_LT(err_db, 1e-12 * scale);
-  std::printf("max|H| %.3e  max|H_float - H_double| %.3e  max|H_double - brute force| %.3e\n", scale, err_fd, err_db);
+  std::printf("max|H| %.3e  max|H_float - H_double| %.3e  max|H_double - brute force| %.3e\n", scale, err_fd,
+              err_db);
 
   // Exactly symmetric (the implementation symmetrizes), and PSD up to float rounding.
   EXPECT_EQ((Hf - Hf.transpose()).cwiseAbs().maxCoeff(), 0.0);
@@ -338,7 +341,8 @@ TEST(DeformationEnergy, InvertedSamplesGiveInfiniteEnergy) {
   E.set_handles(S.D, S.sources);
   const double inf = std::numeric_limits<double>::infinity();
   // (a) A global reflection p ↦ diag(−1, 1, 1) p: affine, hence exactly in span Ξ; det J = −1 everywhere.
-  const MatS3 yr = S.sub.basis.transpose() * S.model.cage.affine_coefficients(Mat3(Vec3(-1, 1, 1).asDiagonal()), Vec3::Zero());
+  const MatS3 yr = S.sub.basis.transpose() *
+                   S.model.cage.affine_coefficients(Mat3(Vec3(-1, 1, 1).asDiagonal()), Vec3::Zero());
   const MatJT JTr = E.jacobians(yr);
   EXPECT_LT(min_det(JTr), -0.99);
   EXPECT_EQ(E.evaluate(JTr, yr, EnergyWeights{}).total, inf);
@@ -362,7 +366,8 @@ TEST(DeformationEnergy, InvertedSamplesGiveInfiniteEnergy) {
     const EnergyTerms t = E.evaluate(JT, y, EnergyWeights{});
     EXPECT_EQ(t.total, inf) << neg << " of " << E.num_samples() << " samples inverted at amplitude " << amp;
     EXPECT_EQ(t.dis, inf);
-    std::printf("amplitude %.3g: %d of %d samples inverted, total = %g\n", amp, neg, E.num_samples(), t.total);
+    std::printf("amplitude %.3g: %d of %d samples inverted, total = %g\n", amp, neg, E.num_samples(),
+                t.total);
   }
   EXPECT_TRUE(found);
   // (c) A single sample with det J = 0 exactly (a rank-2 Jacobian inserted by hand): the barrier includes 0.
@@ -405,10 +410,10 @@ TEST(DeformationEnergy, EvaluateIsBitwiseIdenticalForOneAndTwoThreads) {
 }
 
 TEST(DeformationEnergy, JacobiansAreTheReducedGradientMatrixTimesY) {
-  // JT = G ỹ for the G given to the constructor, up to the storage of G: the implementation keeps G rounded to
-  // single precision (deformation_energy.h, "Storage"), so each entry of JT may differ from the double product
-  // by at most 2⁻²⁴ Σ_j |G(r, j)| |ỹ(j, a)| (relative rounding of each stored entry; the double arithmetic
-  // adds ~1e-16 of the same sum). The bound holds as well for a double G.
+  // JT = G ỹ for the G given to the constructor, up to the storage of G: the implementation keeps G rounded
+  // to single precision (deformation_energy.h, "Storage"), so each entry of JT may differ from the double
+  // product by at most 2⁻²⁴ Σ_j |G(r, j)| |ỹ(j, a)| (relative rounding of each stored entry; the double
+  // arithmetic adds ~1e-16 of the same sum). The bound holds as well for a double G.
   const EnergySetup& S = setup();
   const DeformationEnergy E = make_energy();
   const MatS3 y = random_map(kAmp, 29);
@@ -418,7 +423,8 @@ TEST(DeformationEnergy, JacobiansAreTheReducedGradientMatrixTimesY) {
   const double u = std::ldexp(1.0, -24) * (1 + 1e-6);
   double worst = 0;
   for (Eigen::Index r = 0; r < JT.rows(); ++r)
-    for (int a = 0; a < 3; ++a) worst = std::max(worst, std::abs(JT(r, a) - ref(r, a)) / (u * bound(r, a) + 1e-300));
+    for (int a = 0; a < 3; ++a)
+      worst = std::max(worst, std::abs(JT(r, a) - ref(r, a)) / (u * bound(r, a) + 1e-300));
   EXPECT_LE(worst, 1.0) << "JT deviates from G ỹ by more than float storage of G explains";
   std::printf("max |JT - G y| / (2^-24 |G||y|) = %.3f (0 for double storage)\n", worst);
 }
@@ -430,7 +436,8 @@ TEST(DeformationEnergy, IdentityWithTargetsAtSourcesIsAZero) {
   //  - E_dis = O(|J − I|²) plus the ~1e-15 rounding of ‖J‖² + ‖J⁻¹‖² − 6: < 1e-12;
   //  - E_P2P: D is double, D ỹ − q ~ 1e-15: < 1e-24;  E_smooth: the identity is affine, μ_j ~ 1e-25 on the
   //    affine columns: < 1e-20;
-  //  - gradients, each term isolated: P2P (λ1 = 1) 2 Dᵀ(Dỹ − q) and smooth (λ2 = 1) 2 μ ỹ / |E| are pure double
+  //  - gradients, each term isolated: P2P (λ1 = 1) 2 Dᵀ(Dỹ − q) and smooth (λ2 = 1) 2 μ ỹ / |E| are pure
+  //  double
   //    arithmetic: < 1e-9. E_dis's gradient is Gᵀ of 2(J − J⁻ᵀJ⁻¹J⁻ᵀ) ≈ 8 (J − I)-sized entries: < 1e-9 for
   //    double storage of G, and < 1e-6 with G in float (measured ~3e-8).
   const EnergySetup& S = setup();
@@ -461,7 +468,8 @@ TEST(DeformationEnergy, IdentityWithTargetsAtSourcesIsAZero) {
   const EnergyWeights wd{};  // λ1 = 1e5, λ2 = 0.1: the P2P part scales with λ1
   const double gd = E.gradient(JT, y, wd).norm();
   EXPECT_LT(gd, 1e-6 + 1e-9 * wd.p2p);
-  std::printf("identity: max|J - I| %.2e (double G: %.2e), E_dis %.2e, E_P2P %.2e, E_smooth %.2e, |grad| dis %.2e "
-              "p2p %.2e smooth %.2e, default weights %.2e\n",
-              maxdev, maxdev_d, t.dis, t.p2p, t.smooth, g00.norm(), g_p2p, g_smooth, gd);
+  std::printf(
+      "identity: max|J - I| %.2e (double G: %.2e), E_dis %.2e, E_P2P %.2e, E_smooth %.2e, |grad| dis %.2e "
+      "p2p %.2e smooth %.2e, default weights %.2e\n",
+      maxdev, maxdev_d, t.dis, t.p2p, t.smooth, g00.norm(), g_p2p, g_smooth, gd);
 }

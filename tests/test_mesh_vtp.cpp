@@ -1,5 +1,5 @@
-// write_mesh_vtp (mesh_export.h): a small mesh with point arrays, read back with VTK's own reader; refusals leave
-// no file behind.
+// write_mesh_vtp (mesh_export.h): a small mesh with point arrays, read back with VTK's own reader; refusals
+// leave no file behind.
 #include <gtest/gtest.h>
 #include <vtkCellArray.h>
 #include <vtkDataArray.h>

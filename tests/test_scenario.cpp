@@ -1,6 +1,6 @@
-// The deformation parameter table (deform_params.h) and handle scenarios (scenario.h): defaults from the paper,
-// type/range/name checking with suggestions, the shared scenarios, every refusal naming the file and the
-// problem, write/read round trip, and model-folder resolution.
+// The deformation parameter table (deform_params.h) and handle scenarios (scenario.h): defaults from the
+// paper, type/range/name checking with suggestions, the shared scenarios, every refusal naming the file and
+// the problem, write/read round trip, and model-folder resolution.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -59,22 +59,44 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
   }
   // Every member pointer distinct: each field is reachable through exactly one row.
   for (size_t i = 0; i < table.size(); ++i)
-    for (size_t j = i + 1; j < table.size(); ++j) EXPECT_FALSE(table[i].member == table[j].member) << table[i].name;
+    for (size_t j = i + 1; j < table.size(); ++j)
+      EXPECT_FALSE(table[i].member == table[j].member) << table[i].name;
   // Each field by name (a row pointing at the wrong member would show here).
-  const std::vector<std::string> expected = {
-      "reduced_dof", "samples", "voxel_side", "safety", "hessian_fraction",                       // sampling
-      "lambda_p2p", "lambda_smooth",                                                               // energy
-      "max_iterations", "step_tolerance", "energy_tolerance", "armijo", "max_halvings", "diagonal_shift",
-      "handle_tolerance",                                                                          // newton
-      "max_depth", "bound", "max_refined", "line_search_max_refined",                             // certificate
-      "dynamic_weighting", "e0", "kappa1", "kappa2", "epsilon", "max_smooth_factor", "min_p2p_factor",
-      "direction_retries", "max_weight_resets",                                                                       // weighting
-      "threads"};
+  const std::vector<std::string> expected = {"reduced_dof",
+                                             "samples",
+                                             "voxel_side",
+                                             "safety",
+                                             "hessian_fraction",  // sampling
+                                             "lambda_p2p",
+                                             "lambda_smooth",  // energy
+                                             "max_iterations",
+                                             "step_tolerance",
+                                             "energy_tolerance",
+                                             "armijo",
+                                             "max_halvings",
+                                             "diagonal_shift",
+                                             "handle_tolerance",  // newton
+                                             "max_depth",
+                                             "bound",
+                                             "max_refined",
+                                             "line_search_max_refined",  // certificate
+                                             "dynamic_weighting",
+                                             "e0",
+                                             "kappa1",
+                                             "kappa2",
+                                             "epsilon",
+                                             "max_smooth_factor",
+                                             "min_p2p_factor",
+                                             "direction_retries",
+                                             "max_weight_resets",  // weighting
+                                             "threads"};
   ASSERT_EQ(expected.size(), table.size());
   for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(table[i].name, expected[i]);
   EXPECT_TRUE(std::get<int DeformParams::*>(find_param("max_depth")->member) == &DeformParams::max_depth);
-  EXPECT_TRUE(std::get<double DeformParams::*>(find_param("lambda_p2p")->member) == &DeformParams::lambda_p2p);
-  EXPECT_TRUE(std::get<long DeformParams::*>(find_param("max_refined")->member) == &DeformParams::max_refined);
+  EXPECT_TRUE(std::get<double DeformParams::*>(find_param("lambda_p2p")->member) ==
+              &DeformParams::lambda_p2p);
+  EXPECT_TRUE(std::get<long DeformParams::*>(find_param("max_refined")->member) ==
+              &DeformParams::max_refined);
   EXPECT_TRUE(std::get<std::string DeformParams::*>(find_param("bound")->member) == &DeformParams::bound);
   EXPECT_EQ(find_param("lamda_p2p"), nullptr);
 }
@@ -107,7 +129,7 @@ TEST(DeformParams, DefaultsFollowThePaper) {
 TEST(DeformParams, SetParamAcceptsEachType) {
   DeformParams p;
   set_param(p, "max_depth", json(4), "f");
-  set_param(p, "samples", json(2.0e4), "f");  // integral double for an int
+  set_param(p, "samples", json(2.0e4), "f");   // integral double for an int
   set_param(p, "lambda_p2p", json(250), "f");  // integer for a double
   set_param(p, "max_refined", json(123456789), "f");
   set_param(p, "dynamic_weighting", json(false), "f");
@@ -185,7 +207,8 @@ TEST(DeformParams, SetParamRefusesOutOfRange) {
 TEST(DeformParams, UnknownNameSuggestsTheClosest) {
   DeformParams p;
   std::string m = input_error([&] { set_param(p, "lamda_p2p", json(1), "s.json"); });
-  EXPECT_NE(m.find("s.json: unknown parameter 'lamda_p2p' (did you mean 'lambda_p2p'?)"), std::string::npos) << m;
+  EXPECT_NE(m.find("s.json: unknown parameter 'lamda_p2p' (did you mean 'lambda_p2p'?)"), std::string::npos)
+      << m;
   m = input_error([&] { set_param(p, "max-depth", json(1), "f"); });  // CLI spelling in JSON
   EXPECT_NE(m.find("did you mean 'max_depth'"), std::string::npos) << m;
   m = input_error([&] { set_param(p, "kappa", json(1), "f"); });
@@ -209,9 +232,9 @@ struct SharedScenario {
 
 TEST(Scenario, SharedScenariosLoad) {
   LIDEF_REQUIRE_SHARED();
-  const SharedScenario all[] = {{"bar_bend", "bar", 8},          {"bar_twist90", "bar", 8},
-                                {"bar_twist180", "bar", 8},      {"horse_leg_lift", "horse", 4},
-                                {"spot_head_turn", "spot", 5},   {"animal_tail_lift", "animal", 6}};
+  const SharedScenario all[] = {{"bar_bend", "bar", 8},        {"bar_twist90", "bar", 8},
+                                {"bar_twist180", "bar", 8},    {"horse_leg_lift", "horse", 4},
+                                {"spot_head_turn", "spot", 5}, {"animal_tail_lift", "animal", 6}};
   for (const auto& c : all) {
     SCOPED_TRACE(c.name);
     const std::string file = lidef::test::shared_data() + "/scenarios/" + c.name + ".json";
@@ -260,8 +283,8 @@ const char* const kGoodHandles = R"("handles": [{"source": [0, 0, 0], "target": 
 
 std::string scenario_text(const std::string& extra = "", const std::string& model = "cube",
                           const std::string& handles = kGoodHandles) {
-  return "{\n  \"name\": \"t\",\n  \"model\": \"" + model + "\",\n  " + handles + (extra.empty() ? "" : ",\n  " + extra) +
-         "\n}\n";
+  return "{\n  \"name\": \"t\",\n  \"model\": \"" + model + "\",\n  " + handles +
+         (extra.empty() ? "" : ",\n  " + extra) + "\n}\n";
 }
 
 // The message of read_scenario(path) failing; checks that it names the file.
@@ -273,8 +296,10 @@ std::string read_error(const std::string& path, const std::string& models_dir = 
 
 TEST(Scenario, ReadsParametersInFileOrder) {
   ScenarioDir d;
-  const std::string f =
-      d.write("p.json", scenario_text(R"("description": "two handles", "parameters": {"max_depth": 4, "bound": "first", "lambda_p2p": 1e3})"));
+  const std::string f = d.write(
+      "p.json",
+      scenario_text(
+          R"("description": "two handles", "parameters": {"max_depth": 4, "bound": "first", "lambda_p2p": 1e3})"));
   const Scenario s = read_scenario(f);
   EXPECT_EQ(s.name, "t");
   EXPECT_EQ(s.description, "two handles");
@@ -311,7 +336,8 @@ TEST(Scenario, MissingModelFolderListsThePathsTried) {
   EXPECT_NE(m.find((d.tmp.path / "models" / "elephant").string()), std::string::npos) << m;
   const std::string no_model = read_error(d.write("n.json", std::string("{") + kGoodHandles + "}"));
   EXPECT_NE(no_model.find("missing \"model\""), std::string::npos) << no_model;
-  const std::string not_string = read_error(d.write("s.json", std::string("{\"model\": 3, ") + kGoodHandles + "}"));
+  const std::string not_string =
+      read_error(d.write("s.json", std::string("{\"model\": 3, ") + kGoodHandles + "}"));
   EXPECT_NE(not_string.find("\"model\" must be a string"), std::string::npos) << not_string;
 }
 
@@ -331,7 +357,8 @@ TEST(Scenario, RefusesNonFiniteOrMalformedCoordinates) {
     return scenario_text("", "cube",
                          "\"handles\": [{\"source\": [0, 0, 0], \"target\": [0, 0, 0]}, " + handle + "]");
   };
-  std::string m = read_error(d.write("null.json", with_second(R"({"source": [1, 0, 0], "target": [1, null, 0]})")));
+  std::string m =
+      read_error(d.write("null.json", with_second(R"({"source": [1, 0, 0], "target": [1, null, 0]})")));
   EXPECT_NE(m.find("handle 2 of 2: target[1] (y) is not a finite number (got null)"), std::string::npos) << m;
   m = read_error(d.write("nan.json", with_second(R"({"source": [1, 0, "nan"], "target": [1, 0, 0]})")));
   EXPECT_NE(m.find("source[2] (z) is not a finite number (got string \"nan\")"), std::string::npos) << m;
@@ -344,7 +371,8 @@ TEST(Scenario, RefusesNonFiniteOrMalformedCoordinates) {
   EXPECT_NE(m.find("\"source\" must be an array of 3 numbers"), std::string::npos) << m;
   m = read_error(d.write("miss.json", with_second(R"({"source": [1, 0, 0]})")));
   EXPECT_NE(m.find("handle 2 of 2: missing \"target\""), std::string::npos) << m;
-  m = read_error(d.write("key.json", with_second(R"({"source": [1, 0, 0], "target": [1, 0, 0], "weight": 2})")));
+  m = read_error(
+      d.write("key.json", with_second(R"({"source": [1, 0, 0], "target": [1, 0, 0], "weight": 2})")));
   EXPECT_NE(m.find("handle 2 of 2: unknown key \"weight\""), std::string::npos) << m;
   m = read_error(d.write("arr.json", with_second("[1, 2, 3]")));
   EXPECT_NE(m.find("handle 2 of 2 must be an object"), std::string::npos) << m;
@@ -364,7 +392,8 @@ TEST(Scenario, RefusesBadParameters) {
 
 TEST(Scenario, RefusesUnknownTopLevelKeysAndDuplicates) {
   ScenarioDir d;
-  std::string m = read_error(d.write("k.json", std::string("{\"model\": \"cube\", \"handels\": [], ") + kGoodHandles + "}"));
+  std::string m = read_error(
+      d.write("k.json", std::string("{\"model\": \"cube\", \"handels\": [], ") + kGoodHandles + "}"));
   EXPECT_NE(m.find("unknown key \"handels\""), std::string::npos) << m;
   m = read_error(d.write("dup.json", scenario_text(R"("handles": [])")));
   EXPECT_NE(m.find("duplicate key \"handles\""), std::string::npos) << m;
@@ -374,7 +403,8 @@ TEST(Scenario, RefusesUnknownTopLevelKeysAndDuplicates) {
 
 TEST(Scenario, SyntaxErrorGivesTheLine) {
   ScenarioDir d;
-  const std::string f = d.write("syn.json", "{\n  \"model\": \"cube\",\n  \"handles\": [\n    {\"source\": [0, 0 0]}\n  ]\n}\n");
+  const std::string f = d.write(
+      "syn.json", "{\n  \"model\": \"cube\",\n  \"handles\": [\n    {\"source\": [0, 0 0]}\n  ]\n}\n");
   const std::string m = read_error(f);
   EXPECT_NE(m.find(f + ":4: JSON syntax error at line 4"), std::string::npos) << m;
   EXPECT_NE(m.find("byte"), std::string::npos) << m;
@@ -484,7 +514,8 @@ TEST(Scenario, ModelsDirResolution) {
   EXPECT_NE(m.find((other.path / "nowhere").string()), std::string::npos) << m;
   // An absolute model path, and a folder beside the scenario.
   const std::string abs_model = (other.path / "only_here").string();
-  EXPECT_TRUE(fs::equivalent(read_scenario(d.write("a.json", scenario_text("", abs_model))).model_dir, abs_model));
+  EXPECT_TRUE(
+      fs::equivalent(read_scenario(d.write("a.json", scenario_text("", abs_model))).model_dir, abs_model));
   fs::create_directories(d.tmp.path / "scenarios" / "beside");
   EXPECT_TRUE(fs::equivalent(read_scenario(d.write("b.json", scenario_text("", "beside"))).model_dir,
                              d.tmp.path / "scenarios" / "beside"));

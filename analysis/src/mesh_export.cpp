@@ -45,8 +45,8 @@ void write_mesh_vtp(const std::string& path, const MatX3d& V, const MatX3i& F,
     for (vtkIdType t = 0; t < nf; ++t)
       for (int k = 0; k < 3; ++k)
         if (F(t, k) < 0 || F(t, k) >= nv)
-          throw InputError(path, "triangle " + std::to_string(t + 1) + " has vertex index " + std::to_string(F(t, k)) +
-                                     " outside [0, " + std::to_string(nv) + ")");
+          throw InputError(path, "triangle " + std::to_string(t + 1) + " has vertex index " +
+                                     std::to_string(F(t, k)) + " outside [0, " + std::to_string(nv) + ")");
   }
 
   vtkNew<vtkPoints> points;

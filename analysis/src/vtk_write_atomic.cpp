@@ -51,7 +51,8 @@ void write_vtk_atomic(vtkXMLWriter* writer, const std::string& path, const char*
     std::remove(tmp.c_str());
     // VTK's message is "ERROR: In <source>, line N\n<Class> (0x...): <text>"; keep <text>, on one line.
     std::string why = errors->message;
-    if (why.rfind("ERROR: In ", 0) == 0 && why.find('\n') != std::string::npos) why.erase(0, why.find('\n') + 1);
+    if (why.rfind("ERROR: In ", 0) == 0 && why.find('\n') != std::string::npos)
+      why.erase(0, why.find('\n') + 1);
     if (const size_t obj = why.find("): "); obj != std::string::npos) why.erase(0, obj + 3);
     while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
     std::replace(why.begin(), why.end(), '\n', ' ');

@@ -35,7 +35,8 @@ std::vector<ParamInfo> make_table() {
       {"hessian_fraction", "sampling", &D::hessian_fraction, 1e-9, 1,
        "|H| / |I|: fraction of the voxels whose distortion Hessian is assembled"},
       // --- Energy
-      {"lambda_p2p", "energy", &D::lambda_p2p, 0, 1e12, "lambda1: weight of the handle (point-to-point) energy"},
+      {"lambda_p2p", "energy", &D::lambda_p2p, 0, 1e12,
+       "lambda1: weight of the handle (point-to-point) energy"},
       {"lambda_smooth", "energy", &D::lambda_smooth, 0, 1e12, "lambda2: weight of the smoothness energy"},
       // --- Projected Newton
       {"max_iterations", "newton", &D::max_iterations, 0, 100000, "Newton iterations at most"},
@@ -59,7 +60,8 @@ std::vector<ParamInfo> make_table() {
       // --- Dynamic weighting
       {"dynamic_weighting", "weighting", &D::dynamic_weighting, 0, 0,
        "adapt lambda1 and lambda2 during the solve (Sec. 7.3; kappa1, kappa2 below)"},
-      {"e0", "weighting", &D::e0, 0, 1e6, "E_P2P threshold, relative to the squared cage bounding-box diagonal"},
+      {"e0", "weighting", &D::e0, 0, 1e6,
+       "E_P2P threshold, relative to the squared cage bounding-box diagonal"},
       {"kappa1", "weighting", &D::kappa1, 1e-9, 1,
        "lambda1 <- kappa1 * lambda1 when E_P2P >= E0 and condition (36) fails"},
       {"kappa2", "weighting", &D::kappa2, 1, 1000, "lambda2 <- kappa2 * lambda2"},
@@ -91,7 +93,9 @@ std::string number_text(double x, bool integral) {
   return integral && std::abs(x) < 1e18 ? std::to_string(static_cast<long long>(x)) : format_double(x);
 }
 
-std::string quoted(const std::string& s) { return "'" + s + "'"; }
+std::string quoted(const std::string& s) {
+  return "'" + s + "'";
+}
 
 // A short description of a JSON value for messages ("string \"abc\"", "null", "array").
 std::string describe(const json& v) {
@@ -136,7 +140,8 @@ std::string unknown_message(const std::string& name) {
     const int d = edit_distance(key, p.name);
     if (d <= limit) close.emplace_back(d, p.name);
   }
-  std::stable_sort(close.begin(), close.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::stable_sort(close.begin(), close.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
   std::string msg = "unknown parameter " + quoted(name);
   if (!close.empty()) {
     msg += " (did you mean ";
@@ -181,10 +186,12 @@ void assign(T& field, const ParamInfo& p, const json& v, const std::string& wher
   } else {
     constexpr bool integral = is_integer_v<T>;
     if (!v.is_number())
-      throw InputError(where, what + ": expected " + (integral ? "an integer" : "a number") + ", got " + describe(v));
+      throw InputError(
+          where, what + ": expected " + (integral ? "an integer" : "a number") + ", got " + describe(v));
     const double x = v.get<double>();
     if (!std::isfinite(x)) throw InputError(where, what + " is not a finite number");
-    if (integral && x != std::floor(x)) throw InputError(where, what + ": expected an integer, got " + v.dump());
+    if (integral && x != std::floor(x))
+      throw InputError(where, what + ": expected an integer, got " + v.dump());
     check_range(p, x, integral, where);
     // In range, hence exactly representable in T (every range fits an int).
     field = static_cast<T>(x);
@@ -219,7 +226,8 @@ void set_param(DeformParams& params, const std::string& name, const nlohmann::js
 
 void apply_params(DeformParams& params, const nlohmann::json& object, const std::string& where) {
   if (!object.is_object())
-    throw InputError(where, "parameters must be a JSON object {\"name\": value, ...}, got " + describe(object));
+    throw InputError(where,
+                     "parameters must be a JSON object {\"name\": value, ...}, got " + describe(object));
   for (const auto& [name, value] : object.items()) set_param(params, name, value, where);
 }
 
@@ -234,7 +242,8 @@ void validate_params(const DeformParams& params, const std::string& where) {
             check_string(p, v, where);
           } else if constexpr (!std::is_same_v<T, bool>) {
             const double x = static_cast<double>(v);
-            if (!std::isfinite(x)) throw InputError(where, "parameter " + quoted(p.name) + " is not a finite number");
+            if (!std::isfinite(x))
+              throw InputError(where, "parameter " + quoted(p.name) + " is not a finite number");
             check_range(p, x, is_integer_v<T>, where);
           }
         },
@@ -254,10 +263,14 @@ std::string param_value_string(const DeformParams& params, const ParamInfo& p) {
       [&](auto member) -> std::string {
         using T = std::decay_t<decltype(params.*member)>;
         const T& v = params.*member;
-        if constexpr (std::is_same_v<T, std::string>) return v;
-        else if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
-        else if constexpr (std::is_same_v<T, double>) return format_double(v);
-        else return std::to_string(v);
+        if constexpr (std::is_same_v<T, std::string>)
+          return v;
+        else if constexpr (std::is_same_v<T, bool>)
+          return v ? "true" : "false";
+        else if constexpr (std::is_same_v<T, double>)
+          return format_double(v);
+        else
+          return std::to_string(v);
       },
       p.member);
 }

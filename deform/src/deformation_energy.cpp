@@ -20,17 +20,23 @@ constexpr int kChunk = 256;
 // Samples per block converted from float to double before a product (3 x 32 rows of s doubles stay in L2).
 constexpr int kBlock = 32;
 
-Mat3 jacobian_at(const MatJT& JT, int i) { return JT.middleRows<3>(3 * i).transpose(); }
+Mat3 jacobian_at(const MatJT& JT, int i) {
+  return JT.middleRows<3>(3 * i).transpose();
+}
 
 }  // namespace
 
 DeformationEnergy::DeformationEnergy(MatXdR G, std::vector<int> hessian_subset, VecXd smooth_eigenvalues,
                                      int num_edges)
-    : G_(G.cast<float>()), subset_(std::move(hessian_subset)), mu_(std::move(smooth_eigenvalues)), num_edges_(num_edges) {
+    : G_(G.cast<float>()),
+      subset_(std::move(hessian_subset)),
+      mu_(std::move(smooth_eigenvalues)),
+      num_edges_(num_edges) {
   const int s = reduced_size();
   G.resize(0, 0);
   if (G_.rows() % 3 != 0 || G_.rows() == 0) throw Error("DeformationEnergy: G must have 3|I| > 0 rows");
-  if (mu_.size() != s) throw Error("DeformationEnergy: one smoothness eigenvalue per reduced coefficient needed");
+  if (mu_.size() != s)
+    throw Error("DeformationEnergy: one smoothness eigenvalue per reduced coefficient needed");
   if (num_edges_ <= 0) throw Error("DeformationEnergy: the cage has no edges");
   if (subset_.empty()) {
     subset_.resize(num_samples());
@@ -75,7 +81,9 @@ MatJT DeformationEnergy::jacobians(const MatS3& y) const {
   return JT;
 }
 
-MatX3d DeformationEnergy::handle_positions(const MatS3& y) const { return D_ * y; }
+MatX3d DeformationEnergy::handle_positions(const MatS3& y) const {
+  return D_ * y;
+}
 
 VecXd DeformationEnergy::handle_errors(const MatS3& y) const {
   return (handle_positions(y) - Q_).rowwise().norm();
@@ -167,8 +175,8 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
       for (int q = 0; q < 6; ++q) {
         const Mat3 Ht = pair_block(blocks[k], q);
         for (int b = 0; b < 3; ++b)  // row combinations (a 3x3 times 3 x s product; see the float branch)
-          W.block(3 * k + b, q * s, 1, s) = Ht(b, 0) * Gd.row(3 * k) + Ht(b, 1) * Gd.row(3 * k + 1) +
-                                            Ht(b, 2) * Gd.row(3 * k + 2);
+          W.block(3 * k + b, q * s, 1, s) =
+              Ht(b, 0) * Gd.row(3 * k) + Ht(b, 1) * Gd.row(3 * k + 1) + Ht(b, 2) * Gd.row(3 * k + 2);
       }
     Ball.noalias() = Gd.transpose() * W;
   } else {
@@ -177,7 +185,8 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
     for (int k = 0; k < m; ++k)
       for (int q = 0; q < 6; ++q) {
         const Mat3 Ht = pair_block(blocks[k], q);
-        // Written as row combinations: Eigen's fixed 3x3 product kernel trips GCC 12's -Warray-bounds under AVX.
+        // Written as row combinations: Eigen's fixed 3x3 product kernel trips GCC 12's -Warray-bounds under
+        // AVX.
         for (int b = 0; b < 3; ++b)
           W.block(3 * k + b, q * s, 1, s) = static_cast<float>(Ht(b, 0)) * GH_.row(3 * k) +
                                             static_cast<float>(Ht(b, 1)) * GH_.row(3 * k + 1) +
@@ -185,8 +194,8 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
       }
     Eigen::MatrixXf Bf(s, 6 * s);
     // Row-major GH (3m x s) is column-major GHᵀ (s x 3m); row-major W is column-major Wᵀ.
-    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasTrans, s, 6 * s, 3 * m, 1.0f, GH_.data(), s, W.data(), 6 * s, 0.0f,
-                Bf.data(), s);
+    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasTrans, s, 6 * s, 3 * m, 1.0f, GH_.data(), s, W.data(),
+                6 * s, 0.0f, Bf.data(), s);
     Ball = Bf.cast<double>();
   }
   for (int q = 0; q < 6; ++q) {
@@ -199,7 +208,8 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
   return H;
 }
 
-MatXd DeformationEnergy::hessian(const MatJT& JT, const EnergyWeights& w, bool projected, bool all_samples) const {
+MatXd DeformationEnergy::hessian(const MatJT& JT, const EnergyWeights& w, bool projected,
+                                 bool all_samples) const {
   const int s = reduced_size();
   MatXd H = distortion_hessian(JT, projected, all_samples);
   for (int a = 0; a < 3; ++a) {

@@ -32,7 +32,9 @@ bool cholesky_solve(MatXd& H, VecXd& b) {
 }
 
 using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
 
 std::string fmt(double x) {
   std::ostringstream s;
@@ -41,7 +43,9 @@ std::string fmt(double x) {
   return s.str();
 }
 
-bool stop_requested(const std::atomic<bool>* stop) { return stop && stop->load(std::memory_order_relaxed); }
+bool stop_requested(const std::atomic<bool>* stop) {
+  return stop && stop->load(std::memory_order_relaxed);
+}
 
 void check_finite(const MatX3d& P, const std::string& where, const char* what) {
   for (Eigen::Index i = 0; i < P.rows(); ++i)
@@ -55,16 +59,22 @@ void check_finite(const MatX3d& P, const std::string& where, const char* what) {
 
 const char* to_string(StopReason r) {
   switch (r) {
-    case StopReason::kConverged: return "converged";
-    case StopReason::kMaxIterations: return "max_iterations";
-    case StopReason::kBlocked: return "blocked_by_certificate";
-    case StopReason::kNoCertifiedStep: return "no_certified_step";
-    case StopReason::kInterrupted: return "interrupted";
+    case StopReason::kConverged:
+      return "converged";
+    case StopReason::kMaxIterations:
+      return "max_iterations";
+    case StopReason::kBlocked:
+      return "blocked_by_certificate";
+    case StopReason::kNoCertifiedStep:
+      return "no_certified_step";
+    case StopReason::kInterrupted:
+      return "interrupted";
   }
   return "?";
 }
 
-DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params, const std::string& cache_dir,
+DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
+                                     const std::string& cache_dir,
                                      const std::function<void(const std::string&)>& log)
     : cage_(cage), params_(params), basis_(cage) {
   validate_params(params_, "parameters");
@@ -85,7 +95,8 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
     throw InputError(cage_.source, "no voxel of side " + fmt(sampling_.side) +
                                        " fits inside the cage (use a smaller voxel_side or more samples)");
   say("sampling: " + std::to_string(sampling_.size()) + " voxels of side " + fmt(sampling_.side) + ", " +
-      std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" + fmt(ms_since(t0)) + " ms)");
+      std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" + fmt(ms_since(t0)) +
+      " ms)");
 
   // Reduced gradient matrix G = (∇basis at the centers) Ξ, in chunks so that the full-space matrix of a large
   // cage never exists at once.
@@ -151,7 +162,8 @@ void DeformationSolver::set_params(const DeformParams& p) {
 
 void DeformationSolver::reset() {
   const MatX3d yid = cage_.identity_coefficients();
-  y_ = subspace_.basis.transpose() * yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
+  y_ = subspace_.basis.transpose() *
+       yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
   JT_ = energy_->jacobians(y_);
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
@@ -191,15 +203,23 @@ void DeformationSolver::set_targets(const MatX3d& targets, const std::string& wh
   energy_->set_targets(targets);
 }
 
-MatX3d DeformationSolver::coefficients() const { return subspace_.basis * y_; }
+MatX3d DeformationSolver::coefficients() const {
+  return subspace_.basis * y_;
+}
 
 Certificate DeformationSolver::certify_current(bool keep_leaves) const {
   return certifier_->certify_reduced(y_, certify_params(false, keep_leaves));
 }
 
-EnergyTerms DeformationSolver::energy() const { return energy_->evaluate(JT_, y_, weights_); }
-VecXd DeformationSolver::handle_errors() const { return energy_->handle_errors(y_); }
-MatX3d DeformationSolver::handle_positions() const { return energy_->handle_positions(y_); }
+EnergyTerms DeformationSolver::energy() const {
+  return energy_->evaluate(JT_, y_, weights_);
+}
+VecXd DeformationSolver::handle_errors() const {
+  return energy_->handle_errors(y_);
+}
+MatX3d DeformationSolver::handle_positions() const {
+  return energy_->handle_positions(y_);
+}
 
 IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   const auto t_iter = Clock::now();
@@ -210,8 +230,9 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   bool interrupted = false;
 
   // With dynamic weighting, a direction whose full step fails the certificate while the handles are still far
-  // (E_P2P >= E0) is recomputed with weaker handles and more smoothness before the step is shortened: this keeps
-  // the path inside the certified region (paper Sec. 7.3, Fig. 9) instead of creeping along its boundary.
+  // (E_P2P >= E0) is recomputed with weaker handles and more smoothness before the step is shortened: this
+  // keeps the path inside the certified region (paper Sec. 7.3, Fig. 9) instead of creeping along its
+  // boundary.
   const double p2p_far = params_.e0 * bbox_diag2_;
   const EnergyWeights weights_at_start = weights_;  // restored if the iteration is interrupted
   const int max_attempts = params_.dynamic_weighting ? 1 + params_.direction_retries : 1;
@@ -239,8 +260,8 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       MatXd F = H;
       bool ok = cholesky_solve(F, dvec);
       for (double extra = 1e-6; !ok && extra < 1e6; extra *= 100) {
-        // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision rounding
-        // can still break that, in which case the shift grows.
+        // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision
+        // rounding can still break that, in which case the shift grows.
         H.diagonal().array() += extra * (1.0 + H.diagonal().cwiseAbs().maxCoeff());
         F = H;
         dvec = -gvec;
@@ -302,7 +323,8 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     if (!rec.accepted) rec.terms = e0;
     if (!retry) break;
     weights_.p2p = std::max(params_.min_p2p_factor * params_.lambda_p2p, weights_.p2p * params_.kappa1);
-    weights_.smooth = std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
+    weights_.smooth =
+        std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
     rec.weight_action += "retry,";
   }
   rec.certified = cert_.certified;
@@ -390,7 +412,8 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
       if (can_adjust) {
         // No certified decrease with these weights: pull less, smooth more, and try again.
         weights_.p2p = std::max(params_.min_p2p_factor * params_.lambda_p2p, weights_.p2p * params_.kappa1);
-        weights_.smooth = std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
+        weights_.smooth =
+            std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
         history_.back().weight_action = "p2p*,smooth* (no step)";
         rec.weight_action = history_.back().weight_action;
       } else {
@@ -404,7 +427,8 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
       const double ynorm = std::max(1.0, y_.norm());
       const bool small_step = rec.step_norm <= params_.step_tolerance * ynorm;
       const double decrease = rec.energy_before - rec.terms.total;
-      const bool small_decrease = decrease <= params_.energy_tolerance * std::max(std::abs(rec.energy_before), 1e-300);
+      const bool small_decrease =
+          decrease <= params_.energy_tolerance * std::max(std::abs(rec.energy_before), 1e-300);
       if ((small_step || small_decrease) && rec.certificate_rejections > 0) {
         res.reason = StopReason::kBlocked;
         res.message = "the certificate limits the step to " + fmt(rec.step) +

@@ -59,8 +59,8 @@ std::string untagged(const char* what) {
   return s;
 }
 
-// Parses with the line of a syntax error and refuses duplicate keys: nlohmann keeps the last of them silently,
-// so a scenario with "handles" twice would run with only one of the lists.
+// Parses with the line of a syntax error and refuses duplicate keys: nlohmann keeps the last of them
+// silently, so a scenario with "handles" twice would run with only one of the lists.
 ordered_json parse_scenario_json(const std::string& path, const std::string& text) {
   std::vector<std::set<std::string>> keys;  // keys seen in each open object
   const ordered_json::parser_callback_t callback = [&keys](int, ordered_json::parse_event_t event,
@@ -88,8 +88,8 @@ ordered_json parse_scenario_json(const std::string& path, const std::string& tex
     const size_t colon = detail.find(": ");  // drop nlohmann's own "parse error at line L, column C"
     if (detail.rfind("parse error", 0) == 0 && colon != std::string::npos) detail.erase(0, colon + 2);
     throw InputError(path,
-                     "JSON syntax error at line " + std::to_string(line) + ", column " + std::to_string(column) +
-                         " (byte " + std::to_string(e.byte) + "): " + detail,
+                     "JSON syntax error at line " + std::to_string(line) + ", column " +
+                         std::to_string(column) + " (byte " + std::to_string(e.byte) + "): " + detail,
                      line);
   } catch (const ordered_json::exception& e) {
     // E.g. out_of_range 406 "number overflow parsing '1e400'": locate the quoted token for the line.
@@ -114,15 +114,18 @@ std::string json_type(const ordered_json& v) {
 std::string optional_string(const ordered_json& root, const char* key, const std::string& path) {
   const auto it = root.find(key);
   if (it == root.end()) return "";
-  if (!it->is_string()) throw InputError(path, "\"" + std::string(key) + "\" must be a string, got " + json_type(*it));
+  if (!it->is_string())
+    throw InputError(path, "\"" + std::string(key) + "\" must be a string, got " + json_type(*it));
   return it->get<std::string>();
 }
 
 Vec3 handle_point(const ordered_json& h, const char* key, const std::string& where, const std::string& path) {
   const auto it = h.find(key);
-  if (it == h.end()) throw InputError(path, where + ": missing \"" + key + "\" (a handle is " + kHandleForm + ")");
+  if (it == h.end())
+    throw InputError(path, where + ": missing \"" + key + "\" (a handle is " + kHandleForm + ")");
   if (!it->is_array() || it->size() != 3)
-    throw InputError(path, where + ": \"" + key + "\" must be an array of 3 numbers [x, y, z], got " + json_type(*it));
+    throw InputError(
+        path, where + ": \"" + key + "\" must be an array of 3 numbers [x, y, z], got " + json_type(*it));
   Vec3 p;
   for (int k = 0; k < 3; ++k) {
     const ordered_json& c = (*it)[k];
@@ -179,7 +182,8 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
   for (const auto& [key, value] : root.items()) {
     (void)value;
     if (std::find(std::begin(kTopKeys), std::end(kTopKeys), key) == std::end(kTopKeys))
-      throw InputError(path, "unknown key \"" + key + "\" (allowed: name, model, description, handles, parameters)");
+      throw InputError(
+          path, "unknown key \"" + key + "\" (allowed: name, model, description, handles, parameters)");
   }
 
   Scenario s;
@@ -208,10 +212,11 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
   }
 
   const auto handles = root.find("handles");
-  if (handles == root.end()) throw InputError(path, "missing \"handles\": a scenario needs at least one handle");
+  if (handles == root.end())
+    throw InputError(path, "missing \"handles\": a scenario needs at least one handle");
   if (!handles->is_array())
-    throw InputError(path, "\"handles\" must be an array of " + std::string(kHandleForm) + ", got " +
-                               json_type(*handles));
+    throw InputError(
+        path, "\"handles\" must be an array of " + std::string(kHandleForm) + ", got " + json_type(*handles));
   if (handles->empty()) throw InputError(path, "no handles: a scenario needs at least one handle");
   const Eigen::Index n = static_cast<Eigen::Index>(handles->size());
   s.sources.resize(n, 3);
@@ -220,7 +225,8 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
     const ordered_json& h = (*handles)[static_cast<size_t>(i)];
     // Handles are numbered from 1 in messages, like faces and vertices elsewhere in lidef.
     const std::string where = "handle " + std::to_string(i + 1) + " of " + std::to_string(n);
-    if (!h.is_object()) throw InputError(path, where + " must be an object " + kHandleForm + ", got " + json_type(h));
+    if (!h.is_object())
+      throw InputError(path, where + " must be an object " + kHandleForm + ", got " + json_type(h));
     for (const auto& [key, value] : h.items()) {
       (void)value;
       if (key != "source" && key != "target")
@@ -233,9 +239,10 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
   const auto params = root.find("parameters");
   if (params != root.end()) {
     if (!params->is_object())
-      throw InputError(path, "\"parameters\" must be a JSON object {\"name\": value, ...}, got " + json_type(*params));
-    // set_param key by key rather than apply_params: apply_params takes a nlohmann::json, whose keys are sorted,
-    // and params_given must keep the file's order.
+      throw InputError(
+          path, "\"parameters\" must be a JSON object {\"name\": value, ...}, got " + json_type(*params));
+    // set_param key by key rather than apply_params: apply_params takes a nlohmann::json, whose keys are
+    // sorted, and params_given must keep the file's order.
     for (const auto& [key, value] : params->items()) {
       set_param(s.params, key, nlohmann::json(value), path);
       s.params_given.push_back(key);
@@ -265,8 +272,8 @@ void write_scenario(const std::string& path, const Scenario& s) {
   if (!s.description.empty()) out += "  \"description\": " + json_string(s.description, path) + ",\n";
   out += "  \"handles\": [\n";
   for (Eigen::Index i = 0; i < s.sources.rows(); ++i)
-    out += "    {\"source\": " + json_point(s.sources, i) + ", \"target\": " + json_point(s.targets, i) + "}" +
-           (i + 1 < s.sources.rows() ? ",\n" : "\n");
+    out += "    {\"source\": " + json_point(s.sources, i) + ", \"target\": " + json_point(s.targets, i) +
+           "}" + (i + 1 < s.sources.rows() ? ",\n" : "\n");
   out += "  ]";
   const DeformParams defaults;
   std::vector<std::string> changed;
@@ -277,10 +284,14 @@ void write_scenario(const std::string& path, const Scenario& s) {
           if (v == defaults.*member) return;
           using T = std::decay_t<decltype(v)>;
           std::string text;
-          if constexpr (std::is_same_v<T, std::string>) text = json_string(v, path);
-          else if constexpr (std::is_same_v<T, bool>) text = v ? "true" : "false";
-          else if constexpr (std::is_same_v<T, double>) text = json_number(v);
-          else text = std::to_string(v);
+          if constexpr (std::is_same_v<T, std::string>)
+            text = json_string(v, path);
+          else if constexpr (std::is_same_v<T, bool>)
+            text = v ? "true" : "false";
+          else if constexpr (std::is_same_v<T, double>)
+            text = json_number(v);
+          else
+            text = std::to_string(v);
           changed.push_back("    \"" + std::string(p.name) + "\": " + text);
         },
         p.member);

@@ -13,51 +13,52 @@ namespace lidef {
 
 struct DeformParams {
   // --- Subspace and sampling
-  int reduced_dof = 300;          // s: reduced coefficients per coordinate (3s unknowns)
-  int samples = 30000;            // |I|: target number of voxels (the side is searched to match)
-  double voxel_side = 0;          // > 0: use this voxel side instead of searching from `samples`
-  double safety = 1.5;            // voxel center to cage >= safety * voxel radius
-  double hessian_fraction = 0.05; // |H| / |I|
+  int reduced_dof = 300;           // s: reduced coefficients per coordinate (3s unknowns)
+  int samples = 30000;             // |I|: target number of voxels (the side is searched to match)
+  double voxel_side = 0;           // > 0: use this voxel side instead of searching from `samples`
+  double safety = 1.5;             // voxel center to cage >= safety * voxel radius
+  double hessian_fraction = 0.05;  // |H| / |I|
   // --- Energy E = E_dis + λ1 E_P2P + λ2 E_smooth
-  double lambda_p2p = 1e5;        // λ1
-  double lambda_smooth = 0.1;     // λ2
+  double lambda_p2p = 1e5;     // λ1
+  double lambda_smooth = 0.1;  // λ2
   // --- Projected Newton
   int max_iterations = 50;
-  double step_tolerance = 1e-6;   // converged when t‖δ‖ <= step_tolerance · max(1, ‖ỹ‖)
+  double step_tolerance = 1e-6;    // converged when t‖δ‖ <= step_tolerance · max(1, ‖ỹ‖)
   double energy_tolerance = 1e-5;  // ... or when the relative energy decrease of a step is below this
-  double armijo = 1e-4;           // sufficient-decrease constant c1
-  int max_halvings = 40;          // line-search halvings before "no certified step"
-  double diagonal_shift = 1e-5;   // added to the reduced Hessian's diagonal
-  double handle_tolerance = 1e-3; // handle error (distance, model units) reported as "reached"
+  double armijo = 1e-4;            // sufficient-decrease constant c1
+  int max_halvings = 40;           // line-search halvings before "no certified step"
+  double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
+  double handle_tolerance = 1e-3;  // handle error (distance, model units) reported as "reached"
   // --- Certificate (line search and output)
   int max_depth = 6;
-  std::string bound = "third";    // "first" (17) or "third" (21)
-  long max_refined = 200000;      // child voxels evaluated per certification of a result
+  std::string bound = "third";           // "first" (17) or "third" (21)
+  long max_refined = 200000;             // child voxels evaluated per certification of a result
   long line_search_max_refined = 20000;  // the same budget for line-search trials: a trial that needs more is
                                          // rejected (sound: "not certified") and the step halved
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
   bool dynamic_weighting = true;
-  double e0 = 1e-4;               // E_P2P threshold, relative to the squared cage bounding-box diagonal
-  double kappa1 = 0.5;            // λ1 ← κ1 λ1 when E_P2P >= E0 and (36) fails
-  double kappa2 = 2.0;            // λ2 ← κ2 λ2
-  double epsilon = 0.05;          // margin of condition (36): min over leaves of σ3 − r L >= ε
-  double max_smooth_factor = 1e3; // λ2 stays <= this times its default
-  double min_p2p_factor = 1e-3;   // λ1 stays >= this times its default
-  int direction_retries = 3;      // per iteration: recompute the direction with weaker handles when its full
-                                  // step fails the certificate while E_P2P >= E0
-  int max_weight_resets = 2;      // convergence with changed weights resets them and continues, at most this often
+  double e0 = 1e-4;                // E_P2P threshold, relative to the squared cage bounding-box diagonal
+  double kappa1 = 0.5;             // λ1 ← κ1 λ1 when E_P2P >= E0 and (36) fails
+  double kappa2 = 2.0;             // λ2 ← κ2 λ2
+  double epsilon = 0.05;           // margin of condition (36): min over leaves of σ3 − r L >= ε
+  double max_smooth_factor = 1e3;  // λ2 stays <= this times its default
+  double min_p2p_factor = 1e-3;    // λ1 stays >= this times its default
+  int direction_retries = 3;       // per iteration: recompute the direction with weaker handles when its full
+                                   // step fails the certificate while E_P2P >= E0
+  int max_weight_resets =
+      2;  // convergence with changed weights resets them and continues, at most this often
   // --- Execution
-  int threads = 0;                // OpenMP threads (0 = all cores)
+  int threads = 0;  // OpenMP threads (0 = all cores)
 };
 
 // One row of the table. `member` points into DeformParams.
 struct ParamInfo {
   using Member = std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*,
                               bool DeformParams::*, std::string DeformParams::*>;
-  const char* name;     // JSON key; the CLI flag is "--" + name with '_' → '-'
-  const char* group;    // "sampling", "energy", "newton", "certificate", "weighting", "execution"
+  const char* name;   // JSON key; the CLI flag is "--" + name with '_' → '-'
+  const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution"
   Member member;
-  double min, max;      // valid range (inclusive) for numbers; ignored for bool/string
+  double min, max;  // valid range (inclusive) for numbers; ignored for bool/string
   const char* help;
 };
 
@@ -70,7 +71,8 @@ std::string param_flag(const ParamInfo& p);
 
 // Sets one parameter from a JSON value; throws InputError(where, ...) for an unknown name (listing the close
 // ones), a wrong type, a non-finite number or a value out of range.
-void set_param(DeformParams& params, const std::string& name, const nlohmann::json& value, const std::string& where);
+void set_param(DeformParams& params, const std::string& name, const nlohmann::json& value,
+               const std::string& where);
 // Applies every key of a JSON object (set_param for each); throws on the first bad key.
 void apply_params(DeformParams& params, const nlohmann::json& object, const std::string& where);
 // Checks cross-parameter consistency (ranges of each field and e.g. bound spelled right); throws InputError.

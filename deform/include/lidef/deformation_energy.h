@@ -3,7 +3,8 @@
 //   E(ỹ) = E_dis + λ1 E_P2P + λ2 E_smooth
 //   E_dis    = (1/|I|) Σ_{i∈I} (E_iso(J_i) − 6)        mean symmetric Dirichlet excess over the voxel samples
 //   E_P2P    = Σ_h ‖D̃_h ỹ − q_h‖²                       soft handles (paper (29))
-//   E_smooth = (1/|E|) ‖K Ξ ỹ‖² = (1/|E|) Σ_j μ_j ‖ỹ_j‖²  (Ξ's columns are eigenvectors of KᵀK, eigenvalues μ)
+//   E_smooth = (1/|E|) ‖K Ξ ỹ‖² = (1/|E|) Σ_j μ_j ‖ỹ_j‖²  (Ξ's columns are eigenvectors of KᵀK, eigenvalues
+//   μ)
 //
 // Weighting (MATH-NOTES leaves it open): all voxels have the same volume, so the mean over samples is the
 // paper's volume-weighted integral divided by the sampled volume — independent of the sampling density, and
@@ -11,8 +12,9 @@
 // means the same on coarse and fine cages. E_P2P is a plain sum (paper) so λ1 keeps the paper's meaning.
 //
 // Layouts. ỹ: s by 3 (column a = coordinate a). vec(ỹ) is column-major: index j + s·a. Jacobians at the
-// samples are stored as one 3|I| by 3 matrix JT with JT(3i+b, a) = J_i(a,b) = ∂f_a/∂p_b (J_iᵀ in rows 3i..3i+2),
-// which is exactly G ỹ for the reduced gradient matrix G (3|I| by s, row 3i+b = ∂/∂p_b of the reduced basis).
+// samples are stored as one 3|I| by 3 matrix JT with JT(3i+b, a) = J_i(a,b) = ∂f_a/∂p_b (J_iᵀ in rows
+// 3i..3i+2), which is exactly G ỹ for the reduced gradient matrix G (3|I| by s, row 3i+b = ∂/∂p_b of the
+// reduced basis).
 //
 // Hessian: ∇²E_dis is approximated on the subset H ⊂ I (weight 1/|H|) with every per-sample 9x9 block
 // projected to PSD by the analytic eigensystem (symmetric_dirichlet.h). The block structure is Kronecker:
@@ -34,8 +36,8 @@ using MatXdR = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowM
 using MatXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 struct EnergyWeights {
-  double p2p = 1e5;    // λ1
-  double smooth = 0.1; // λ2
+  double p2p = 1e5;     // λ1
+  double smooth = 0.1;  // λ2
 };
 
 struct EnergyTerms {
@@ -44,14 +46,14 @@ struct EnergyTerms {
 };
 
 // Storage: G is kept rounded to single precision (half the memory traffic of the two passes over it per
-// iteration, which are memory-bound); all arithmetic with it is double. The energy is then exactly that of the
-// map whose basis gradients are the rounded ones — a fixed smooth function of ỹ, so the line search and the
-// derivative checks are consistent; it differs from the true E_dis by ~1e-7 relative. Certificates never use
-// it (the certifier has its own bounds on its own storage).
+// iteration, which are memory-bound); all arithmetic with it is double. The energy is then exactly that of
+// the map whose basis gradients are the rounded ones — a fixed smooth function of ỹ, so the line search and
+// the derivative checks are consistent; it differs from the true E_dis by ~1e-7 relative. Certificates never
+// use it (the certifier has its own bounds on its own storage).
 class DeformationEnergy {
  public:
-  // G: 3|I| by s reduced gradient matrix (see above). hessian_subset: indices into I (the set H; empty = all).
-  // smooth_eigenvalues: s eigenvalues μ_j of KᵀK for the basis columns. num_edges: |E| of the cage.
+  // G: 3|I| by s reduced gradient matrix (see above). hessian_subset: indices into I (the set H; empty =
+  // all). smooth_eigenvalues: s eigenvalues μ_j of KᵀK for the basis columns. num_edges: |E| of the cage.
   DeformationEnergy(MatXdR G, std::vector<int> hessian_subset, VecXd smooth_eigenvalues, int num_edges);
 
   // D: #h by s reduced basis values at the handle sources (f(p_h) = D_h ỹ); Q: #h by 3 targets.
@@ -79,7 +81,8 @@ class DeformationEnergy {
   // ∇²E as 3s by 3s (vec(ỹ) column-major). projected = PSD-projected blocks (the solver's matrix);
   // all_samples = use every sample with weight 1/|I| in double precision (the exact Hessian when not
   // projected; for tests) instead of the subset H in single precision.
-  MatXd hessian(const MatJT& JT, const EnergyWeights& w, bool projected = true, bool all_samples = false) const;
+  MatXd hessian(const MatJT& JT, const EnergyWeights& w, bool projected = true,
+                bool all_samples = false) const;
   // Only the E_dis part of hessian(), for benchmarks.
   MatXd distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const;
 
@@ -89,9 +92,9 @@ class DeformationEnergy {
   MatXfR GH_;  // 3|H| by s, the rows of G at the subset, single precision
   VecXd mu_;
   int num_edges_;
-  MatXd D_;      // #h by s
-  MatX3d Q_;     // #h by 3
-  MatXd DtD_;    // s by s
+  MatXd D_;    // #h by s
+  MatX3d Q_;   // #h by 3
+  MatXd DtD_;  // s by s
 };
 
 }  // namespace lidef

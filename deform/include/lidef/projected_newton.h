@@ -4,7 +4,8 @@
 // iterate is certified; the solver's current map is always the last certified one.
 //
 // Dynamic weighting (Sec. 7.3, absent from the published code; docs/solver.md): after each accepted step,
-//   if E_P2P >= E0:  λ2 ← κ2 λ2, and if the certificate's min over leaves of σ3 − r L is < ε (condition (36)):
+//   if E_P2P >= E0:  λ2 ← κ2 λ2, and if the certificate's min over leaves of σ3 − r L is < ε (condition
+//   (36)):
 //                    λ1 ← κ1 λ1;
 //   else if the full Newton step failed condition (6) (the certificate shortened the step): λ2 ← κ2 λ2;
 //   else (nothing needed a change): λ2 ← max(default, λ2/κ2), λ1 ← min(default, λ1/κ1)   (our addition).
@@ -13,9 +14,9 @@
 // weights they are reset to the defaults and the iteration goes on (at most max_weight_resets times), so the
 // final map minimises the energy with the user's weights whenever it can.
 //
-// Usage: DeformationSolver precomputes once per cage (subspace, sampling, reduced gradient matrix, certifier);
-// set_handles() / set_targets() and solve() or step() many times (the studio calls step() while a handle is
-// dragged, starting from the last solution).
+// Usage: DeformationSolver precomputes once per cage (subspace, sampling, reduced gradient matrix,
+// certifier); set_handles() / set_targets() and solve() or step() many times (the studio calls step() while a
+// handle is dragged, starting from the last solution).
 #pragma once
 #include <atomic>
 #include <functional>
@@ -36,40 +37,40 @@ namespace lidef {
 
 // One Newton iteration, as iterations.csv records it.
 struct IterationRecord {
-  int iteration = 0;              // 1-based
+  int iteration = 0;                         // 1-based
   double lambda_p2p = 0, lambda_smooth = 0;  // weights used in this iteration
-  double energy_before = 0;       // E at the start (these weights)
-  EnergyTerms terms;              // at the accepted point (these weights)
-  double gradient_norm = 0;       // ‖∇E‖ at the start
-  double newton_decrement = 0;    // −∇Eᵀδ
-  double step = 0;                // accepted t (0: no step accepted)
-  double step_norm = 0;           // t ‖δ‖
-  int armijo_rejections = 0;      // halvings because the energy did not decrease enough (or became +∞)
-  int certificate_rejections = 0; // halvings because the certificate failed
+  double energy_before = 0;                  // E at the start (these weights)
+  EnergyTerms terms;                         // at the accepted point (these weights)
+  double gradient_norm = 0;                  // ‖∇E‖ at the start
+  double newton_decrement = 0;               // −∇Eᵀδ
+  double step = 0;                           // accepted t (0: no step accepted)
+  double step_norm = 0;                      // t ‖δ‖
+  int armijo_rejections = 0;       // halvings because the energy did not decrease enough (or became +∞)
+  int certificate_rejections = 0;  // halvings because the certificate failed
   bool accepted = false;
-  bool certified = false;         // the current map (accepted point, or the previous one) is certified
-  double min_sigma3 = 0;          // certificate of the current map: min σ3 at the voxel centers
-  double min_lower_bound = 0;     // min over leaves of σ3 − r L
-  long refined = 0;               // voxels the certificate subdivided
-  double max_handle_error = 0;    // max ‖f(p_h) − q_h‖ at the current map
-  std::string weight_action;      // what dynamic weighting did after this step ("", "smooth*", "p2p*", "reset")
+  bool certified = false;       // the current map (accepted point, or the previous one) is certified
+  double min_sigma3 = 0;        // certificate of the current map: min σ3 at the voxel centers
+  double min_lower_bound = 0;   // min over leaves of σ3 − r L
+  long refined = 0;             // voxels the certificate subdivided
+  double max_handle_error = 0;  // max ‖f(p_h) − q_h‖ at the current map
+  std::string weight_action;    // what dynamic weighting did after this step ("", "smooth*", "p2p*", "reset")
   double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, ms_certificate = 0, ms_total = 0;
 };
 
 enum class StopReason {
-  kConverged,       // step below step_tolerance or energy decrease below energy_tolerance, at the user's weights —
-                    // or at adjusted ones once max_weight_resets is used up (SolveResult::message says so)
+  kConverged,  // step below step_tolerance or energy decrease below energy_tolerance, at the user's weights —
+               // or at adjusted ones once max_weight_resets is used up (SolveResult::message says so)
   kMaxIterations,
-  kBlocked,         // the certificate shortened the step to below the tolerance: at the injectivity boundary
-  kNoCertifiedStep, // no step length in max_halvings halvings was both decreasing and certified
-  kInterrupted,     // the callback or the stop flag asked to stop
+  kBlocked,          // the certificate shortened the step to below the tolerance: at the injectivity boundary
+  kNoCertifiedStep,  // no step length in max_halvings halvings was both decreasing and certified
+  kInterrupted,      // the callback or the stop flag asked to stop
 };
 const char* to_string(StopReason r);
 
 struct SolveResult {
   StopReason reason = StopReason::kMaxIterations;
   std::string message;
-  int iterations = 0;             // accepted or attempted Newton iterations run by this solve()
+  int iterations = 0;  // accepted or attempted Newton iterations run by this solve()
   bool converged() const { return reason == StopReason::kConverged; }
   double seconds = 0;
 };
@@ -78,7 +79,8 @@ class DeformationSolver {
  public:
   // Precomputes everything that depends only on the cage and the parameters that shape it (reduced_dof,
   // samples/voxel_side, safety, hessian_fraction, threads). `log` receives one line per preprocessing stage.
-  DeformationSolver(const Cage& cage, const DeformParams& params, const std::string& cache_dir = default_cache_dir(),
+  DeformationSolver(const Cage& cage, const DeformParams& params,
+                    const std::string& cache_dir = default_cache_dir(),
                     const std::function<void(const std::string&)>& log = {});
   ~DeformationSolver();
 
@@ -94,8 +96,8 @@ class DeformationSolver {
   void reset();
 
   // Newton iterations until a stop criterion. `on_iteration` is called after every iteration; returning false
-  // stops (kInterrupted). `stop` (optional) is polled between line-search trials too (Ctrl-C): an iteration cut
-  // short leaves the map unchanged.
+  // stops (kInterrupted). `stop` (optional) is polled between line-search trials too (Ctrl-C): an iteration
+  // cut short leaves the map unchanged.
   SolveResult solve(const std::function<bool(const IterationRecord&)>& on_iteration = {},
                     const std::atomic<bool>* stop = nullptr);
   // One Newton iteration (the studio's unit of work).
@@ -103,14 +105,14 @@ class DeformationSolver {
 
   // The current (last certified) map.
   const MatS3& reduced_coefficients() const { return y_; }
-  MatX3d coefficients() const;              // #V+#F by 3, y = Ξ ỹ
+  MatX3d coefficients() const;                              // #V+#F by 3, y = Ξ ỹ
   const Certificate& certificate() const { return cert_; }  // of the current map (keep_leaves = false)
   // A full certificate of the current map with leaves (for reports).
   Certificate certify_current(bool keep_leaves = true) const;
-  EnergyTerms energy() const;               // at the current map, current weights
+  EnergyTerms energy() const;  // at the current map, current weights
   EnergyWeights weights() const { return weights_; }
-  VecXd handle_errors() const;              // #h
-  MatX3d handle_positions() const;          // #h by 3
+  VecXd handle_errors() const;      // #h
+  MatX3d handle_positions() const;  // #h by 3
   const std::vector<IterationRecord>& history() const { return history_; }
 
   const Cage& cage() const { return cage_; }
@@ -132,8 +134,8 @@ class DeformationSolver {
   HarmonicBasis basis_;
   std::unique_ptr<OctreeCertifier> certifier_;
   std::unique_ptr<DeformationEnergy> energy_;
-  MatS3 y_;        // current reduced coefficients
-  MatJT JT_;       // their Jacobians at the samples
+  MatS3 y_;   // current reduced coefficients
+  MatJT JT_;  // their Jacobians at the samples
   Certificate cert_;
   EnergyWeights weights_;
   int weight_resets_ = 0;

@@ -18,14 +18,14 @@
 namespace lidef {
 
 struct Scenario {
-  std::string path;         // the file it was read from ("" when built in memory)
-  std::string name;         // "name", else the file's stem
+  std::string path;  // the file it was read from ("" when built in memory)
+  std::string name;  // "name", else the file's stem
   std::string description;
-  std::string model;        // as written in the file
-  std::string model_dir;    // resolved folder (exists; not yet validated as a model)
-  MatX3d sources;           // #handles by 3
-  MatX3d targets;           // #handles by 3
-  DeformParams params;      // defaults overridden by "parameters"
+  std::string model;                      // as written in the file
+  std::string model_dir;                  // resolved folder (exists; not yet validated as a model)
+  MatX3d sources;                         // #handles by 3
+  MatX3d targets;                         // #handles by 3
+  DeformParams params;                    // defaults overridden by "parameters"
   std::vector<std::string> params_given;  // names set by the file, in file order
   int num_handles() const { return static_cast<int>(sources.rows()); }
 };
