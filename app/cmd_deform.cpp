@@ -13,6 +13,8 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <type_traits>
+#include <variant>
 
 #include "commands.h"
 #include "lidef/atomic_file.h"
@@ -132,7 +134,20 @@ void add_deform_command(CLI::App& app, Action& action) {
     sub->add_option_function<std::string>(
            param_flag(p), [opts, name](const std::string& v) { opts->overrides[name] = v; },
            std::string(p.help) + " [default " + param_value_string(defaults, p) + "]")
-        ->group(std::string("Parameters: ") + p.group);
+        ->group(std::string("Parameters: ") + p.group)
+        ->type_name(std::visit(
+            [](auto m) -> std::string {
+              using T = std::remove_reference_t<decltype(DeformParams{}.*m)>;
+              if constexpr (std::is_same_v<T, bool>)
+                return "BOOL";
+              else if constexpr (std::is_same_v<T, std::string>)
+                return "TEXT";
+              else if constexpr (std::is_floating_point_v<T>)
+                return "REAL";
+              else
+                return "INT";
+            },
+            p.member));
   }
   sub->footer(
       "Writes into --out (all files appear together, or none): coefficients.txt (#V+#F rows, readable by\n"
