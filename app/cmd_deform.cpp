@@ -109,7 +109,7 @@ std::string iteration_row(const IterationRecord& r) {
 
 void add_deform_command(CLI::App& app, Action& action) {
   struct Opts {
-    std::string scenario, out, models, cache_dir = "<default>";
+    std::string scenario, out, models, init, cache_dir = "<default>";
     int grid = 0;
     bool quiet = false;
     std::map<std::string, std::string> overrides;  // parameter name → text from the command line
@@ -121,6 +121,10 @@ void add_deform_command(CLI::App& app, Action& action) {
       ->required();
   sub->add_option("--out", opts->out, "Output folder (created if missing)")->required();
   sub->add_option("--models", opts->models, "Folder that holds the model named in the scenario");
+  sub->add_option(
+      "--init", opts->init,
+      "Start from this certified map (a coefficients.txt of an earlier run with the same reduced_dof) "
+      "instead of the identity");
   sub->add_option("--cache-dir", opts->cache_dir,
                   "Subspace cache folder ('' = no cache; default $LIDEF_CACHE_DIR or ~/.cache/lidef)");
   sub->add_option("--grid", opts->grid,
@@ -208,6 +212,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       const std::string cache = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
       DeformationSolver solver(model.cage, sc.params, cache, log);
       solver.set_handles(sc.sources, sc.targets, sc.path);
+      if (!o.init.empty()) solver.set_initial_map(read_coefficients(o.init, model.cage), o.init);
 
       // --- Solve, one progress line per iteration; Ctrl-C stops cleanly.
       g_stop.store(false);

@@ -25,7 +25,9 @@
 #include <string>
 #include <vector>
 
+#include "lidef/coefficients.h"
 #include "lidef/mesh_io.h"
+#include "lidef/model_check.h"
 #include "test_support.h"
 
 namespace fs = std::filesystem;
@@ -470,6 +472,64 @@ TEST_F(DeformCli, HelpListsTheParameters) {
                         "--lambda-smooth", "--max-depth", "--dynamic-weighting", "--max-iterations",
                         "--samples", "--reduced-dof", "coefficients.txt", "summary.json", "Exit code"})
     EXPECT_NE(output.find(s), std::string::npos) << s << "\n" << output;
+}
+
+// --init: a run continues from the certified map of an earlier one; maps it cannot start from are refused.
+TEST_F(DeformCli, InitStartsFromAnEarlierCertifiedMap) {
+  TempDir tmp;
+  std::string out;
+  ASSERT_EQ(deform(beam_bend(), tmp / "a", tmp / "cache", std::string(kSmall) + " --max-iterations 2", &out),
+            1)
+      << out;
+  // Zero iterations from A's map: the written map is A's (up to the round trip through the subspace basis).
+  ASSERT_EQ(
+      deform(beam_bend(), tmp / "b", tmp / "cache",
+             std::string(kSmall) + " --max-iterations 0 --init " + quote(tmp / "a/coefficients.txt"), &out),
+      1)
+      << out;
+  const lidef::Model model = lidef::load_model(beam());
+  const lidef::MatX3d ya = lidef::read_coefficients(tmp / "a/coefficients.txt", model.cage);
+  const lidef::MatX3d yb = lidef::read_coefficients(tmp / "b/coefficients.txt", model.cage);
+  EXPECT_LE((ya - yb).cwiseAbs().maxCoeff(), 1e-12 * ya.cwiseAbs().maxCoeff());
+  EXPECT_EQ(read_json(tmp / "b/summary.json")["certified"], true);
+  // Continuing converges.
+  ASSERT_EQ(deform(beam_bend(), tmp / "c", tmp / "cache",
+                   std::string(kSmall) + " --init " + quote(tmp / "a/coefficients.txt"), &out),
+            0)
+      << out;
+  EXPECT_LE(read_json(tmp / "c/summary.json")["max_handle_error"].get<double>(), 1e-3);
+
+  // Refused, nothing written: the reflection p -> -p (in the subspace, but det J < 0 everywhere) ...
+  const lidef::MatX3d reflected = -model.cage.identity_coefficients();
+  write_text(tmp / "reflected.txt", [&] {
+    std::ostringstream s;
+    lidef::write_coefficients(s, reflected);
+    return s.str();
+  }());
+  std::string err;
+  EXPECT_EQ(deform(beam_bend(), tmp / "d", tmp / "cache",
+                   std::string(kSmall) + " --init " + quote(tmp / "reflected.txt"), &err, "", true),
+            2);
+  EXPECT_NE(err.find("not certified"), std::string::npos) << err;
+  // ... a map outside the 60-column subspace (one vertex coefficient moved) ...
+  lidef::MatX3d moved = ya;
+  moved(0, 0) += 0.01;
+  write_text(tmp / "moved.txt", [&] {
+    std::ostringstream s;
+    lidef::write_coefficients(s, moved);
+    return s.str();
+  }());
+  EXPECT_EQ(deform(beam_bend(), tmp / "d", tmp / "cache",
+                   std::string(kSmall) + " --init " + quote(tmp / "moved.txt"), &err, "", true),
+            2);
+  EXPECT_NE(err.find("not in the reduced subspace"), std::string::npos) << err;
+  // ... and a file with the wrong number of rows.
+  write_text(tmp / "short.txt", "0 0 0\n1 1 1\n");
+  EXPECT_EQ(deform(beam_bend(), tmp / "d", tmp / "cache",
+                   std::string(kSmall) + " --init " + quote(tmp / "short.txt"), &err, "", true),
+            2);
+  EXPECT_NE(err.find("short.txt"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(tmp / "d"));
 }
 
 // The paper's scenarios on the shared models, default parameters (30k samples, 300 DOF per coordinate). Slow

@@ -174,6 +174,32 @@ void DeformationSolver::reset() {
                          "); the voxels are too close to the cage — raise 'safety' or use smaller voxels");
 }
 
+void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& where) {
+  if (y.rows() != cage_.num_coeffs())
+    throw InputError(where, "has " + std::to_string(y.rows()) + " coefficient rows; this cage needs " +
+                                std::to_string(cage_.num_coeffs()) + " (#V+#F)");
+  if (!y.allFinite()) throw InputError(where, "contains a non-finite coefficient");
+  const MatS3 yr = subspace_.basis.transpose() * y;
+  const double norm = y.norm();
+  const double residual = (subspace_.basis * yr - y).norm() / std::max(norm, 1e-300);
+  if (residual > 1e-9)
+    throw InputError(where, "is not in the reduced subspace of this cage (" +
+                                std::to_string(subspace_.size()) +
+                                " coefficients per coordinate; relative residual " + fmt(residual) +
+                                "): projecting it would change the map. A coefficients.txt written by "
+                                "'lidef deform' with the same reduced_dof is in it.");
+  const Certificate c = certifier_->certify_reduced(yr, certify_params(false, false));
+  if (!c.certified)
+    throw InputError(where, "the initial map is not certified locally injective on this sampling (" +
+                                c.reason + "); lidef deform only starts from certified maps");
+  y_ = yr;
+  JT_ = energy_->jacobians(y_);
+  cert_ = c;
+  weights_ = {params_.lambda_p2p, params_.lambda_smooth};
+  weight_resets_ = 0;
+  history_.clear();
+}
+
 void DeformationSolver::set_handles(const MatX3d& sources, const MatX3d& targets, const std::string& where) {
   if (sources.rows() == 0) throw InputError(where, "no handles: at least one handle is needed");
   if (sources.rows() != targets.rows()) throw InputError(where, "as many targets as sources are needed");

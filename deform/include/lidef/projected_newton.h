@@ -94,6 +94,12 @@ class DeformationSolver {
 
   // Back to the identity map (certified; throws NumericalError if even the identity is not).
   void reset();
+  // Starts from the map with full coefficients y (#V+#F by 3), e.g. a coefficients.txt written by `lidef
+  // deform` with the same reduced_dof. Throws InputError(where, ...) when y has the wrong shape or is not in
+  // the reduced subspace (relative residual ‖Ξ Ξᵀ y − y‖/‖y‖ > 1e-9: projecting would change the map), and
+  // when the map is not certified locally injective on this sampling. Keeps the weights at their defaults and
+  // clears the history.
+  void set_initial_map(const MatX3d& y, const std::string& where);
 
   // Newton iterations until a stop criterion. `on_iteration` is called after every iteration; returning false
   // stops (kInterrupted). `stop` (optional) is polled between line-search trials too (Ctrl-C): an iteration
