@@ -205,6 +205,9 @@ void add_deform_command(CLI::App& app, Action& action) {
       const Model model = load_model(sc.model_dir);
       for (size_t k = 0; k < model.report.warnings.size() && k < 5; ++k)
         std::cerr << "lidef deform: warning: " << model.report.warnings[k].str() << "\n";
+      if (model.report.warnings.size() > 5)
+        std::cerr << "lidef deform: warning: ... and " << model.report.warnings.size() - 5
+                  << " more (run 'lidef check " << sc.model_dir << "')\n";
 
       auto log = [&](const std::string& s) {
         if (!o.quiet) std::cerr << "lidef deform: " << s << "\n";
