@@ -306,18 +306,7 @@ TEST(ProjectedNewton, FreshSolversAreBitwiseDeterministic) {
 TEST(ProjectedNewton, SetHandlesRejectsBadInput) {
   auto s = make_solver();
   const MatS3 y0 = s->reduced_coefficients();
-  auto message = [](auto&& f) -> std::string {
-    try {
-      f();
-    } catch (const InputError& e) {
-      return e.what();
-    } catch (const std::exception& e) {
-      ADD_FAILURE() << "expected InputError, got: " << e.what();
-      return "";
-    }
-    ADD_FAILURE() << "expected InputError, nothing thrown";
-    return "";
-  };
+  auto message = [](auto&& f) { return lidef::test::input_error_message(f); };
   MatX3d src = beam().sources, tgt = beam().targets;
   // A source outside the cage (the cage spans x in [-1.04, 1.04]).
   MatX3d out = src;

@@ -28,19 +28,9 @@ void write_text(const std::string& path, const std::string& text) {
   out << text;
 }
 
-// The message of the InputError thrown by f; fails the test when nothing (or something else) is thrown.
 template <class F>
 std::string input_error(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "expected InputError, got: " << e.what();
-    return "";
-  }
-  ADD_FAILURE() << "expected InputError, nothing thrown";
-  return "";
+  return lidef::test::input_error_message(std::forward<F>(f));
 }
 
 // --- Parameter table

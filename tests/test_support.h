@@ -9,6 +9,8 @@
 #include <sstream>
 #include <string>
 
+#include "lidef/errors.h"
+
 namespace lidef::test {
 
 // ../shared/data (or $LIDEF_SHARED_DATA). Empty string when absent.
@@ -27,6 +29,20 @@ inline std::string read_text(const std::string& path) {
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
+}
+// The message of the lidef::InputError thrown by f; a test failure when nothing (or something else) is thrown.
+template <class F>
+std::string input_error_message(F&& f) {
+  try {
+    f();
+  } catch (const ::lidef::InputError& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "expected InputError, got: " << e.what();
+    return "";
+  }
+  ADD_FAILURE() << "expected InputError, nothing thrown";
+  return "";
 }
 // Writes `text` to `path` (a gtest failure if that fails).
 inline void write_text(const std::string& path, const std::string& text) {
