@@ -25,6 +25,7 @@
 #include "lidef/mesh_export.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/opencl_backend.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
 #include "lidef/signed_svd.h"
@@ -213,7 +214,10 @@ void add_deform_command(CLI::App& app, Action& action) {
         if (!o.quiet) std::cerr << "lidef deform: " << s << "\n";
       };
       const std::string cache = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
-      DeformationSolver solver(model.cage, sc.params, cache, log);
+      std::string backend_msg;
+      const auto backend = select_backend(sc.params.backend, cache, &backend_msg);
+      std::cerr << "lidef deform: " << backend_msg << "\n";
+      DeformationSolver solver(model.cage, sc.params, cache, log, backend);
       solver.set_handles(sc.sources, sc.targets, sc.path);
       if (!o.init.empty()) solver.set_initial_map(read_coefficients(o.init, model.cage), o.init);
 
@@ -306,6 +310,7 @@ void add_deform_command(CLI::App& app, Action& action) {
                       {"final_certificate_and_fields", ms_final / 1000},
                       {"total", ms_since(t_start) / 1000}};
       sj["threads"] = omp_get_max_threads();
+      sj["backend"] = solver.backend().name();
       sj["parameters"] = params_to_json(sc.params);
       const std::string summary = sj.dump(2) + "\n";
       write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });

@@ -36,9 +36,9 @@ std::string input_error(F&& f) {
 // --- Parameter table
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
-  // Counted by hand in deform_params.h: 5 sampling + 2 energy + 7 newton + 4 certificate + 9 weighting +
-  // 1 execution. A new field must be added here and to the table.
-  const int kFields = 28;
+  // Counted by hand in deform_params.h: 5 sampling + 2 energy + 8 newton + 4 certificate + 9 weighting +
+  // 2 execution. A new field must be added here and to the table.
+  const int kFields = 30;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -65,6 +65,7 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "armijo",
                                              "max_halvings",
                                              "diagonal_shift",
+                                             "hessian_precision",
                                              "handle_tolerance",  // newton
                                              "max_depth",
                                              "bound",
@@ -79,7 +80,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "min_p2p_factor",
                                              "direction_retries",
                                              "max_weight_resets",  // weighting
-                                             "threads"};
+                                             "threads",
+                                             "backend"};
   ASSERT_EQ(expected.size(), table.size());
   for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(table[i].name, expected[i]);
   EXPECT_TRUE(std::get<int DeformParams::*>(find_param("max_depth")->member) == &DeformParams::max_depth);

@@ -48,6 +48,8 @@ std::vector<ParamInfo> make_table() {
       {"max_halvings", "newton", &D::max_halvings, 0, 200,
        "line-search halvings before giving up with \"no certified step\""},
       {"diagonal_shift", "newton", &D::diagonal_shift, 0, 1e6, "added to the reduced Hessian's diagonal"},
+      {"hessian_precision", "newton", &D::hessian_precision, 0, 0,
+       "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,
        "handle error (distance, model units) reported as \"reached\""},
       // --- Certificate
@@ -76,13 +78,20 @@ std::vector<ParamInfo> make_table() {
        "times that convergence with changed weights resets them and continues"},
       // --- Execution
       {"threads", "execution", &D::threads, 0, 1024, "OpenMP threads (0 = all cores)"},
+      {"backend", "execution", &D::backend, 0, 0,
+       "compute backend: \"cpu\", \"opencl\" or \"auto\" (OpenCL when a device with fp64 exists, else CPU)"},
   };
 }
 
-// Values allowed for string parameters; the table has no column for them since `bound` is the only one.
+// Values allowed for string parameters (bound, hessian_precision, backend).
 const std::vector<std::string>* allowed_strings(const std::string& name) {
   static const std::vector<std::string> bound = {"first", "third"};
-  return name == "bound" ? &bound : nullptr;
+  static const std::vector<std::string> precision = {"single", "double"};
+  static const std::vector<std::string> backend = {"cpu", "opencl", "auto"};
+  if (name == "bound") return &bound;
+  if (name == "hessian_precision") return &precision;
+  if (name == "backend") return &backend;
+  return nullptr;
 }
 
 template <class T>

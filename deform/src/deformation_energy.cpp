@@ -89,7 +89,7 @@ VecXd DeformationEnergy::handle_errors(const MatS3& y) const {
   return (handle_positions(y) - Q_).rowwise().norm();
 }
 
-EnergyTerms DeformationEnergy::evaluate(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const {
+double DeformationEnergy::distortion_sum(const MatJT& JT) const {
   const int n = num_samples();
   const int chunks = (n + kChunk - 1) / kChunk;
   std::vector<double> partial(chunks, 0.0);
@@ -100,17 +100,25 @@ EnergyTerms DeformationEnergy::evaluate(const MatJT& JT, const MatS3& y, const E
     for (int i = b; i < e; ++i) sum += sd_energy(jacobian_at(JT, i)) - 6.0;
     partial[c] = sum;
   }
-  EnergyTerms t;
   double dis = 0;
   for (double p : partial) dis += p;
-  t.dis = dis / n;
+  return dis;
+}
+
+EnergyTerms DeformationEnergy::terms(double dis_sum, const MatS3& y, const EnergyWeights& w) const {
+  EnergyTerms t;
+  t.dis = dis_sum / num_samples();
   t.p2p = D_.rows() > 0 ? (D_ * y - Q_).squaredNorm() : 0.0;
   t.smooth = (mu_.asDiagonal() * y).cwiseProduct(y).sum() / num_edges_;
   t.total = std::isfinite(t.dis) ? t.dis + w.p2p * t.p2p + w.smooth * t.smooth : kInf;
   return t;
 }
 
-MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const {
+EnergyTerms DeformationEnergy::evaluate(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const {
+  return terms(distortion_sum(JT), y, w);
+}
+
+MatS3 DeformationEnergy::distortion_gradient_sum(const MatJT& JT) const {
   const int n = num_samples(), s = reduced_size();
   const int chunks = (n + kChunk - 1) / kChunk;
   std::vector<MatS3> partial(chunks);
@@ -130,15 +138,23 @@ MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyW
   }
   MatS3 g = MatS3::Zero(s, 3);
   for (const MatS3& p : partial) g += p;
-  g /= n;
+  return g;
+}
+
+MatS3 DeformationEnergy::gradient_from(const MatS3& dis_sum, const MatS3& y, const EnergyWeights& w) const {
+  MatS3 g = dis_sum / num_samples();
   if (D_.rows() > 0) g.noalias() += 2.0 * w.p2p * D_.transpose() * (D_ * y - Q_);
   g += (2.0 * w.smooth / num_edges_) * (mu_.asDiagonal() * y);
   return g;
 }
 
-MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const {
+MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const {
+  return gradient_from(distortion_gradient_sum(JT), y, w);
+}
+
+MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_samples,
+                                     bool double_precision) const {
   const int s = reduced_size();
-  MatXd H = MatXd::Zero(3 * s, 3 * s);
   const std::vector<int>* idx = &subset_;
   std::vector<int> all;
   if (all_samples) {
@@ -166,10 +182,12 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
     return Ht;
   };
   MatXd Ball(s, 6 * s);
-  if (all_samples) {
-    // Double-precision reference over all samples (idx = 0..n-1, so G's rows match W's).
+  if (all_samples || double_precision) {
+    // Double precision: the reference over all samples (idx = 0..n-1, so G's rows match W's), or the subset
+    // for parity checks between backends, where single-precision rounding of the direction (~1e-7) would hide
+    // everything else.
     MatXdR W(3 * static_cast<Eigen::Index>(m), 6 * s);
-    const MatXdR Gd = G_.cast<double>();
+    const MatXdR Gd = all_samples ? MatXdR(G_.cast<double>()) : MatXdR(GH_.cast<double>());
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < m; ++k)
       for (int q = 0; q < 6; ++q) {
@@ -178,7 +196,8 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
           W.block(3 * k + b, q * s, 1, s) =
               Ht(b, 0) * Gd.row(3 * k) + Ht(b, 1) * Gd.row(3 * k + 1) + Ht(b, 2) * Gd.row(3 * k + 2);
       }
-    Ball.noalias() = Gd.transpose() * W;
+    cblas_dgemm(CblasColMajor, CblasNoTrans, CblasTrans, s, 6 * s, 3 * m, 1.0, Gd.data(), s, W.data(), 6 * s,
+                0.0, Ball.data(), s);
   } else {
     MatXfR W(3 * static_cast<Eigen::Index>(m), 6 * s);  // row-major: the rows written below are contiguous
 #pragma omp parallel for schedule(static)
@@ -198,6 +217,15 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
                 6 * s, 0.0f, Bf.data(), s);
     Ball = Bf.cast<double>();
   }
+  return Ball;
+}
+
+namespace {
+// 3s by 3s from the six pair blocks (s by 6s), exactly symmetric.
+MatXd assemble_pairs(const MatXd& Ball) {
+  const int s = static_cast<int>(Ball.rows());
+  constexpr int kPairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  MatXd H(3 * s, 3 * s);
   for (int q = 0; q < 6; ++q) {
     const int a = kPairs[q][0], a2 = kPairs[q][1];
     H.block(a * s, a2 * s, s, s) = Ball.middleCols(q * s, s);
@@ -207,17 +235,36 @@ MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, boo
   H = 0.5 * (H + H.transpose()).eval();
   return H;
 }
+}  // namespace
+
+MatXd DeformationEnergy::distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const {
+  return assemble_pairs(pair_blocks(JT, projected, all_samples, false));
+}
+
+MatXd DeformationEnergy::distortion_pair_blocks(const MatJT& JT, bool double_precision) const {
+  return pair_blocks(JT, true, false, double_precision);
+}
 
 MatXd DeformationEnergy::hessian(const MatJT& JT, const EnergyWeights& w, bool projected,
                                  bool all_samples) const {
-  const int s = reduced_size();
   MatXd H = distortion_hessian(JT, projected, all_samples);
+  add_quadratic_hessian(H, w);
+  return H;
+}
+
+MatXd DeformationEnergy::hessian_from(const MatXd& pair_blocks, const EnergyWeights& w) const {
+  MatXd H = assemble_pairs(pair_blocks);
+  add_quadratic_hessian(H, w);
+  return H;
+}
+
+void DeformationEnergy::add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const {
+  const int s = reduced_size();
   for (int a = 0; a < 3; ++a) {
     auto blk = H.block(a * s, a * s, s, s);
     if (D_.rows() > 0) blk += (2.0 * w.p2p) * DtD_;
     blk.diagonal() += (2.0 * w.smooth / num_edges_) * mu_;
   }
-  return H;
 }
 
 }  // namespace lidef

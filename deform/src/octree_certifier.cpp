@@ -38,7 +38,9 @@ inline double hessian_norm_sym(const double* h0, int stride_a) {
 
 }  // namespace
 
-const char* to_string(LipschitzBound b) { return b == LipschitzBound::kFirstOrder ? "first" : "third"; }
+const char* to_string(LipschitzBound b) {
+  return b == LipschitzBound::kFirstOrder ? "first" : "third";
+}
 
 LipschitzBound lipschitz_bound_from_string(const std::string& s) {
   if (s == "first") return LipschitzBound::kFirstOrder;
@@ -55,13 +57,16 @@ struct OctreeCertifier::Impl {
   // bandwidth-bound stage; the storage rounding is covered by the allowance kFloatStorageRel (see run()).
   std::vector<float> GH;
   long m = 0;
-  VecXd scale_J, scale_H;  // per voxel: Σ over the rows and k of |stored value| (rounding allowance)
+  VecXd scale_J, scale_H;    // per voxel: Σ over the rows and k of |stored value| (rounding allowance)
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
   mutable std::vector<char> first_finite, third_finite;  // per voxel: no factor is +∞
   // Stored as floats rounded *up*, so that they stay upper bounds.
   mutable Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> first, third;
+  // Backend kernels (nullptr: the CPU code below) and which factor matrices they hold.
+  std::unique_ptr<CertifierKernels> kernels;
+  mutable bool kernels_first = false, kernels_third = false;
 };
 
 OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
@@ -79,8 +84,8 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
   const long N = sampling.size(), n = basis_.size();
   const long m = reduction ? reduction->cols() : n;
   if (reduction && reduction->rows() != n)
-    throw InputError("", "reduction basis has " + std::to_string(reduction->rows()) + " rows, expected #V+#F = " +
-                             std::to_string(n));
+    throw InputError("", "reduction basis has " + std::to_string(reduction->rows()) +
+                             " rows, expected #V+#F = " + std::to_string(n));
   const double bytes = 9.0 * N * m * sizeof(float);
   if (reduction || bytes <= max_matrix_bytes) {
     im.mode = reduction ? Impl::Mode::kReduced : Impl::Mode::kFull;
@@ -120,20 +125,35 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
 
 OctreeCertifier::~OctreeCertifier() = default;
 
+void OctreeCertifier::set_backend(const ComputeBackend& backend) {
+  Impl& im = *impl_;
+  CertifierData d;
+  d.cage = &cage_;
+  d.voxels = sampling_.size();
+  d.centers = &sampling_.centers;
+  d.m = im.mode == Impl::Mode::kOnTheFly ? 0 : im.m;
+  d.GH = im.GH.empty() ? nullptr : im.GH.data();
+  d.edge_u = im.eu;
+  d.edge_w = im.ew;
+  im.kernels = backend.certifier_kernels(d);
+  im.kernels_first = im.kernels_third = false;
+}
+
 VecXd OctreeCertifier::edge_delta_norms(const MatX3d& y) const {
   return delta_norms(basis_.face_matrices(y));
 }
 
 VecXd OctreeCertifier::delta_norms(const HarmonicBasis::FaceMatrices& fm) const {
   VecXd out(cage_.num_edges());
-  for (int e = 0; e < cage_.num_edges(); ++e) out(e) = (fm.A[cage_.edges[e].f0] - fm.A[cage_.edges[e].f1]).norm();
+  for (int e = 0; e < cage_.num_edges(); ++e)
+    out(e) = (fm.A[cage_.edges[e].f0] - fm.A[cage_.edges[e].f1]).norm();
   return out;
 }
 
 Certificate OctreeCertifier::certify(const MatX3d& y, const CertifyParams& params) const {
   if (y.rows() != basis_.size())
-    throw InputError("", "coefficients have " + std::to_string(y.rows()) + " rows, expected #V+#F = " +
-                             std::to_string(basis_.size()));
+    throw InputError("", "coefficients have " + std::to_string(y.rows()) +
+                             " rows, expected #V+#F = " + std::to_string(basis_.size()));
   if (!y.allFinite()) throw InputError("", "coefficients contain NaN or Inf");
   return run(y, nullptr, 0, params);
 }
@@ -149,7 +169,8 @@ Certificate OctreeCertifier::certify_reduced(const Eigen::Matrix<double, Eigen::
   return run(y, yr.data(), yr.rows(), params);
 }
 
-Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_rows, const CertifyParams& p) const {
+Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_rows,
+                                 const CertifyParams& p) const {
   const auto t_start = Clock::now();
   if (p.max_depth < 0) throw InputError("", "max depth must be >= 0");
   const Impl& im = *impl_;
@@ -165,6 +186,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   auto t0 = Clock::now();
   VecXd scaleJ(N), scaleH(N);
   std::vector<Mat3> Jc(N);
+  std::vector<double> device_Y;  // coefficients for the backend's base stage (empty: CPU)
   VecXd hnorm(N);
   const bool use_stored = im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr_ptr);
   if (use_stored) {
@@ -175,36 +197,43 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
       for (int a = 0; a < 3; ++a) Ycols[a * m + k] = yr_ptr ? yr_ptr[a * yr_rows + k] : y(k, a);
     double cmax = 0;
     for (double v : Ycols) cmax = std::max(cmax, std::abs(v));
-    const double* y0 = Ycols.data();
-    const double* y1 = y0 + m;
-    const double* y2 = y1 + m;
-#pragma omp parallel for schedule(static)
     for (long i = 0; i < N; ++i) {
-      const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
-      double out[9][3];
-      for (int row = 0; row < 9; ++row) {
-        const float* g = blk + row * m;
-        double a0 = 0, a1 = 0, a2 = 0;
-#pragma omp simd reduction(+ : a0, a1, a2)
-        for (long k = 0; k < m; ++k) {
-          const double gk = g[k];
-          a0 += gk * y0[k];
-          a1 += gk * y1[k];
-          a2 += gk * y2[k];
-        }
-        out[row][0] = a0;
-        out[row][1] = a1;
-        out[row][2] = a2;
-      }
-      Mat3& J = Jc[i];
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];
-      double H6[3][6];
-      for (int a = 0; a < 3; ++a)
-        for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
-      hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
       scaleJ(i) = im.scale_J(i) * cmax;
       scaleH(i) = im.scale_H(i) * cmax;
+    }
+    if (im.kernels) {
+      // The backend's base stage also forms T (step 3), so it runs there; see below.
+      device_Y = std::move(Ycols);
+    } else {
+      const double* y0 = Ycols.data();
+      const double* y1 = y0 + m;
+      const double* y2 = y1 + m;
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < N; ++i) {
+        const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
+        double out[9][3];
+        for (int row = 0; row < 9; ++row) {
+          const float* g = blk + row * m;
+          double a0 = 0, a1 = 0, a2 = 0;
+#pragma omp simd reduction(+ : a0, a1, a2)
+          for (long k = 0; k < m; ++k) {
+            const double gk = g[k];
+            a0 += gk * y0[k];
+            a1 += gk * y1[k];
+            a2 += gk * y2[k];
+          }
+          out[row][0] = a0;
+          out[row][1] = a1;
+          out[row][2] = a2;
+        }
+        Mat3& J = Jc[i];
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];
+        double H6[3][6];
+        for (int a = 0; a < 3; ++a)
+          for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
+        hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
+      }
     }
   }
   const bool on_the_fly = !use_stored;
@@ -218,23 +247,27 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   };
   if (on_the_fly) {
 #pragma omp parallel for schedule(dynamic, 64)
-    for (long i = 0; i < N; ++i) eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i));
+    for (long i = 0; i < N; ++i)
+      eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i));
   }
   cert.ms_jacobian = ms_since(t0);
 
   // --- 2. σ3 at the centers.
   t0 = Clock::now();
   VecXd sigma3(N);
+  const bool on_device = !device_Y.empty();
+  if (!on_device) {
 #pragma omp parallel for schedule(static)
-  for (long i = 0; i < N; ++i) sigma3(i) = signed_singular_values(Jc[i])(2);
+    for (long i = 0; i < N; ++i) sigma3(i) = signed_singular_values(Jc[i])(2);
+  }
   cert.ms_sigma = ms_since(t0);
-  cert.min_sigma3_center = sigma3.minCoeff();
 
   // --- 3. Lipschitz constants: δ norms (map) times the per-voxel per-edge factors (cage only).
   t0 = Clock::now();
   const VecXd delta = delta_norms(fm);
   // The factor matrix of the chosen bound, built on first use (it depends only on the cage and the voxels).
-  auto build_factors = [&](auto& mat, std::vector<char>& finite, double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
+  auto build_factors = [&](auto& mat, std::vector<char>& finite,
+                           double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
     mat.resize(N, E);
     finite.assign(N, 1);
 #pragma omp parallel for schedule(static)
@@ -245,17 +278,32 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
       }
   };
   if (third)
-    std::call_once(im.third_once, [&] { build_factors(im.third, im.third_finite, &third_order_edge_factor); });
+    std::call_once(im.third_once,
+                   [&] { build_factors(im.third, im.third_finite, &third_order_edge_factor); });
   else
-    std::call_once(im.first_once, [&] { build_factors(im.first, im.first_finite, &first_order_edge_factor); });
+    std::call_once(im.first_once,
+                   [&] { build_factors(im.first, im.first_finite, &first_order_edge_factor); });
   const auto* factors = third ? &im.third : &im.first;
   const std::vector<char>* row_finite = third ? &im.third_finite : &im.first_finite;
   // An edge whose factor is +∞ (the voxel's ball may touch it) makes L infinite unless δ_e = 0 exactly (then
   // H does not depend on it). Rows without an infinite factor take a branch-free, vectorized dot product.
   VecXd T(N);
   const double* dl = delta.data();
+  double device_ms = 0;
+  if (on_device) {
+    // σ3, ‖H‖ and T in one pass on the device (its time is reported as the Jacobian stage).
+    bool& has = third ? im.kernels_third : im.kernels_first;
+    if (!has) {
+      im.kernels->set_factors(third, factors->data(), E);
+      has = true;
+    }
+    const auto td = Clock::now();
+    im.kernels->base_stage(device_Y.data(), third, delta, sigma3, hnorm, T);
+    device_ms = ms_since(td);
+    cert.ms_jacobian += device_ms;
+  }
 #pragma omp parallel for schedule(static)
-  for (long i = 0; i < N; ++i) {
+  for (long i = 0; i < (on_device ? 0 : N); ++i) {
     double s = 0;
     const float* f = factors->row(i).data();
     if ((*row_finite)[i]) {
@@ -267,6 +315,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     }
     T(i) = s;
   }
+  cert.min_sigma3_center = sigma3.minCoeff();
   auto lipschitz = [&](double hn, double t, double rad) { return third ? hn + rad * t : t; };
   // Allowance for rounding: kRoundingRel covers the double-precision evaluation and summation (relative to
   // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
@@ -282,142 +331,204 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     const double L = lipschitz(hnorm(i), T(i), r);
     const double lb = sigma3(i) - r * L;
     const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage);
-    base[i] = {sampling_.centers.row(i).transpose(), side, 0, sigma3(i), L, margin, margin > 0, static_cast<int>(i)};
+    base[i] = {
+        sampling_.centers.row(i).transpose(), side, 0, sigma3(i), L, margin, margin > 0, static_cast<int>(i)};
     if (!(margin > 0)) failing_base.push_back(i);
   }
-  cert.ms_bound = ms_since(t0);
+  cert.ms_bound = ms_since(t0) - device_ms;
 
-  // --- 4. Adaptive refinement of the failing voxels.
+  // --- 4. Adaptive refinement of the failing voxels, one octree level at a time: all nodes of a level are
+  // evaluated in one batch (on the backend when it has kernels), then the decisions are taken here in
+  // base-voxel order, so the result does not depend on the thread schedule or the backend. Every child keeps
+  // the smaller of its parent's and its own bound (its ball lies inside the parent's). A voxel is certified
+  // iff every node of its subtree resolves; the set of evaluated nodes is the same as in a depth-first
+  // traversal whenever no budget runs out, so the order changes no verdict.
   t0 = Clock::now();
-  std::atomic<long> budget_used{0};
-  std::atomic<bool> abort{false};
-  std::atomic<bool> budget_hit{false};
-  std::vector<std::vector<CertLeaf>> sub(failing_base.size());
-  std::vector<char> sub_ok(failing_base.size(), 0);
-  std::vector<long> sub_refined(failing_base.size(), 0);
-  std::vector<int> sub_depth(failing_base.size(), 0);
-  std::vector<double> sub_min_sigma(failing_base.size(), kInf);
-#pragma omp parallel
-  {
-#pragma omp for schedule(dynamic, 1)
-    for (long fi = 0; fi < static_cast<long>(failing_base.size()); ++fi) {
-      const long i = failing_base[fi];
-      std::vector<CertLeaf>& out = sub[fi];
-      if (sigma3(i) <= 0 || p.max_depth == 0 || (p.stop_on_failure && abort.load())) {
-        out.push_back(base[i]);  // σ3 ≤ 0 at a center: no subdivision can certify it
+  struct Node {
+    Vec3 c;
+    double side;
+    int depth;
+    double bound;     // third: Σ δ Θ over the node's ball; first: L over the node's ball
+    long fi;          // index into failing_base
+    int first_child;  // index of the first of its 8 children in `tree` (−1: a leaf)
+    CertLeaf leaf;
+  };
+  struct VoxelState {
+    bool ok = true, definite_fail = false;
+    long refined = 1, evaluated = 0;
+    int depth_used = 0;
+    double min_sigma = kInf;
+    int first_child = -1;
+  };
+  const long F = static_cast<long>(failing_base.size());
+  std::vector<VoxelState> vs(F);
+  std::vector<Node> tree;
+  std::vector<int> frontier;
+  long budget_used = 0;
+  bool abort = false, budget_hit = false;
+  auto add_children = [&](const Vec3& c, double sd, int depth, double bound, long fi) {
+    const int first = static_cast<int>(tree.size());
+    for (int k = 0; k < 8; ++k) {
+      const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
+      tree.push_back({c + sd * off, sd / 2, depth + 1, bound, fi, -1, {}});
+      frontier.push_back(first + k);
+    }
+    return first;
+  };
+  for (long fi = 0; fi < F; ++fi) {
+    const long i = failing_base[fi];
+    if (sigma3(i) <= 0 || p.max_depth == 0) {
+      vs[fi].ok = false;  // σ3 ≤ 0 at a center: no subdivision can certify it
+      if (p.stop_on_failure) abort = true;
+      continue;
+    }
+    vs[fi].first_child = add_children(base[i].center, side, 0, T(i), fi);
+  }
+  auto unresolved = [&](Node& nd) {
+    // A leaf with unknown σ3 keeps the leaves a tiling of the voxel.
+    nd.leaf = {nd.c, nd.side, nd.depth, std::numeric_limits<double>::quiet_NaN(),
+               kInf, -kInf,   false,    static_cast<int>(failing_base[nd.fi])};
+    vs[nd.fi].ok = false;
+  };
+  std::vector<int> batch;
+  MatX3d bc;
+  VecXd brad;
+  std::vector<NodeValues> vals;
+  while (!frontier.empty()) {
+    if (p.stop_on_failure && abort) {
+      for (int id : frontier) unresolved(tree[id]);
+      break;
+    }
+    // Budgets, in order.
+    batch.clear();
+    for (int id : frontier) {
+      Node& nd = tree[id];
+      VoxelState& st = vs[nd.fi];
+      if (st.definite_fail || ++st.evaluated > p.max_children_per_voxel ||
+          budget_used++ >= p.max_refined_voxels) {
+        if (!st.definite_fail) budget_hit = true;
+        unresolved(nd);
         if (p.stop_on_failure) abort = true;
         continue;
       }
-      // Depth-first refinement with an explicit stack; children keep the parent's third-order bound
-      // unless their own (smaller ball) is tighter.
-      struct Node {
-        Vec3 c;
-        double side;
-        int depth;
-        double bound;  // third: Σ δ Θ over the node's ball; first: L over the node's ball
-      };
-      std::vector<Node> stack;
-            bool ok = true, definite_fail = false;
-      long refined = 1, evaluated = 0;
-      int depth_used = 0;
-      double min_sigma = kInf;
-      auto push_children = [&](const Node& nd) {
-        for (int k = 7; k >= 0; --k) {
-          const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
-          stack.push_back({nd.c + nd.side * off, nd.side / 2, nd.depth + 1, nd.bound});
-        }
-      };
-      push_children({base[i].center, side, 0, T(i)});
-      while (!stack.empty()) {
-        if (p.stop_on_failure && abort.load()) {
-          ok = false;
-          break;
-        }
-        const Node nd = stack.back();
-        stack.pop_back();
-        if (definite_fail || ++evaluated > p.max_children_per_voxel ||
-            budget_used.fetch_add(1) >= p.max_refined_voxels) {
-          // Unresolved: left uncertified (a leaf with unknown σ3 keeps the leaves a tiling of the voxel).
-          ok = false;
-          if (!definite_fail) budget_hit = true;
-          if (p.stop_on_failure) abort = true;
-          out.push_back({nd.c, nd.side, nd.depth, std::numeric_limits<double>::quiet_NaN(), kInf, -kInf, false,
-                         static_cast<int>(i)});
-          continue;
-        }
-        depth_used = std::max(depth_used, nd.depth);
+      batch.push_back(id);
+    }
+    // Evaluate the batch.
+    const long nb = static_cast<long>(batch.size());
+    vals.assign(nb, {});
+    if (im.kernels && nb > 0) {
+      bc.resize(nb, 3);
+      brad.resize(nb);
+      for (long q = 0; q < nb; ++q) {
+        bc.row(q) = tree[batch[q]].c.transpose();
+        brad(q) = 0.5 * std::sqrt(3.0) * tree[batch[q]].side;
+      }
+      im.kernels->evaluate_nodes(fm.A, fm.AD, fm.A_abs, delta, third, bc, brad, vals);
+    } else {
+#pragma omp parallel for schedule(dynamic, 4)
+      for (long q = 0; q < nb; ++q) {
+        const Node& nd = tree[batch[q]];
         const double rad = 0.5 * std::sqrt(3.0) * nd.side;
         Mat3 J;
-        double hn, sJ, sH;
-        eval_point(nd.c, J, hn, sJ, sH);
-        const double s3 = signed_singular_values(J)(2);
-        min_sigma = std::min(min_sigma, s3);
+        NodeValues& v = vals[q];
+        eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H);
+        v.sigma3 = signed_singular_values(J)(2);
         double own = 0;
         for (long e = 0; e < E; ++e)
           if (delta(e) != 0)
             own += delta(e) * (third ? third_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad)
                                      : first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad));
-        const double bnd = std::min(nd.bound, own);
-        const double L = lipschitz(hn, bnd, rad);
-        const double margin = s3 - rad * L - tolerance(sJ, sH, s3, L, rad, 0.0);
-        if (margin > 0) {
-          out.push_back({nd.c, nd.side, nd.depth, s3, L, margin, true, static_cast<int>(i)});
-        } else if (s3 <= 0 || nd.depth >= p.max_depth) {
-          out.push_back({nd.c, nd.side, nd.depth, s3, L, margin, false, static_cast<int>(i)});
-          ok = false;
-          // σ3 ≤ 0 at a center settles this voxel: refining its siblings cannot change the verdict.
-          if (s3 <= 0) definite_fail = true;
-          if (p.stop_on_failure) abort = true;
-        } else {
-          ++refined;
-          push_children({nd.c, nd.side, nd.depth, bnd});
-        }
+        v.own_bound = own;
       }
-      sub_ok[fi] = ok;
-      sub_refined[fi] = refined;
-      sub_depth[fi] = depth_used;
-      sub_min_sigma[fi] = min_sigma;
+    }
+    // Decide, in order.
+    frontier.clear();
+    for (long q = 0; q < nb; ++q) {
+      const int id = batch[q];
+      const NodeValues& v = vals[q];
+      const long fi = tree[id].fi;
+      VoxelState& st = vs[fi];
+      const Vec3 c = tree[id].c;
+      const double sd = tree[id].side;
+      const int depth = tree[id].depth;
+      st.depth_used = std::max(st.depth_used, depth);
+      st.min_sigma = std::min(st.min_sigma, v.sigma3);
+      const double rad = 0.5 * std::sqrt(3.0) * sd;
+      const double bnd = std::min(tree[id].bound, v.own_bound);
+      const double L = lipschitz(v.hnorm, bnd, rad);
+      const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+      const int bi = static_cast<int>(failing_base[fi]);
+      if (margin > 0) {
+        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, true, bi};
+      } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
+        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, false, bi};
+        st.ok = false;
+        // σ3 ≤ 0 at a center settles this voxel: refining its other nodes cannot change the verdict.
+        if (v.sigma3 <= 0) st.definite_fail = true;
+        if (p.stop_on_failure) abort = true;
+      } else {
+        ++st.refined;
+        const int first = add_children(c, sd, depth, bnd, fi);
+        tree[id].first_child = first;
+      }
     }
   }
   cert.ms_refine = ms_since(t0);
 
-  // --- 5. Assemble, in base-voxel order (deterministic whatever the thread schedule).
+  // --- 5. Assemble, in base-voxel order with each subtree depth-first (children in octant order).
   bool all_ok = true;
   cert.min_margin = kInf;
   cert.min_lower_bound = kInf;
-  size_t fi = 0;
   long leaves = 0;
+  auto emit = [&](const CertLeaf& l) {
+    ++leaves;
+    cert.min_margin = std::min(cert.min_margin, l.margin);
+    cert.min_lower_bound = std::min(cert.min_lower_bound, l.sigma3 - 0.5 * std::sqrt(3.0) * l.side * l.L);
+    if (!l.certified) {
+      all_ok = false;
+      if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
+    }
+    if (p.keep_leaves) cert.leaves.push_back(l);
+  };
+  std::vector<int> stack;
+  size_t fi = 0;
   for (long i = 0; i < N; ++i) {
     const bool refined_here = fi < failing_base.size() && failing_base[fi] == i;
-    const std::vector<CertLeaf> single{base[i]};
-    const std::vector<CertLeaf>& ls = refined_here ? sub[fi] : single;
-    if (refined_here) {
-      all_ok = all_ok && sub_ok[fi];
-      cert.refined += (sigma3(i) <= 0 || p.max_depth == 0) ? 0 : sub_refined[fi];
-      cert.max_depth_used = std::max(cert.max_depth_used, sub_depth[fi]);
-      cert.min_sigma3_center = std::min(cert.min_sigma3_center, sub_min_sigma[fi]);
-      ++fi;
-    }
-    for (const CertLeaf& l : ls) {
-      ++leaves;
-      cert.min_margin = std::min(cert.min_margin, l.margin);
-      cert.min_lower_bound = std::min(cert.min_lower_bound, l.sigma3 - 0.5 * std::sqrt(3.0) * l.side * l.L);
-      if (!l.certified) {
+    if (!refined_here || vs[fi].first_child < 0) {
+      emit(base[i]);
+      if (refined_here) {
         all_ok = false;
-        if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
+        ++fi;
       }
-      if (p.keep_leaves) cert.leaves.push_back(l);
+      continue;
     }
+    const VoxelState& st = vs[fi];
+    all_ok = all_ok && st.ok;
+    cert.refined += st.refined;
+    cert.max_depth_used = std::max(cert.max_depth_used, st.depth_used);
+    cert.min_sigma3_center = std::min(cert.min_sigma3_center, st.min_sigma);
+    stack.clear();
+    for (int k = 7; k >= 0; --k) stack.push_back(st.first_child + k);
+    while (!stack.empty()) {
+      const Node& nd = tree[stack.back()];
+      stack.pop_back();
+      if (nd.first_child >= 0) {
+        for (int k = 7; k >= 0; --k) stack.push_back(nd.first_child + k);
+      } else {
+        emit(nd.leaf);
+      }
+    }
+    ++fi;
   }
   cert.certified = all_ok;
   cert.num_leaves = leaves;
   if (!cert.certified) {
     if (cert.min_sigma3_center <= 0)
       cert.reason = "sigma3 <= 0 at a sampled center: the map is not locally injective there";
-    else if (budget_hit.load())
-      cert.reason = "refinement budget exhausted (" + std::to_string(p.max_children_per_voxel) + " per voxel, " +
-                    std::to_string(p.max_refined_voxels) + " in all)";
-    else if (p.stop_on_failure && abort.load())
+    else if (budget_hit)
+      cert.reason = "refinement budget exhausted (" + std::to_string(p.max_children_per_voxel) +
+                    " per voxel, " + std::to_string(p.max_refined_voxels) + " in all)";
+    else if (p.stop_on_failure && abort)
       cert.reason = "a voxel failed at maximum depth " + std::to_string(p.max_depth);
     else
       cert.reason = "condition (6) fails on " + std::to_string(cert.failing.size()) +
@@ -428,7 +539,8 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   return cert;
 }
 
-Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y, const CertifyParams& params) {
+Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y,
+                        const CertifyParams& params) {
   return OctreeCertifier(cage, sampling).certify(y, params);
 }
 

@@ -75,8 +75,9 @@ const char* to_string(StopReason r) {
 
 DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
                                      const std::string& cache_dir,
-                                     const std::function<void(const std::string&)>& log)
-    : cage_(cage), params_(params), basis_(cage) {
+                                     const std::function<void(const std::string&)>& log,
+                                     std::shared_ptr<const ComputeBackend> backend)
+    : cage_(cage), params_(params), basis_(cage), backend_(backend ? std::move(backend) : cpu_backend()) {
   validate_params(params_, "parameters");
   if (params_.threads > 0) omp_set_num_threads(params_.threads);
   const auto t_all = Clock::now();
@@ -116,6 +117,11 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   t0 = Clock::now();
   certifier_ = std::make_unique<OctreeCertifier>(cage_, sampling_, &subspace_.basis);
   say("certificate precomputation: " + fmt(ms_since(t0)) + " ms");
+  t0 = Clock::now();
+  kernels_ = backend_->energy_kernels(*energy_);
+  certifier_->set_backend(*backend_);
+  if (!backend_->is_cpu())
+    say("backend " + backend_->name() + ": device buffers " + fmt(ms_since(t0)) + " ms");
 
   bbox_diag2_ = (cage_.bbox_max - cage_.bbox_min).squaredNorm();
   reset();
@@ -164,7 +170,7 @@ void DeformationSolver::reset() {
   const MatX3d yid = cage_.identity_coefficients();
   y_ = subspace_.basis.transpose() *
        yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
-  JT_ = energy_->jacobians(y_);
+  kernels_->set_current(y_);
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
   history_.clear();
@@ -193,7 +199,7 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
     throw InputError(where, "the initial map is not certified locally injective on this sampling (" +
                                 c.reason + "); lidef deform only starts from certified maps");
   y_ = yr;
-  JT_ = energy_->jacobians(y_);
+  kernels_->set_current(y_);
   cert_ = c;
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
@@ -238,7 +244,7 @@ Certificate DeformationSolver::certify_current(bool keep_leaves) const {
 }
 
 EnergyTerms DeformationSolver::energy() const {
-  return energy_->evaluate(JT_, y_, weights_);
+  return energy_->terms(kernels_->distortion_sum(0), y_, weights_);
 }
 VecXd DeformationSolver::handle_errors() const {
   return energy_->handle_errors(y_);
@@ -268,14 +274,15 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     rec.armijo_rejections = rec.certificate_rejections = 0;
 
     auto t0 = Clock::now();
-    const EnergyTerms e0 = energy_->evaluate(JT_, y_, weights_);
+    const EnergyTerms e0 = energy_->terms(kernels_->distortion_sum(0), y_, weights_);
     rec.energy_before = e0.total;
-    const MatS3 g = energy_->gradient(JT_, y_, weights_);
+    const MatS3 g = energy_->gradient_from(kernels_->distortion_gradient_sum(), y_, weights_);
     rec.gradient_norm = g.norm();
     rec.ms_gradient += ms_since(t0);
 
     t0 = Clock::now();
-    MatXd H = energy_->hessian(JT_, weights_, true, false);
+    MatXd H = energy_->hessian_from(kernels_->distortion_pair_blocks(params_.hessian_precision == "double"),
+                                    weights_);
     H.diagonal().array() += params_.diagonal_shift;
     rec.ms_hessian += ms_since(t0);
 
@@ -300,7 +307,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     rec.ms_solve += ms_since(t0);
 
     t0 = Clock::now();
-    const MatJT dJ = energy_->jacobians(delta);
+    kernels_->set_direction(delta);
     const double slope = gvec.dot(dvec);  // < 0 for a descent direction
     const bool may_retry = attempt + 1 < max_attempts && e0.p2p >= p2p_far &&
                            (weights_.p2p > params_.min_p2p_factor * params_.lambda_p2p ||
@@ -313,8 +320,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
         break;
       }
       const MatS3 yt = y_ + t * delta;
-      const MatJT JTt = JT_ + t * dJ;
-      const EnergyTerms et = energy_->evaluate(JTt, yt, weights_);
+      const EnergyTerms et = energy_->terms(kernels_->distortion_sum(t), yt, weights_);
       if (!(et.total <= e0.total + params_.armijo * t * slope)) {
         if (trace) std::fprintf(stderr, "  trial t=%.4g E=%.6g > E0=%.6g (Armijo)\n", t, et.total, e0.total);
         ++rec.armijo_rejections;
@@ -341,7 +347,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       rec.step_norm = t * delta.norm();
       rec.terms = et;
       y_ = yt;
-      JT_ = JTt;
+      kernels_->accept(t);
       cert_ = std::move(c);
       break;
     }

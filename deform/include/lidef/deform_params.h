@@ -28,6 +28,7 @@ struct DeformParams {
   double armijo = 1e-4;            // sufficient-decrease constant c1
   int max_halvings = 40;           // line-search halvings before "no certified step"
   double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
+  std::string hessian_precision = "single";  // "single" or "double" products of the reduced Hessian
   double handle_tolerance = 1e-3;  // handle error (distance, model units) reported as "reached"
   // --- Certificate (line search and output)
   int max_depth = 6;
@@ -49,6 +50,7 @@ struct DeformParams {
       2;  // convergence with changed weights resets them and continues, at most this often
   // --- Execution
   int threads = 0;  // OpenMP threads (0 = all cores)
+  std::string backend = "cpu";  // "cpu", "opencl" or "auto" (OpenCL when a device with fp64 exists)
 };
 
 // One row of the table. `member` points into DeformParams.

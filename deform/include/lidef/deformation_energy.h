@@ -78,7 +78,7 @@ class DeformationEnergy {
   EnergyTerms evaluate(const MatS3& y, const EnergyWeights& w) const { return evaluate(jacobians(y), y, w); }
   // ∇E (s by 3). Requires det J_i > 0 at every sample.
   MatS3 gradient(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const;
-  // ∇²E as 3s by 3s (vec(ỹ) column-major). projected = PSD-projected blocks (the solver's matrix);
+  // ∇²E as 3s by 3s (vec(ỹ) column-major), single-precision products on the subset. projected = PSD-projected blocks (the solver's matrix);
   // all_samples = use every sample with weight 1/|I| in double precision (the exact Hessian when not
   // projected; for tests) instead of the subset H in single precision.
   MatXd hessian(const MatJT& JT, const EnergyWeights& w, bool projected = true,
@@ -86,7 +86,25 @@ class DeformationEnergy {
   // Only the E_dis part of hessian(), for benchmarks.
   MatXd distortion_hessian(const MatJT& JT, bool projected, bool all_samples) const;
 
+  // --- The pieces the solver combines with a compute backend (compute_backend.h).
+  // Σ_i (E_iso(J_i) − 6), +∞ when some det J_i ≤ 0 (fixed chunk order: deterministic).
+  double distortion_sum(const MatJT& JT) const;
+  // Σ_i G_iᵀ ∂E_iso/∂J_i (s by 3, not divided by |I|).
+  MatS3 distortion_gradient_sum(const MatJT& JT) const;
+  // The six pair blocks (s by 6s) of the PSD-projected distortion Hessian on the subset H, weighted by 1/|H|,
+  // products in single (OpenBLAS sgemm) or double precision (dgemm).
+  MatXd distortion_pair_blocks(const MatJT& JT, bool double_precision) const;
+  // All terms from Σ_i (E_iso − 6) and ỹ.
+  EnergyTerms terms(double distortion_sum, const MatS3& y, const EnergyWeights& w) const;
+  // ∇E from Σ_i G_iᵀ ∂E_iso/∂J_i (adds the handle and smoothness terms).
+  MatS3 gradient_from(const MatS3& distortion_gradient_sum, const MatS3& y, const EnergyWeights& w) const;
+  // ∇²E (3s by 3s) from the pair blocks (symmetrized, plus the exact quadratic terms).
+  MatXd hessian_from(const MatXd& pair_blocks, const EnergyWeights& w) const;
+  const MatXfR& subset_gradient_matrix() const { return GH_; }  // 3|H| by s
+
  private:
+  MatXd pair_blocks(const MatJT& JT, bool projected, bool all_samples, bool double_precision) const;
+  void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
   MatXfR G_;
   std::vector<int> subset_;
   MatXfR GH_;  // 3|H| by s, the rows of G at the subset, single precision

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "lidef/cage.h"
+#include "lidef/compute_backend.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/sampling.h"
 #include "lidef/types.h"
@@ -36,14 +37,14 @@ struct CertifyParams {
 
 // One leaf of the certification octree.
 struct CertLeaf {
-  Vec3 center;
-  double side;
-  int depth;
-  double sigma3;  // signed σ3 at the center
-  double L;       // Lipschitz constant of σ3 on the voxel's ball
-  double margin;  // σ3 − r L − τ (> 0: certified)
-  bool certified;
-  int base;       // index of the base voxel it refines
+  Vec3 center = Vec3::Zero();
+  double side = 0;
+  int depth = 0;
+  double sigma3 = 0;  // signed σ3 at the center
+  double L = 0;       // Lipschitz constant of σ3 on the voxel's ball
+  double margin = 0;  // σ3 − r L − τ (> 0: certified)
+  bool certified = false;
+  int base = 0;       // index of the base voxel it refines
 };
 
 struct Certificate {
@@ -80,6 +81,10 @@ class OctreeCertifier {
   // Same map given in the reduced space (ỹ: s by 3, y = Ξ ỹ); uses the precomputed reduced matrices.
   Certificate certify_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& y_reduced,
                               const CertifyParams& params = {}) const;
+
+  // Runs the base stage and the evaluation of octree nodes on `backend` from now on (a CPU backend restores
+  // the built-in code). Verdicts do not depend on the backend: every decision is taken here, on the host.
+  void set_backend(const ComputeBackend& backend);
 
   // ‖δ_A^e‖_F for every undirected cage edge (#E): zero for affine maps.
   VecXd edge_delta_norms(const MatX3d& y) const;

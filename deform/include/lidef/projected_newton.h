@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "lidef/cage.h"
+#include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
 #include "lidef/deformation_energy.h"
 #include "lidef/green_coordinates.h"
@@ -79,9 +80,12 @@ class DeformationSolver {
  public:
   // Precomputes everything that depends only on the cage and the parameters that shape it (reduced_dof,
   // samples/voxel_side, safety, hessian_fraction, threads). `log` receives one line per preprocessing stage.
+  // `backend` runs the per-sample stages (compute_backend.h); nullptr = the CPU backend. The front end turns
+  // params.backend ("cpu", "opencl", "auto") into one (opencl/include/lidef/opencl_backend.h).
   DeformationSolver(const Cage& cage, const DeformParams& params,
                     const std::string& cache_dir = default_cache_dir(),
-                    const std::function<void(const std::string&)>& log = {});
+                    const std::function<void(const std::string&)>& log = {},
+                    std::shared_ptr<const ComputeBackend> backend = nullptr);
   ~DeformationSolver();
 
   // Handles: sources and targets #h by 3 (h ≥ 1). Throws InputError(where, ...) for a source outside the cage
@@ -127,6 +131,9 @@ class DeformationSolver {
   const HarmonicBasis& basis() const { return basis_; }
   const OctreeCertifier& certifier() const { return *certifier_; }
   const DeformationEnergy& energy_function() const { return *energy_; }
+  const ComputeBackend& backend() const { return *backend_; }
+  // The Jacobians of the current map at the samples (3|I| by 3, JT layout), from the backend.
+  MatJT current_jacobians() const { return kernels_->current_jacobians(); }
   double preprocess_seconds() const { return preprocess_seconds_; }
   SamplingParams sampling_params() const;
   CertifyParams certify_params(bool stop_on_failure, bool keep_leaves) const;
@@ -140,8 +147,9 @@ class DeformationSolver {
   HarmonicBasis basis_;
   std::unique_ptr<OctreeCertifier> certifier_;
   std::unique_ptr<DeformationEnergy> energy_;
-  MatS3 y_;   // current reduced coefficients
-  MatJT JT_;  // their Jacobians at the samples
+  std::shared_ptr<const ComputeBackend> backend_;
+  std::unique_ptr<EnergyKernels> kernels_;  // holds the Jacobians of y_ (and of the direction) at the samples
+  MatS3 y_;  // current reduced coefficients
   Certificate cert_;
   EnergyWeights weights_;
   int weight_resets_ = 0;

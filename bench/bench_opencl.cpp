@@ -1,0 +1,302 @@
+// Benchmark of the OpenCL backend against the CPU backend, in one process, same parameters, same inputs:
+//  1. Per scenario: the full solve on each backend (iterations, ms per iteration and its stage split, the
+//     solve time), with the parity of the two runs: the same accepted steps and certificate verdicts, and the
+//     relative difference of the final coefficients.
+//  2. Per model, at the CPU run's final map: each stage alone (median of --reps after a warm-up): Jacobians
+//  at
+//     the samples (G y), the energy sum, the energy gradient (per-sample ∂E/∂J and Gᵀ P), the PSD Hessian
+//     blocks with the dense product (single precision), the certificate of the map (base stage + refinement),
+//     and the evaluation of a batch of octree nodes (the refinement kernel).
+//
+// Scenarios: every *.json in DATA_DIR/scenarios (DATA_DIR = first positional argument, else
+// $LIDEF_SHARED_DATA, else ../shared/data beside the source tree) plus the project's beam_bend.json; --only
+// a,b picks scenarios by file stem. bar_twist180 is capped at --cap iterations (default 8) on both backends.
+// Output: markdown on stdout, progress on stderr. Exit 0; 2 on bad input; 3 when no OpenCL device works or
+// the two backends disagree on a verdict.
+//
+// Usage: bench_opencl [DATA_DIR] [--only a,b] [--iterations N] [--cap N] [--reps R] [--threads T]
+//                     [--cache-dir DIR]
+#include <omp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "lidef/errors.h"
+#include "lidef/model_check.h"
+#include "lidef/opencl_backend.h"
+#include "lidef/projected_newton.h"
+#include "lidef/scenario.h"
+
+using namespace lidef;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+std::string cpu_model() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) {
+      const auto c = line.find(':');
+      return c == std::string::npos ? line : line.substr(c + 2);
+    }
+  return "unknown";
+}
+
+std::string f(double x, int prec = 3) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", prec, x);
+  return b;
+}
+std::string e(double x) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.1e", x);
+  return b;
+}
+
+template <class F>
+double median_ms(int reps, F&& fn) {
+  fn();  // warm-up
+  std::vector<double> t;
+  for (int r = 0; r < reps; ++r) {
+    const auto t0 = Clock::now();
+    fn();
+    t.push_back(ms_since(t0));
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+struct Run {
+  SolveResult result;
+  std::vector<IterationRecord> history;
+  MatS3 y;
+  bool certified = false;
+};
+
+Run solve(DeformationSolver& s, const Scenario& sc, int max_iter) {
+  DeformParams p = sc.params;
+  p.max_iterations = max_iter;
+  s.set_params(p);
+  s.reset();
+  s.set_handles(sc.sources, sc.targets, sc.path);
+  Run r;
+  r.result = s.solve();
+  r.history = s.history();
+  r.y = s.reduced_coefficients();
+  r.certified = s.certificate().certified;
+  return r;
+}
+
+struct StageMeans {
+  double total = 0, grad = 0, hess = 0, solve = 0, ls = 0, cert = 0;
+};
+StageMeans means(const std::vector<IterationRecord>& h) {
+  StageMeans m;
+  if (h.empty()) return m;
+  for (const auto& r : h) {
+    m.total += r.ms_total;
+    m.grad += r.ms_gradient;
+    m.hess += r.ms_hessian;
+    m.solve += r.ms_solve;
+    m.ls += r.ms_line_search - r.ms_certificate;
+    m.cert += r.ms_certificate;
+  }
+  const double n = static_cast<double>(h.size());
+  m.total /= n, m.grad /= n, m.hess /= n, m.solve /= n, m.ls /= n, m.cert /= n;
+  return m;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string data_dir, only, cache_dir = "/tmp/lidef-bench-cache";
+  int iterations = 0, cap = 8, reps = 5, threads = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::cerr << "bench_opencl: " << a << " needs a value\n";
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--only")
+      only = next();
+    else if (a == "--iterations")
+      iterations = std::atoi(next().c_str());
+    else if (a == "--cap")
+      cap = std::atoi(next().c_str());
+    else if (a == "--reps")
+      reps = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--threads")
+      threads = std::atoi(next().c_str());
+    else if (a == "--cache-dir")
+      cache_dir = next();
+    else if (a == "--help" || a == "-h") {
+      std::cout << "usage: bench_opencl [DATA_DIR] [--only a,b] [--iterations N] [--cap N] [--reps R] "
+                   "[--threads T] [--cache-dir DIR]\n";
+      return 0;
+    } else if (!a.empty() && a[0] == '-') {
+      std::cerr << "bench_opencl: unknown option " << a << "\n";
+      return 2;
+    } else
+      data_dir = a;
+  }
+  if (threads > 0) omp_set_num_threads(threads);
+  if (data_dir.empty()) {
+    const char* env = std::getenv("LIDEF_SHARED_DATA");
+    data_dir = env ? env : LIDEF_SHARED_DATA_DIR;
+  }
+  std::vector<Scenario> scenarios;
+  try {
+    std::vector<fs::path> files;
+    if (fs::is_directory(fs::path(data_dir) / "scenarios")) {
+      for (const auto& en : fs::directory_iterator(fs::path(data_dir) / "scenarios"))
+        if (en.path().extension() == ".json") files.push_back(en.path());
+    } else {
+      std::cerr << "bench_opencl: no scenarios under " << data_dir
+                << " (shared data absent); project scenario only\n";
+    }
+    std::sort(files.begin(), files.end());
+    const fs::path beam = fs::path(LIDEF_SOURCE_DIR) / "data/scenarios/beam_bend.json";
+    if (fs::exists(beam)) files.push_back(beam);
+    std::map<std::string, bool> seen;
+    for (const auto& p : files) {
+      if (seen[p.stem().string()]) continue;  // the project's beam_bend may also sit in DATA_DIR
+      seen[p.stem().string()] = true;
+      if (!only.empty() && ("," + only + ",").find("," + p.stem().string() + ",") == std::string::npos)
+        continue;
+      scenarios.push_back(read_scenario(p.string()));
+    }
+  } catch (const Error& ex) {
+    std::cerr << "bench_opencl: " << ex.what() << "\n";
+    return 2;
+  }
+
+  std::shared_ptr<const ComputeBackend> ocl;
+  try {
+    ocl = make_opencl_backend(opencl_device_filter_from_env(), cache_dir);
+  } catch (const OpenCLError& ex) {
+    std::cerr << "bench_opencl: " << ex.what() << "\n";
+    return 3;
+  }
+  std::string why;
+  std::cout << "## OpenCL backend vs CPU backend (bench_opencl)\n\n";
+  std::cout << "- host: " << cpu_model() << "; nproc " << sysconf(_SC_NPROCESSORS_ONLN) << "; OpenMP threads "
+            << omp_get_max_threads() << "\n";
+  std::cout << "- OpenCL device: " << ocl->name() << "\n";
+  for (const auto& d : opencl_devices(&why))
+    std::cout << "  - available: " << d.name << " (" << d.platform << ", " << d.type << ", " << d.version
+              << ", fp64 " << (d.fp64 ? "yes" : "no") << ", " << d.compute_units << " compute units, "
+              << (d.global_mem >> 20) << " MiB)\n";
+  std::cout << "\n";
+
+  std::ostringstream solve_table, stage_table;
+  solve_table
+      << "| scenario | backend | iterations | ms/iteration | gradient | Hessian | Cholesky | line search "
+         "(energy) | certificate | solve s | same steps & verdicts | coefficient rel. diff |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  stage_table << "| model | stage | CPU ms | OpenCL ms | OpenCL / CPU |\n|---|---|---|---|---|\n";
+  bool disagree = false;
+  std::map<std::string, bool> staged;
+  for (const Scenario& sc : scenarios) {
+    std::cerr << "bench_opencl: " << sc.name << "\n";
+    const Model model = load_model(sc.model_dir);
+    std::unique_ptr<DeformationSolver> cpu, gpu;
+    double pre_cpu = 0, pre_gpu = 0;
+    {
+      auto t0 = Clock::now();
+      cpu = std::make_unique<DeformationSolver>(model.cage, sc.params, cache_dir);
+      pre_cpu = ms_since(t0);
+      t0 = Clock::now();
+      gpu = std::make_unique<DeformationSolver>(model.cage, sc.params, cache_dir,
+                                                std::function<void(const std::string&)>{}, ocl);
+      pre_gpu = ms_since(t0);
+    }
+    int max_iter = iterations > 0 ? iterations : sc.params.max_iterations;
+    if (sc.name == "bar_twist180") max_iter = std::min(max_iter, cap);
+    const Run rc = solve(*cpu, sc, max_iter);
+    const Run rg = solve(*gpu, sc, max_iter);
+    bool same = rc.history.size() == rg.history.size() && rc.certified == rg.certified;
+    for (size_t i = 0; same && i < rc.history.size(); ++i)
+      same = rc.history[i].accepted == rg.history[i].accepted && rc.history[i].step == rg.history[i].step &&
+             rc.history[i].certified == rg.history[i].certified;
+    if (rc.certified != rg.certified) disagree = true;
+    const double diff = (rc.y - rg.y).norm() / rc.y.norm();
+    for (int b = 0; b < 2; ++b) {
+      const Run& r = b == 0 ? rc : rg;
+      const StageMeans m = means(r.history);
+      solve_table << "| " << sc.name << " | " << (b == 0 ? "cpu" : "opencl") << " | " << r.history.size()
+                  << " | " << f(m.total, 1) << " | " << f(m.grad, 1) << " | " << f(m.hess, 1) << " | "
+                  << f(m.solve, 1) << " | " << f(m.ls, 1) << " | " << f(m.cert, 1) << " | "
+                  << f(r.result.seconds, 2) << " | " << (b == 0 ? "" : (same ? "yes" : "**no**")) << " | "
+                  << (b == 0 ? "" : e(diff)) << " |\n";
+    }
+    std::cerr << "  preprocessing ms: cpu " << f(pre_cpu, 0) << ", opencl " << f(pre_gpu, 0) << "\n";
+
+    // --- Stages alone, once per model, at the CPU run's final map.
+    const std::string key = sc.model_dir;
+    if (staged[key]) continue;
+    staged[key] = true;
+    const DeformationEnergy& en = cpu->energy_function();
+    auto kc = cpu_backend()->energy_kernels(en);
+    auto kg = ocl->energy_kernels(en);
+    const MatS3 y = rc.y;
+    const MatS3 d = 0.01 * (rc.y - cpu->subspace().basis.transpose() * model.cage.identity_coefficients());
+    for (auto* k : {kc.get(), kg.get()}) {
+      k->set_current(y);
+      k->set_direction(d);
+    }
+    auto row = [&](const std::string& stage, double a, double b) {
+      stage_table << "| " << sc.model << " | " << stage << " | " << f(a, 2) << " | " << f(b, 2) << " | "
+                  << f(b / a, 2) << " |\n";
+    };
+    row("Jacobians G y (" + std::to_string(en.num_samples()) + " samples)",
+        median_ms(reps, [&] { kc->set_current(y); }), median_ms(reps, [&] { kg->set_current(y); }));
+    row("energy sum at J + t dJ", median_ms(reps, [&] { kc->distortion_sum(0.5); }),
+        median_ms(reps, [&] { kg->distortion_sum(0.5); }));
+    row("energy gradient", median_ms(reps, [&] { kc->distortion_gradient_sum(); }),
+        median_ms(reps, [&] { kg->distortion_gradient_sum(); }));
+    row("PSD Hessian blocks + product (single)", median_ms(reps, [&] { kc->distortion_pair_blocks(false); }),
+        median_ms(reps, [&] { kg->distortion_pair_blocks(false); }));
+    row("PSD Hessian blocks + product (double)", median_ms(reps, [&] { kc->distortion_pair_blocks(true); }),
+        median_ms(reps, [&] { kg->distortion_pair_blocks(true); }));
+    const CertifyParams cp = cpu->certify_params(false, false);
+    Certificate cc, cg;
+    const double tc = median_ms(reps, [&] { cc = cpu->certifier().certify_reduced(y, cp); });
+    const double tg = median_ms(reps, [&] { cg = gpu->certifier().certify_reduced(y, cp); });
+    row("certificate of the final map (" + std::to_string(cc.refined) + " refined)", tc, tg);
+    row("  of which base stage (J, H, σ3, bound)", cc.ms_jacobian + cc.ms_sigma + cc.ms_bound,
+        cg.ms_jacobian + cg.ms_sigma + cg.ms_bound);
+    row("  of which refinement", cc.ms_refine, cg.ms_refine);
+    if (cc.certified != cg.certified) disagree = true;
+    std::cerr << "  certificate: cpu " << cc.certified << " " << cc.refined << ", opencl " << cg.certified
+              << " " << cg.refined << "\n";
+  }
+  std::cout << "### Solves (same process, same parameters; stage columns are ms per iteration)\n\n"
+            << solve_table.str() << "\n### Stages alone (median of " << reps << ")\n\n"
+            << stage_table.str() << "\n";
+  if (disagree) {
+    std::cout << "**The backends disagreed on a certificate verdict.**\n";
+    return 3;
+  }
+  return 0;
+}

@@ -1,0 +1,88 @@
+// Compute backends: the per-sample stages of the solver and of the certificate behind one interface, so that
+// they run on the CPU (the reference, this library) or on an OpenCL device (opencl/, docs/opencl.md).
+//
+// The solver keeps its state on the backend: the Jacobians at the current map J_cur and along the current
+// Newton direction dJ stay where they were computed (device memory for OpenCL); per step only the reduced
+// coefficients (s by 3) travel there and only scalars, the gradient (s by 3) and the Hessian blocks come
+// back. Decisions (Armijo, the certificate's condition (6) with its rounding allowance, refinement, budgets)
+// are taken on the host from the values the backend returns, with the same code for every backend.
+#pragma once
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "lidef/cage.h"
+#include "lidef/deformation_energy.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+// The distortion stages of one DeformationEnergy (E_dis = (1/|I|) Σ_i E_iso(J_i) − 6).
+class EnergyKernels {
+ public:
+  virtual ~EnergyKernels() = default;
+  // J_cur = G y (y: s by 3).
+  virtual void set_current(const MatS3& y) = 0;
+  // dJ = G d (d: s by 3).
+  virtual void set_direction(const MatS3& d) = 0;
+  // Σ_i (E_iso(J_cur,i + t dJ_i) − 6), +∞ when some det ≤ 0. t = 0 reads J_cur only.
+  virtual double distortion_sum(double t) = 0;
+  // J_cur ← J_cur + t dJ (the accepted step).
+  virtual void accept(double t) = 0;
+  // Σ_i G_iᵀ ∂E_iso/∂J_i at J_cur, s by 3 (not divided by |I|). Requires det J_i > 0 everywhere.
+  virtual MatS3 distortion_gradient_sum() = 0;
+  // The six pair blocks G_Hᵀ diag(H̃^{aa'}) G_H of the PSD-projected distortion Hessian at J_cur, side by side
+  // (s by 6s, pairs 00, 01, 02, 11, 12, 22), weighted by 1/|H|; single or double precision products.
+  virtual MatXd distortion_pair_blocks(bool double_precision) = 0;
+  // J_cur in the JT layout (3|I| by 3), for reports and tests.
+  virtual MatJT current_jacobians() = 0;
+};
+
+// The data a certifier backend needs, all owned by the OctreeCertifier that creates it.
+struct CertifierData {
+  const Cage* cage = nullptr;
+  long voxels = 0;                   // N
+  const MatX3d* centers = nullptr;   // N by 3
+  long m = 0;                        // coefficient rows of the stored derivatives (0: none stored)
+  const float* GH = nullptr;         // N blocks of 9 rows by m floats (octree_certifier.cpp)
+  std::vector<Vec3> edge_u, edge_w;  // endpoints of each undirected cage edge (#E)
+};
+
+// One octree node evaluated: signed σ3 and ‖H‖ at its center, its own bound Σ_e δ_e factor_e(center, radius)
+// and the rounding scales of the differential representation (HarmonicBasis::differential_jet).
+struct NodeValues {
+  double sigma3 = 0, hnorm = 0, own_bound = 0, scale_J = 0, scale_H = 0;
+};
+
+class CertifierKernels {
+ public:
+  virtual ~CertifierKernels() = default;
+  // Edge factor matrix of one bound (N by #E, row-major, rounded up to float), given once per bound.
+  virtual void set_factors(bool third, const float* factors, long edges) = 0;
+  // Base voxels: σ3, ‖H‖ (stored Hessian rows) and T_i = Σ_e δ_e F(i, e) (δ_e = 0 skipped), for the stored
+  // derivatives times Y (m by 3, column-major). Outputs are N-vectors.
+  virtual void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& hnorm,
+                          VecXd& T) = 0;
+  // Octree nodes (centers #nodes by 3, radii #nodes) through the differential representation of the map
+  // whose face matrices are `fm`.
+  virtual void evaluate_nodes(const std::vector<Mat3>& A, const std::vector<std::array<Mat3, 3>>& AD,
+                              const std::vector<double>& A_abs, const VecXd& delta, bool third,
+                              const MatX3d& centers, const VecXd& radii, std::vector<NodeValues>& out) = 0;
+};
+
+class ComputeBackend {
+ public:
+  virtual ~ComputeBackend() = default;
+  // "cpu", or "opencl (<device>, <platform>)".
+  virtual std::string name() const = 0;
+  virtual bool is_cpu() const { return false; }
+  virtual std::unique_ptr<EnergyKernels> energy_kernels(const DeformationEnergy& energy) const = 0;
+  // nullptr: the certifier uses its own CPU code (the reference).
+  virtual std::unique_ptr<CertifierKernels> certifier_kernels(const CertifierData& data) const = 0;
+};
+
+// The CPU backend (Eigen, OpenMP, OpenBLAS).
+std::shared_ptr<const ComputeBackend> cpu_backend();
+
+}  // namespace lidef

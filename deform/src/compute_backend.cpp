@@ -1,0 +1,46 @@
+#include "lidef/compute_backend.h"
+
+namespace lidef {
+namespace {
+
+// The reference backend: the DeformationEnergy's own Eigen/OpenMP/OpenBLAS code on host arrays.
+class CpuEnergyKernels final : public EnergyKernels {
+ public:
+  explicit CpuEnergyKernels(const DeformationEnergy& e) : e_(e) {}
+  void set_current(const MatS3& y) override { J_ = e_.jacobians(y); }
+  void set_direction(const MatS3& d) override { dJ_ = e_.jacobians(d); }
+  double distortion_sum(double t) override {
+    if (t == 0) return e_.distortion_sum(J_);
+    const MatJT Jt = J_ + t * dJ_;
+    return e_.distortion_sum(Jt);
+  }
+  void accept(double t) override { J_ = (J_ + t * dJ_).eval(); }
+  MatS3 distortion_gradient_sum() override { return e_.distortion_gradient_sum(J_); }
+  MatXd distortion_pair_blocks(bool double_precision) override {
+    return e_.distortion_pair_blocks(J_, double_precision);
+  }
+  MatJT current_jacobians() override { return J_; }
+
+ private:
+  const DeformationEnergy& e_;
+  MatJT J_, dJ_;
+};
+
+class CpuBackend final : public ComputeBackend {
+ public:
+  std::string name() const override { return "cpu"; }
+  bool is_cpu() const override { return true; }
+  std::unique_ptr<EnergyKernels> energy_kernels(const DeformationEnergy& energy) const override {
+    return std::make_unique<CpuEnergyKernels>(energy);
+  }
+  std::unique_ptr<CertifierKernels> certifier_kernels(const CertifierData&) const override { return nullptr; }
+};
+
+}  // namespace
+
+std::shared_ptr<const ComputeBackend> cpu_backend() {
+  static const auto backend = std::make_shared<const CpuBackend>();
+  return backend;
+}
+
+}  // namespace lidef

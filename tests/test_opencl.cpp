@@ -1,0 +1,489 @@
+// The OpenCL backend (opencl/) against the CPU reference: every kernel on random inputs (including
+// near-singular Jacobians and clustered singular values), whole certificates (same verdicts, leaves and
+// margins), the solver (same accepted steps and coefficients to ~1e-9 with double-precision Hessian
+// products), the CLI (--backend, auto's fallback, failures reported with exit 2). Runs on whatever OpenCL
+// platform exists (PoCL in CI); skips with a message where there is none.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "lidef/compute_backend.h"
+#include "lidef/deformation_energy.h"
+#include "lidef/green_coordinates.h"
+#include "lidef/lipschitz_bound.h"
+#include "lidef/model_check.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/opencl_backend.h"
+#include "lidef/projected_newton.h"
+#include "lidef/sampling.h"
+#include "lidef/signed_svd.h"
+#include "test_cages.h"
+#include "test_support.h"
+
+using namespace lidef;
+
+namespace {
+
+// The OpenCL backend, built once for the whole file; nullptr (and the reason) when there is none.
+std::shared_ptr<const ComputeBackend> opencl(std::string* why = nullptr) {
+  static std::string reason;
+  static const std::shared_ptr<const ComputeBackend> b = []() -> std::shared_ptr<const ComputeBackend> {
+    try {
+      static lidef::test::TempDir cache;
+      return make_opencl_backend(opencl_device_filter_from_env(), cache.str());
+    } catch (const OpenCLError& e) {
+      reason = e.what();
+      return nullptr;
+    }
+  }();
+  if (why) *why = reason;
+  return b;
+}
+
+#define REQUIRE_OPENCL()                                                                           \
+  std::string why_;                                                                                \
+  if (!opencl(&why_)) {                                                                            \
+    std::string platforms_;                                                                        \
+    if (opencl_devices(&platforms_).empty()) GTEST_SKIP() << "no OpenCL platform: " << platforms_; \
+    FAIL() << "an OpenCL platform exists but the backend failed: " << why_;                        \
+  }
+
+// Relative difference; 0 for equal values (infinities, and NaN for "not evaluated" on both sides).
+double rel(double a, double b) {
+  if (a == b || (std::isnan(a) && std::isnan(b))) return 0;
+  return std::abs(a - b) / std::max({std::abs(a), std::abs(b), 1e-300});
+}
+
+// A DeformationEnergy on random data: n samples, s coefficients; G's rows scaled so that J = G y is a
+// perturbed rotation-like matrix for the y returned.
+struct RandomEnergy {
+  std::unique_ptr<DeformationEnergy> energy;
+  MatS3 y, d;
+};
+
+RandomEnergy random_energy(int n, int s, unsigned seed, double noise) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01(0.0, 1.0);
+  MatXdR G(3 * n, s);
+  // The first 3 coefficients carry the identity (J = I for y = e_a), the rest random perturbations.
+  G.setZero();
+  for (int i = 0; i < n; ++i)
+    for (int b = 0; b < 3; ++b) {
+      G(3 * i + b, b) = 1.0;
+      for (int k = 3; k < s; ++k) G(3 * i + b, k) = noise * N01(rng);
+    }
+  std::vector<int> subset;
+  for (int i = 0; i < n; i += 7) subset.push_back(i);
+  VecXd mu = VecXd::LinSpaced(s, 0.0, 3.0);
+  RandomEnergy r;
+  r.energy = std::make_unique<DeformationEnergy>(G, subset, mu, 30);
+  r.y = MatS3::Zero(s, 3);
+  for (int a = 0; a < 3; ++a) r.y(a, a) = 1.0;
+  for (int k = 3; k < s; ++k)
+    for (int a = 0; a < 3; ++a) r.y(k, a) = 0.3 * N01(rng);
+  r.d = MatS3(s, 3);
+  for (int k = 0; k < s; ++k)
+    for (int a = 0; a < 3; ++a) r.d(k, a) = 0.05 * N01(rng);
+  return r;
+}
+
+}  // namespace
+
+TEST(OpenCL, DevicesAreListedWithoutThrowing) {
+  std::string why;
+  const auto devs = opencl_devices(&why);
+  if (devs.empty()) {
+    EXPECT_FALSE(why.empty());
+    GTEST_SKIP() << "no OpenCL platform: " << why;
+  }
+  for (const auto& d : devs) {
+    EXPECT_FALSE(d.name.empty());
+    EXPECT_GT(d.global_mem, 0u);
+  }
+}
+
+TEST(OpenCL, EnergyKernelsMatchCpu) {
+  REQUIRE_OPENCL();
+  const RandomEnergy r = random_energy(1500, 24, 3, 0.02);
+  auto cpu = cpu_backend()->energy_kernels(*r.energy);
+  auto gpu = opencl()->energy_kernels(*r.energy);
+  for (auto* k : {cpu.get(), gpu.get()}) {
+    k->set_current(r.y);
+    k->set_direction(r.d);
+  }
+  const MatJT Jc = cpu->current_jacobians(), Jg = gpu->current_jacobians();
+  EXPECT_LT((Jc - Jg).cwiseAbs().maxCoeff(), 1e-13 * Jc.cwiseAbs().maxCoeff());
+  const double e0c = cpu->distortion_sum(0), e0g = gpu->distortion_sum(0);
+  ASSERT_TRUE(std::isfinite(e0c));
+  EXPECT_LT(rel(e0c, e0g), 1e-11) << e0c << " vs " << e0g;
+  EXPECT_LT(rel(cpu->distortion_sum(0.7), gpu->distortion_sum(0.7)), 1e-11);
+  const MatS3 gc = cpu->distortion_gradient_sum(), gg = gpu->distortion_gradient_sum();
+  EXPECT_LT((gc - gg).norm(), 1e-11 * gc.norm());
+  const MatXd Bc = cpu->distortion_pair_blocks(true), Bg = gpu->distortion_pair_blocks(true);
+  ASSERT_EQ(Bc.rows(), Bg.rows());
+  EXPECT_LT((Bc - Bg).norm(), 1e-11 * Bc.norm());
+  const MatXd Bcf = cpu->distortion_pair_blocks(false), Bgf = gpu->distortion_pair_blocks(false);
+  EXPECT_LT((Bcf - Bgf).norm(), 1e-5 * Bcf.norm());  // single precision products, different order
+  EXPECT_LT((Bcf - Bc).norm(), 1e-5 * Bc.norm());
+  // The accepted step.
+  cpu->accept(0.5);
+  gpu->accept(0.5);
+  EXPECT_LT(rel(cpu->distortion_sum(0), gpu->distortion_sum(0)), 1e-11);
+}
+
+TEST(OpenCL, EnergyBarrierIsInfiniteOnBothBackends) {
+  REQUIRE_OPENCL();
+  const RandomEnergy r = random_energy(400, 10, 5, 0.02);
+  auto cpu = cpu_backend()->energy_kernels(*r.energy);
+  auto gpu = opencl()->energy_kernels(*r.energy);
+  MatS3 flip = r.y;
+  flip.row(2) *= -1.0;  // J = diag(1, 1, −1) + noise: every det < 0
+  for (auto* k : {cpu.get(), gpu.get()}) {
+    k->set_current(r.y);
+    k->set_direction(flip - r.y);
+  }
+  EXPECT_TRUE(std::isfinite(gpu->distortion_sum(0)));
+  EXPECT_EQ(cpu->distortion_sum(1.0), std::numeric_limits<double>::infinity());
+  EXPECT_EQ(gpu->distortion_sum(1.0), std::numeric_limits<double>::infinity());
+}
+
+// σ3 on the device for hand-made Jacobians (float-representable), through the certificate's base stage with
+// stored rows = Jᵀ and Y = I: near-singular, repeated and clustered singular values, reflections.
+TEST(OpenCL, SignedSigma3MatchesCpuOnHardMatrices) {
+  REQUIRE_OPENCL();
+  const Cage cage(lidef::test::icosphere(1));
+  std::vector<Mat3> Js;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> N01(0.0, 1.0);
+  auto rotation = [&]() {
+    Mat3 A;
+    for (int q = 0; q < 9; ++q) A.data()[q] = N01(rng);
+    Eigen::HouseholderQR<Mat3> qr(A);
+    Mat3 Q = qr.householderQ();
+    if (Q.determinant() < 0) Q.col(0) *= -1;
+    return Q;
+  };
+  const double sigmas[][3] = {{1, 1, 1},        {1, 1, 1e-3},     {1, 1, 1e-7},      {2, 1e-4, 1e-5},
+                              {1, 1 + 1e-9, 1}, {3, 2, 2 - 1e-8}, {1e3, 1, 1e-3},    {1, 0.5, -0.25},
+                              {1, 1, -1e-6},    {5, 5, 5},        {1, 1e-12, 1e-12}, {2, 1, 0}};
+  for (const auto& sg : sigmas)
+    for (int rep = 0; rep < 20; ++rep) {
+      const Mat3 U = rotation(), V = rotation();
+      Mat3 J = U * Vec3(sg[0], sg[1], sg[2]).asDiagonal() * V.transpose();
+      J = J.cast<float>().cast<double>();  // stored as float on the device
+      Js.push_back(J);
+    }
+  for (int rep = 0; rep < 200; ++rep) {
+    Mat3 J;
+    for (int q = 0; q < 9; ++q) J.data()[q] = static_cast<float>(N01(rng));
+    Js.push_back(J);
+  }
+  const long N = static_cast<long>(Js.size()), m = 3;
+  std::vector<float> GH(static_cast<size_t>(N) * 9 * m, 0.0f);
+  for (long i = 0; i < N; ++i)
+    for (int b = 0; b < 3; ++b)
+      for (int a = 0; a < 3; ++a)
+        GH[i * 9 * m + b * m + a] = static_cast<float>(Js[i](a, b));  // J(a,b) = Σ_k g_bk Y_ka
+  MatX3d centers = MatX3d::Zero(N, 3);
+  CertifierData data;
+  data.cage = &cage;
+  data.voxels = N;
+  data.centers = &centers;
+  data.m = m;
+  data.GH = GH.data();
+  for (const CageEdge& e : cage.edges) {
+    data.edge_u.push_back(cage.V.row(e.v0));
+    data.edge_w.push_back(cage.V.row(e.v1));
+  }
+  auto k = opencl()->certifier_kernels(data);
+  ASSERT_TRUE(k);
+  const long E = cage.num_edges();
+  std::vector<float> F(static_cast<size_t>(N) * E, 1.0f);
+  k->set_factors(true, F.data(), E);
+  const double Y[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  VecXd s3, hn, T;
+  const VecXd delta = VecXd::LinSpaced(E, 0.0, 1.0);
+  k->base_stage(Y, true, delta, s3, hn, T);
+  int worst = -1;
+  double worst_err = 0;
+  for (long i = 0; i < N; ++i) {
+    const Vec3 ref = signed_singular_values(Js[i]);
+    const double err = std::abs(s3(i) - ref(2)) / std::max(ref(0), 1e-300);
+    if (err > worst_err) worst_err = err, worst = static_cast<int>(i);
+    if (ref(2) != 0 && std::abs(ref(2)) > 1e-10 * ref(0)) {
+      EXPECT_EQ(s3(i) < 0, ref(2) < 0) << "matrix " << i;
+    }
+    EXPECT_DOUBLE_EQ(hn(i), 0.0);
+    EXPECT_NEAR(T(i), delta.sum(), 1e-12 * delta.sum());
+  }
+  EXPECT_LT(worst_err, 1e-14) << "worst matrix " << worst << ":\n" << Js[worst];
+}
+
+// The node kernel (differential representation + own edge bound) against the CPU functions it mirrors.
+TEST(OpenCL, NodeEvaluationMatchesCpu) {
+  REQUIRE_OPENCL();
+  const Cage cage(lidef::test::icosphere(2, 0.15, 4));
+  const HarmonicBasis basis(cage);
+  std::mt19937 rng(2);
+  std::normal_distribution<double> N01(0.0, 1.0);
+  MatX3d y = cage.identity_coefficients();
+  for (int r = 0; r < y.rows(); ++r)
+    for (int c = 0; c < 3; ++c) y(r, c) += 0.05 * N01(rng);
+  const auto fm = basis.face_matrices(y);
+  VecXd delta(cage.num_edges());
+  for (int e = 0; e < cage.num_edges(); ++e)
+    delta(e) = (fm.A[cage.edges[e].f0] - fm.A[cage.edges[e].f1]).norm() * (e % 5 == 0 ? 0.0 : 1.0);
+  const MatX3d P = lidef::test::interior_points(cage, 300, 0.2, 9);
+  VecXd rad(P.rows());
+  for (long j = 0; j < P.rows(); ++j) rad(j) = 0.01 + 0.05 * (j % 4);
+  MatX3d centers = MatX3d::Zero(1, 3);
+  CertifierData data;
+  data.cage = &cage;
+  data.voxels = 1;
+  data.centers = &centers;
+  for (const CageEdge& e : cage.edges) {
+    data.edge_u.push_back(cage.V.row(e.v0));
+    data.edge_w.push_back(cage.V.row(e.v1));
+  }
+  auto k = opencl()->certifier_kernels(data);
+  for (bool third : {true, false}) {
+    std::vector<NodeValues> out;
+    k->evaluate_nodes(fm.A, fm.AD, fm.A_abs, delta, third, P, rad, out);
+    ASSERT_EQ(out.size(), static_cast<size_t>(P.rows()));
+    for (long j = 0; j < P.rows(); ++j) {
+      double sJ, sH;
+      const MapJet jet = basis.differential_jet(fm, P.row(j).transpose(), third ? 2 : 1, &sJ, &sH);
+      const double s3 = signed_singular_values(jet.J)(2);
+      double own = 0;
+      for (int e = 0; e < cage.num_edges(); ++e)
+        if (delta(e) != 0)
+          own +=
+              delta(e) *
+              (third ? third_order_edge_factor(data.edge_u[e], data.edge_w[e], P.row(j).transpose(), rad(j))
+                     : first_order_edge_factor(data.edge_u[e], data.edge_w[e], P.row(j).transpose(), rad(j)));
+      EXPECT_LT(rel(out[j].sigma3, s3), 1e-12) << j;
+      if (third) {
+        EXPECT_LT(rel(out[j].hnorm, jet.hessian_norm()), 1e-12) << j;
+        EXPECT_LT(rel(out[j].scale_H, sH), 1e-12) << j;
+      }
+      EXPECT_LT(rel(out[j].own_bound, own), 1e-12) << j;
+      EXPECT_LT(rel(out[j].scale_J, sJ), 1e-12) << j;
+    }
+  }
+}
+
+namespace {
+
+struct Beam {
+  Model model;
+  lidef::test::TempDir cache;
+  MatX3d sources, targets;
+};
+const Beam& beam() {
+  static const std::unique_ptr<Beam> b = [] {
+    auto p =
+        std::make_unique<Beam>(Beam{load_model(lidef::test::project_data() + "/models/beam"), {}, {}, {}});
+    std::ifstream in(lidef::test::project_data() + "/scenarios/beam_bend.json");
+    const nlohmann::json j = nlohmann::json::parse(in);
+    const auto& h = j.at("handles");
+    p->sources.resize(h.size(), 3);
+    p->targets.resize(h.size(), 3);
+    for (size_t i = 0; i < h.size(); ++i)
+      for (int c = 0; c < 3; ++c) {
+        p->sources(i, c) = h[i]["source"][c].get<double>();
+        p->targets(i, c) = h[i]["target"][c].get<double>();
+      }
+    return p;
+  }();
+  return *b;
+}
+
+// Compares two certificates leaf by leaf.
+void expect_same_certificate(const Certificate& a, const Certificate& b, double tol) {
+  EXPECT_EQ(a.certified, b.certified);
+  EXPECT_EQ(a.refined, b.refined);
+  ASSERT_EQ(a.leaves.size(), b.leaves.size());
+  for (size_t i = 0; i < a.leaves.size(); ++i) {
+    const CertLeaf &x = a.leaves[i], &y = b.leaves[i];
+    ASSERT_EQ(x.certified, y.certified) << "leaf " << i;
+    ASSERT_EQ(x.depth, y.depth) << "leaf " << i;
+    EXPECT_EQ(x.center, y.center);
+    EXPECT_LT(rel(x.sigma3, y.sigma3), tol) << "leaf " << i;
+    // L of a (nearly) affine map is rounding noise of a cancelling sum: compare it on the scale of σ3.
+    if (!(std::isinf(x.L) && std::isinf(y.L))) {
+      EXPECT_LE(std::abs(x.L - y.L), tol * (std::abs(x.L) + 1.0)) << "leaf " << i;
+    }
+    if (std::isfinite(x.margin) || std::isfinite(y.margin)) {
+      EXPECT_LT(std::abs(x.margin - y.margin), tol * (std::abs(x.sigma3) + x.L)) << "leaf " << i;
+    }
+  }
+  EXPECT_LT(rel(a.min_lower_bound, b.min_lower_bound), tol);
+}
+
+}  // namespace
+
+// Whole certificates of deformed beams: full space (stored derivatives) and reduced space, third- and
+// first-order bounds; maps that need refinement and one that folds.
+TEST(OpenCL, CertificatesMatchCpu) {
+  REQUIRE_OPENCL();
+  const Cage& cage = beam().model.cage;
+  SamplingParams sp;
+  sp.target_count = 3000;
+  const VoxelSampling sampling = sample_voxels(cage, sp);
+  OctreeCertifier cpu(cage, sampling), gpu(cage, sampling);
+  gpu.set_backend(*opencl());
+  const MatX3d id = cage.identity_coefficients();
+  // A bend (y = p + a x² e_y), strong enough to need refinement, and a fold.
+  auto bent = [&](double a) {
+    MatX3d y = id;
+    for (int v = 0; v < cage.num_vertices(); ++v) y(v, 1) += a * id(v, 0) * id(v, 0);
+    return y;
+  };
+  int refined_cases = 0;
+  for (double a : {0.0, 0.4, 0.9, 3.0})
+    for (auto bound : {LipschitzBound::kThirdOrder, LipschitzBound::kFirstOrder}) {
+      CertifyParams cp;
+      cp.bound = bound;
+      cp.max_refined_voxels = 20000;
+      const Certificate c = cpu.certify(bent(a), cp), g = gpu.certify(bent(a), cp);
+      SCOPED_TRACE("a = " + std::to_string(a) + " bound " + to_string(bound));
+      expect_same_certificate(c, g, 1e-10);
+      if (c.refined > 0) ++refined_cases;
+    }
+  EXPECT_GE(refined_cases, 2) << "the test maps should exercise the refinement";
+}
+
+// The solver on both backends with double-precision Hessian products: the same accepted steps, the same
+// certificate verdicts, coefficients equal to ~1e-9 relative. With single precision (the default) the
+// directions differ by float rounding: the same verdicts, coefficients to ~1e-5.
+TEST(OpenCL, SolverMatchesCpu) {
+  REQUIRE_OPENCL();
+  for (const std::string precision : {"double", "single"}) {
+    SCOPED_TRACE(precision);
+    DeformParams p;
+    p.samples = 4000;
+    p.reduced_dof = 60;
+    p.max_iterations = 12;
+    p.hessian_precision = precision;
+    DeformationSolver cpu(beam().model.cage, p, beam().cache.str());
+    DeformationSolver gpu(beam().model.cage, p, beam().cache.str(), {}, opencl());
+    EXPECT_NE(gpu.backend().name().find("opencl"), std::string::npos);
+    cpu.set_handles(beam().sources, beam().targets);
+    gpu.set_handles(beam().sources, beam().targets);
+    const SolveResult rc = cpu.solve(), rg = gpu.solve();
+    EXPECT_EQ(rc.reason, rg.reason);
+    ASSERT_EQ(cpu.history().size(), gpu.history().size());
+    const double tol = precision == "double" ? 1e-9 : 1e-5;
+    for (size_t i = 0; i < cpu.history().size(); ++i) {
+      const IterationRecord &a = cpu.history()[i], &b = gpu.history()[i];
+      EXPECT_EQ(a.accepted, b.accepted) << "iteration " << i + 1;
+      EXPECT_EQ(a.step, b.step) << "iteration " << i + 1;
+      EXPECT_EQ(a.certified, b.certified) << "iteration " << i + 1;
+      EXPECT_EQ(a.certificate_rejections, b.certificate_rejections) << "iteration " << i + 1;
+      EXPECT_LT(rel(a.terms.total, b.terms.total), tol) << "iteration " << i + 1;
+    }
+    const double diff =
+        (cpu.reduced_coefficients() - gpu.reduced_coefficients()).norm() / cpu.reduced_coefficients().norm();
+    EXPECT_LT(diff, tol);
+    EXPECT_TRUE(gpu.certificate().certified);
+    std::cout << "[ parity   ] " << precision << ": " << cpu.history().size() << " iterations, relative "
+              << "coefficient difference " << diff << "\n";
+  }
+}
+
+// --- CLI
+
+namespace {
+std::string beam_scenario_args() {
+  return lidef::test::project_data() + "/scenarios/beam_bend.json --models " + lidef::test::project_data() +
+         "/models --samples 4000 --reduced-dof 60 --max-iterations 4 --grid 0";
+}
+}  // namespace
+
+TEST(OpenCLCli, DeformWithOpenCLBackendWritesItsName) {
+  REQUIRE_OPENCL();
+  lidef::test::TempDir out;
+  std::string log;
+  const int rc = lidef::test::run_command(lidef::test::cli() + " deform " + beam_scenario_args() +
+                                              " --backend opencl --quiet --out " + out.str() + "/r",
+                                          &log);
+  ASSERT_LE(rc, 1) << log;
+  const nlohmann::json s = nlohmann::json::parse(lidef::test::read_text(out / "r/summary.json"));
+  EXPECT_NE(s.at("backend").get<std::string>().find("opencl"), std::string::npos);
+  EXPECT_NE(log.find("backend: opencl"), std::string::npos) << log;
+  EXPECT_TRUE(s.at("certified").get<bool>()) << log;
+}
+
+TEST(OpenCLCli, BackendFailuresAreClearAndAutoFallsBack) {
+  lidef::test::TempDir out;
+  std::string log;
+  // No device matches the filter: --backend opencl refuses (exit 2, nothing written) and says why ...
+  int rc = lidef::test::run_command("LIDEF_OPENCL_DEVICE=no-such-device " + lidef::test::cli() + " deform " +
+                                        beam_scenario_args() + " --backend opencl --quiet --out " +
+                                        out.str() + "/a",
+                                    &log);
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_NE(log.find("no-such-device"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(out / "a"));
+  // ... and auto says so and runs on the CPU.
+  rc =
+      lidef::test::run_command("LIDEF_OPENCL_DEVICE=no-such-device " + lidef::test::cli() + " deform " +
+                                   beam_scenario_args() + " --backend auto --quiet --out " + out.str() + "/b",
+                               &log);
+  EXPECT_LE(rc, 1) << log;
+  EXPECT_NE(log.find("backend: cpu (auto: no usable OpenCL device"), std::string::npos) << log;
+  // No OpenCL platform at all (the ICD loader finds no vendor files).
+  rc = lidef::test::run_command("OCL_ICD_VENDORS=/nonexistent-lidef " + lidef::test::cli() + " deform " +
+                                    beam_scenario_args() + " --backend opencl --quiet --out " + out.str() +
+                                    "/c",
+                                &log);
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_NE(log.find("OpenCL"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(out / "c"));
+  // An unknown backend name.
+  rc = lidef::test::run_command(lidef::test::cli() + " deform " + beam_scenario_args() +
+                                    " --backend cuda --quiet --out " + out.str() + "/d",
+                                &log);
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_NE(log.find("backend"), std::string::npos) << log;
+}
+
+TEST(OpenCLCli, KernelBuildFailureIsReportedWithTheCompilerLog) {
+  REQUIRE_OPENCL();
+  lidef::test::TempDir out;
+  std::string log;
+  // Test hook: appends a line that does not compile to the kernel source.
+  const int rc = lidef::test::run_command("LIDEF_TEST_BREAK_KERNELS=1 " + lidef::test::cli() + " deform " +
+                                              beam_scenario_args() + " --backend opencl --quiet --out " +
+                                              out.str() + "/a",
+                                          &log);
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_NE(log.find("building the kernels failed"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(out / "a"));
+}
+
+TEST(OpenCLCli, CertifyBackendsAgree) {
+  REQUIRE_OPENCL();
+  lidef::test::TempDir out;
+  const std::string model = lidef::test::project_data() + "/models/beam";
+  std::string log;
+  for (const char* b : {"cpu", "opencl"}) {
+    const int rc = lidef::test::run_command(lidef::test::cli() + " certify " + model +
+                                                " --coeffs identity --voxels 3000 --grid 0 --backend " + b +
+                                                " --out " + out.str() + "/" + b,
+                                            &log);
+    ASSERT_EQ(rc, 0) << log;
+  }
+  const nlohmann::json a = nlohmann::json::parse(lidef::test::read_text(out / "cpu/certificate.json"));
+  const nlohmann::json b = nlohmann::json::parse(lidef::test::read_text(out / "opencl/certificate.json"));
+  for (const char* key : {"certified", "leaves", "refined", "voxels"}) EXPECT_EQ(a.at(key), b.at(key)) << key;
+  EXPECT_LT(rel(a.at("min_lower_bound").get<double>(), b.at("min_lower_bound").get<double>()), 1e-10);
+  const nlohmann::json t = nlohmann::json::parse(lidef::test::read_text(out / "opencl/timings.json"));
+  EXPECT_NE(t.at("backend").get<std::string>().find("opencl"), std::string::npos);
+  EXPECT_EQ(a.at("certified"), b.at("certified"));
+}
