@@ -20,6 +20,7 @@
 #include "lidef/octree_certifier.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/projected_newton.h"
+#include "lidef/scenario.h"
 #include "lidef/sampling.h"
 #include "lidef/signed_svd.h"
 #include "test_cages.h"
@@ -107,11 +108,22 @@ TEST(OpenCL, DevicesAreListedWithoutThrowing) {
   }
 }
 
-TEST(OpenCL, EnergyKernelsMatchCpu) {
+// Both ways of forming the Hessian product: on the host BLAS (what a CPU device such as PoCL does) and on the
+// device with CLBlast (what a GPU does; forced here by LIDEF_OPENCL_DEVICE_PRODUCT).
+class OpenCLEnergy : public ::testing::TestWithParam<bool> {};
+
+TEST_P(OpenCLEnergy, KernelsMatchCpu) {
   REQUIRE_OPENCL();
+  std::shared_ptr<const ComputeBackend> backend = opencl();
+  lidef::test::TempDir cache;
+  if (GetParam()) {
+    setenv("LIDEF_OPENCL_DEVICE_PRODUCT", "1", 1);
+    backend = make_opencl_backend(opencl_device_filter_from_env(), cache.str());
+    unsetenv("LIDEF_OPENCL_DEVICE_PRODUCT");
+  }
   const RandomEnergy r = random_energy(1500, 24, 3, 0.02);
   auto cpu = cpu_backend()->energy_kernels(*r.energy);
-  auto gpu = opencl()->energy_kernels(*r.energy);
+  auto gpu = backend->energy_kernels(*r.energy);
   for (auto* k : {cpu.get(), gpu.get()}) {
     k->set_current(r.y);
     k->set_direction(r.d);
@@ -135,6 +147,8 @@ TEST(OpenCL, EnergyKernelsMatchCpu) {
   gpu->accept(0.5);
   EXPECT_LT(rel(cpu->distortion_sum(0), gpu->distortion_sum(0)), 1e-11);
 }
+
+INSTANTIATE_TEST_SUITE_P(HostAndDeviceProduct, OpenCLEnergy, ::testing::Values(false, true));
 
 TEST(OpenCL, EnergyBarrierIsInfiniteOnBothBackends) {
   REQUIRE_OPENCL();
@@ -486,4 +500,58 @@ TEST(OpenCLCli, CertifyBackendsAgree) {
   const nlohmann::json t = nlohmann::json::parse(lidef::test::read_text(out / "opencl/timings.json"));
   EXPECT_NE(t.at("backend").get<std::string>().find("opencl"), std::string::npos);
   EXPECT_EQ(a.at("certified"), b.at("certified"));
+}
+
+// --- The paper's scenarios (../shared/data; ctest label "slow"): default parameters with double-precision
+// Hessian products on both backends, the first iterations of each solve: the same accepted steps and
+// certificate verdicts, coefficients equal to ~1e-9 relative, the final maps certified alike.
+class OpenCLShared : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(OpenCLShared, SameStepsVerdictsAndCoefficients) {
+  REQUIRE_OPENCL();
+  const std::string path = lidef::test::shared_data() + "/scenarios/" + GetParam() + ".json";
+  if (lidef::test::shared_data().empty() || !std::filesystem::exists(path))
+    GTEST_SKIP() << "shared data absent: " << path;
+  static lidef::test::TempDir cache;
+  const Scenario sc = read_scenario(path);
+  const Model model = load_model(sc.model_dir);
+  DeformParams p = sc.params;
+  p.hessian_precision = "double";
+  p.max_iterations = std::string(GetParam()) == "bar_twist180" ? 3 : 6;
+  DeformationSolver cpu(model.cage, p, cache.str());
+  DeformationSolver gpu(model.cage, p, cache.str(), {}, opencl());
+  cpu.set_handles(sc.sources, sc.targets, sc.path);
+  gpu.set_handles(sc.sources, sc.targets, sc.path);
+  const SolveResult rc = cpu.solve(), rg = gpu.solve();
+  EXPECT_EQ(rc.reason, rg.reason);
+  ASSERT_EQ(cpu.history().size(), gpu.history().size());
+  for (size_t i = 0; i < cpu.history().size(); ++i) {
+    const IterationRecord &a = cpu.history()[i], &b = gpu.history()[i];
+    EXPECT_EQ(a.accepted, b.accepted) << "iteration " << i + 1;
+    EXPECT_EQ(a.step, b.step) << "iteration " << i + 1;
+    EXPECT_EQ(a.certified, b.certified) << "iteration " << i + 1;
+    EXPECT_EQ(a.certificate_rejections, b.certificate_rejections) << "iteration " << i + 1;
+    EXPECT_EQ(a.armijo_rejections, b.armijo_rejections) << "iteration " << i + 1;
+  }
+  const double diff =
+      (cpu.reduced_coefficients() - gpu.reduced_coefficients()).norm() / cpu.reduced_coefficients().norm();
+  EXPECT_LT(diff, 1e-9);
+  EXPECT_EQ(cpu.certificate().certified, gpu.certificate().certified);
+  EXPECT_TRUE(gpu.certificate().certified);
+  std::cout << "[ parity   ] " << GetParam() << ": " << cpu.history().size() << " iterations ("
+            << to_string(rc.reason) << "), relative coefficient difference " << diff << ", solve "
+            << rc.seconds << " s cpu, " << rg.seconds << " s opencl\n";
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenarios, OpenCLShared,
+                         ::testing::Values("bar_bend", "bar_twist90", "bar_twist180", "horse_leg_lift",
+                                           "spot_head_turn", "animal_tail_lift"));
+
+TEST(OpenCLCli, DevicesListsWhatAutoPicks) {
+  std::string log;
+  ASSERT_EQ(lidef::test::run_command(lidef::test::cli() + " devices", &log), 0) << log;
+  EXPECT_NE(log.find("--backend auto -> "), std::string::npos) << log;
+  if (opencl()) {
+    EXPECT_NE(log.find("double precision yes"), std::string::npos) << log;
+  }
 }

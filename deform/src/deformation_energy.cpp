@@ -154,7 +154,6 @@ MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyW
 
 MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_samples,
                                      bool double_precision) const {
-  const int s = reduced_size();
   const std::vector<int>* idx = &subset_;
   std::vector<int> all;
   if (all_samples) {
@@ -171,6 +170,17 @@ MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_s
     const Mat3 J = jacobian_at(JT, (*idx)[k]);
     blocks[k] = weight * (projected ? sd_hessian_psd(J) : sd_hessian(J));
   }
+  return products(blocks, all_samples, double_precision);
+}
+
+MatXd DeformationEnergy::distortion_pair_blocks_from(const std::vector<Mat9>& blocks, bool double_precision) const {
+  if (blocks.size() != subset_.size()) throw Error("distortion_pair_blocks_from: one block per subset sample needed");
+  return products(blocks, false, double_precision);
+}
+
+MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const {
+  const int s = reduced_size();
+  const int m = static_cast<int>(blocks.size());
   // The six (a ≤ a') blocks: W = [diag_k(H̃_k^{aa'}) G_k]_{(a,a')} side by side (3m by 6s), then one product
   // G_Hᵀ W (s by 6s) — one large BLAS call blocks and threads better than six small ones.
   constexpr int kPairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};

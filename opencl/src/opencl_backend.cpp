@@ -121,6 +121,7 @@ struct Device {
   cl::Program program;
   std::string label;  // "<device> (<platform>)"
   size_t max_group = 1;
+  bool cpu_device = false;  // the device is the host's CPU (PoCL): dense products go to the host BLAS
   unsigned long long max_alloc = 0, global_mem = 0;
   std::mutex mutex;  // kernels of one backend are used by one thread at a time; this guards the queue anyway
 };
@@ -259,7 +260,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_wd_ = cl::Kernel(d_->program, "fill_w_double");
       return 0;
     });
-    warm_up();
+    if (!d_->cpu_device) warm_up();
   }
 
   // CLBlast compiles its GEMM kernels at the first call of a shape and precision in each process (about a
@@ -277,6 +278,15 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       d_->queue.finish();
       return 0;
     });
+  }
+
+  void run_psd_blocks() {
+    k_psd_.setArg(0, J_);
+    k_psd_.setArg(1, subset_);
+    k_psd_.setArg(2, m_);
+    k_psd_.setArg(3, 1.0 / m_);
+    k_psd_.setArg(4, blocks_);
+    d_->queue.enqueueNDRangeKernel(k_psd_, cl::NullRange, cl::NDRange(round_up(m_, 64)), cl::NDRange(64));
   }
 
   void set_current(const MatS3& y) override { jacobians(y, J_, "Jacobians at the samples"); }
@@ -309,7 +319,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_axpy_.setArg(1, dJ_);
       k_axpy_.setArg(2, t);
       k_axpy_.setArg(3, static_cast<cl_long>(3 * R_));
-      d_->queue.enqueueNDRangeKernel(k_axpy_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)));
+      d_->queue.enqueueNDRangeKernel(k_axpy_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)), cl::NDRange(64));
       d_->queue.finish();
       return 0;
     });
@@ -322,7 +332,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_grad_.setArg(0, J_);
       k_grad_.setArg(1, static_cast<cl_long>(n_));
       k_grad_.setArg(2, P_);
-      d_->queue.enqueueNDRangeKernel(k_grad_, cl::NullRange, cl::NDRange(round_up(n_, 64)));
+      d_->queue.enqueueNDRangeKernel(k_grad_, cl::NullRange, cl::NDRange(round_up(n_, 64)), cl::NDRange(64));
       k_red_.setArg(0, Gt_);
       k_red_.setArg(1, static_cast<cl_long>(R_));
       k_red_.setArg(2, s_);
@@ -339,6 +349,21 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   MatXd distortion_pair_blocks(bool double_precision) override {
     std::lock_guard<std::mutex> lock(d_->mutex);
     const size_t wsize = static_cast<size_t>(3) * m_ * 6 * s_;
+    MatXd out(s_, 6 * s_);
+    if (d_->cpu_device) {
+      // The device is this CPU: CLBlast's generic kernels under PoCL run the product ~10x slower than OpenBLAS
+      // (docs/benchmarks.md), and host and device share the memory, so the 9x9 blocks (|H| x 81 doubles) come
+      // back and the host BLAS forms the product (DeformationEnergy::distortion_pair_blocks_from).
+      std::vector<double> flat(static_cast<size_t>(m_) * 81);
+      guarded(d_->label, "Hessian blocks", [&] {
+        run_psd_blocks();
+        d_->queue.enqueueReadBuffer(blocks_, CL_TRUE, 0, flat.size() * sizeof(double), flat.data());
+        return 0;
+      });
+      std::vector<Mat9> blocks(m_);
+      for (int k = 0; k < m_; ++k) blocks[k] = Eigen::Map<const Mat9>(&flat[81 * static_cast<size_t>(k)]);  // symmetric
+      return e_.distortion_pair_blocks_from(blocks, double_precision);
+    }
     if (double_precision && !Wd_()) {
       Wd_ = make_buffer<double>(*d_, wsize, "allocating the double-precision Hessian product");
       Bd_ = make_buffer<double>(*d_, static_cast<size_t>(s_) * 6 * s_, "allocating the Hessian blocks");
@@ -352,14 +377,8 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       Wf_ = make_buffer<float>(*d_, wsize, "allocating the Hessian product");
       Bf_ = make_buffer<float>(*d_, static_cast<size_t>(s_) * 6 * s_, "allocating the Hessian blocks");
     }
-    MatXd out(s_, 6 * s_);
     guarded(d_->label, "Hessian blocks", [&] {
-      k_psd_.setArg(0, J_);
-      k_psd_.setArg(1, subset_);
-      k_psd_.setArg(2, m_);
-      k_psd_.setArg(3, 1.0 / m_);
-      k_psd_.setArg(4, blocks_);
-      d_->queue.enqueueNDRangeKernel(k_psd_, cl::NullRange, cl::NDRange(round_up(m_, 64)));
+      run_psd_blocks();
       cl::Kernel& kw = double_precision ? k_wd_ : k_wf_;
       kw.setArg(0, blocks_);
       kw.setArg(1, double_precision ? GHd_ : GHf_);
@@ -411,7 +430,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_jac_.setArg(2, s_);
       k_jac_.setArg(3, y_);
       k_jac_.setArg(4, out);
-      d_->queue.enqueueNDRangeKernel(k_jac_, cl::NullRange, cl::NDRange(round_up(R_, 64)));
+      d_->queue.enqueueNDRangeKernel(k_jac_, cl::NullRange, cl::NDRange(round_up(R_, 64)), cl::NDRange(64));
       d_->queue.finish();
       return 0;
     });
@@ -508,7 +527,7 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       k_base_.setArg(8, s3_);
       k_base_.setArg(9, hn_);
       k_base_.setArg(10, T_);
-      d_->queue.enqueueNDRangeKernel(k_base_, cl::NullRange, cl::NDRange(round_up(N_, 64)));
+      d_->queue.enqueueNDRangeKernel(k_base_, cl::NullRange, cl::NDRange(round_up(N_, 64)), cl::NDRange(64));
       d_->queue.enqueueReadBuffer(s3_, CL_FALSE, 0, N_ * sizeof(double), sigma3.data());
       d_->queue.enqueueReadBuffer(hn_, CL_FALSE, 0, N_ * sizeof(double), hnorm.data());
       d_->queue.enqueueReadBuffer(T_, CL_TRUE, 0, N_ * sizeof(double), T.data());
@@ -683,6 +702,9 @@ std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& fil
     d->context = cl::Context(d->device);
     d->queue = cl::CommandQueue(d->context, d->device);
     d->max_group = d->device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>();
+    // LIDEF_OPENCL_DEVICE_PRODUCT=1 keeps the product on the device anyway (tests of that path on PoCL).
+    d->cpu_device = (d->device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_CPU) != 0 &&
+                    std::getenv("LIDEF_OPENCL_DEVICE_PRODUCT") == nullptr;
     d->max_alloc = d->device.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
     d->global_mem = d->device.getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>();
     d->program = build_program(*d, cache_dir.empty() ? std::string() : cache_dir + "/opencl", &how);

@@ -26,6 +26,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "lidef/symmetric_dirichlet.h"
 #include "lidef/types.h"
 
 namespace lidef {
@@ -94,6 +95,9 @@ class DeformationEnergy {
   // The six pair blocks (s by 6s) of the PSD-projected distortion Hessian on the subset H, weighted by 1/|H|,
   // products in single (OpenBLAS sgemm) or double precision (dgemm).
   MatXd distortion_pair_blocks(const MatJT& JT, bool double_precision) const;
+  // The same from given per-subset-sample 9x9 blocks (PSD-projected, weighted by 1/|H|): the host product for
+  // backends whose device is the CPU itself (docs/opencl.md).
+  MatXd distortion_pair_blocks_from(const std::vector<Mat9>& blocks, bool double_precision) const;
   // All terms from Σ_i (E_iso − 6) and ỹ.
   EnergyTerms terms(double distortion_sum, const MatS3& y, const EnergyWeights& w) const;
   // ∇E from Σ_i G_iᵀ ∂E_iso/∂J_i (adds the handle and smoothness terms).
@@ -104,6 +108,7 @@ class DeformationEnergy {
 
  private:
   MatXd pair_blocks(const MatJT& JT, bool projected, bool all_samples, bool double_precision) const;
+  MatXd products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const;
   void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
   MatXfR G_;
   std::vector<int> subset_;
