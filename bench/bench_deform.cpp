@@ -59,6 +59,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "lidef/cage.h"
 #include "lidef/deform_params.h"
 #include "lidef/deformation_energy.h"
@@ -153,16 +154,6 @@ std::string cpu_pressure() {
   const auto t = s.find(" total=");
   if (t != std::string::npos) s.resize(t);
   return s.empty() ? "unavailable" : s;
-}
-std::string cpu_model() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown";
 }
 std::string mem_total() {
   std::ifstream in("/proc/meminfo");
@@ -508,8 +499,8 @@ int main(int argc, char** argv) {
   const std::string src = LIDEF_SOURCE_DIR;
   std::cout << "# bench_deform: the deformation solver on the handle scenarios\n\n";
   std::cout << "- date: " << utc_now() << "\n";
-  std::cout << "- machine: " << cpu_model() << "; nproc (online CPUs) " << sysconf(_SC_NPROCESSORS_ONLN)
-            << "; RAM " << mem_total() << "\n";
+  std::cout << "- machine: " << lidef::bench::cpu_model() << "; nproc (online CPUs) "
+            << sysconf(_SC_NPROCESSORS_ONLN) << "; RAM " << mem_total() << "\n";
   std::cout << "- OpenMP: omp_get_max_threads() = " << omp_get_max_threads()
             << ", omp_get_num_procs() = " << omp_get_num_procs()
             << (opt.threads > 0 ? " (--threads " + std::to_string(opt.threads) + ")"

@@ -33,6 +33,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
 #include "lidef/opencl_backend.h"
@@ -47,17 +48,6 @@ namespace {
 
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-std::string cpu_model() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown";
 }
 
 std::string f(double x, int prec = 3) {
@@ -200,8 +190,8 @@ int main(int argc, char** argv) {
   }
   std::string why;
   std::cout << "## OpenCL backend vs CPU backend (bench_opencl)\n\n";
-  std::cout << "- host: " << cpu_model() << "; nproc " << sysconf(_SC_NPROCESSORS_ONLN) << "; OpenMP threads "
-            << omp_get_max_threads() << "\n";
+  std::cout << "- host: " << lidef::bench::cpu_model() << "; nproc " << sysconf(_SC_NPROCESSORS_ONLN)
+            << "; OpenMP threads " << omp_get_max_threads() << "\n";
   std::cout << "- OpenCL device: " << ocl->name() << "\n";
   for (const auto& d : opencl_devices(&why))
     std::cout << "  - available: " << d.name << " (" << d.platform << ", " << d.type << ", " << d.version

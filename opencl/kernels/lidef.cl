@@ -300,38 +300,44 @@ DEFINE_FILL_W(double, fill_w_double)
 
 // ---------------------------------------------------------------- certificate (octree_certifier.cpp)
 
-// Base stage per voxel i: J and H from the stored derivative rows times the coefficients Y (m by 3,
-// column-major), ‖H‖ (full 27-entry norm), signed σ3, and T = Σ_e δ_e F(i, e) (skipping δ_e = 0, whose factor
-// may be +∞).
-__kernel void certify_base(__global const float* GHt, long N, int m, __global const double* Y, int third,
-                           __global const float* Ft, int E, __global const double* delta,
-                           __global double* sigma3, __global double* hnorm, __global double* T) {
+// Base stage, part 1 (streaming, kept simple so that CPU OpenCL compilers vectorize it across work-items):
+// row `row` of voxel i's stored derivatives times Y (m by 3, column-major) → JH[(3 row + a) N + i].
+__kernel void certify_rows(__global const float* GHt, long N, int m, __global const double* Y, int rows,
+                           __global double* JH) {
   const long i = get_global_id(0);
   if (i >= N) return;
-  double out[9][3];
-  for (int row = 0; row < 9; ++row) {
+  for (int row = 0; row < rows; ++row) {
+    __global const float* g = GHt + (long)row * m * N + i;
     double a0 = 0, a1 = 0, a2 = 0;
-    if (row < 3 || third) {
-      __global const float* g = GHt + (long)row * m * N + i;
-      for (int k = 0; k < m; ++k) {
-        const double gk = g[(long)k * N];
-        a0 += gk * Y[k];
-        a1 += gk * Y[m + k];
-        a2 += gk * Y[2 * m + k];
-      }
+    for (int k = 0; k < m; ++k) {
+      const double gk = g[(long)k * N];
+      a0 += gk * Y[k];
+      a1 += gk * Y[m + k];
+      a2 += gk * Y[2 * m + k];
     }
-    out[row][0] = a0;
-    out[row][1] = a1;
-    out[row][2] = a2;
+    JH[(3L * row) * N + i] = a0;
+    JH[(3L * row + 1) * N + i] = a1;
+    JH[(3L * row + 2) * N + i] = a2;
   }
+}
+
+// Base stage, part 2 per voxel: ‖H‖ (full 27-entry norm; 0 when only the gradient rows were formed), signed
+// σ3, and T = Σ_e δ_e F(i, e) (skipping δ_e = 0, whose factor may be +∞).
+__kernel void certify_finish(__global const double* JH, long N, int third, __global const float* Ft, int E,
+                             __global const double* delta, __global double* sigma3, __global double* hnorm,
+                             __global double* T) {
+  const long i = get_global_id(0);
+  if (i >= N) return;
   double J[9];
   for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) J[3 * a + b] = out[b][a];
+    for (int b = 0; b < 3; ++b) J[3 * a + b] = JH[(3L * b + a) * N + i];
   double hs = 0;
-  for (int a = 0; a < 3; ++a) {
-    const double h0 = out[3][a], h1 = out[4][a], h2 = out[5][a], h3 = out[6][a], h4 = out[7][a], h5 = out[8][a];
-    hs += h0 * h0 + h3 * h3 + h5 * h5 + 2 * (h1 * h1 + h2 * h2 + h4 * h4);
-  }
+  if (third)
+    for (int a = 0; a < 3; ++a) {
+      const double h0 = JH[(9L + a) * N + i], h1 = JH[(12L + a) * N + i], h2 = JH[(15L + a) * N + i];
+      const double h3 = JH[(18L + a) * N + i], h4 = JH[(21L + a) * N + i], h5 = JH[(24L + a) * N + i];
+      hs += h0 * h0 + h3 * h3 + h5 * h5 + 2 * (h1 * h1 + h2 * h2 + h4 * h4);
+    }
   hnorm[i] = sqrt(hs);
   sigma3[i] = signed_sigma3(J);
   double t = 0;

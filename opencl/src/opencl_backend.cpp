@@ -319,7 +319,8 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_axpy_.setArg(1, dJ_);
       k_axpy_.setArg(2, t);
       k_axpy_.setArg(3, static_cast<cl_long>(3 * R_));
-      d_->queue.enqueueNDRangeKernel(k_axpy_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)), cl::NDRange(64));
+      d_->queue.enqueueNDRangeKernel(k_axpy_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)),
+                                     cl::NDRange(64));
       d_->queue.finish();
       return 0;
     });
@@ -351,9 +352,10 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     const size_t wsize = static_cast<size_t>(3) * m_ * 6 * s_;
     MatXd out(s_, 6 * s_);
     if (d_->cpu_device) {
-      // The device is this CPU: CLBlast's generic kernels under PoCL run the product ~10x slower than OpenBLAS
-      // (docs/benchmarks.md), and host and device share the memory, so the 9x9 blocks (|H| x 81 doubles) come
-      // back and the host BLAS forms the product (DeformationEnergy::distortion_pair_blocks_from).
+      // The device is this CPU: CLBlast's generic kernels under PoCL run the product ~10x slower than
+      // OpenBLAS (docs/benchmarks.md), and host and device share the memory, so the 9x9 blocks (|H| x 81
+      // doubles) come back and the host BLAS forms the product
+      // (DeformationEnergy::distortion_pair_blocks_from).
       std::vector<double> flat(static_cast<size_t>(m_) * 81);
       guarded(d_->label, "Hessian blocks", [&] {
         run_psd_blocks();
@@ -361,7 +363,8 @@ class OpenCLEnergyKernels final : public EnergyKernels {
         return 0;
       });
       std::vector<Mat9> blocks(m_);
-      for (int k = 0; k < m_; ++k) blocks[k] = Eigen::Map<const Mat9>(&flat[81 * static_cast<size_t>(k)]);  // symmetric
+      for (int k = 0; k < m_; ++k)
+        blocks[k] = Eigen::Map<const Mat9>(&flat[81 * static_cast<size_t>(k)]);  // symmetric
       return e_.distortion_pair_blocks_from(blocks, double_precision);
     }
     if (double_precision && !Wd_()) {
@@ -489,9 +492,11 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       s3_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       hn_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       T_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
+      JH_ = make_buffer<double>(*d_, 27 * static_cast<size_t>(N_), "allocating certificate Jacobians");
     }
     guarded(d_->label, "creating kernels", [&] {
-      k_base_ = cl::Kernel(d_->program, "certify_base");
+      k_rows_ = cl::Kernel(d_->program, "certify_rows");
+      k_finish_ = cl::Kernel(d_->program, "certify_finish");
       k_nodes_ = cl::Kernel(d_->program, "eval_nodes");
       return 0;
     });
@@ -516,18 +521,25 @@ class OpenCLCertifierKernels final : public CertifierKernels {
     guarded(d_->label, "certificate base stage", [&] {
       d_->queue.enqueueWriteBuffer(Y_, CL_FALSE, 0, 3 * m_ * sizeof(double), Y);
       d_->queue.enqueueWriteBuffer(delta_, CL_FALSE, 0, E_ * sizeof(double), delta.data());
-      k_base_.setArg(0, GHt_);
-      k_base_.setArg(1, static_cast<cl_long>(N_));
-      k_base_.setArg(2, static_cast<int>(m_));
-      k_base_.setArg(3, Y_);
-      k_base_.setArg(4, third ? 1 : 0);
-      k_base_.setArg(5, third ? F3_ : F1_);
-      k_base_.setArg(6, E_);
-      k_base_.setArg(7, delta_);
-      k_base_.setArg(8, s3_);
-      k_base_.setArg(9, hn_);
-      k_base_.setArg(10, T_);
-      d_->queue.enqueueNDRangeKernel(k_base_, cl::NullRange, cl::NDRange(round_up(N_, 64)), cl::NDRange(64));
+      const int rows = third ? 9 : 3;  // the first-order bound needs no Hessian
+      k_rows_.setArg(0, GHt_);
+      k_rows_.setArg(1, static_cast<cl_long>(N_));
+      k_rows_.setArg(2, static_cast<int>(m_));
+      k_rows_.setArg(3, Y_);
+      k_rows_.setArg(4, rows);
+      k_rows_.setArg(5, JH_);
+      d_->queue.enqueueNDRangeKernel(k_rows_, cl::NullRange, cl::NDRange(round_up(N_, 64)), cl::NDRange(64));
+      k_finish_.setArg(0, JH_);
+      k_finish_.setArg(1, static_cast<cl_long>(N_));
+      k_finish_.setArg(2, third ? 1 : 0);
+      k_finish_.setArg(3, third ? F3_ : F1_);
+      k_finish_.setArg(4, E_);
+      k_finish_.setArg(5, delta_);
+      k_finish_.setArg(6, s3_);
+      k_finish_.setArg(7, hn_);
+      k_finish_.setArg(8, T_);
+      d_->queue.enqueueNDRangeKernel(k_finish_, cl::NullRange, cl::NDRange(round_up(N_, 64)),
+                                     cl::NDRange(64));
       d_->queue.enqueueReadBuffer(s3_, CL_FALSE, 0, N_ * sizeof(double), sigma3.data());
       d_->queue.enqueueReadBuffer(hn_, CL_FALSE, 0, N_ * sizeof(double), hnorm.data());
       d_->queue.enqueueReadBuffer(T_, CL_TRUE, 0, N_ * sizeof(double), T.data());
@@ -589,8 +601,8 @@ class OpenCLCertifierKernels final : public CertifierKernels {
   std::shared_ptr<Device> d_;
   long N_ = 0, m_ = 0, cap_ = 0;
   int nf_ = 0, E_ = 0;
-  cl::Buffer GHt_, faces_, edges_, delta_, fm_, Y_, s3_, hn_, T_, F1_, F3_, centers_, radii_, out_;
-  cl::Kernel k_base_, k_nodes_;
+  cl::Buffer GHt_, JH_, faces_, edges_, delta_, fm_, Y_, s3_, hn_, T_, F1_, F3_, centers_, radii_, out_;
+  cl::Kernel k_rows_, k_finish_, k_nodes_;
 };
 
 class OpenCLBackend final : public ComputeBackend {
