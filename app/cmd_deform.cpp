@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <type_traits>
@@ -217,7 +218,16 @@ void add_deform_command(CLI::App& app, Action& action) {
       std::string backend_msg;
       const auto backend = select_backend(sc.params.backend, cache, &backend_msg);
       std::cerr << "lidef deform: " << backend_msg << "\n";
-      DeformationSolver solver(model.cage, sc.params, cache, log, backend);
+      std::unique_ptr<DeformationSolver> solver_ptr;
+      try {
+        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, backend);
+      } catch (const OpenCLError& e) {
+        // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
+        if (sc.params.backend != "auto") throw;
+        std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
+        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, cpu_backend());
+      }
+      DeformationSolver& solver = *solver_ptr;
       solver.set_handles(sc.sources, sc.targets, sc.path);
       if (!o.init.empty()) solver.set_initial_map(read_coefficients(o.init, model.cage), o.init);
 

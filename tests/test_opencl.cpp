@@ -548,3 +548,24 @@ TEST(OpenCLCli, DevicesListsWhatAutoPicks) {
     EXPECT_NE(log.find("double precision yes"), std::string::npos) << log;
   }
 }
+
+TEST(OpenCLCli, DeviceTooSmallIsClearAndAutoFallsBack) {
+  REQUIRE_OPENCL();
+  lidef::test::TempDir out;
+  std::string log;
+  // Test hook: the device allows at most 1 MB per buffer, less than the reduced basis gradients need.
+  const std::string env = "LIDEF_TEST_OPENCL_MAX_ALLOC=1000000 ";
+  int rc = lidef::test::run_command(env + lidef::test::cli() + " deform " + beam_scenario_args() +
+                                        " --backend opencl --quiet --out " + out.str() + "/a",
+                                    &log);
+  EXPECT_EQ(rc, 2) << log;
+  EXPECT_NE(log.find("the device allows at most"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(out / "a"));
+  rc = lidef::test::run_command(env + lidef::test::cli() + " deform " + beam_scenario_args() +
+                                    " --backend auto --quiet --out " + out.str() + "/b",
+                                &log);
+  EXPECT_LE(rc, 1) << log;
+  EXPECT_NE(log.find("backend: cpu (auto: OpenCL"), std::string::npos) << log;
+  const nlohmann::json s = nlohmann::json::parse(lidef::test::read_text(out / "b/summary.json"));
+  EXPECT_EQ(s.at("backend"), "cpu");
+}

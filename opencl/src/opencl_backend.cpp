@@ -718,6 +718,9 @@ std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& fil
     d->cpu_device = (d->device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_CPU) != 0 &&
                     std::getenv("LIDEF_OPENCL_DEVICE_PRODUCT") == nullptr;
     d->max_alloc = d->device.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
+    // Test hook (tests/test_opencl.cpp): pretend the device allows smaller buffers, to exercise that path.
+    if (const char* cap = std::getenv("LIDEF_TEST_OPENCL_MAX_ALLOC"))
+      d->max_alloc = std::min<unsigned long long>(d->max_alloc, std::strtoull(cap, nullptr, 10));
     d->global_mem = d->device.getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>();
     d->program = build_program(*d, cache_dir.empty() ? std::string() : cache_dir + "/opencl", &how);
     return 0;
