@@ -33,7 +33,9 @@ std::string g6(double x) {
   std::snprintf(buf, sizeof buf, "%.6g", x);
   return buf;
 }
-std::string fd(double x) { return format_double(x); }
+std::string fd(double x) {
+  return format_double(x);
+}
 
 // Options shared by `show` and the verification part of `search`.
 struct ShowOptions {
@@ -47,14 +49,18 @@ struct ShowOptions {
 
 void check_show_options(const ShowOptions& o) {
   if (o.starts < 1 || o.starts > 100000) throw InputError("--starts", "must be in 1..100000");
-  if (o.grid < 2 || o.grid > 512) throw InputError("--grid", "must be in 2..512 (got " + std::to_string(o.grid) + ")");
+  if (o.grid < 2 || o.grid > 512)
+    throw InputError("--grid", "must be in 2..512 (got " + std::to_string(o.grid) + ")");
   if (o.sphere_subdivisions < 1 || o.sphere_subdivisions > 7)
-    throw InputError("--sphere-subdivisions", "must be in 1..7 (got " + std::to_string(o.sphere_subdivisions) + ")");
+    throw InputError("--sphere-subdivisions",
+                     "must be in 1..7 (got " + std::to_string(o.sphere_subdivisions) + ")");
   if (o.max_depth < 0 || o.max_depth > 12)
     throw InputError("--max-depth", "must be in 0..12 (got " + std::to_string(o.max_depth) + ")");
 }
 
-ojson vec_json(const Vec3& v) { return ojson::array({v.x(), v.y(), v.z()}); }
+ojson vec_json(const Vec3& v) {
+  return ojson::array({v.x(), v.y(), v.z()});
+}
 
 ojson certificate_json(const BallCertificate& c) {
   ojson j;
@@ -72,72 +78,98 @@ ojson certificate_json(const BallCertificate& c) {
 
 void write_minima_csv(const std::string& path, const std::vector<Sigma3Minimum>& minima) {
   write_file_atomic(path, [&](std::ostream& s) {
-    s << "x,y,z,sigma3,gradient_norm,hessian_eig1,hessian_eig2,hessian_eig3,sphere_radius,sphere_min_sigma3,strict,"
+    s << "x,y,z,sigma3,gradient_norm,hessian_eig1,hessian_eig2,hessian_eig3,sphere_radius,sphere_min_sigma3,"
+         "strict,"
          "starts\n";
     for (const Sigma3Minimum& m : minima)
-      s << fd(m.position.x()) << ',' << fd(m.position.y()) << ',' << fd(m.position.z()) << ',' << fd(m.sigma3) << ','
-        << fd(m.gradient_norm) << ',' << fd(m.hessian_eigenvalues(0)) << ',' << fd(m.hessian_eigenvalues(1)) << ','
-        << fd(m.hessian_eigenvalues(2)) << ',' << fd(m.sphere_radius) << ',' << fd(m.sphere_min_sigma3) << ','
-        << (m.strict ? 1 : 0) << ',' << m.starts << '\n';
+      s << fd(m.position.x()) << ',' << fd(m.position.y()) << ',' << fd(m.position.z()) << ',' << fd(m.sigma3)
+        << ',' << fd(m.gradient_norm) << ',' << fd(m.hessian_eigenvalues(0)) << ','
+        << fd(m.hessian_eigenvalues(1)) << ',' << fd(m.hessian_eigenvalues(2)) << ',' << fd(m.sphere_radius)
+        << ',' << fd(m.sphere_min_sigma3) << ',' << (m.strict ? 1 : 0) << ',' << m.starts << '\n';
   });
 }
 
-// The slice z = z0 through the ball (Fig. 2, right): σ3 on a square grid, NaN outside the ball; a gnuplot
-// script that draws it with the minimum marked. Returns the PNG's status note (empty when drawn).
-std::string write_slice(StagedOutputs& out, const std::string& prefix, const ExplorerMap& map, const Ball& ball,
-                        const Sigma3Minimum* m, int res, const std::string& title) {
-  const double z0 = m ? m->position.z() : ball.center.z();
-  std::vector<double> v(static_cast<size_t>(res) * res, NAN);
+// Two slices through the minimum (Fig. 2, right): the planes z = z0 and y = y0, σ3 on a square grid, NaN
+// outside the ball; a gnuplot script draws both with the minimum marked. Returns the PNG's status note (empty
+// when drawn).
+std::string write_slice(StagedOutputs& out, const std::string& prefix, const ExplorerMap& map,
+                        const Ball& ball, const Sigma3Minimum* m, int res, const std::string& title) {
+  const Vec3 p0 = m ? m->position : ball.center;
   const double step = 2 * ball.radius / (res - 1);
-#pragma omp parallel for schedule(dynamic)
-  for (int j = 0; j < res; ++j)
-    for (int i = 0; i < res; ++i) {
-      const Vec3 p(ball.center.x() - ball.radius + i * step, ball.center.y() - ball.radius + j * step, z0);
-      if (ball.contains(p)) v[static_cast<size_t>(j) * res + i] = signed_singular_values(map.jet(p).J)(2);
-    }
   double lo = INFINITY, hi = -INFINITY;
-  for (double x : v)
-    if (std::isfinite(x)) lo = std::min(lo, x), hi = std::max(hi, x);
-  write_file_atomic(out.path(prefix + "slice.dat"), [&](std::ostream& s) {
-    s << "# x y sigma3 on the plane z = " << fd(z0) << " (NaN outside the ball)\n";
-    for (int j = 0; j < res; ++j) {
+  // axis_u, axis_v: in-plane axes; the fixed axis goes through p0.
+  struct Plane {
+    const char* name;
+    int u, v, fixed;
+  };
+  const Plane planes[2] = {{"xy", 0, 1, 2}, {"xz", 0, 2, 1}};
+  for (const Plane& pl : planes) {
+    std::vector<double> v(static_cast<size_t>(res) * res, NAN);
+#pragma omp parallel for schedule(dynamic)
+    for (int j = 0; j < res; ++j)
       for (int i = 0; i < res; ++i) {
-        const double x = v[static_cast<size_t>(j) * res + i];
-        s << fd(ball.center.x() - ball.radius + i * step) << ' ' << fd(ball.center.y() - ball.radius + j * step) << ' '
-          << (std::isfinite(x) ? fd(x) : "NaN") << '\n';
+        Vec3 p = p0;
+        p(pl.u) = ball.center(pl.u) - ball.radius + i * step;
+        p(pl.v) = ball.center(pl.v) - ball.radius + j * step;
+        if (ball.contains(p)) v[static_cast<size_t>(j) * res + i] = signed_singular_values(map.jet(p).J)(2);
       }
-      s << '\n';
-    }
-  });
-  // Colour range: the slice's own range (NaN outside the ball is left blank).
-  double top = hi;
-  if (!(top > lo)) top = lo + 1;
-  const double rz = std::sqrt(std::max(0.0, ball.radius * ball.radius - (z0 - ball.center.z()) * (z0 - ball.center.z())));
+    for (double x : v)
+      if (std::isfinite(x)) lo = std::min(lo, x), hi = std::max(hi, x);
+    write_file_atomic(out.path(prefix + "slice_" + pl.name + ".dat"), [&](std::ostream& s) {
+      s << "# "
+        << "xyz"[pl.u] << ' ' << "xyz"[pl.v] << " sigma3 on the plane "
+        << "xyz"[pl.fixed] << " = " << fd(p0(pl.fixed)) << " (NaN outside the ball)\n";
+      for (int j = 0; j < res; ++j) {
+        for (int i = 0; i < res; ++i) {
+          const double x = v[static_cast<size_t>(j) * res + i];
+          s << fd(ball.center(pl.u) - ball.radius + i * step) << ' '
+            << fd(ball.center(pl.v) - ball.radius + j * step) << ' ' << (std::isfinite(x) ? fd(x) : "NaN")
+            << '\n';
+        }
+        s << '\n';
+      }
+    });
+  }
+  if (!(hi > lo)) hi = lo + 1;
   write_file_atomic(out.path(prefix + "slice.gp"), [&](std::ostream& s) {
-    s << "# sigma3 on the slice z = " << fd(z0) << " through the ball (paper Fig. 2, right).\n"
+    s << "# sigma3 on two slices through the ball (paper Fig. 2, right).\n"
       << "# Render with: gnuplot " << prefix << "slice.gp   (in this folder)\n"
-      << "set terminal pngcairo enhanced size 820,720 font 'sans,11'\n"
+      << "set terminal pngcairo enhanced size 1400,680 font 'sans,11'\n"
       << "set output '" << prefix << "slice.png'\n"
-      << "set title \"" << title << "\\nsigma_3 on the slice z = " << g6(z0) << "\"\n"
-      << "set size ratio -1\nset xlabel 'x'\nset ylabel 'y'\n"
-      << "set xrange [" << fd(ball.center.x() - ball.radius) << ":" << fd(ball.center.x() + ball.radius) << "]\n"
-      << "set yrange [" << fd(ball.center.y() - ball.radius) << ":" << fd(ball.center.y() + ball.radius) << "]\n"
-      << "set cbrange [" << fd(lo) << ":" << fd(top) << "]\nset cblabel 'sigma_3 (clipped above)'\n"
+      << "set multiplot layout 1,2 title \"" << title << "\"\n"
+      << "set size ratio -1\n"
+      << "set cbrange [" << fd(lo) << ":" << fd(hi) << "]\nset cblabel 'sigma_3'\n"
       << "set palette defined (0 '#0d0887', 0.25 '#7e03a8', 0.5 '#cc4778', 0.75 '#f89540', 1 '#f0f921')\n"
-      << "set datafile missing 'NaN'\n"
-      << "set object 1 circle at " << fd(ball.center.x()) << "," << fd(ball.center.y()) << " size " << fd(rz)
-      << " front fillstyle empty border lc rgb 'black' lw 1.5\n"
-      << "set key bottom right opaque\n"
-      << "plot '" << prefix << "slice.dat' using 1:2:3 with image notitle";
-    if (m)
-      s << ", '-' using 1:2 with points pt 7 ps 1.6 lc rgb '#00ff66' title sprintf('interior minimum, sigma_3 = %.6g', "
-        << fd(m->sigma3) << ")\n"
-        << fd(m->position.x()) << ' ' << fd(m->position.y()) << "\ne\n";
-    else
-      s << "\n";
+      << "set key below\n";
+    for (const Plane& pl : planes) {
+      const double d = p0(pl.fixed) - ball.center(pl.fixed);
+      const double rr = std::sqrt(std::max(0.0, ball.radius * ball.radius - d * d));
+      s << "set title 'sigma_3 on the plane "
+        << "xyz"[pl.fixed] << " = " << g6(p0(pl.fixed)) << "'\n"
+        << "set xlabel '"
+        << "xyz"[pl.u] << "'\nset ylabel '"
+        << "xyz"[pl.v] << "'\n"
+        << "set xrange [" << fd(ball.center(pl.u) - ball.radius) << ":" << fd(ball.center(pl.u) + ball.radius)
+        << "]\n"
+        << "set yrange [" << fd(ball.center(pl.v) - ball.radius) << ":" << fd(ball.center(pl.v) + ball.radius)
+        << "]\n"
+        << "set object 1 circle at " << fd(ball.center(pl.u)) << "," << fd(ball.center(pl.v)) << " size "
+        << fd(rr) << " front fillstyle empty border lc rgb 'black' lw 1.5\n"
+        << ""
+        << "plot '" << prefix << "slice_" << pl.name << ".dat' using 1:2:3 with image notitle";
+      if (m)
+        s << ", '-' using 1:2 with points pt 7 ps 1.6 lc rgb '#00ff66' title sprintf('interior minimum, "
+             "sigma_3 = %.6g', "
+          << fd(m->sigma3) << ")\n"
+          << fd(m->position(pl.u)) << ' ' << fd(m->position(pl.v)) << "\ne\n";
+      else
+        s << "\n";
+    }
+    s << "unset multiplot\n";
   });
   const std::string gnuplot = find_gnuplot();
-  if (gnuplot.empty()) return "gnuplot not found (install gnuplot-nox or set LIDEF_GNUPLOT): " + prefix + "slice.png not drawn";
+  if (gnuplot.empty())
+    return "gnuplot not found (install gnuplot-nox or set LIDEF_GNUPLOT): " + prefix + "slice.png not drawn";
   const std::string png = out.path(prefix + "slice.png");
   std::string log;
   if (!run_gnuplot(gnuplot, out.staging_dir(), prefix + "slice.gp", &log) || !fs::exists(png)) {
@@ -153,10 +185,10 @@ struct ShowResult {
   ojson summary;
 };
 
-// The `show` pipeline for one map; files named prefix + {map.json, minima.csv, fields.vti, sphere.vtp, image.vtp,
-// slice.dat, slice.gp, slice.png, summary.json}.
-ShowResult show_map(StagedOutputs& out, const std::string& prefix, const ExplorerExample& ex, const ShowOptions& o,
-                    const std::string& tag, const std::string& map_json) {
+// The `show` pipeline for one map; files named prefix + {map.json, minima.csv, fields.vti, sphere.vtp,
+// image.vtp, slice.dat, slice.gp, slice.png, summary.json}.
+ShowResult show_map(StagedOutputs& out, const std::string& prefix, const ExplorerExample& ex,
+                    const ShowOptions& o, const std::string& tag, const std::string& map_json) {
   const ExplorerMap& map = *ex.map;
   const Ball& ball = ex.ball;
   std::cerr << tag << ": interior minima of sigma3 (" << o.starts << " starts)...\n";
@@ -177,7 +209,8 @@ ShowResult show_map(StagedOutputs& out, const std::string& prefix, const Explore
   s["note"] = ex.note;
   s["domain"] = {{"center", vec_json(ball.center)}, {"radius", ball.radius}};
   s["minima_found"] = minima.size();
-  s["strict_minima"] = std::count_if(minima.begin(), minima.end(), [](const Sigma3Minimum& m) { return m.strict; });
+  s["strict_minima"] =
+      std::count_if(minima.begin(), minima.end(), [](const Sigma3Minimum& m) { return m.strict; });
   s["sphere_min_sigma3_sampled"] = sphere_min.first;
   s["sphere_min_point_sampled"] = vec_json(sphere_min.second);
   if (best) {
@@ -212,11 +245,13 @@ ShowResult show_map(StagedOutputs& out, const std::string& prefix, const Explore
     }
   } else {
     s["local_injectivity"] = {{"certified", false},
-                              {"reason", "cage maps: certify with 'lidef certify' (the ball certificate here needs a "
-                                         "polynomial map)"}};
+                              {"reason",
+                               "cage maps: certify with 'lidef certify' (the ball certificate here needs a "
+                               "polynomial map)"}};
     s["boundary_above_minimum"] = nullptr;
   }
-  std::cerr << tag << ": boundary sphere image (" << o.sphere_subdivisions << " subdivisions) self-intersections...\n";
+  std::cerr << tag << ": boundary sphere image (" << o.sphere_subdivisions
+            << " subdivisions) self-intersections...\n";
   const BoundaryEmbedding be = check_boundary_embedding(map, ball, o.sphere_subdivisions);
   s["boundary_embedding"] = {{"embedded", be.embedded},
                              {"subdivisions", be.subdivisions},
@@ -258,24 +293,29 @@ void print_show_summary(const ojson& s, const std::string& tag) {
     const ojson& m = s["minimum"];
     std::cout << "  interior minimum of sigma3 " << g6(m["sigma3"].get<double>()) << " at ("
               << g6(m["position"][0].get<double>()) << ", " << g6(m["position"][1].get<double>()) << ", "
-              << g6(m["position"][2].get<double>()) << "), Hessian eigenvalues " << g6(m["hessian_eigenvalues"][0].get<double>())
-              << ", " << g6(m["hessian_eigenvalues"][1].get<double>()) << ", "
+              << g6(m["position"][2].get<double>()) << "), Hessian eigenvalues "
+              << g6(m["hessian_eigenvalues"][0].get<double>()) << ", "
+              << g6(m["hessian_eigenvalues"][1].get<double>()) << ", "
               << g6(m["hessian_eigenvalues"][2].get<double>()) << "\n";
   } else {
     std::cout << "  no strict interior minimum of sigma3 found\n";
   }
-  std::cout << "  min sigma3 on the boundary sphere (sampled) " << g6(s["sphere_min_sigma3_sampled"].get<double>()) << "\n";
+  std::cout << "  min sigma3 on the boundary sphere (sampled) "
+            << g6(s["sphere_min_sigma3_sampled"].get<double>()) << "\n";
   const ojson& li = s["local_injectivity"];
-  std::cout << "  local injectivity on the ball: " << (li["certified"].get<bool>() ? "certified" : "NOT certified");
+  std::cout << "  local injectivity on the ball: "
+            << (li["certified"].get<bool>() ? "certified" : "NOT certified");
   if (li.contains("min_lower_bound") && !li["min_lower_bound"].is_null())
-    std::cout << " (sigma3 >= " << g6(li["min_lower_bound"].get<double>()) << ", " << li["leaves"].get<long>() << " cells)";
+    std::cout << " (sigma3 >= " << g6(li["min_lower_bound"].get<double>()) << ", " << li["leaves"].get<long>()
+              << " cells)";
   if (!li["reason"].get<std::string>().empty()) std::cout << ": " << li["reason"].get<std::string>();
   std::cout << "\n";
   if (!s["boundary_above_minimum"].is_null()) {
     const ojson& b = s["boundary_above_minimum"];
     std::cout << "  sigma3 > interior minimum on the whole sphere: "
               << (b["certified"].get<bool>() ? "certified" : "NOT certified");
-    if (!b["min_lower_bound"].is_null()) std::cout << " (sigma3 >= " << g6(b["min_lower_bound"].get<double>()) << " there)";
+    if (!b["min_lower_bound"].is_null())
+      std::cout << " (sigma3 >= " << g6(b["min_lower_bound"].get<double>()) << " there)";
     std::cout << "\n";
   }
   const ojson& e = s["boundary_embedding"];
@@ -302,17 +342,22 @@ std::string json_for_example(const ExplorerExample& ex, const std::string& sourc
 }  // namespace
 
 void add_explore_command(CLI::App& app, Action& action) {
-  auto* ex = app.add_subcommand("explore", "sigma3 counterexample explorer: interior minima of sigma3 (paper Fig. 2)");
+  auto* ex = app.add_subcommand("explore",
+                                "sigma3 counterexample explorer: interior minima of sigma3 (paper Fig. 2)");
   ex->require_subcommand(1);
-  ex->footer("See 'lidef explore search --help', 'lidef explore show --help', 'lidef explore laplacian --help' and\n"
-             "docs/explorer.md.");
+  ex->footer(
+      "See 'lidef explore search --help', 'lidef explore show --help', 'lidef explore laplacian --help' and\n"
+      "docs/explorer.md.");
 
   auto add_show_options = [](CLI::App* sub, ShowOptions& o) {
-    sub->add_option("--starts", o.starts, "Starts of the local minimization of sigma3 (the center + random points)")
+    sub->add_option("--starts", o.starts,
+                    "Starts of the local minimization of sigma3 (the center + random points)")
         ->capture_default_str();
-    sub->add_option("--grid", o.grid, "Points per axis of fields.vti over the ball's bounding cube")->capture_default_str();
-    sub->add_option("--sphere-subdivisions", o.sphere_subdivisions,
-                    "Icosphere subdivisions of the boundary sphere for the embedding check and image.vtp (1..7)")
+    sub->add_option("--grid", o.grid, "Points per axis of fields.vti over the ball's bounding cube")
+        ->capture_default_str();
+    sub->add_option(
+           "--sphere-subdivisions", o.sphere_subdivisions,
+           "Icosphere subdivisions of the boundary sphere for the embedding check and image.vtp (1..7)")
         ->capture_default_str();
     sub->add_option("--max-depth", o.max_depth, "Subdivision levels of the ball certificate's cells (0..12)")
         ->capture_default_str();
@@ -326,19 +371,26 @@ void add_explore_command(CLI::App& app, Action& action) {
       int threads = 0;
     };
     auto o = std::make_shared<Opts>();
-    auto* sub = ex->add_subcommand("show", "Study one map file: minima of sigma3, certificate, boundary, pictures");
-    sub->add_option("EXAMPLE", o->file, "Map file (JSON, docs/explorer.md), e.g. data/explorer/sigma3_interior_min.json")
+    auto* sub =
+        ex->add_subcommand("show", "Study one map file: minima of sigma3, certificate, boundary, pictures");
+    sub->add_option("EXAMPLE", o->file,
+                    "Map file (JSON, docs/explorer.md), e.g. data/explorer/sigma3_interior_min.json")
         ->required();
     sub->add_option("--out", o->out, "Output folder (created if missing)")->required();
     add_show_options(sub, o->show);
     sub->add_option("--seed", o->show.seed, "Seed of the random starts")->capture_default_str();
     sub->add_option("--threads", o->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
     sub->footer(
-        "Writes map.json, minima.csv (position, sigma3, Hessian eigenvalues, small-sphere check), fields.vti\n"
-        "(sigma1..3, detJ on a grid over the ball), sphere.vtp and image.vtp (the boundary sphere and its image),\n"
-        "slice.png (sigma3 on the plane z = z_min through the minimum; gnuplot) with slice.gp/slice.dat, and\n"
-        "summary.json. Exit code: 0 verified counterexample (strict interior minimum, sigma3 > 0 certified on the\n"
-        "ball, sigma3 > the minimum certified on the sphere, boundary image embedded), 1 not verified, 2 error.");
+        "Writes map.json, minima.csv (position, sigma3, Hessian eigenvalues, small-sphere check), "
+        "fields.vti\n"
+        "(sigma1..3, detJ on a grid over the ball), sphere.vtp and image.vtp (the boundary sphere and its "
+        "image),\n"
+        "slice.png (sigma3 on the plane z = z_min through the minimum; gnuplot) with slice.gp/slice.dat, "
+        "and\n"
+        "summary.json. Exit code: 0 verified counterexample (strict interior minimum, sigma3 > 0 certified "
+        "on the\n"
+        "ball, sigma3 > the minimum certified on the sphere, boundary image embedded), 1 not verified, 2 "
+        "error.");
     sub->callback([o, &action] {
       action = [o] {
         check_show_options(o->show);
@@ -346,10 +398,12 @@ void add_explore_command(CLI::App& app, Action& action) {
         if (o->threads > 0) omp_set_num_threads(o->threads);
         const ExplorerExample example = read_explorer_example(o->file);
         StagedOutputs out(o->out);
-        const ShowResult r = show_map(out, "", example, o->show, "lidef explore show", json_for_example(example, o->file));
+        const ShowResult r =
+            show_map(out, "", example, o->show, "lidef explore show", json_for_example(example, o->file));
         out.commit();
         print_show_summary(r.summary, "lidef explore show");
-        std::cout << "  wrote " << out.final_path("") << "{map.json, minima.csv, fields.vti, sphere.vtp, image.vtp, "
+        std::cout << "  wrote " << out.final_path("")
+                  << "{map.json, minima.csv, fields.vti, sphere.vtp, image.vtp, "
                   << "slice.png, summary.json}\n";
         return r.verified ? kOk : kNotCertified;
       };
@@ -363,14 +417,24 @@ void add_explore_command(CLI::App& app, Action& action) {
       int degree = 4, trials = 200, verify = 3, threads = 0;
       unsigned long long seed = 1;
       double amplitude = 0.6;
+      std::string family = "random";
       ShowOptions show;
     };
     auto o = std::make_shared<Opts>();
-    auto* sub = ex->add_subcommand("search", "Random harmonic polynomial maps: how often sigma3 has an interior minimum");
-    sub->add_option("--degree", o->degree, "Polynomial degree D of the random maps (2..4)")->capture_default_str();
+    auto* sub = ex->add_subcommand(
+        "search", "Random harmonic polynomial maps: how often sigma3 has an interior minimum");
+    sub->add_option(
+           "--family", o->family,
+           "'random' (random linear part + random harmonic terms) or 'twist' (random perturbations of the "
+           "constructed twist family; degree 3..4)")
+        ->capture_default_str();
+    sub->add_option("--degree", o->degree, "Polynomial degree D of the random maps (2..4)")
+        ->capture_default_str();
     sub->add_option("--trials", o->trials, "Number of random maps")->capture_default_str();
-    sub->add_option("--seed", o->seed, "Seed (results do not depend on the thread count)")->capture_default_str();
-    sub->add_option("--amplitude", o->amplitude, "Largest amplitude of the non-affine part (docs/explorer.md)")
+    sub->add_option("--seed", o->seed, "Seed (results do not depend on the thread count)")
+        ->capture_default_str();
+    sub->add_option("--amplitude", o->amplitude,
+                    "Largest amplitude of the non-affine part (docs/explorer.md)")
         ->capture_default_str();
     sub->add_option("--verify", o->verify, "Candidates (best first) to certify and check for embedding")
         ->capture_default_str();
@@ -378,15 +442,22 @@ void add_explore_command(CLI::App& app, Action& action) {
     sub->add_option("--threads", o->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
     sub->add_option("--out", o->out, "Output folder (created if missing)")->required();
     sub->footer(
-        "Writes trials.csv (one row per map), minima.csv (every interior minimum found), summary.json (counts and\n"
-        "frequencies), candidate_<trial>.json for each verified candidate, and for the best candidate the files of\n"
-        "'lidef explore show' prefixed best_. Exit code: 0 a verified counterexample was found, 1 none, 2 error.");
+        "Writes trials.csv (one row per map), minima.csv (every interior minimum found), summary.json "
+        "(counts and\n"
+        "frequencies), candidate_<trial>.json for each verified candidate, and for the best candidate the "
+        "files of\n"
+        "'lidef explore show' prefixed best_. Exit code: 0 a verified counterexample was found, 1 none, 2 "
+        "error.");
     sub->callback([o, &action] {
       action = [o] {
         check_show_options(o->show);
         if (o->degree < 2 || o->degree > kMaxHarmonicDegree)
           throw InputError("--degree", "must be in 2.." + std::to_string(kMaxHarmonicDegree) + " (got " +
                                            std::to_string(o->degree) + ")");
+        if (o->family != "random" && o->family != "twist")
+          throw InputError("--family", "must be 'random' or 'twist' (got '" + o->family + "')");
+        if (o->family == "twist" && o->degree < 3)
+          throw InputError("--degree", "the twist family needs degree 3 or 4");
         if (o->trials < 1 || o->trials > 1000000) throw InputError("--trials", "must be in 1..1000000");
         if (o->verify < 0 || o->verify > 1000) throw InputError("--verify", "must be in 0..1000");
         if (!(o->amplitude >= 0) || !std::isfinite(o->amplitude) || o->amplitude > 10)
@@ -395,6 +466,7 @@ void add_explore_command(CLI::App& app, Action& action) {
         if (o->threads > 0) omp_set_num_threads(o->threads);
         StagedOutputs out(o->out);
         SearchParams sp;
+        sp.family = o->family == "twist" ? SearchFamily::kTwist : SearchFamily::kRandom;
         sp.degree = o->degree;
         sp.trials = o->trials;
         sp.seed = o->seed;
@@ -415,7 +487,8 @@ void add_explore_command(CLI::App& app, Action& action) {
           candidates += t.candidate;
         }
         write_file_atomic(out.path("trials.csv"), [&](std::ostream& s) {
-          s << "trial,seed,interior_minima,strict_minima,lowest_minimum_sigma3,sphere_min_sigma3_sampled,candidate,"
+          s << "trial,seed,interior_minima,strict_minima,lowest_minimum_sigma3,sphere_min_sigma3_sampled,"
+               "candidate,"
                "candidate_gap\n";
           for (const SearchTrial& t : trials)
             s << t.trial << ',' << t.seed << ',' << t.minima.size() << ',' << t.strict_minima << ','
@@ -426,9 +499,10 @@ void add_explore_command(CLI::App& app, Action& action) {
           s << "trial,x,y,z,sigma3,hessian_eig1,hessian_eig2,hessian_eig3,sphere_min_sigma3,strict\n";
           for (const SearchTrial& t : trials)
             for (const Sigma3Minimum& m : t.minima)
-              s << t.trial << ',' << fd(m.position.x()) << ',' << fd(m.position.y()) << ',' << fd(m.position.z()) << ','
-                << fd(m.sigma3) << ',' << fd(m.hessian_eigenvalues(0)) << ',' << fd(m.hessian_eigenvalues(1)) << ','
-                << fd(m.hessian_eigenvalues(2)) << ',' << fd(m.sphere_min_sigma3) << ',' << (m.strict ? 1 : 0) << '\n';
+              s << t.trial << ',' << fd(m.position.x()) << ',' << fd(m.position.y()) << ','
+                << fd(m.position.z()) << ',' << fd(m.sigma3) << ',' << fd(m.hessian_eigenvalues(0)) << ','
+                << fd(m.hessian_eigenvalues(1)) << ',' << fd(m.hessian_eigenvalues(2)) << ','
+                << fd(m.sphere_min_sigma3) << ',' << (m.strict ? 1 : 0) << '\n';
         });
         // Verify the best candidates (largest relative gap between the sphere and the interior minimum).
         std::vector<int> order;
@@ -441,8 +515,9 @@ void add_explore_command(CLI::App& app, Action& action) {
         int best_trial = -1;
         for (int t : order) {
           const SearchTrial& tr = trials[t];
-          const std::string note = "lidef explore search --degree " + std::to_string(o->degree) + " --seed " +
-                                   std::to_string(o->seed) + ": trial " + std::to_string(t);
+          const std::string note = "lidef explore search --family " + o->family + " --degree " +
+                                   std::to_string(o->degree) + " --amplitude " + fd(o->amplitude) +
+                                   " --seed " + std::to_string(o->seed) + ": trial " + std::to_string(t);
           const PolynomialExplorerMap m(tr.map);
           BallCertifyParams cp;
           cp.max_depth = o->show.max_depth;
@@ -455,8 +530,10 @@ void add_explore_command(CLI::App& app, Action& action) {
               break;
             }
           cp.sphere_only = true;
-          const BallCertificate sc = c.certified ? certify_sigma3_on_ball(tr.map, Ball(), cp) : BallCertificate();
-          const bool emb = c.certified && sc.certified && check_boundary_embedding(m, Ball(), o->show.sphere_subdivisions).embedded;
+          const BallCertificate sc =
+              c.certified ? certify_sigma3_on_ball(tr.map, Ball(), cp) : BallCertificate();
+          const bool emb = c.certified && sc.certified &&
+                           check_boundary_embedding(m, Ball(), o->show.sphere_subdivisions).embedded;
           const bool ok = c.certified && sc.certified && emb;
           verified.push_back({{"trial", t},
                               {"local_injectivity_certified", c.certified},
@@ -471,6 +548,7 @@ void add_explore_command(CLI::App& app, Action& action) {
         }
         if (best_trial < 0 && !order.empty()) best_trial = order[0];
         ojson s;
+        s["family"] = o->family;
         s["degree"] = o->degree;
         s["trials"] = o->trials;
         s["seed"] = o->seed;
@@ -487,8 +565,9 @@ void add_explore_command(CLI::App& app, Action& action) {
         if (best_trial >= 0) {
           ExplorerExample ex;
           ex.kind = "harmonic_polynomial";
-          ex.note = "lidef explore search --degree " + std::to_string(o->degree) + " --seed " +
-                    std::to_string(o->seed) + ": trial " + std::to_string(best_trial);
+          ex.note = "lidef explore search --family " + o->family + " --degree " + std::to_string(o->degree) +
+                    " --amplitude " + fd(o->amplitude) + " --seed " + std::to_string(o->seed) + ": trial " +
+                    std::to_string(best_trial);
           ex.map = std::make_shared<PolynomialExplorerMap>(trials[best_trial].map);
           const ShowResult r = show_map(out, "best_", ex, o->show, "lidef explore search",
                                         explorer_example_json(trials[best_trial].map, ex.ball, ex.note));
@@ -497,15 +576,17 @@ void add_explore_command(CLI::App& app, Action& action) {
         }
         write_file_atomic(out.path("summary.json"), [&](std::ostream& f) { f << s.dump(2) << "\n"; });
         out.commit();
-        std::cout << "lidef explore search: " << o->trials << " random degree-" << o->degree << " maps (seed " << o->seed
-                  << "): " << with_strict << " with a strict interior minimum of sigma3, " << positive
+        std::cout << "lidef explore search: " << o->trials << " " << o->family << " degree-" << o->degree
+                  << " maps (seed " << o->seed << "): " << with_strict
+                  << " with a strict interior minimum of sigma3, " << positive
                   << " of them with sigma3 > 0 there, " << candidates
                   << " candidates (minimum below every sampled boundary value)\n";
         std::cout << "  verified counterexamples among the " << order.size() << " best candidates: ";
         int nv = 0;
         for (const auto& v : verified) nv += v["verified"].get<bool>();
         std::cout << nv << "\n";
-        if (best_trial >= 0) print_show_summary(s["best"], "  best (trial " + std::to_string(best_trial) + ")");
+        if (best_trial >= 0)
+          print_show_summary(s["best"], "  best (trial " + std::to_string(best_trial) + ")");
         std::cout << "  wrote " << out.final_path("") << "{trials.csv, minima.csv, summary.json, best_*}\n";
         return found ? kOk : kNotCertified;
       };
@@ -520,7 +601,8 @@ void add_explore_command(CLI::App& app, Action& action) {
       double twist = 0.5, cubic = 0.05;
     };
     auto o = std::make_shared<Opts>();
-    auto* sub = ex->add_subcommand("construct", "Write the constructed twist counterexample family as a map file");
+    auto* sub =
+        ex->add_subcommand("construct", "Write the constructed twist counterexample family as a map file");
     sub->add_option("--sigma", o->sigma, "Singular values s1 > s2 > s3 > 0 of J at the center")
         ->expected(3)
         ->delimiter(',')
@@ -530,7 +612,8 @@ void add_explore_command(CLI::App& app, Action& action) {
     sub->add_option("--out", o->out, "Map file to write (JSON)")->required();
     sub->footer(
         "f(x,y,z) = (s1 x + c x z, s2 y - c y z, s3 z + (c/2)(y^2 - x^2) + d (z^3 - 1.5 z (x^2 + y^2))):\n"
-        "grad sigma3 = 0 at the center, Hessian diag(2c^2/(s3+s1) - 3d, 2c^2/(s3+s2) - 3d, 6d) (docs/explorer.md).\n"
+        "grad sigma3 = 0 at the center, Hessian diag(2c^2/(s3+s1) - 3d, 2c^2/(s3+s2) - 3d, 6d) "
+        "(docs/explorer.md).\n"
         "Check the result with 'lidef explore show FILE --out DIR'.");
     sub->callback([o, &action] {
       action = [o] {
@@ -538,11 +621,13 @@ void add_explore_command(CLI::App& app, Action& action) {
         for (double v : s)
           if (!std::isfinite(v)) throw InputError("--sigma", "must be finite numbers");
         if (!(s[0] > s[1] && s[1] > s[2] && s[2] > 0)) throw InputError("--sigma", "needs s1 > s2 > s3 > 0");
-        if (!std::isfinite(o->twist) || !std::isfinite(o->cubic)) throw InputError("--twist/--cubic", "must be finite");
+        if (!std::isfinite(o->twist) || !std::isfinite(o->cubic))
+          throw InputError("--twist/--cubic", "must be finite");
         const HarmonicPolynomialMap m = twist_example(Vec3(s[0], s[1], s[2]), o->twist, o->cubic, 4);
-        const std::string note = "twist example: sigma = (" + fd(s[0]) + ", " + fd(s[1]) + ", " + fd(s[2]) +
-                                 "), twist c = " + fd(o->twist) + ", cubic d = " + fd(o->cubic) +
-                                 "; f = (s1 x + c x z, s2 y - c y z, s3 z + (c/2)(y^2 - x^2) + d (z^3 - 1.5 z (x^2 + y^2)))";
+        const std::string note =
+            "twist example: sigma = (" + fd(s[0]) + ", " + fd(s[1]) + ", " + fd(s[2]) +
+            "), twist c = " + fd(o->twist) + ", cubic d = " + fd(o->cubic) +
+            "; f = (s1 x + c x z, s2 y - c y z, s3 z + (c/2)(y^2 - x^2) + d (z^3 - 1.5 z (x^2 + y^2)))";
         write_file_atomic(o->out, [&](std::ostream& f) { f << explorer_example_json(m, Ball(), note); });
         std::cout << "lidef explore construct: wrote " << o->out << "\n";
         return kOk;
@@ -559,16 +644,21 @@ void add_explore_command(CLI::App& app, Action& action) {
       double amplitude = 0.6;
     };
     auto o = std::make_shared<Opts>();
-    auto* sub = ex->add_subcommand("laplacian", "Laplacians of sigma1 and sigma3 at random points of random maps (App. D)");
-    sub->add_option("--degree", o->degree, "Polynomial degree of the random maps (2..4)")->capture_default_str();
+    auto* sub = ex->add_subcommand(
+        "laplacian", "Laplacians of sigma1 and sigma3 at random points of random maps (App. D)");
+    sub->add_option("--degree", o->degree, "Polynomial degree of the random maps (2..4)")
+        ->capture_default_str();
     sub->add_option("--maps", o->maps, "Number of random maps")->capture_default_str();
-    sub->add_option("--points", o->points, "Random points per map (uniform in the unit ball)")->capture_default_str();
+    sub->add_option("--points", o->points, "Random points per map (uniform in the unit ball)")
+        ->capture_default_str();
     sub->add_option("--seed", o->seed, "Seed")->capture_default_str();
-    sub->add_option("--amplitude", o->amplitude, "Largest amplitude of the non-affine part")->capture_default_str();
+    sub->add_option("--amplitude", o->amplitude, "Largest amplitude of the non-affine part")
+        ->capture_default_str();
     sub->add_option("--threads", o->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
     sub->add_option("--out", o->out, "Output folder (created if missing)")->required();
     sub->footer(
-        "Writes laplacian.csv (per point: sigma's, exact and finite-difference Laplacians of sigma1 and sigma3) and\n"
+        "Writes laplacian.csv (per point: sigma's, exact and finite-difference Laplacians of sigma1 and "
+        "sigma3) and\n"
         "summary.json. Subharmonicity of sigma1 (paper App. D) means lap_sigma1 >= 0 everywhere; a minimum\n"
         "principle for sigma3 would follow from lap_sigma3 <= 0, which fails where lap_sigma3 > 0.");
     sub->callback([o, &action] {
@@ -582,15 +672,17 @@ void add_explore_command(CLI::App& app, Action& action) {
         if (o->threads < 0) throw InputError("--threads", "must be >= 0");
         if (o->threads > 0) omp_set_num_threads(o->threads);
         StagedOutputs out(o->out);
-        const std::vector<LaplacianSample> L = laplacian_experiment(o->degree, o->maps, o->points, o->seed, o->amplitude);
+        const std::vector<LaplacianSample> L =
+            laplacian_experiment(o->degree, o->maps, o->points, o->seed, o->amplitude);
         long n = 0, s1neg = 0, s3pos = 0, s3pos_det = 0, det_pos = 0;
         double min_l1 = INFINITY, max_l3 = -INFINITY, max_fd = 0;
         write_file_atomic(out.path("laplacian.csv"), [&](std::ostream& s) {
           s << "map,x,y,z,sigma1,sigma2,sigma3,lap_sigma1,lap_sigma1_fd,lap_sigma3,lap_sigma3_fd,gap\n";
           for (const LaplacianSample& q : L) {
-            s << q.map << ',' << fd(q.p.x()) << ',' << fd(q.p.y()) << ',' << fd(q.p.z()) << ',' << fd(q.sigma(0)) << ','
-              << fd(q.sigma(1)) << ',' << fd(q.sigma(2)) << ',' << fd(q.lap_sigma1) << ',' << fd(q.lap_sigma1_fd) << ','
-              << fd(q.lap_sigma3) << ',' << fd(q.lap_sigma3_fd) << ',' << fd(q.gap) << '\n';
+            s << q.map << ',' << fd(q.p.x()) << ',' << fd(q.p.y()) << ',' << fd(q.p.z()) << ','
+              << fd(q.sigma(0)) << ',' << fd(q.sigma(1)) << ',' << fd(q.sigma(2)) << ',' << fd(q.lap_sigma1)
+              << ',' << fd(q.lap_sigma1_fd) << ',' << fd(q.lap_sigma3) << ',' << fd(q.lap_sigma3_fd) << ','
+              << fd(q.gap) << '\n';
             if (!(q.gap > 1e-3)) continue;  // the formulas need simple singular values
             ++n;
             s1neg += q.lap_sigma1 < 0;
@@ -599,8 +691,9 @@ void add_explore_command(CLI::App& app, Action& action) {
             s3pos_det += q.lap_sigma3 > 0 && q.sigma(2) > 0;
             min_l1 = std::min(min_l1, q.lap_sigma1);
             max_l3 = std::max(max_l3, q.lap_sigma3);
-            max_fd = std::max({max_fd, std::abs(q.lap_sigma1 - q.lap_sigma1_fd) / (1 + std::abs(q.lap_sigma1)),
-                               std::abs(q.lap_sigma3 - q.lap_sigma3_fd) / (1 + std::abs(q.lap_sigma3))});
+            max_fd =
+                std::max({max_fd, std::abs(q.lap_sigma1 - q.lap_sigma1_fd) / (1 + std::abs(q.lap_sigma1)),
+                          std::abs(q.lap_sigma3 - q.lap_sigma3_fd) / (1 + std::abs(q.lap_sigma3))});
           }
         });
         ojson s;
@@ -623,7 +716,8 @@ void add_explore_command(CLI::App& app, Action& action) {
         out.commit();
         std::cout << "lidef explore laplacian: " << n << " points (" << o->maps << " maps x " << o->points
                   << ", gap > 1e-3)\n"
-                  << "  lap sigma1 < 0 at " << s1neg << " points (min " << g6(min_l1) << "): sigma1 subharmonic\n"
+                  << "  lap sigma1 < 0 at " << s1neg << " points (min " << g6(min_l1)
+                  << "): sigma1 subharmonic\n"
                   << "  lap sigma3 > 0 at " << s3pos << " points (" << g6(100.0 * s3pos / std::max(1L, n))
                   << "%; max " << g6(max_l3) << "): no superharmonicity, so no minimum principle from it\n"
                   << "  exact vs finite-difference Laplacians: max relative difference " << g6(max_fd) << "\n"

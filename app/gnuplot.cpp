@@ -34,8 +34,10 @@ std::string find_gnuplot() {
   return "";
 }
 
-bool run_gnuplot(const std::string& gnuplot, const std::string& dir, const std::string& script, std::string* log) {
-  const std::string cmd = "cd " + shell_quote(dir) + " && " + shell_quote(gnuplot) + " " + shell_quote(script) + " 2>&1";
+bool run_gnuplot(const std::string& gnuplot, const std::string& dir, const std::string& script,
+                 std::string* log) {
+  const std::string cmd =
+      "cd " + shell_quote(dir) + " && " + shell_quote(gnuplot) + " " + shell_quote(script) + " 2>&1";
   std::string out;
   int rc = -1;
   if (FILE* p = ::popen(cmd.c_str(), "r")) {

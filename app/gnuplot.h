@@ -12,6 +12,7 @@ std::string shell_quote(const std::string& s);
 std::string find_gnuplot();
 
 // Runs `gnuplot script` inside `dir`. Returns true when gnuplot exited 0; `log` receives its output.
-bool run_gnuplot(const std::string& gnuplot, const std::string& dir, const std::string& script, std::string* log);
+bool run_gnuplot(const std::string& gnuplot, const std::string& dir, const std::string& script,
+                 std::string* log);
 
 }  // namespace lidef::cli

@@ -34,7 +34,7 @@ class Rng {
   explicit Rng(std::uint64_t seed) : s_(splitmix64(seed)) {}
   std::uint64_t next() { return s_ = splitmix64(s_); }
   double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }  // [0, 1)
-  double normal() {                                                          // Box-Muller
+  double normal() {                                                           // Box-Muller
     const double u1 = 1.0 - uniform(), u2 = uniform();
     return std::sqrt(-2.0 * std::log(u1)) * std::cos(2 * M_PI * u2);
   }
@@ -55,7 +55,8 @@ class Rng {
 };
 
 // dJ[k](a,b) = ∂²f_a/∂x_b∂x_k and d2J[k][l](a,b) = ∂³f_a/∂x_b∂x_k∂x_l from a jet.
-void jacobian_derivatives(const PolyJet& j, std::array<Mat3, 3>& dJ, std::array<std::array<Mat3, 3>, 3>& d2J) {
+void jacobian_derivatives(const PolyJet& j, std::array<Mat3, 3>& dJ,
+                          std::array<std::array<Mat3, 3>, 3>& d2J) {
   for (int k = 0; k < 3; ++k)
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) {
@@ -93,7 +94,9 @@ DescentResult descend(const ExplorerMap& map, const Ball& ball, Vec3 x, int max_
     Eigen::SelfAdjointEigenSolver<Mat3> es(d.hess[2]);
     Vec3 p;
     if (es.info() == Eigen::Success && es.eigenvalues()(0) > 0)
-      p = -(es.eigenvectors() * es.eigenvalues().cwiseInverse().asDiagonal() * es.eigenvectors().transpose()) * g;
+      p = -(es.eigenvectors() * es.eigenvalues().cwiseInverse().asDiagonal() *
+            es.eigenvectors().transpose()) *
+          g;
     else
       p = -g.normalized() * delta;
     if (!p.allFinite()) break;
@@ -122,7 +125,9 @@ double region_max_dist(const Vec3& q, double half, const Vec3& c) {
   return ((q - c).cwiseAbs() + Vec3::Constant(half)).norm();
 }
 
-std::string fmt(double x) { return format_double(x); }
+std::string fmt(double x) {
+  return format_double(x);
+}
 
 }  // namespace
 
@@ -136,7 +141,9 @@ CageExplorerMap::CageExplorerMap(const Cage& cage, const MatX3d& y, std::string 
   if (y.rows() != cage.num_coeffs()) throw InputError(name_, "coefficient rows do not match the cage");
 }
 
-Vec3 CageExplorerMap::value(const Vec3& p) const { return basis_.map_jet(y_, p, 0).f; }
+Vec3 CageExplorerMap::value(const Vec3& p) const {
+  return basis_.map_jet(y_, p, 0).f;
+}
 
 PolyJet CageExplorerMap::jet(const Vec3& p) const {
   const MapJet m = basis_.map_jet(y_, p, 2);
@@ -159,8 +166,8 @@ PolyJet CageExplorerMap::jet(const Vec3& p) const {
     for (int b = 0; b < 3; ++b)
       for (int c = 0; c < 3; ++c)
         for (int d = 0; d < 3; ++d)
-          s[b][c][d] = (j.T[a][b](c, d) + j.T[a][b](d, c) + j.T[a][c](b, d) + j.T[a][c](d, b) + j.T[a][d](b, c) +
-                        j.T[a][d](c, b)) /
+          s[b][c][d] = (j.T[a][b](c, d) + j.T[a][b](d, c) + j.T[a][c](b, d) + j.T[a][c](d, b) +
+                        j.T[a][d](b, c) + j.T[a][d](c, b)) /
                        6;
     for (int b = 0; b < 3; ++b)
       for (int c = 0; c < 3; ++c)
@@ -229,7 +236,8 @@ std::vector<Sigma3Minimum> find_sigma3_minima(const ExplorerMap& map, const Ball
   return out;
 }
 
-std::pair<double, Vec3> sampled_sphere_min_sigma3(const ExplorerMap& map, const Ball& ball, int subdivisions) {
+std::pair<double, Vec3> sampled_sphere_min_sigma3(const ExplorerMap& map, const Ball& ball,
+                                                  int subdivisions) {
   const TriMesh s = icosphere(ball.radius, subdivisions);
   double best = std::numeric_limits<double>::infinity();
   Vec3 where = ball.center;
@@ -249,7 +257,8 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
                                        const BallCertifyParams& params) {
   if (params.base_cells < 1 || params.max_depth < 0 || params.max_cells < 1)
     throw InputError("", "certify: base_cells ≥ 1, max_depth ≥ 0 and max_cells ≥ 1 are required");
-  if (map.degree() > kMaxHarmonicDegree) throw Error("certify: degree above 4 has no constant fourth derivative");
+  if (map.degree() > kMaxHarmonicDegree)
+    throw Error("certify: degree above 4 has no constant fourth derivative");
   const int n = params.base_cells;
   const double h0 = 2 * ball.radius / n;
   auto meets = [&](const Vec3& q, double half) {
@@ -314,8 +323,8 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
         continue;
       }
       if (c.depth >= params.max_depth) {
-        r.fail = "a cell still fails at depth " + std::to_string(params.max_depth) + " near (" + fmt(c.q.x()) + ", " +
-                 fmt(c.q.y()) + ", " + fmt(c.q.z()) + ")";
+        r.fail = "a cell still fails at depth " + std::to_string(params.max_depth) + " near (" +
+                 fmt(c.q.x()) + ", " + fmt(c.q.y()) + ", " + fmt(c.q.z()) + ")";
         r.min_lb = std::min(r.min_lb, lb);
         r.worst = c.q;
         break;
@@ -388,7 +397,8 @@ HarmonicPolynomialMap random_harmonic_map(int degree, std::uint64_t seed, double
   Vec3 s;
   for (int i = 0; i < 3; ++i) s(i) = std::exp(0.35 * rng.normal());
   const Mat3 A = R1 * s.asDiagonal() * R2.transpose();
-  Eigen::Matrix<double, 3, Eigen::Dynamic> C = HarmonicPolynomialMap::affine_coefficients(degree, A, Vec3::Zero());
+  Eigen::Matrix<double, 3, Eigen::Dynamic> C =
+      HarmonicPolynomialMap::affine_coefficients(degree, A, Vec3::Zero());
   const double amp = max_amplitude * rng.uniform();
   const HarmonicPolynomialBasis& B = harmonic_polynomial_basis(degree);
   for (int j = 0; j < B.size(); ++j)
@@ -398,7 +408,8 @@ HarmonicPolynomialMap random_harmonic_map(int degree, std::uint64_t seed, double
 }
 
 HarmonicPolynomialMap twist_example(const Vec3& s, double c, double d, int degree) {
-  if (degree < 3 || degree > kMaxHarmonicDegree) throw InputError("", "the twist example needs degree 3 or 4");
+  if (degree < 3 || degree > kMaxHarmonicDegree)
+    throw InputError("", "the twist example needs degree 3 or 4");
   std::array<Polynomial, 3> f;
   auto set = [&](Polynomial& p, int a, int b, int cc, double v) { p.c[monomial_index(a, b, cc)] += v; };
   set(f[0], 1, 0, 0, s(0));
@@ -414,7 +425,27 @@ HarmonicPolynomialMap twist_example(const Vec3& s, double c, double d, int degre
   return HarmonicPolynomialMap::from_components(degree, f);
 }
 
-std::vector<SearchTrial> search_sigma3_minima(const SearchParams& params, const std::function<void(int)>& progress) {
+HarmonicPolynomialMap random_twist_map(int degree, std::uint64_t seed, double max_amplitude) {
+  if (degree < 3 || degree > kMaxHarmonicDegree)
+    throw InputError("", "the twist family needs a degree in 3.." + std::to_string(kMaxHarmonicDegree) +
+                             " (got " + std::to_string(degree) + ")");
+  Rng rng(seed);
+  Vec3 s;
+  s(2) = 0.3 + 0.5 * rng.uniform();
+  s(1) = s(2) + 0.3 + 0.9 * rng.uniform();
+  s(0) = s(1) + 0.1 + 0.5 * rng.uniform();
+  const double c = 1.2 * (s(1) - s(2)) * rng.uniform(), d = 0.1 * rng.uniform();
+  Eigen::Matrix<double, 3, Eigen::Dynamic> C = twist_example(s, c, d, degree).coefficients();
+  const double amp = max_amplitude * rng.uniform();
+  const HarmonicPolynomialBasis& B = harmonic_polynomial_basis(degree);
+  for (int j = 0; j < B.size(); ++j)
+    if (B.degree_of[j] >= 1)
+      for (int a = 0; a < 3; ++a) C(a, j) += amp / B.degree_of[j] * rng.normal();
+  return HarmonicPolynomialMap(degree, C);
+}
+
+std::vector<SearchTrial> search_sigma3_minima(const SearchParams& params,
+                                              const std::function<void(int)>& progress) {
   if (params.trials < 1) throw InputError("--trials", "must be at least 1");
   std::vector<SearchTrial> out(params.trials);
   int done = 0;
@@ -424,7 +455,9 @@ std::vector<SearchTrial> search_sigma3_minima(const SearchParams& params, const 
     SearchTrial& tr = out[t];
     tr.trial = t;
     tr.seed = trial_seed(params.seed, t);
-    tr.map = random_harmonic_map(params.degree, tr.seed, params.max_amplitude);
+    tr.map = params.family == SearchFamily::kTwist
+                 ? random_twist_map(params.degree, tr.seed, params.max_amplitude)
+                 : random_harmonic_map(params.degree, tr.seed, params.max_amplitude);
     const PolynomialExplorerMap m(tr.map);
     MinimaSearchParams mp = params.minima;
     mp.seed = splitmix64(tr.seed);
@@ -449,9 +482,10 @@ std::vector<SearchTrial> search_sigma3_minima(const SearchParams& params, const 
   return out;
 }
 
-std::vector<LaplacianSample> laplacian_experiment(int degree, int maps, int points_per_map, std::uint64_t seed,
-                                                  double max_amplitude) {
-  if (maps < 1 || points_per_map < 1) throw InputError("", "the Laplacian experiment needs maps ≥ 1 and points ≥ 1");
+std::vector<LaplacianSample> laplacian_experiment(int degree, int maps, int points_per_map,
+                                                  std::uint64_t seed, double max_amplitude) {
+  if (maps < 1 || points_per_map < 1)
+    throw InputError("", "the Laplacian experiment needs maps ≥ 1 and points ≥ 1");
   std::vector<LaplacianSample> out(static_cast<size_t>(maps) * points_per_map);
   const Ball ball;
 #pragma omp parallel for schedule(dynamic)
@@ -544,14 +578,16 @@ ExplorerExample read_explorer_example(const std::string& path) {
         throw InputError(path, "\"basis\" must list the " + std::to_string(n) + " basis names");
       for (int i = 0; i < n; ++i)
         if (!b[i].is_string() || b[i].get<std::string>() != B.names[i])
-          throw InputError(path, "basis entry " + std::to_string(i + 1) + " should be \"" + B.names[i] + "\"");
+          throw InputError(path,
+                           "basis entry " + std::to_string(i + 1) + " should be \"" + B.names[i] + "\"");
     }
     Eigen::Matrix<double, 3, Eigen::Dynamic> C(3, n);
     for (int i = 0; i < n; ++i)
       C.col(i) = vec3(c[i], "coefficient row " + std::to_string(i + 1) + " (" + B.names[i] + ")");
     ex.map = std::make_shared<PolynomialExplorerMap>(HarmonicPolynomialMap(static_cast<int>(deg), C));
   } else if (ex.kind == "cage") {
-    if (!j.contains("model") || !j["model"].is_string()) throw InputError(path, "\"model\" (a folder) is missing");
+    if (!j.contains("model") || !j["model"].is_string())
+      throw InputError(path, "\"model\" (a folder) is missing");
     if (!j.contains("coefficients") || !j["coefficients"].is_string())
       throw InputError(path, "\"coefficients\" (a coefficient file or \"identity\") is missing");
     const std::filesystem::path base = std::filesystem::path(path).parent_path();
@@ -576,7 +612,8 @@ ExplorerExample read_explorer_example(const std::string& path) {
   return ex;
 }
 
-std::string explorer_example_json(const HarmonicPolynomialMap& map, const Ball& ball, const std::string& note) {
+std::string explorer_example_json(const HarmonicPolynomialMap& map, const Ball& ball,
+                                  const std::string& note) {
   const HarmonicPolynomialBasis& B = harmonic_polynomial_basis(map.degree());
   std::ostringstream s;
   s << "{\n  \"format\": \"lidef-explorer-map\",\n  \"type\": \"harmonic_polynomial\",\n";
@@ -589,8 +626,8 @@ std::string explorer_example_json(const HarmonicPolynomialMap& map, const Ball& 
   s << "],\n  \"coefficients\": [\n";
   for (int i = 0; i < B.size(); ++i) {
     const auto& c = map.coefficients().col(i);
-    s << "    [" << fmt(c(0)) << ", " << fmt(c(1)) << ", " << fmt(c(2)) << "]" << (i + 1 < B.size() ? "," : "")
-      << "\n";
+    s << "    [" << fmt(c(0)) << ", " << fmt(c(1)) << ", " << fmt(c(2)) << "]"
+      << (i + 1 < B.size() ? "," : "") << "\n";
   }
   s << "  ]\n}\n";
   return s.str();

@@ -80,12 +80,14 @@ double double_factorial(int n) {  // n!! for n ≥ -1
 // (1/4π) ∫_{S²} x^a y^b z^c dA = (a−1)!!(b−1)!!(c−1)!! / (a+b+c+1)!! for even a, b, c; 0 otherwise.
 double sphere_moment(int a, int b, int c) {
   if (a % 2 || b % 2 || c % 2) return 0;
-  return double_factorial(a - 1) * double_factorial(b - 1) * double_factorial(c - 1) / double_factorial(a + b + c + 1);
+  return double_factorial(a - 1) * double_factorial(b - 1) * double_factorial(c - 1) /
+         double_factorial(a + b + c + 1);
 }
 
 HarmonicPolynomialBasis build_basis(int degree) {
-  // Q_l^m = (x+iy)^m Π(z, r²) with Q_{l+1}^m = ((2l+1) z Q_l^m − (l+m) r² Q_{l−1}^m)/(l−m+1): r^l P_l^m e^{imφ}
-  // up to a constant factor (the associated Legendre recurrence times r^{l+1}). Re → C_l^m, Im → S_l^m.
+  // Q_l^m = (x+iy)^m Π(z, r²) with Q_{l+1}^m = ((2l+1) z Q_l^m − (l+m) r² Q_{l−1}^m)/(l−m+1): r^l P_l^m
+  // e^{imφ} up to a constant factor (the associated Legendre recurrence times r^{l+1}). Re → C_l^m, Im →
+  // S_l^m.
   const int D = degree;
   std::vector<std::vector<Polynomial>> re(D + 1, std::vector<Polynomial>(D + 1)),
       im(D + 1, std::vector<Polynomial>(D + 1));
@@ -148,14 +150,18 @@ int sym3(int b, int c, int d) {
 
 }  // namespace
 
-const std::array<std::array<int, 3>, kNumMonomials>& monomial_exponents() { return table().exps; }
+const std::array<std::array<int, 3>, kNumMonomials>& monomial_exponents() {
+  return table().exps;
+}
 
 int monomial_index(int a, int b, int c) {
   if (a < 0 || b < 0 || c < 0 || a + b + c > kMaxHarmonicDegree) return -1;
   return table().index[a][b][c];
 }
 
-double Polynomial::eval(const Vec3& p) const { return dot(*this, monomial_values(p)); }
+double Polynomial::eval(const Vec3& p) const {
+  return dot(*this, monomial_values(p));
+}
 
 int Polynomial::degree() const {
   int d = -1;
@@ -182,7 +188,8 @@ Polynomial differentiate(const Polynomial& q, int i, int j, int k) {
 }
 
 Polynomial laplacian(const Polynomial& q) {
-  return lin(1, lin(1, differentiate(q, 2, 0, 0), 1, differentiate(q, 0, 2, 0)), 1, differentiate(q, 0, 0, 2));
+  return lin(1, lin(1, differentiate(q, 2, 0, 0), 1, differentiate(q, 0, 2, 0)), 1,
+             differentiate(q, 0, 0, 2));
 }
 
 double sphere_mean_product(const Polynomial& q, const Polynomial& r) {
@@ -191,7 +198,8 @@ double sphere_mean_product(const Polynomial& q, const Polynomial& r) {
   for (int i = 0; i < kNumMonomials; ++i) {
     if (q.c[i] == 0) continue;
     for (int j = 0; j < kNumMonomials; ++j)
-      if (r.c[j] != 0) s += q.c[i] * r.c[j] * sphere_moment(e[i][0] + e[j][0], e[i][1] + e[j][1], e[i][2] + e[j][2]);
+      if (r.c[j] != 0)
+        s += q.c[i] * r.c[j] * sphere_moment(e[i][0] + e[j][0], e[i][1] + e[j][1], e[i][2] + e[j][2]);
   }
   return s;
 }
@@ -218,7 +226,8 @@ double PolyJet::third_norm() const {
   return std::sqrt(s);
 }
 
-HarmonicPolynomialMap::HarmonicPolynomialMap(int degree, const Eigen::Matrix<double, 3, Eigen::Dynamic>& coeffs)
+HarmonicPolynomialMap::HarmonicPolynomialMap(int degree,
+                                             const Eigen::Matrix<double, 3, Eigen::Dynamic>& coeffs)
     : degree_(degree), coeffs_(coeffs) {
   if (degree < 0 || degree > kMaxHarmonicDegree)
     throw InputError("", "harmonic polynomial degree must be in 0.." + std::to_string(kMaxHarmonicDegree) +
@@ -253,7 +262,7 @@ HarmonicPolynomialMap::HarmonicPolynomialMap(int degree, const Eigen::Matrix<dou
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> HarmonicPolynomialMap::affine_coefficients(int degree, const Mat3& A,
-                                                                                      const Vec3& b) {
+                                                                                    const Vec3& b) {
   // Project onto the sphere-orthonormal basis: every harmonic polynomial of degree ≤ D lies in its span.
   const HarmonicPolynomialBasis& B = harmonic_polynomial_basis(degree);
   if (degree < 1) throw Error("an affine map needs degree ≥ 1");
@@ -269,11 +278,15 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> HarmonicPolynomialMap::affine_coefficie
   return C;
 }
 
-HarmonicPolynomialMap HarmonicPolynomialMap::from_components(int degree, const std::array<Polynomial, 3>& components) {
+HarmonicPolynomialMap HarmonicPolynomialMap::from_components(int degree,
+                                                             const std::array<Polynomial, 3>& components) {
   const HarmonicPolynomialBasis& B = harmonic_polynomial_basis(degree);
   Eigen::Matrix<double, 3, Eigen::Dynamic> C(3, B.size());
   for (int a = 0; a < 3; ++a)
     for (int j = 0; j < B.size(); ++j) C(a, j) = sphere_mean_product(components[a], B.q[j]);
+  // Projection round-off (~1e-17) on coefficients that are exactly zero is set to zero, for readable files.
+  const double cmax = C.cwiseAbs().maxCoeff();
+  C = C.unaryExpr([cmax](double v) { return std::abs(v) < 1e-14 * cmax ? 0.0 : v; });
   HarmonicPolynomialMap m(degree, C);
   for (int a = 0; a < 3; ++a) {
     double err = 0, scale = 0;
@@ -282,8 +295,8 @@ HarmonicPolynomialMap HarmonicPolynomialMap::from_components(int degree, const s
       scale = std::max(scale, std::abs(components[a].c[k]));
     }
     if (err > 1e-12 * std::max(1.0, scale))
-      throw InputError("", "component " + std::to_string(a + 1) + " is not a harmonic polynomial of degree <= " +
-                               std::to_string(degree));
+      throw InputError("", "component " + std::to_string(a + 1) +
+                               " is not a harmonic polynomial of degree <= " + std::to_string(degree));
   }
   return m;
 }

@@ -17,7 +17,8 @@ SigmaDerivatives sigma_derivatives(const Mat3& J, const std::array<Mat3, 3>& dJ,
   for (int i = 0; i < 3; ++i) {
     double g = INFINITY;
     for (int j = 0; j < 3; ++j)
-      if (j != i) g = std::min({g, std::abs(svd.sigma(i) - svd.sigma(j)), std::abs(svd.sigma(i) + svd.sigma(j))});
+      if (j != i)
+        g = std::min({g, std::abs(svd.sigma(i) - svd.sigma(j)), std::abs(svd.sigma(i) + svd.sigma(j))});
     out.gap(i) = g;
     for (int k = 0; k < 3; ++k) out.grad(i, k) = M[k](i, i);
   }

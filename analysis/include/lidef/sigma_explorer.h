@@ -51,8 +51,9 @@ class PolynomialExplorerMap : public ExplorerMap {
   HarmonicPolynomialMap map_;
 };
 
-// A cage map f = Σ y_i basis_i (green_coordinates.h). f, J, H are the closed forms; T is the central difference
-// of the closed-form H with step `fd_step` (relative error ~1e-7 at the distances the ball keeps from the cage).
+// A cage map f = Σ y_i basis_i (green_coordinates.h). f, J, H are the closed forms; T is the central
+// difference of the closed-form H with step `fd_step` (relative error ~1e-7 at the distances the ball keeps
+// from the cage).
 class CageExplorerMap : public ExplorerMap {
  public:
   // y: #V+#F by 3. Keeps its own copy of the cage and y.
@@ -73,7 +74,8 @@ class CageExplorerMap : public ExplorerMap {
   double h_;
 };
 
-// σ's of the map at p with gradients and (with_hessian) Hessians and Laplacians (singular_value_derivatives.h).
+// σ's of the map at p with gradients and (with_hessian) Hessians and Laplacians
+// (singular_value_derivatives.h).
 SigmaDerivatives map_sigma_derivatives(const ExplorerMap& map, const Vec3& p, bool with_hessian = true);
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -83,62 +85,65 @@ struct Sigma3Minimum {
   double sigma3 = 0;
   double gradient_norm = 0;
   Vec3 hessian_eigenvalues = Vec3::Zero();  // ascending
-  double sphere_radius = 0;      // radius of the small sphere around the point that was sampled
-  double sphere_min_sigma3 = 0;  // min of σ3 over that sphere's sample points
-  double gap = 0;                // gap of σ3 (σ3 simple and σ3 + σj ≠ 0 when > 0)
-  bool strict = false;           // Hessian positive definite and sphere_min_sigma3 > sigma3
-  int starts = 0;                // starts that converged to this point
+  double sphere_radius = 0;                 // radius of the small sphere around the point that was sampled
+  double sphere_min_sigma3 = 0;             // min of σ3 over that sphere's sample points
+  double gap = 0;                           // gap of σ3 (σ3 simple and σ3 + σj ≠ 0 when > 0)
+  bool strict = false;                      // Hessian positive definite and sphere_min_sigma3 > sigma3
+  int starts = 0;                           // starts that converged to this point
 };
 
 struct MinimaSearchParams {
-  int starts = 24;              // the ball's center plus (starts − 1) random points in the ball
+  int starts = 24;  // the ball's center plus (starts − 1) random points in the ball
   std::uint64_t seed = 1;
-  int max_iterations = 200;     // per start
-  double interior_margin = 1e-3;  // a minimum must satisfy |x − c| < R (1 − margin)
+  int max_iterations = 200;          // per start
+  double interior_margin = 1e-3;     // a minimum must satisfy |x − c| < R (1 − margin)
   double gradient_tolerance = 1e-9;  // relative to 1 + σ1 at the point
-  int sphere_points = 200;      // Fibonacci points on the small confirmation sphere
+  int sphere_points = 200;           // Fibonacci points on the small confirmation sphere
 };
 
 // Multi-start projected trust-region Newton descent of σ3 in the ball, with the exact gradient
 // (∂σ3/∂x_k = u3ᵀ ∂J/∂x_k v3) and Hessian of σ3. Returns the distinct interior critical points that are local
-// minima candidates (|∇σ3| small, inside the margin), sorted by σ3, each confirmed by the Hessian's eigenvalues
-// and by sampling σ3 on a small sphere around it (radius min(R/100, distance to the boundary / 2)).
+// minima candidates (|∇σ3| small, inside the margin), sorted by σ3, each confirmed by the Hessian's
+// eigenvalues and by sampling σ3 on a small sphere around it (radius min(R/100, distance to the boundary /
+// 2)).
 std::vector<Sigma3Minimum> find_sigma3_minima(const ExplorerMap& map, const Ball& ball,
                                               const MinimaSearchParams& params = {});
 
-// Min of σ3 over the vertices of an icosphere of the ball's radius (`subdivisions` times subdivided): a sampled
-// estimate of the minimum on the boundary. Returns the value and its point.
-std::pair<double, Vec3> sampled_sphere_min_sigma3(const ExplorerMap& map, const Ball& ball, int subdivisions = 4);
+// Min of σ3 over the vertices of an icosphere of the ball's radius (`subdivisions` times subdivided): a
+// sampled estimate of the minimum on the boundary. Returns the value and its point.
+std::pair<double, Vec3> sampled_sphere_min_sigma3(const ExplorerMap& map, const Ball& ball,
+                                                  int subdivisions = 4);
 
 // ---------------------------------------------------------------------------------------------------------------
 // A sound lower bound of σ3 on the ball (or on its boundary sphere) for polynomial maps of degree ≤ 4.
 // Cells: the cube [c − R, c + R]³ is cut into base_cells³ cubes; the cells meeting the closed ball (or, with
-// sphere_only, meeting the sphere) are checked. A cell with center q, side h, circumradius r = (√3/2) h passes when
+// sphere_only, meeting the sphere) are checked. A cell with center q, side h, circumradius r = (√3/2) h
+// passes when
 //   σ3(q) − r L − τ > threshold,   L = ‖H(q)‖ + r (‖T(q)‖ + r ‖F‖)
 // (full Frobenius norms: 27, 81, 243 entries). L bounds ‖H‖ on B(q, r) exactly: T is affine for degree ≤ 4 so
 // ‖T‖ ≤ ‖T(q)‖ + r ‖F‖ there, and ‖H(x)‖ ≤ ‖H(q)‖ + |x − q| max ‖T‖. By Theorem 4.1 (docs/certificate.md)
-// σ3 ≥ σ3(q) − r L on the cell. τ = 1e-9 (|σ3(q)| + r L + 24 max(1, ρ)⁴ Σ|monomial coefficients|), ρ = largest
-// coordinate magnitude in the cube, covers rounding (a wide allowance, not interval arithmetic). Failing cells are
-// split into 8 up to max_depth; a cell still failing there, σ3(q) ≤ threshold at a center, or an exhausted budget
-// means "not certified".
+// σ3 ≥ σ3(q) − r L on the cell. τ = 1e-9 (|σ3(q)| + r L + 24 max(1, ρ)⁴ Σ|monomial coefficients|), ρ =
+// largest coordinate magnitude in the cube, covers rounding (a wide allowance, not interval arithmetic).
+// Failing cells are split into 8 up to max_depth; a cell still failing there, σ3(q) ≤ threshold at a center,
+// or an exhausted budget means "not certified".
 struct BallCertifyParams {
-  int base_cells = 8;         // per axis
+  int base_cells = 8;  // per axis
   int max_depth = 8;
-  long max_cells = 4000000;   // evaluated cells in all
-  double threshold = 0;       // certify σ3 > threshold
-  bool sphere_only = false;   // only the cells meeting the sphere |x − c| = R
+  long max_cells = 4000000;  // evaluated cells in all
+  double threshold = 0;      // certify σ3 > threshold
+  bool sphere_only = false;  // only the cells meeting the sphere |x − c| = R
 };
 
 struct BallCertificate {
   bool certified = false;
-  std::string reason;       // why not (empty when certified)
+  std::string reason;  // why not (empty when certified)
   double threshold = 0;
   bool sphere_only = false;
   long cells_evaluated = 0;
   long leaves = 0;
   int max_depth_used = 0;
-  double min_lower_bound = 0;     // over the leaves: σ3(q) − r L − τ (a lower bound of σ3 on the region)
-  double min_sigma3_center = 0;   // over the evaluated centers
+  double min_lower_bound = 0;  // over the leaves: σ3(q) − r L − τ (a lower bound of σ3 on the region)
+  double min_sigma3_center = 0;      // over the evaluated centers
   Vec3 worst_center = Vec3::Zero();  // leaf with the smallest lower bound
 };
 
@@ -146,15 +151,15 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
                                        const BallCertifyParams& params = {});
 
 // ---------------------------------------------------------------------------------------------------------------
-// The image of the boundary sphere: an icosphere of the ball (`subdivisions` times subdivided) mapped vertex by
-// vertex, checked for self-intersections with exact predicates (self_intersections.h). This is a check of the
-// piecewise-linear interpolant of the image surface at this resolution, not of the smooth surface itself.
+// The image of the boundary sphere: an icosphere of the ball (`subdivisions` times subdivided) mapped vertex
+// by vertex, checked for self-intersections with exact predicates (self_intersections.h). This is a check of
+// the piecewise-linear interpolant of the image surface at this resolution, not of the smooth surface itself.
 struct BoundaryEmbedding {
   bool embedded = false;
   int subdivisions = 0;
   long intersecting_pairs = 0;
-  TriMesh source;  // the icosphere on the ball's boundary
-  TriMesh image;   // its image (same faces)
+  TriMesh source;             // the icosphere on the ball's boundary
+  TriMesh image;              // its image (same faces)
   double min_image_edge = 0;  // shortest image edge (degenerate triangles would be skipped by the check)
   double signed_volume = 0;   // enclosed by the image (> 0: orientation preserved)
 };
@@ -168,15 +173,22 @@ BoundaryEmbedding check_boundary_embedding(const ExplorerMap& map, const Ball& b
 // amplitude itself uniform in [0, max_amplitude]. Deterministic for a given 64-bit seed.
 HarmonicPolynomialMap random_harmonic_map(int degree, std::uint64_t seed, double max_amplitude = 0.6);
 
-// The constructed counterexample family (docs/explorer.md): with s1 > s2 > s3 > 0, twist c and cubic weight d,
+// The constructed counterexample family (docs/explorer.md): with s1 > s2 > s3 > 0, twist c and cubic weight
+// d,
 //   f(x, y, z) = ( s1 x + c x z,   s2 y − c y z,   s3 z + (c/2)(y² − x²) + d (z³ − (3/2) z (x² + y²)) ).
 // At the origin J = diag(s1, s2, s3), ∇σ3 = 0, and the Hessian of σ3 is
 //   diag(2c²/(s3 + s1) − 3d, 2c²/(s3 + s2) − 3d, 6d):
-// the twist (an antisymmetric change of J in the (1,3) and (2,3) entries) raises σ3 in x and y, the cubic term in z.
-// Degree 3 when d ≠ 0 (returned in the degree-`degree` basis, degree ≥ 3).
+// the twist (an antisymmetric change of J in the (1,3) and (2,3) entries) raises σ3 in x and y, the cubic
+// term in z. Degree 3 when d ≠ 0 (returned in the degree-`degree` basis, degree ≥ 3).
 HarmonicPolynomialMap twist_example(const Vec3& s, double c, double d, int degree = 4);
 
-// Per-trial seeds: splitmix64 of (seed, trial), so a trial's result does not depend on threads or on other trials.
+// A random perturbation of the twist family: s3 ~ U[0.3, 0.8], s2 = s3 + U[0.3, 1.2], s1 = s2 + U[0.1, 0.6],
+// c ~ U[0, 1.2] (s2 − s3), d ~ U[0, 0.1], plus N(0, (amplitude / max(l, 1))²) on every coefficient of degree
+// l ≥ 1 (amplitude itself uniform in [0, max_amplitude]).
+HarmonicPolynomialMap random_twist_map(int degree, std::uint64_t seed, double max_amplitude = 0.6);
+
+// Per-trial seeds: splitmix64 of (seed, trial), so a trial's result does not depend on threads or on other
+// trials.
 std::uint64_t trial_seed(std::uint64_t seed, std::uint64_t trial);
 
 struct SearchTrial {
@@ -192,7 +204,9 @@ struct SearchTrial {
   double candidate_gap = 0;  // (sphere min − interior min) / interior min, for ranking
 };
 
+enum class SearchFamily { kRandom, kTwist };  // random_harmonic_map / random_twist_map
 struct SearchParams {
+  SearchFamily family = SearchFamily::kRandom;
   int degree = 4;
   int trials = 200;
   std::uint64_t seed = 1;
@@ -200,8 +214,8 @@ struct SearchParams {
   MinimaSearchParams minima;
 };
 
-// Runs the trials in parallel (results in trial order). `progress` (optional) is called after each finished trial
-// with the number finished so far, from one thread at a time.
+// Runs the trials in parallel (results in trial order). `progress` (optional) is called after each finished
+// trial with the number finished so far, from one thread at a time.
 std::vector<SearchTrial> search_sigma3_minima(const SearchParams& params,
                                               const std::function<void(int)>& progress = nullptr);
 
@@ -211,12 +225,12 @@ struct LaplacianSample {
   int map = 0;
   Vec3 p = Vec3::Zero();
   Vec3 sigma = Vec3::Zero();
-  double lap_sigma1 = 0, lap_sigma3 = 0;          // exact (Hessian traces)
-  double lap_sigma1_fd = 0, lap_sigma3_fd = 0;    // 7-point finite-difference Laplacians (step 1e-3)
-  double gap = 0;                                  // min gap of σ1 and σ3 (formulas need it > 0)
+  double lap_sigma1 = 0, lap_sigma3 = 0;        // exact (Hessian traces)
+  double lap_sigma1_fd = 0, lap_sigma3_fd = 0;  // 7-point finite-difference Laplacians (step 1e-3)
+  double gap = 0;                               // min gap of σ1 and σ3 (formulas need it > 0)
 };
-std::vector<LaplacianSample> laplacian_experiment(int degree, int maps, int points_per_map, std::uint64_t seed,
-                                                  double max_amplitude = 0.6);
+std::vector<LaplacianSample> laplacian_experiment(int degree, int maps, int points_per_map,
+                                                  std::uint64_t seed, double max_amplitude = 0.6);
 
 // ---------------------------------------------------------------------------------------------------------------
 // Map files (JSON; docs/explorer.md). Throws InputError(path, ...) on any problem.
@@ -231,7 +245,8 @@ struct ExplorerExample {
 ExplorerExample read_explorer_example(const std::string& path);
 // The polynomial map as JSON text (format of read_explorer_example), deterministic, numbers in shortest
 // round-trip form.
-std::string explorer_example_json(const HarmonicPolynomialMap& map, const Ball& ball, const std::string& note);
+std::string explorer_example_json(const HarmonicPolynomialMap& map, const Ball& ball,
+                                  const std::string& note);
 
 // σ's sampled on a regular grid over the ball's bounding cube (`resolution` points per axis, x fastest), NaN
 // outside the ball.

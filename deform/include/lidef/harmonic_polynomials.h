@@ -1,7 +1,7 @@
 // Closed-form harmonic maps on a ball (the σ3 explorer's polynomial family, docs/explorer.md):
 //   f(x) = Σ_j c_j q_j(x),   c_j ∈ R³,  q_j the real solid harmonics of degree 0..D (D ≤ 4),
-// i.e. f(x) = b + A x + Σ_k c_k h_k(x) with the vector-valued harmonic polynomials h_k = e_a q_j (deg q_j ≥ 2).
-// Every component of f is harmonic. Values and all derivatives up to order 4 are exact (polynomial
+// i.e. f(x) = b + A x + Σ_k c_k h_k(x) with the vector-valued harmonic polynomials h_k = e_a q_j (deg q_j ≥
+// 2). Every component of f is harmonic. Values and all derivatives up to order 4 are exact (polynomial
 // differentiation), so J, H, the third derivatives T and the (constant) fourth derivatives F are exact.
 #pragma once
 #include <array>
@@ -35,7 +35,8 @@ int monomial_index(int a, int b, int c);
 Polynomial differentiate(const Polynomial& q, int i, int j, int k);
 // Exact Laplacian.
 Polynomial laplacian(const Polynomial& q);
-// (1/4π) ∫_{S²} q r dA for polynomials q, r with deg q + deg r ≤ 8 (exact monomial moments of the unit sphere).
+// (1/4π) ∫_{S²} q r dA for polynomials q, r with deg q + deg r ≤ 8 (exact monomial moments of the unit
+// sphere).
 double sphere_mean_product(const Polynomial& q, const Polynomial& r);
 
 // The scalar basis q_0 … q_{N−1}, N = (D+1)²: for each degree l = 0..D the 2l+1 real solid harmonics
@@ -52,7 +53,9 @@ struct HarmonicPolynomialBasis {
 // Throws Error unless 0 ≤ degree ≤ kMaxHarmonicDegree.
 const HarmonicPolynomialBasis& harmonic_polynomial_basis(int degree);
 // N = (D+1)² basis functions of degree ≤ D.
-inline int harmonic_basis_size(int degree) { return (degree + 1) * (degree + 1); }
+inline int harmonic_basis_size(int degree) {
+  return (degree + 1) * (degree + 1);
+}
 
 // f, J, H, third and fourth derivatives of a map at one point:
 //   J(a,b) = ∂_b f_a,  H[a](b,c) = ∂_b∂_c f_a,  T[a][b](c,d) = ∂_b∂_c∂_d f_a,  F[a][b][c](d,e) = ∂⁴ f_a.
@@ -61,7 +64,8 @@ struct PolyJet {
   Mat3 J = Mat3::Zero();
   std::array<Mat3, 3> H{};
   std::array<std::array<Mat3, 3>, 3> T{};
-  // Full Frobenius norms of the tensors (every entry, permutations counted separately): 27, 81 and 243 entries.
+  // Full Frobenius norms of the tensors (every entry, permutations counted separately): 27, 81 and 243
+  // entries.
   double hessian_norm() const;
   double third_norm() const;
 };
@@ -76,7 +80,8 @@ class HarmonicPolynomialMap {
   // Coefficients of the identity f(x) = x in the basis of degree D (3 by (D+1)²).
   static Eigen::Matrix<double, 3, Eigen::Dynamic> identity_coefficients(int degree);
   // Coefficients of the affine map A x + b (exact: C_1^1 = −x/2, S_1^1 = −y/2, C_1^0 = z before scaling).
-  static Eigen::Matrix<double, 3, Eigen::Dynamic> affine_coefficients(int degree, const Mat3& A, const Vec3& b);
+  static Eigen::Matrix<double, 3, Eigen::Dynamic> affine_coefficients(int degree, const Mat3& A,
+                                                                      const Vec3& b);
 
   // The map with the given components (monomial form) in the basis of degree D. Throws InputError when a
   // component is not harmonic or has degree above D (it is then not reproduced by its projection).
