@@ -13,6 +13,7 @@
 
 #include "lidef/harmonic_polynomials.h"
 #include "lidef/mesh_io.h"
+#include "lidef/model_check.h"
 #include "lidef/procedural_models.h"
 #include "lidef/sigma_explorer.h"
 #include "lidef/signed_svd.h"
@@ -441,4 +442,57 @@ TEST(ExploreCli, SearchIsByteIdenticalForAFixedSeed) {
   for (const char* f : {"trials.csv", "minima.csv", "summary.json"})
     EXPECT_EQ(lidef::test::read_text(tmp / "a/" + f), lidef::test::read_text(tmp / "b/" + f)) << f;
   EXPECT_FALSE(lidef::test::read_text(tmp / "a/trials.csv").empty());
+}
+
+TEST(ExploreCage, CageMapsThroughTheSameInterface) {
+  TempDir tmp;
+  const std::string model = lidef::test::project_data() + "/models/ball";
+  ASSERT_TRUE(fs::exists(model)) << model;
+  // A cage map file: identity coefficients on the project's ball model, a ball of radius 0.8 inside the cage.
+  lidef::test::write_text(tmp / "id.json",
+                          "{\"format\": \"lidef-explorer-map\", \"type\": \"cage\", \"model\": \"" + model +
+                              "\", \"coefficients\": \"identity\", \"domain\": {\"radius\": 0.8}}");
+  const ExplorerExample ex = read_explorer_example(tmp / "id.json");
+  ASSERT_EQ(ex.polynomial(), nullptr);
+  const auto* cm = dynamic_cast<const CageExplorerMap*>(ex.map.get());
+  ASSERT_NE(cm, nullptr);
+  // The identity is reproduced; the finite-difference third derivatives vanish.
+  std::mt19937_64 rng(1);
+  for (int t = 0; t < 5; ++t) {
+    const Vec3 p = random_in_ball(rng, 0.8);
+    const PolyJet j = cm->jet(p);
+    EXPECT_LT((j.f - p).norm(), 1e-10);
+    EXPECT_LT((j.J - Mat3::Identity()).norm(), 1e-9);
+    EXPECT_LT(j.third_norm(), 1e-4);
+  }
+  // σ3 ≡ 1: no strict minimum; certified with σ3 ≥ 1 − rounding.
+  EXPECT_TRUE(find_sigma3_minima(*cm, ex.ball, {4}).empty() ||
+              !find_sigma3_minima(*cm, ex.ball, {4})[0].strict);
+  const BallCertificate c = certify_cage_map_on_ball(*cm, ex.ball, 2);
+  EXPECT_TRUE(c.certified) << c.reason;
+  EXPECT_NEAR(c.min_lower_bound, 1, 1e-6);
+  // A reflection (σ3 = −1) is not certified; a domain ball that sticks out of the cage is refused.
+  const Model m = load_model(model);
+  const CageExplorerMap refl(m.cage, m.cage.affine_coefficients(Vec3(1, 1, -1).asDiagonal(), Vec3::Zero()),
+                             "refl");
+  EXPECT_FALSE(certify_cage_map_on_ball(refl, ex.ball, 2).certified);
+  Ball big;
+  big.radius = 1.5;
+  EXPECT_FALSE(certify_cage_map_on_ball(*cm, big, 2).certified);
+  lidef::test::write_text(tmp / "big.json",
+                          "{\"format\": \"lidef-explorer-map\", \"type\": \"cage\", \"model\": \"" + model +
+                              "\", \"coefficients\": \"identity\", \"domain\": {\"radius\": 1.5}}");
+  EXPECT_NE(lidef::test::input_error_message([&] {
+              read_explorer_example(tmp / "big.json");
+            }).find("not inside the cage"),
+            std::string::npos);
+  // T of a non-affine cage map: finite differences of H with two steps agree (the difference error is small).
+  MatX3d y = m.cage.identity_coefficients();
+  for (int i = 0; i < y.rows(); ++i)
+    y.row(i) += 0.05 * Vec3(std::sin(3.0 * i), std::cos(5.0 * i), std::sin(7.0 * i)).transpose();
+  const CageExplorerMap a(m.cage, y, "a", 1e-4), b(m.cage, y, "b", 1e-3);
+  const Vec3 p(0.2, -0.3, 0.1);
+  const PolyJet ja = a.jet(p), jb = b.jet(p);
+  for (int q = 0; q < 3; ++q)
+    for (int r = 0; r < 3; ++r) EXPECT_LT((ja.T[q][r] - jb.T[q][r]).norm(), 1e-4 * (1 + ja.third_norm()));
 }

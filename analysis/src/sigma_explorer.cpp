@@ -15,7 +15,9 @@
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"
+#include "lidef/sampling.h"
 #include "lidef/self_intersections.h"
 #include "lidef/signed_svd.h"
 
@@ -145,6 +147,10 @@ Vec3 CageExplorerMap::value(const Vec3& p) const {
   return basis_.map_jet(y_, p, 0).f;
 }
 
+Mat3 CageExplorerMap::jacobian(const Vec3& p) const {
+  return basis_.map_jet(y_, p, 1).J;
+}
+
 PolyJet CageExplorerMap::jet(const Vec3& p) const {
   const MapJet m = basis_.map_jet(y_, p, 2);
   PolyJet j;
@@ -227,10 +233,13 @@ std::vector<Sigma3Minimum> find_sigma3_minima(const ExplorerMap& map, const Ball
     m.sphere_radius = std::min(0.01 * ball.radius, 0.5 * (ball.radius - (r.x - ball.center).norm()));
     m.sphere_min_sigma3 = std::numeric_limits<double>::infinity();
     for (const Vec3& u : sphere) {
-      const Vec3 s = signed_singular_values(map.jet(r.x + m.sphere_radius * u).J);
+      const Vec3 s = signed_singular_values(map.jacobian(r.x + m.sphere_radius * u));
       m.sphere_min_sigma3 = std::min(m.sphere_min_sigma3, s(2));
     }
-    m.strict = m.hessian_eigenvalues(0) > 0 && m.sphere_min_sigma3 > m.sigma3;
+    // Flat directions (a constant σ3, e.g. an affine map) are not strict minima: demand curvature and a rise
+    // that clearly exceed rounding.
+    const double scale = 1 + std::abs(d.sigma(0));
+    m.strict = m.hessian_eigenvalues(0) > 1e-8 * scale && m.sphere_min_sigma3 > m.sigma3 + 1e-12 * scale;
     out.push_back(m);
   }
   return out;
@@ -243,7 +252,7 @@ std::pair<double, Vec3> sampled_sphere_min_sigma3(const ExplorerMap& map, const 
   Vec3 where = ball.center;
   for (int i = 0; i < s.V.rows(); ++i) {
     const Vec3 p = ball.center + s.V.row(i).transpose();
-    const double v = signed_singular_values(map.jet(p).J)(2);
+    const double v = signed_singular_values(map.jacobian(p))(2);
     if (v < best) {
       best = v;
       where = p;
@@ -354,6 +363,57 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
   }
   if (base.empty()) out.reason = "no cell meets the region";
   out.certified = out.reason.empty();
+  return out;
+}
+
+BallCertificate certify_cage_map_on_ball(const CageExplorerMap& map, const Ball& ball, int max_depth,
+                                         long max_cells) {
+  BallCertificate out;
+  const Cage& cage = map.cage();
+  const double clearance = cage.distance(ball.center) - ball.radius;
+  if (!(clearance > 0) || std::abs(cage.winding_number(ball.center) - 1) > 1e-6) {
+    out.reason = "the domain ball is not strictly inside the cage";
+    return out;
+  }
+  // A cube meeting the ball has its center within R + r of the ball's center, so its ball reaches R + 2r:
+  // r ≤ clearance / 4 keeps it at least clearance / 2 away from the cage.
+  const int n = static_cast<int>(std::ceil(2 * ball.radius / (clearance / (2 * std::sqrt(3.0)))));
+  if (static_cast<double>(n) * n * n * 0.6 > static_cast<double>(max_cells)) {
+    out.reason = "the domain ball is too close to the cage (clearance " + fmt(clearance) + ") for " +
+                 std::to_string(max_cells) + " cells";
+    return out;
+  }
+  VoxelSampling vs;
+  vs.side = 2 * ball.radius / n;
+  vs.origin = ball.center - Vec3::Constant(ball.radius);
+  std::vector<Vec3> centers;
+  std::vector<Eigen::Vector3i> idx;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const Vec3 q = vs.origin + vs.side * Vec3(i + 0.5, j + 0.5, k + 0.5);
+        if (region_min_dist(q, vs.side / 2, ball.center) <= ball.radius) {
+          centers.push_back(q);
+          idx.emplace_back(i, j, k);
+        }
+      }
+  vs.centers.resize(static_cast<long>(centers.size()), 3);
+  vs.grid_index.resize(static_cast<long>(centers.size()), 3);
+  for (size_t i = 0; i < centers.size(); ++i) {
+    vs.centers.row(static_cast<long>(i)) = centers[i].transpose();
+    vs.grid_index.row(static_cast<long>(i)) = idx[i].transpose();
+  }
+  CertifyParams cp;
+  cp.max_depth = max_depth;
+  cp.keep_leaves = false;
+  const Certificate c = certify_map(cage, vs, map.coefficients(), cp);
+  out.certified = c.certified;
+  out.reason = c.reason;
+  out.cells_evaluated = c.voxels + 8 * c.refined;
+  out.leaves = c.num_leaves;
+  out.max_depth_used = c.max_depth_used;
+  out.min_lower_bound = c.min_lower_bound;
+  out.min_sigma3_center = c.min_sigma3_center;
   return out;
 }
 
@@ -650,7 +710,7 @@ BallFieldGrid compute_ball_fields(const ExplorerMap& map, const Ball& ball, int 
     const long i = idx % resolution, j = (idx / resolution) % resolution, k = idx / (resolution * resolution);
     const Vec3 p = g.origin + g.spacing * Vec3(i, j, k);
     if (!ball.contains(p)) continue;
-    const Mat3 J = map.jet(p).J;
+    const Mat3 J = map.jacobian(p);
     const Vec3 s = signed_singular_values(J);
     g.sigma1[idx] = static_cast<float>(s(0));
     g.sigma2[idx] = static_cast<float>(s(1));

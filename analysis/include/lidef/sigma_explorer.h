@@ -33,6 +33,8 @@ class ExplorerMap {
   virtual ~ExplorerMap() = default;
   virtual PolyJet jet(const Vec3& p) const = 0;
   virtual Vec3 value(const Vec3& p) const { return jet(p).f; }
+  // J alone (cheaper for cage maps).
+  virtual Mat3 jacobian(const Vec3& p) const { return jet(p).J; }
   // True when T is exact (polynomials); false when it comes from finite differences (cage maps).
   virtual bool exact_third_derivatives() const = 0;
   virtual std::string description() const = 0;
@@ -60,6 +62,7 @@ class CageExplorerMap : public ExplorerMap {
   CageExplorerMap(const Cage& cage, const MatX3d& y, std::string name, double fd_step = 1e-4);
   PolyJet jet(const Vec3& p) const override;
   Vec3 value(const Vec3& p) const override;
+  Mat3 jacobian(const Vec3& p) const override;
   bool exact_third_derivatives() const override { return false; }
   std::string description() const override { return name_; }
   const Cage& cage() const { return cage_; }
@@ -88,8 +91,8 @@ struct Sigma3Minimum {
   double sphere_radius = 0;                 // radius of the small sphere around the point that was sampled
   double sphere_min_sigma3 = 0;             // min of σ3 over that sphere's sample points
   double gap = 0;                           // gap of σ3 (σ3 simple and σ3 + σj ≠ 0 when > 0)
-  bool strict = false;                      // Hessian positive definite and sphere_min_sigma3 > sigma3
-  int starts = 0;                           // starts that converged to this point
+  bool strict = false;  // Hessian eigenvalues > 1e-8 (1 + σ1), sphere_min_sigma3 > sigma3 + 1e-12 (1 + σ1)
+  int starts = 0;       // starts that converged to this point
 };
 
 struct MinimaSearchParams {
@@ -149,6 +152,15 @@ struct BallCertificate {
 
 BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const Ball& ball,
                                        const BallCertifyParams& params = {});
+
+// Local injectivity (σ3 > 0) of a cage map on the ball with the project's certificate (octree_certifier.h,
+// docs/certificate.md, third-order bound): cubes of side h covering the ball (those meeting it) as base
+// voxels, with h chosen so that every cube's circumscribed ball stays inside the cage, at least half the
+// ball-to-cage clearance away from it (the map is harmonic, and the edge bounds finite, only there).
+// max_depth: refinement levels. Not certified when the domain ball is too close to the cage for at most
+// `max_cells` base cubes.
+BallCertificate certify_cage_map_on_ball(const CageExplorerMap& map, const Ball& ball, int max_depth = 6,
+                                         long max_cells = 400000);
 
 // ---------------------------------------------------------------------------------------------------------------
 // The image of the boundary sphere: an icosphere of the ball (`subdivisions` times subdivided) mapped vertex
