@@ -496,3 +496,34 @@ TEST(ExploreCage, CageMapsThroughTheSameInterface) {
   for (int q = 0; q < 3; ++q)
     for (int r = 0; r < 3; ++r) EXPECT_LT((ja.T[q][r] - jb.T[q][r]).norm(), 1e-4 * (1 + ja.third_norm()));
 }
+
+TEST(ExploreCertificate, CellBoundDominatesHessianNormOnTheBall) {
+  // ‖H(x)‖ ≤ L(q, r) for x in B(q, r), sampled inside and on the sphere; includes a quartic with H = T = 0 at
+  // the center, where only the fourth-derivative term r²‖F‖ is left.
+  std::array<Polynomial, 3> f;
+  f[0].c[monomial_index(4, 0, 0)] = 1;  // Re (x + iy)⁴
+  f[0].c[monomial_index(2, 2, 0)] = -6;
+  f[0].c[monomial_index(0, 4, 0)] = 1;
+  f[1].c[monomial_index(0, 1, 0)] = 1;
+  f[2].c[monomial_index(0, 0, 1)] = 1;
+  std::vector<HarmonicPolynomialMap> maps{HarmonicPolynomialMap::from_components(4, f)};
+  for (int i = 0; i < 4; ++i) maps.push_back(random_harmonic_map(2 + i % 3, 70 + i, 0.8));
+  std::mt19937_64 rng(2);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (const HarmonicPolynomialMap& m : maps)
+    for (int c = 0; c < 20; ++c) {
+      const Vec3 q = c == 0 ? Vec3::Zero() : random_in_ball(rng);
+      const double r = 0.02 + 0.3 * u(rng);
+      const double L = cell_lipschitz_bound(m.jet(q, 3), m.fourth_norm(), r);
+      const double s3q = signed_singular_values(m.jet(q, 1).J)(2);
+      for (int t = 0; t < 200; ++t) {
+        Vec3 d = random_in_ball(rng);
+        if (t % 2) d.normalize();
+        const Vec3 x = q + r * d;
+        const PolyJet jx = m.jet(x, 2);
+        EXPECT_LE(jx.hessian_norm(), L * (1 + 1e-12) + 1e-14);
+        // Theorem 4.1 on the segment [q, x]: |σ3(x) − σ3(q)| ≤ |x − q| L.
+        EXPECT_LE(std::abs(signed_singular_values(jx.J)(2) - s3q), (x - q).norm() * L * (1 + 1e-12) + 1e-14);
+      }
+    }
+}

@@ -262,6 +262,10 @@ std::pair<double, Vec3> sampled_sphere_min_sigma3(const ExplorerMap& map, const 
 }
 
 // ---------------------------------------------------------------------------------------------------------------
+double cell_lipschitz_bound(const PolyJet& jet_at_center, double fourth_norm, double r) {
+  return jet_at_center.hessian_norm() + r * (jet_at_center.third_norm() + r * fourth_norm);
+}
+
 BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const Ball& ball,
                                        const BallCertifyParams& params) {
   if (params.base_cells < 1 || params.max_depth < 0 || params.max_cells < 1)
@@ -310,7 +314,7 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
       const double h = h0 / std::ldexp(1.0, c.depth), rad = std::sqrt(3.0) / 2 * h;
       const PolyJet jt = map.jet(c.q, 3);
       const double s3 = signed_singular_values(jt.J)(2);
-      const double L = jt.hessian_norm() + rad * (jt.third_norm() + rad * F);
+      const double L = cell_lipschitz_bound(jt, F, rad);
       const double rho = std::max(1.0, (c.q.cwiseAbs() + Vec3::Constant(h / 2)).maxCoeff());
       const double tau = 1e-9 * (std::abs(s3) + rad * L + 24 * std::pow(rho, 4) * S);
       const double lb = s3 - rad * L - tau;

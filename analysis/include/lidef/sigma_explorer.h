@@ -150,6 +150,10 @@ struct BallCertificate {
   Vec3 worst_center = Vec3::Zero();  // leaf with the smallest lower bound
 };
 
+// The cell bound L above from the jet at the center q (order 3), ‖F‖ and the radius r: ‖H(x)‖ ≤ L for |x − q|
+// ≤ r.
+double cell_lipschitz_bound(const PolyJet& jet_at_center, double fourth_norm, double r);
+
 BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const Ball& ball,
                                        const BallCertifyParams& params = {});
 
