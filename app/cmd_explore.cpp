@@ -45,6 +45,7 @@ struct ShowOptions {
   int grid = 64;
   int sphere_subdivisions = 5;
   int max_depth = 8;
+  int net_subdivisions = 6;
   int slice_resolution = 201;
 };
 
@@ -55,6 +56,9 @@ void check_show_options(const ShowOptions& o) {
   if (o.sphere_subdivisions < 1 || o.sphere_subdivisions > 7)
     throw InputError("--sphere-subdivisions",
                      "must be in 1..7 (got " + std::to_string(o.sphere_subdivisions) + ")");
+  if (o.net_subdivisions < 1 || o.net_subdivisions > 8)
+    throw InputError("--net-subdivisions",
+                     "must be in 1..8 (got " + std::to_string(o.net_subdivisions) + ")");
   if (o.max_depth < 0 || o.max_depth > 12)
     throw InputError("--max-depth", "must be in 0..12 (got " + std::to_string(o.max_depth) + ")");
 }
@@ -289,7 +293,7 @@ ShowResult show_map(StagedOutputs& out, const std::string& prefix, const Explore
     s["minimum"] = nullptr;
   }
 
-  bool injective_ok = false, below_ok = false;
+  bool injective_ok = false, below_ok = false, boundary_injective_ok = false;
   if (const HarmonicPolynomialMap* poly = ex.polynomial()) {
     std::cerr << tag << ": certifying sigma3 > 0 on the ball...\n";
     BallCertifyParams cp;
@@ -297,6 +301,32 @@ ShowResult show_map(StagedOutputs& out, const std::string& prefix, const Explore
     const BallCertificate cert = certify_sigma3_on_ball(*poly, ball, cp);
     s["local_injectivity"] = certificate_json(cert);
     injective_ok = cert.certified;
+    if (cert.certified) {
+      // Injectivity on the sphere needs a positive lower bound of σ3 on the ball: half the smallest value
+      // seen.
+      const double t =
+          0.5 * std::min(cert.min_sigma3_center, best && best->sigma3 > 0 ? best->sigma3 : INFINITY);
+      std::cerr << tag << ": certifying injectivity on the boundary sphere (net of " << o.net_subdivisions
+                << " subdivisions, sigma3 > " << g6(t) << ")...\n";
+      const BoundaryInjectivity bi =
+          certify_boundary_injective(*poly, ball, t, o.net_subdivisions, o.max_depth);
+      s["boundary_injectivity"] = {
+          {"certified", bi.certified},
+          {"reason", bi.reason},
+          {"sigma3_lower", bi.sigma3_lower},
+          {"hessian_bound", bi.hessian_bound},
+          {"jacobian_bound", bi.jacobian_bound},
+          {"rho", bi.rho},
+          {"subdivisions", bi.subdivisions},
+          {"triangles", bi.triangles},
+          {"pairs_measured", bi.pairs_measured},
+          {"max_delta", bi.max_delta},
+          {"min_pair_margin",
+           std::isfinite(bi.min_pair_margin) ? ojson(bi.min_pair_margin) : ojson(nullptr)}};
+      boundary_injective_ok = bi.certified;
+    } else {
+      s["boundary_injectivity"] = nullptr;
+    }
     if (best && best->sigma3 > 0) {
       std::cerr << tag << ": certifying sigma3 > " << g6(best->sigma3) << " on the boundary sphere...\n";
       cp.threshold = best->sigma3;
@@ -315,6 +345,7 @@ ShowResult show_map(StagedOutputs& out, const std::string& prefix, const Explore
     const BallCertificate cert = certify_cage_map_on_ball(*cm, ball, std::min(o.max_depth, 6));
     s["local_injectivity"] = certificate_json(cert);
     injective_ok = cert.certified;
+    s["boundary_injectivity"] = nullptr;
     s["boundary_above_minimum"] = nullptr;
   }
   std::cerr << tag << ": boundary sphere image (" << o.sphere_subdivisions
@@ -327,7 +358,7 @@ ShowResult show_map(StagedOutputs& out, const std::string& prefix, const Explore
                              {"min_image_edge", be.min_image_edge},
                              {"image_volume", be.signed_volume}};
   ShowResult r;
-  r.verified = best && best->sigma3 > 0 && injective_ok && below_ok && be.embedded;
+  r.verified = best && best->sigma3 > 0 && injective_ok && below_ok && boundary_injective_ok && be.embedded;
   s["verified_counterexample"] = r.verified;
 
   // --- Files.
@@ -388,6 +419,17 @@ void print_show_summary(const ojson& s, const std::string& tag) {
       std::cout << " (sigma3 >= " << g6(b["min_lower_bound"].get<double>()) << " there)";
     std::cout << "\n";
   }
+  if (!s["boundary_injectivity"].is_null()) {
+    const ojson& b = s["boundary_injectivity"];
+    std::cout << "  injective on the boundary sphere: "
+              << (b["certified"].get<bool>() ? "certified" : "NOT certified");
+    if (b["certified"].get<bool>())
+      std::cout << " (rho " << g6(b["rho"].get<double>()) << ", " << b["triangles"].get<long>()
+                << " triangles, " << b["pairs_measured"].get<long>() << " pairs measured)";
+    else
+      std::cout << ": " << b["reason"].get<std::string>();
+    std::cout << "\n";
+  }
   const ojson& e = s["boundary_embedding"];
   std::cout << "  boundary image: " << (e["embedded"].get<bool>() ? "embedded" : "NOT embedded") << " ("
             << e["triangles"].get<long>() << " triangles, " << e["intersecting_pairs"].get<long>()
@@ -431,6 +473,9 @@ void add_explore_command(CLI::App& app, Action& action) {
         ->capture_default_str();
     sub->add_option("--max-depth", o.max_depth, "Subdivision levels of the ball certificate's cells (0..12)")
         ->capture_default_str();
+    sub->add_option("--net-subdivisions", o.net_subdivisions,
+                    "Icosphere subdivisions of the net of the boundary-injectivity certificate (1..8)")
+        ->capture_default_str();
   };
 
   // --- show
@@ -459,7 +504,9 @@ void add_explore_command(CLI::App& app, Action& action) {
         "*_tri.dat)\n"
         "and summary.json. PNGs need gnuplot ($LIDEF_GNUPLOT or PATH; skipped with a warning otherwise).\n"
         "Exit code: 0 verified counterexample (strict interior minimum, sigma3 > 0 certified on the ball,\n"
-        "sigma3 > the minimum certified on the sphere, boundary image embedded), 1 not verified, 2 error.");
+        "sigma3 > the minimum certified on the sphere, injectivity on the sphere certified, triangulated "
+        "boundary\n"
+        "image embedded), 1 not verified, 2 error.");
     sub->callback([o, &action] {
       action = [o] {
         check_show_options(o->show);

@@ -527,3 +527,78 @@ TEST(ExploreCertificate, CellBoundDominatesHessianNormOnTheBall) {
       }
     }
 }
+
+TEST(ExploreBoundary, TriangleDistanceMatchesSampling) {
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> n;
+  int tested = 0;
+  for (int t = 0; t < 200 && tested < 60; ++t) {
+    std::array<Vec3, 3> A, B;
+    const Vec3 shift(n(rng), n(rng), n(rng));
+    for (int k = 0; k < 3; ++k) {
+      A[k] = Vec3(n(rng), n(rng), n(rng)) * 0.5;
+      B[k] = Vec3(n(rng), n(rng), n(rng)) * 0.5 + 1.5 * shift;
+    }
+    // Brute force over barycentric grids of both triangles (a dense sampling of their points).
+    auto pts = [](const std::array<Vec3, 3>& T) {
+      std::vector<Vec3> p;
+      const int m = 40;
+      for (int i = 0; i <= m; ++i)
+        for (int j = 0; i + j <= m; ++j)
+          p.push_back(T[0] + (T[1] - T[0]) * (double(i) / m) + (T[2] - T[0]) * (double(j) / m));
+      return p;
+    };
+    const std::vector<Vec3> pa = pts(A), pb = pts(B);
+    double brute = INFINITY;
+    for (const Vec3& a : pa)
+      for (const Vec3& b : pb) brute = std::min(brute, (a - b).norm());
+    if (brute < 0.05) continue;  // possibly intersecting: outside the function's contract
+    ++tested;
+    const double d = disjoint_triangle_distance(A, B);
+    EXPECT_LE(d, brute + 1e-12);
+    // The grid spacing bounds how far the sampled minimum can be above the true one.
+    const double spacing =
+        std::max({(A[1] - A[0]).norm(), (A[2] - A[0]).norm(), (B[1] - B[0]).norm(), (B[2] - B[0]).norm()}) /
+        40;
+    EXPECT_GE(d, brute - 2 * spacing);
+  }
+  EXPECT_GE(tested, 30);
+}
+
+TEST(ExploreBoundary, BoundaryInjectivityCertificate) {
+  const ExplorerExample ex = read_explorer_example(shipped_example());
+  const HarmonicPolynomialMap& m = *ex.polynomial();
+  // A fine enough net certifies it, with some pairs measured exactly; a coarse net cannot.
+  const BoundaryInjectivity fine = certify_boundary_injective(m, ex.ball, 0.3, 5);
+  EXPECT_TRUE(fine.certified) << fine.reason;
+  EXPECT_GT(fine.pairs_measured, 0);
+  EXPECT_GT(fine.min_pair_margin, 0);
+  EXPECT_GE(fine.sigma3_lower, 0.3);
+  EXPECT_GT(fine.rho, 0);
+  EXPECT_FALSE(certify_boundary_injective(m, ex.ball, 0.3, 3).certified);
+  // The bounds it uses hold at sampled points: ‖H‖ ≤ H, ‖J‖_F ≤ G, σ3 ≥ s.
+  std::mt19937_64 rng(4);
+  for (int t = 0; t < 2000; ++t) {
+    const PolyJet j = m.jet(random_in_ball(rng), 2);
+    EXPECT_LE(j.hessian_norm(), fine.hessian_bound);
+    EXPECT_LE(j.J.norm(), fine.jacobian_bound);
+    EXPECT_GE(signed_singular_values(j.J)(2), fine.sigma3_lower);
+  }
+  // Far-apart sphere points have far-apart images: the margin the certificate relies on, sampled.
+  double worst = INFINITY;
+  for (int t = 0; t < 20000; ++t) {
+    const Vec3 p = random_in_ball(rng).normalized(), q = random_in_ball(rng).normalized();
+    if ((p - q).norm() >= fine.rho) worst = std::min(worst, (m.value(p) - m.value(q)).norm());
+  }
+  EXPECT_GT(worst, 0);
+  // The σ3 threshold must be certified first: a threshold above the minimum 0.6 fails.
+  EXPECT_FALSE(certify_boundary_injective(m, ex.ball, 0.7, 5).certified);
+  // The double cover (x² − y², 2xy, z) is not locally injective on the axis: refused.
+  std::array<Polynomial, 3> f;
+  f[0].c[monomial_index(2, 0, 0)] = 1;
+  f[0].c[monomial_index(0, 2, 0)] = -1;
+  f[1].c[monomial_index(1, 1, 0)] = 2;
+  f[2].c[monomial_index(0, 0, 1)] = 1;
+  EXPECT_FALSE(
+      certify_boundary_injective(HarmonicPolynomialMap::from_components(2, f), Ball(), 0.01, 4).certified);
+}

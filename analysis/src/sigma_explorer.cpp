@@ -295,7 +295,7 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
   struct Result {
     long evaluated = 0, leaves = 0;
     int depth = 0;
-    double min_lb = INFINITY, min_sigma = INFINITY;
+    double min_lb = INFINITY, min_sigma = INFINITY, max_L = 0, max_J = 0;
     Vec3 worst = Vec3::Zero();
     std::string fail;
   };
@@ -329,6 +329,8 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
       }
       if (lb > params.threshold) {
         ++r.leaves;
+        r.max_L = std::max(r.max_L, L);
+        r.max_J = std::max(r.max_J, jt.J.norm() + rad * L);
         if (lb < r.min_lb) {
           r.min_lb = lb;
           r.worst = c.q;
@@ -363,6 +365,8 @@ BallCertificate certify_sigma3_on_ball(const HarmonicPolynomialMap& map, const B
       out.worst_center = r.worst;
     }
     out.min_sigma3_center = std::min(out.min_sigma3_center, r.min_sigma);
+    out.max_hessian_bound = std::max(out.max_hessian_bound, r.max_L);
+    out.max_jacobian_bound = std::max(out.max_jacobian_bound, r.max_J);
     if (out.reason.empty() && !r.fail.empty()) out.reason = r.fail;
   }
   if (base.empty()) out.reason = "no cell meets the region";
@@ -444,6 +448,170 @@ BoundaryEmbedding check_boundary_embedding(const ExplorerMap& map, const Ball& b
   out.signed_volume = vol;
   out.intersecting_pairs = static_cast<long>(find_self_intersections(out.image.V, out.image.F).size());
   out.embedded = out.intersecting_pairs == 0 && out.min_image_edge > 0 && vol > 0;
+  return out;
+}
+
+namespace {
+
+// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
+Vec3 closest_point_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return a;
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + (d1 / (d1 - d3)) * ab;
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + (d2 / (d2 - d6)) * ac;
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+  const double den = 1 / (va + vb + vc);
+  return a + ab * (vb * den) + ac * (vc * den);
+}
+
+// Distance between segments p1q1 and p2q2 (Ericson 5.1.9).
+double segment_distance(const Vec3& p1, const Vec3& q1, const Vec3& p2, const Vec3& q2) {
+  const Vec3 d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
+  double s = 0, t = 0;
+  if (a <= 1e-300 && e <= 1e-300) return r.norm();
+  if (a <= 1e-300) {
+    t = std::clamp(f / e, 0.0, 1.0);
+  } else {
+    const double c = d1.dot(r);
+    if (e <= 1e-300) {
+      s = std::clamp(-c / a, 0.0, 1.0);
+    } else {
+      const double b = d1.dot(d2), den = a * e - b * b;
+      s = den > 0 ? std::clamp((b * f - c * e) / den, 0.0, 1.0) : 0.0;
+      t = (b * s + f) / e;
+      if (t < 0) {
+        t = 0;
+        s = std::clamp(-c / a, 0.0, 1.0);
+      } else if (t > 1) {
+        t = 1;
+        s = std::clamp((b - c) / a, 0.0, 1.0);
+      }
+    }
+  }
+  return ((p1 + d1 * s) - (p2 + d2 * t)).norm();
+}
+
+}  // namespace
+
+double disjoint_triangle_distance(const std::array<Vec3, 3>& A, const std::array<Vec3, 3>& B) {
+  double d = INFINITY;
+  for (int i = 0; i < 3; ++i) {
+    d = std::min(d, (A[i] - closest_point_triangle(A[i], B[0], B[1], B[2])).norm());
+    d = std::min(d, (B[i] - closest_point_triangle(B[i], A[0], A[1], A[2])).norm());
+    for (int j = 0; j < 3; ++j) d = std::min(d, segment_distance(A[i], A[(i + 1) % 3], B[j], B[(j + 1) % 3]));
+  }
+  return d;
+}
+
+BoundaryInjectivity certify_boundary_injective(const HarmonicPolynomialMap& map, const Ball& ball,
+                                               double sigma3_threshold, int subdivisions, int max_depth) {
+  BoundaryInjectivity out;
+  out.subdivisions = subdivisions;
+  out.min_pair_margin = INFINITY;
+  if (!(sigma3_threshold > 0)) {
+    out.reason = "needs a positive sigma3 threshold";
+    return out;
+  }
+  BallCertifyParams cp;
+  cp.threshold = sigma3_threshold;
+  cp.max_depth = max_depth;
+  const BallCertificate c = certify_sigma3_on_ball(map, ball, cp);
+  if (!c.certified) {
+    out.reason = "sigma3 > " + fmt(sigma3_threshold) + " not certified on the ball: " + c.reason;
+    return out;
+  }
+  out.sigma3_lower = c.min_lower_bound;
+  out.hessian_bound = c.max_hessian_bound;
+  out.jacobian_bound = c.max_jacobian_bound;
+  const double H = std::max(out.hessian_bound, 1e-300), G = out.jacobian_bound;
+  out.rho = out.sigma3_lower / H;
+
+  TriMesh src = icosphere(ball.radius, subdivisions);
+  src.V.rowwise() += ball.center.transpose();
+  const long nv = src.V.rows(), nf = src.F.rows();
+  out.triangles = nf;
+  MatX3d img(nv, 3);
+#pragma omp parallel for schedule(static)
+  for (long i = 0; i < nv; ++i) img.row(i) = map.value(src.V.row(i).transpose()).transpose();
+  if (!img.allFinite()) {
+    out.reason = "non-finite image point";
+    return out;
+  }
+  // The linear images must not intersect at all (exact predicates); then distances are vertex/edge distances.
+  if (!find_self_intersections(img, src.F).empty()) {
+    out.reason = "the triangulated image of the sphere intersects itself";
+    return out;
+  }
+  std::vector<double> delta(nf), rad(nf);
+  std::vector<Vec3> cen(nf);
+  std::vector<Eigen::AlignedBox3d> box(nf);
+  double scale = 0;
+  for (long t = 0; t < nf; ++t) {
+    const Vec3 a = src.V.row(src.F(t, 0)), b = src.V.row(src.F(t, 1)), cc = src.V.row(src.F(t, 2));
+    const double e = std::max({(b - a).norm(), (cc - b).norm(), (a - cc).norm()});
+    const Vec3 n = (b - a).cross(cc - a).normalized();
+    const double sag = std::max(0.0, ball.radius - std::abs(n.dot(a - ball.center)));
+    cen[t] = (a + b + cc) / 3;
+    rad[t] = std::max({(a - cen[t]).norm(), (b - cen[t]).norm(), (cc - cen[t]).norm()}) + sag;
+    delta[t] = G * sag + 0.5 * H * e * e;
+    out.max_delta = std::max(out.max_delta, delta[t]);
+    for (int k = 0; k < 3; ++k) {
+      box[t].extend(img.row(src.F(t, k)).transpose());
+      scale = std::max(scale, img.row(src.F(t, k)).cwiseAbs().maxCoeff());
+    }
+    box[t].min().array() -= delta[t];
+    box[t].max().array() += delta[t];
+  }
+  const double allowance = 1e-9 * (1 + scale);  // rounding of the image points and of the distances
+  // Sweep over x of the grown boxes.
+  std::vector<long> order(nf);
+  for (long t = 0; t < nf; ++t) order[t] = t;
+  std::sort(order.begin(), order.end(), [&](long a, long b) {
+    return box[a].min().x() < box[b].min().x() || (box[a].min().x() == box[b].min().x() && a < b);
+  });
+  long measured = 0;
+  double min_margin = INFINITY;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : measured) reduction(min : min_margin)
+  for (long oi = 0; oi < nf; ++oi) {
+    const long i = order[oi];
+    for (long oj = oi + 1; oj < nf && box[order[oj]].min().x() <= box[i].max().x(); ++oj) {
+      const long j = order[oj];
+      if (box[i].intersection(box[j]).isEmpty()) continue;
+      // All point pairs of these two triangles are closer than ρ: the local argument covers them.
+      if ((cen[i] - cen[j]).norm() + rad[i] + rad[j] < out.rho) continue;
+      std::array<Vec3, 3> A, B;
+      bool shared = false;
+      for (int k = 0; k < 3; ++k) {
+        A[k] = img.row(src.F(i, k)).transpose();
+        B[k] = img.row(src.F(j, k)).transpose();
+        for (int l = 0; l < 3; ++l) shared = shared || src.F(i, k) == src.F(j, l);
+      }
+      ++measured;
+      const double m = (shared ? 0.0 : disjoint_triangle_distance(A, B)) - delta[i] - delta[j] - allowance;
+      min_margin = std::min(min_margin, m);
+    }
+  }
+  out.pairs_measured = measured;
+  out.min_pair_margin = min_margin;
+  if (!(min_margin > 0)) {
+    out.reason = "two boundary triangles at least rho = " + fmt(out.rho) +
+                 " apart have images closer than their "
+                 "error bounds (margin " +
+                 fmt(min_margin) + "): refine the net (more subdivisions)";
+    return out;
+  }
+  out.certified = true;
   return out;
 }
 

@@ -5,6 +5,7 @@
 // coefficients), both behind ExplorerMap. Everything here is deterministic for a fixed seed, whatever the
 // thread count.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -148,6 +149,10 @@ struct BallCertificate {
   double min_lower_bound = 0;  // over the leaves: σ3(q) − r L − τ (a lower bound of σ3 on the region)
   double min_sigma3_center = 0;      // over the evaluated centers
   Vec3 worst_center = Vec3::Zero();  // leaf with the smallest lower bound
+  // Over the accepted leaves (when certified they cover the region): max of L ≥ ‖H‖ (27-entry Frobenius) and
+  // of ‖J(q)‖_F + r L ≥ ‖J‖_F on each leaf's ball.
+  double max_hessian_bound = 0;
+  double max_jacobian_bound = 0;
 };
 
 // The cell bound L above from the jet at the center q (order 3), ‖F‖ and the radius r: ‖H(x)‖ ≤ L for |x − q|
@@ -180,6 +185,41 @@ struct BoundaryEmbedding {
   double signed_volume = 0;   // enclosed by the image (> 0: orientation preserved)
 };
 BoundaryEmbedding check_boundary_embedding(const ExplorerMap& map, const Ball& ball, int subdivisions = 5);
+
+// A sound certificate that a polynomial map is injective on the boundary sphere (docs/explorer.md). With σ3 >
+// s > 0 certified on the ball (threshold `sigma3_threshold`), H := max ‖H‖ and G := max ‖J‖_F bounded by that
+// certificate, and ρ = s / H:
+//  * |p − q| < ρ: f(p) − f(q) = J(q)(p − q) + E, |E| ≤ ½ H |p − q|², so |f(p) − f(q)| ≥ |p − q| (s − ½ H |p −
+//  q|) > 0
+//    (the segment lies in the ball, which is convex);
+//  * |p − q| ≥ ρ: p, q lie in spherical triangles T1, T2 of an icosphere (`subdivisions`) with
+//    |c1 − c2| + rad1 + rad2 ≥ ρ (c the centroid, rad ≥ max |p − c| on the spherical triangle). f maps each
+//    spherical triangle T to within δ_T = G sag_T + ½ H e_T² of its linear image (sag: distance from the
+//    sphere to the flat triangle, e: longest edge), so it suffices that the linear images of every such pair
+//    are more than δ1 + δ2 apart: pairs whose image boxes grown by δ do not overlap are, the others are
+//    measured exactly (the triangle-triangle distance, after an exact check that no two linear images
+//    intersect).
+// Together with local injectivity this makes f a bijection of the ball onto its image (docs/explorer.md).
+struct BoundaryInjectivity {
+  bool certified = false;
+  std::string reason;
+  double sigma3_lower = 0;    // s
+  double hessian_bound = 0;   // H
+  double jacobian_bound = 0;  // G
+  double rho = 0;
+  int subdivisions = 0;
+  long triangles = 0;
+  long pairs_measured = 0;     // pairs whose distance had to be computed
+  double max_delta = 0;        // max δ_T
+  double min_pair_margin = 0;  // min over measured pairs of distance − δ1 − δ2 (+inf when none)
+};
+// Distance between two triangles that do not intersect: the smallest of the 6 vertex-triangle and 9 edge-edge
+// distances (for intersecting triangles it is not 0, so callers check intersections first).
+double disjoint_triangle_distance(const std::array<Vec3, 3>& A, const std::array<Vec3, 3>& B);
+
+BoundaryInjectivity certify_boundary_injective(const HarmonicPolynomialMap& map, const Ball& ball,
+                                               double sigma3_threshold, int subdivisions = 6,
+                                               int max_depth = 8);
 
 // ---------------------------------------------------------------------------------------------------------------
 // Random maps and the search.
