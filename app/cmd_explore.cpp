@@ -650,10 +650,15 @@ void add_explore_command(CLI::App& app, Action& action) {
               c.certified ? certify_sigma3_on_ball(tr.map, Ball(), cp) : BallCertificate();
           const bool emb = c.certified && sc.certified &&
                            check_boundary_embedding(m, Ball(), o->show.sphere_subdivisions).embedded;
-          const bool ok = c.certified && sc.certified && emb;
+          const bool binj = emb && certify_boundary_injective(
+                                       tr.map, Ball(), 0.5 * std::min(c.min_sigma3_center, cp.threshold),
+                                       o->show.net_subdivisions, o->show.max_depth)
+                                       .certified;
+          const bool ok = c.certified && sc.certified && emb && binj;
           verified.push_back({{"trial", t},
                               {"local_injectivity_certified", c.certified},
                               {"boundary_above_minimum_certified", sc.certified},
+                              {"boundary_injectivity_certified", binj},
                               {"boundary_embedded", emb},
                               {"verified", ok}});
           if (ok) {
