@@ -558,12 +558,10 @@ void add_explore_command(CLI::App& app, Action& action) {
     sub->add_option("--threads", o->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
     sub->add_option("--out", o->out, "Output folder (created if missing)")->required();
     sub->footer(
-        "Writes trials.csv (one row per map), minima.csv (every interior minimum found), summary.json "
-        "(counts and\n"
-        "frequencies), candidate_<trial>.json for each verified candidate, and for the best candidate the "
-        "files of\n"
-        "'lidef explore show' prefixed best_. Exit code: 0 a verified counterexample was found, 1 none, 2 "
-        "error.");
+        "Writes trials.csv (one row per map), minima.csv (every interior minimum found), summary.json\n"
+        "(counts and frequencies), candidate_<trial>.json for each verified candidate, and the files of\n"
+        "'lidef explore show' prefixed best_ for the best candidate (else the first map with a strict interior\n"
+        "minimum, else map 0). Exit code: 0 a verified counterexample was found, 1 none, 2 error.");
     sub->callback([o, &action] {
       action = [o] {
         check_show_options(o->show);
@@ -667,7 +665,12 @@ void add_explore_command(CLI::App& app, Action& action) {
             if (best_trial < 0) best_trial = t;
           }
         }
+        // No verified candidate: still show one map (the best candidate, else the first with a strict interior
+        // minimum, else trial 0), so that the pictures and fields always exist.
         if (best_trial < 0 && !order.empty()) best_trial = order[0];
+        for (const SearchTrial& t : trials)
+          if (best_trial < 0 && t.strict_minima > 0) best_trial = t.trial;
+        if (best_trial < 0) best_trial = 0;
         ojson s;
         s["family"] = o->family;
         s["degree"] = o->degree;
