@@ -560,7 +560,8 @@ void add_explore_command(CLI::App& app, Action& action) {
     sub->footer(
         "Writes trials.csv (one row per map), minima.csv (every interior minimum found), summary.json\n"
         "(counts and frequencies), candidate_<trial>.json for each verified candidate, and the files of\n"
-        "'lidef explore show' prefixed best_ for the best candidate (else the first map with a strict interior\n"
+        "'lidef explore show' prefixed best_ for the best candidate (else the first map with a strict "
+        "interior\n"
         "minimum, else map 0). Exit code: 0 a verified counterexample was found, 1 none, 2 error.");
     sub->callback([o, &action] {
       action = [o] {
@@ -665,8 +666,8 @@ void add_explore_command(CLI::App& app, Action& action) {
             if (best_trial < 0) best_trial = t;
           }
         }
-        // No verified candidate: still show one map (the best candidate, else the first with a strict interior
-        // minimum, else trial 0), so that the pictures and fields always exist.
+        // No verified candidate: still show one map (the best candidate, else the first with a strict
+        // interior minimum, else trial 0), so that the pictures and fields always exist.
         if (best_trial < 0 && !order.empty()) best_trial = order[0];
         for (const SearchTrial& t : trials)
           if (best_trial < 0 && t.strict_minima > 0) best_trial = t.trial;
@@ -801,12 +802,14 @@ void add_explore_command(CLI::App& app, Action& action) {
         long n = 0, s1neg = 0, s3pos = 0, s3pos_det = 0, det_pos = 0;
         double min_l1 = INFINITY, max_l3 = -INFINITY, max_fd = 0;
         write_file_atomic(out.path("laplacian.csv"), [&](std::ostream& s) {
-          s << "map,x,y,z,sigma1,sigma2,sigma3,lap_sigma1,lap_sigma1_fd,lap_sigma3,lap_sigma3_fd,gap\n";
+          s << "map,x,y,z,sigma1,sigma2,sigma3,lap_sigma1,lap_sigma1_fd,lap_sigma3,lap_sigma3_fd,lap_sigma3_"
+               "sym,"
+               "lap_sigma3_anti,gap\n";
           for (const LaplacianSample& q : L) {
             s << q.map << ',' << fd(q.p.x()) << ',' << fd(q.p.y()) << ',' << fd(q.p.z()) << ','
               << fd(q.sigma(0)) << ',' << fd(q.sigma(1)) << ',' << fd(q.sigma(2)) << ',' << fd(q.lap_sigma1)
               << ',' << fd(q.lap_sigma1_fd) << ',' << fd(q.lap_sigma3) << ',' << fd(q.lap_sigma3_fd) << ','
-              << fd(q.gap) << '\n';
+              << fd(q.lap_sigma3_sym) << ',' << fd(q.lap_sigma3_anti) << ',' << fd(q.gap) << '\n';
             if (!(q.gap > 1e-3)) continue;  // the formulas need simple singular values
             ++n;
             s1neg += q.lap_sigma1 < 0;
@@ -838,6 +841,46 @@ void add_explore_command(CLI::App& app, Action& action) {
         s["lap_sigma3_positive_det_positive"] = s3pos_det;
         s["lap_sigma3_max"] = max_l3;
         s["max_rel_difference_exact_vs_fd_gap_above_0.05"] = max_fd;
+        // Where Δσ3 > 0: the antisymmetric (≥ 0) against the symmetric (≤ 0) part, log-log, with the
+        // diagonal.
+        write_file_atomic(out.path("laplacian_plot.dat"), [&](std::ostream& f) {
+          f << "# -lap_sigma3_sym lap_sigma3_anti (points with gap > 1e-3 and both parts > 1e-12)\n# "
+               "lap_sigma3 <= 0\n";
+          for (int pass = 0; pass < 2; ++pass) {
+            if (pass == 1) f << "\n\n# lap_sigma3 > 0\n";
+            for (const LaplacianSample& q : L)
+              if (q.gap > 1e-3 && -q.lap_sigma3_sym > 1e-12 && q.lap_sigma3_anti > 1e-12 &&
+                  (q.lap_sigma3 > 0) == (pass == 1))
+                f << fd(-q.lap_sigma3_sym) << ' ' << fd(q.lap_sigma3_anti) << '\n';
+          }
+        });
+        write_file_atomic(out.path("laplacian.gp"), [&](std::ostream& f) {
+          f << "# The two parts of the Laplacian of sigma3 at random points of random harmonic maps.\n"
+               "# Render with: gnuplot laplacian.gp   (in this folder)\n"
+               "set terminal pngcairo enhanced size 800,700 font 'sans,11'\nset output 'laplacian.png'\n"
+               "set title 'Laplacian of sigma_3: where it is positive (no superharmonicity)'\n"
+               "set logscale xy\nset format x '10^{%L}'\nset format y '10^{%L}'\nset size ratio -1\n"
+               "set xlabel '-(symmetric part)  (<= 0 term)'\nset ylabel 'antisymmetric part  (>= 0 term)'\n"
+               "set key top left\nset grid\n"
+               "plot 'laplacian_plot.dat' index 0 using 1:2 with points pt 7 ps 0.3 lc rgb '#1f77b4' "
+               "title 'Laplacian of sigma_3 <= 0', '' index 1 using 1:2 with points pt 7 ps 0.3 lc rgb "
+               "'#d62728' "
+               "title 'Laplacian of sigma_3 > 0', x with lines lc rgb 'black' dt 2 title 'equal parts'\n";
+        });
+        const std::string gnuplot = find_gnuplot();
+        std::string plot_note;
+        if (gnuplot.empty()) {
+          plot_note = "gnuplot not found: laplacian.png not drawn";
+        } else {
+          std::string log;
+          const std::string png = out.path("laplacian.png");
+          if (!run_gnuplot(gnuplot, out.staging_dir(), "laplacian.gp", &log) || !fs::exists(png)) {
+            std::error_code ec;
+            fs::remove(png, ec);
+            plot_note = "gnuplot failed: laplacian.png not drawn" + (log.empty() ? "" : ": " + log);
+          }
+        }
+        if (!plot_note.empty()) std::cerr << "lidef explore laplacian: warning: " << plot_note << "\n";
         write_file_atomic(out.path("summary.json"), [&](std::ostream& f) { f << s.dump(2) << "\n"; });
         out.commit();
         std::cout << "lidef explore laplacian: " << n << " points (" << o->maps << " maps x " << o->points
@@ -848,7 +891,7 @@ void add_explore_command(CLI::App& app, Action& action) {
                   << "%; max " << g6(max_l3) << "): no superharmonicity, so no minimum principle from it\n"
                   << "  exact vs finite-difference Laplacians (gap > 0.05): max relative difference "
                   << g6(max_fd) << "\n"
-                  << "  wrote " << out.final_path("") << "{laplacian.csv, summary.json}\n";
+                  << "  wrote " << out.final_path("") << "{laplacian.csv, summary.json, laplacian.png}\n";
         return kOk;
       };
     });

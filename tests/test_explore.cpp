@@ -223,6 +223,10 @@ TEST(ExploreSigma, Sigma1SubharmonicSigma3NotSuperharmonic) {
     EXPECT_NEAR(q.lap_sigma1, q.lap_sigma1_fd, 1e-3 * (1 + std::abs(q.lap_sigma1)));
     EXPECT_NEAR(q.lap_sigma3, q.lap_sigma3_fd, 1e-3 * (1 + std::abs(q.lap_sigma3)));
     s3pos += q.lap_sigma3 > 0;
+    // The Laplacian is the sum of a non-positive (symmetric) and a non-negative (antisymmetric) part.
+    EXPECT_LE(q.lap_sigma3_sym, 0);
+    EXPECT_GE(q.lap_sigma3_anti, 0);
+    EXPECT_NEAR(q.lap_sigma3, q.lap_sigma3_sym + q.lap_sigma3_anti, 1e-9 * (1 + std::abs(q.lap_sigma3_sym)));
   }
   EXPECT_GT(used, 500);
   // σ3 is not superharmonic: its Laplacian is positive at some points (and negative at others).

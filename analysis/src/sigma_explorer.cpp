@@ -733,6 +733,8 @@ std::vector<LaplacianSample> laplacian_experiment(int degree, int maps, int poin
       o.sigma = d.sigma;
       o.lap_sigma1 = d.laplacian(0);
       o.lap_sigma3 = d.laplacian(2);
+      o.lap_sigma3_sym = d.laplacian_symmetric(2);
+      o.lap_sigma3_anti = d.laplacian_antisymmetric(2);
       o.gap = std::min(d.gap(0), d.gap(2));
       const double h = 1e-3;
       Vec3 sum = -6 * d.sigma;

@@ -37,6 +37,13 @@ SigmaDerivatives sigma_derivatives(const Mat3& J, const std::array<Mat3, 3>& dJ,
         Hi(k, l) = Hi(l, k) = h;
       }
     out.laplacian(i) = Hi.trace();
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < 3; ++j) {
+        if (j == i) continue;
+        const double sk = M[k](j, i) + M[k](i, j), ak = M[k](j, i) - M[k](i, j);
+        out.laplacian_symmetric(i) += 0.5 * sk * sk / (svd.sigma(i) - svd.sigma(j));
+        out.laplacian_antisymmetric(i) += 0.5 * ak * ak / (svd.sigma(i) + svd.sigma(j));
+      }
   }
   return out;
 }

@@ -19,6 +19,10 @@ struct SigmaDerivatives {
   Mat3 grad = Mat3::Zero();       // row i: ∇σ_i
   std::array<Mat3, 3> hess{};     // hess[i]: Hessian of σ_i (only when second derivatives of J were given)
   Vec3 laplacian = Vec3::Zero();  // trace of hess[i]
+  // The two parts of the perturbation term's trace, ½ Σ_k Σ_{j≠i} (s^k_ij)²/(σ_i − σ_j) and (a^k_ij)²/(σ_i +
+  // σ_j): for σ3 the first is ≤ 0 and the second ≥ 0 (for σ1 both are ≥ 0). For a harmonic map their sum is
+  // the Laplacian.
+  Vec3 laplacian_symmetric = Vec3::Zero(), laplacian_antisymmetric = Vec3::Zero();
   // min over j ≠ i of |σ_i − σ_j| and |σ_i + σ_j|, per i: the formulas lose accuracy as this nears 0.
   Vec3 gap = Vec3::Zero();
 };
