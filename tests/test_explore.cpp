@@ -5,6 +5,13 @@
 // family.
 #include <gtest/gtest.h>
 #include <omp.h>
+#include <vtkDataArray.h>
+#include <vtkImageData.h>
+#include <vtkNew.h>
+#include <vtkPointData.h>
+#include <vtkPolyData.h>
+#include <vtkXMLImageDataReader.h>
+#include <vtkXMLPolyDataReader.h>
 
 #include <Eigen/Eigenvalues>
 #include <cmath>
@@ -385,6 +392,62 @@ TEST(ExploreCli, ShowWritesEverythingAndIsDeterministic) {
   ASSERT_EQ(lidef::test::run_command(base + " --threads 1 --out " + tmp / "b", &log), 0) << log;
   for (const char* f : {"map.json", "minima.csv", "summary.json", "slice_xy.dat", "fields.vti", "image.vtp"})
     EXPECT_EQ(lidef::test::read_text(tmp / "a/" + f), lidef::test::read_text(tmp / "b/" + f)) << f;
+}
+
+TEST(ExploreCli, VtkFilesHoldTheFields) {
+  TempDir tmp;
+  std::string log;
+  ASSERT_EQ(lidef::test::run_command(lidef::test::cli() + " explore show " + shipped_example() +
+                                         " --grid 17 --sphere-subdivisions 2 --out " + tmp / "o",
+                                     &log),
+            0)
+      << log;
+  const ExplorerExample ex = read_explorer_example(shipped_example());
+  vtkNew<vtkXMLImageDataReader> ir;
+  ir->SetFileName((tmp / "o/fields.vti").c_str());
+  ir->Update();
+  vtkImageData* im = ir->GetOutput();
+  int dims[3];
+  im->GetDimensions(dims);
+  EXPECT_EQ(dims[0], 17);
+  EXPECT_EQ(dims[2], 17);
+  vtkDataArray *s1 = im->GetPointData()->GetArray("sigma1"), *s3 = im->GetPointData()->GetArray("sigma3"),
+               *det = im->GetPointData()->GetArray("detJ"), *in = im->GetPointData()->GetArray("inside_ball");
+  ASSERT_TRUE(s1 && s3 && det && in && im->GetPointData()->GetArray("sigma2"));
+  long inside = 0;
+  for (vtkIdType i = 0; i < im->GetNumberOfPoints(); ++i) {
+    double p[3];
+    im->GetPoint(i, p);
+    const Vec3 x(p[0], p[1], p[2]);
+    EXPECT_EQ(in->GetTuple1(i) == 1, x.norm() <= 1 + 1e-12) << x.transpose();
+    if (in->GetTuple1(i) != 1) {
+      EXPECT_TRUE(std::isnan(s3->GetTuple1(i)));
+      continue;
+    }
+    ++inside;
+    const Mat3 J = ex.map->jacobian(x);
+    const Vec3 s = signed_singular_values(J);
+    EXPECT_NEAR(s3->GetTuple1(i), s(2), 1e-6);
+    EXPECT_NEAR(s1->GetTuple1(i), s(0), 1e-6);
+    EXPECT_NEAR(det->GetTuple1(i), J.determinant(), 1e-5);
+  }
+  EXPECT_GT(inside, 1000);
+  // The image surface: the boundary sphere's image, with σ3 per vertex.
+  vtkNew<vtkXMLPolyDataReader> pr;
+  pr->SetFileName((tmp / "o/image.vtp").c_str());
+  pr->Update();
+  vtkPolyData* pd = pr->GetOutput();
+  ASSERT_GT(pd->GetNumberOfPoints(), 100);
+  ASSERT_NE(pd->GetPointData()->GetArray("sigma3"), nullptr);
+  vtkNew<vtkXMLPolyDataReader> sr;
+  sr->SetFileName((tmp / "o/sphere.vtp").c_str());
+  sr->Update();
+  for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); i += 7) {
+    double a[3], b[3];
+    sr->GetOutput()->GetPoint(i, a);
+    pd->GetPoint(i, b);
+    EXPECT_NEAR((ex.map->value(Vec3(a[0], a[1], a[2])) - Vec3(b[0], b[1], b[2])).norm(), 0, 1e-6);
+  }
 }
 
 TEST(ExploreCli, BadInputsFailWithoutOutput) {
