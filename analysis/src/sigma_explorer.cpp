@@ -548,7 +548,16 @@ BoundaryInjectivity certify_boundary_injective(const HarmonicPolynomialMap& map,
     out.reason = "non-finite image point";
     return out;
   }
-  // The linear images must not intersect at all (exact predicates); then distances are vertex/edge distances.
+  // The linear images must be proper triangles (the exact intersection test skips degenerate ones) and must not
+  // intersect at all (exact predicates); then distances are vertex/edge distances.
+  for (long t = 0; t < nf; ++t) {
+    const Vec3 a = img.row(src.F(t, 0)), b = img.row(src.F(t, 1)), c2 = img.row(src.F(t, 2));
+    const double e2 = std::max({(b - a).squaredNorm(), (c2 - b).squaredNorm(), (a - c2).squaredNorm()});
+    if (!((b - a).cross(c2 - a).norm() > 1e-12 * e2)) {
+      out.reason = "a triangle of the sphere's image is degenerate";
+      return out;
+    }
+  }
   if (!find_self_intersections(img, src.F).empty()) {
     out.reason = "the triangulated image of the sphere intersects itself";
     return out;
