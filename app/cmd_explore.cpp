@@ -441,13 +441,19 @@ void print_show_summary(const ojson& s, const std::string& tag) {
             << "\n";
 }
 
-std::string json_for_example(const ExplorerExample& ex, const std::string& source_path) {
+std::string json_for_example(const ExplorerExample& ex) {
   if (const HarmonicPolynomialMap* p = ex.polynomial()) return explorer_example_json(*p, ex.ball, ex.note);
-  // Cage maps: the input file itself (its relative paths stay valid only beside it), with the source noted.
+  // Cage maps: the same file with absolute paths, so that it loads from anywhere.
+  auto abs = [](const std::string& p) {
+    return p == "identity" ? p : fs::absolute(p).lexically_normal().string();
+  };
   ojson j;
   j["format"] = "lidef-explorer-map";
   j["type"] = "cage";
-  j["source"] = fs::absolute(source_path).string();
+  j["note"] = ex.note;
+  j["model"] = abs(ex.cage_model);
+  j["coefficients"] = abs(ex.cage_coefficients);
+  j["domain"] = {{"center", vec_json(ex.ball.center)}, {"radius", ex.ball.radius}};
   return j.dump(2) + "\n";
 }
 
@@ -515,7 +521,7 @@ void add_explore_command(CLI::App& app, Action& action) {
         const ExplorerExample example = read_explorer_example(o->file);
         StagedOutputs out(o->out);
         const ShowResult r =
-            show_map(out, "", example, o->show, "lidef explore show", json_for_example(example, o->file));
+            show_map(out, "", example, o->show, "lidef explore show", json_for_example(example));
         out.commit();
         print_show_summary(r.summary, "lidef explore show");
         std::cout << "  wrote " << out.final_path("")

@@ -669,3 +669,25 @@ TEST(ExploreBoundary, BoundaryInjectivityCertificate) {
   EXPECT_FALSE(
       certify_boundary_injective(HarmonicPolynomialMap::from_components(2, f), Ball(), 0.01, 4).certified);
 }
+
+TEST(ExploreCage, ShowOnACageMapWritesAReloadableMapFile) {
+  TempDir tmp;
+  const std::string model = lidef::test::project_data() + "/models/ball";
+  ASSERT_TRUE(fs::exists(model)) << model;
+  lidef::test::write_text(tmp / "id.json",
+                          "{\"format\": \"lidef-explorer-map\", \"type\": \"cage\", \"model\": \"" + model +
+                              "\", \"coefficients\": \"identity\", \"domain\": {\"radius\": 0.8}}");
+  std::string log;
+  // Not a counterexample (σ3 ≡ 1: no strict minimum): exit 1, but every file is written.
+  ASSERT_EQ(lidef::test::run_command(lidef::test::cli() + " explore show " + tmp / "id.json" +
+                                         " --grid 8 --sphere-subdivisions 2 --starts 2 --max-depth 2 --out " +
+                                         tmp / "o",
+                                     &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("local injectivity on the ball: certified"), std::string::npos) << log;
+  const ExplorerExample again = read_explorer_example(tmp / "o/map.json");
+  EXPECT_EQ(again.kind, "cage");
+  EXPECT_EQ(again.ball.radius, 0.8);
+  EXPECT_LT((again.map->value(Vec3(0.1, 0.2, 0.3)) - Vec3(0.1, 0.2, 0.3)).norm(), 1e-10);
+}

@@ -548,8 +548,8 @@ BoundaryInjectivity certify_boundary_injective(const HarmonicPolynomialMap& map,
     out.reason = "non-finite image point";
     return out;
   }
-  // The linear images must be proper triangles (the exact intersection test skips degenerate ones) and must not
-  // intersect at all (exact predicates); then distances are vertex/edge distances.
+  // The linear images must be proper triangles (the exact intersection test skips degenerate ones) and must
+  // not intersect at all (exact predicates); then distances are vertex/edge distances.
   for (long t = 0; t < nf; ++t) {
     const Vec3 a = img.row(src.F(t, 0)), b = img.row(src.F(t, 1)), c2 = img.row(src.F(t, 2));
     const double e2 = std::max({(b - a).squaredNorm(), (c2 - b).squaredNorm(), (a - c2).squaredNorm()});
@@ -849,6 +849,8 @@ ExplorerExample read_explorer_example(const std::string& path) {
         throw InputError(path, "the domain ball is not inside the cage of " + j["model"].get<std::string>());
     }
     ex.map = std::make_shared<CageExplorerMap>(model.cage, y, path);
+    ex.cage_model = resolve(j["model"].get<std::string>());
+    ex.cage_coefficients = resolve(j["coefficients"].get<std::string>());
   } else {
     throw InputError(path, "\"type\" must be \"harmonic_polynomial\" or \"cage\"");
   }

@@ -297,6 +297,7 @@ struct ExplorerExample {
   Ball ball;
   std::string note;
   std::shared_ptr<const ExplorerMap> map;
+  std::string cage_model, cage_coefficients;  // kind == cage: the resolved paths ("identity" kept as is)
   // The polynomial map (kind == harmonic_polynomial), else null.
   const HarmonicPolynomialMap* polynomial() const;
 };
