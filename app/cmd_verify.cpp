@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "commands.h"
+#include "gnuplot.h"
 #include "lidef/atomic_file.h"
 #include "lidef/certificate_report.h"
 #include "lidef/certificate_verification.h"
@@ -31,32 +32,6 @@ std::string g6(double x) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.6g", x);
   return buf;
-}
-
-std::string shell_quote(const std::string& s) {
-  std::string q = "'";
-  for (const char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-// The gnuplot executable: $LIDEF_GNUPLOT (a path; "none" disables plotting), else `gnuplot` on $PATH.
-// Empty when there is none.
-std::string find_gnuplot() {
-  if (const char* env = std::getenv("LIDEF_GNUPLOT")) {
-    const std::string g = env;
-    if (g == "none") return "";
-    if (!g.empty()) return fs::exists(g) ? g : "";
-  }
-  const char* path = std::getenv("PATH");
-  if (!path) return "";
-  std::istringstream dirs(path);
-  for (std::string d; std::getline(dirs, d, ':');) {
-    if (d.empty()) continue;
-    const fs::path p = fs::path(d) / "gnuplot";
-    std::error_code ec;
-    if (fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0) return p.string();
-  }
-  return "";
 }
 
 constexpr int kPlotLeaves = 500;  // as in the paper's Fig. 5
@@ -174,16 +149,9 @@ void add_verify_command(CLI::App& app, Action& action) {
         std::cerr << "lidef verify: warning: " << plot_note << "\n";
       } else {
         const std::string png = out.path("verify_plot.png");
-        const std::string cmd =
-            "cd " + shell_quote(out.staging_dir()) + " && " + shell_quote(gnuplot) + " verify_plot.gp 2>&1";
         std::string log;
-        int rc = -1;
-        if (FILE* p = ::popen(cmd.c_str(), "r")) {
-          char buf[512];
-          while (std::fgets(buf, sizeof buf, p)) log += buf;
-          rc = ::pclose(p);
-        }
-        if (rc != 0 || !fs::exists(png)) {
+        const bool ran = run_gnuplot(gnuplot, out.staging_dir(), "verify_plot.gp", &log);
+        if (!ran || !fs::exists(png)) {
           std::error_code ec;
           fs::remove(png, ec);
           plot_note = "gnuplot failed (" + gnuplot + "): verify_plot.png not drawn";

@@ -22,6 +22,7 @@ void add_check_command(CLI::App& app, Action& action);
 void add_deform_command(CLI::App& app, Action& action);
 void add_devices_command(CLI::App& app, Action& action);
 void add_eval_command(CLI::App& app, Action& action);
+void add_explore_command(CLI::App& app, Action& action);
 void add_make_model_command(CLI::App& app, Action& action);
 void add_verify_command(CLI::App& app, Action& action);
 

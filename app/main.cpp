@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   add_deform_command(app, action);
   add_devices_command(app, action);
   add_eval_command(app, action);
+  add_explore_command(app, action);
   add_make_model_command(app, action);
   add_verify_command(app, action);
   try {
