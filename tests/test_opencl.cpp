@@ -512,7 +512,7 @@ TEST(OpenCLCli, CertifyBackendsAgree) {
 }
 
 // --- The paper's scenarios (../shared/data; ctest label "slow"): default parameters with double-precision
-// Hessian products on both backends, the first iterations of each solve: the same accepted steps and
+// Hessian products on both backends, the first 4 iterations of each solve (bar_twist180: 2): the same accepted steps and
 // certificate verdicts, coefficients equal to ~1e-9 relative, the final maps certified alike.
 class OpenCLShared : public ::testing::TestWithParam<const char*> {};
 
@@ -526,7 +526,9 @@ TEST_P(OpenCLShared, SameStepsVerdictsAndCoefficients) {
   const Model model = load_model(sc.model_dir);
   DeformParams p = sc.params;
   p.hessian_precision = "double";
-  p.max_iterations = std::string(GetParam()) == "bar_twist180" ? 3 : 6;
+  // The first iterations only: on PoCL with 2 cores each costs up to seconds; docs/benchmarks.md has whole solves
+  // (on the H100: every iteration of every scenario the same on both backends).
+  p.max_iterations = std::string(GetParam()) == "bar_twist180" ? 2 : 4;
   DeformationSolver cpu(model.cage, p, cache.str());
   DeformationSolver gpu(model.cage, p, cache.str(), {}, opencl());
   cpu.set_handles(sc.sources, sc.targets, sc.path);
