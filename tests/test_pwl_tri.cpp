@@ -39,7 +39,8 @@ TEST(PwlTri, RigidMotionOfAllHandlesGivesRigidResult) {
   }
   const MatX3d dst = ((src * R.transpose()).rowwise() + t.transpose()).eval();
   PwlTriParams p;
-  p.energy_tolerance = 1e-9;
+  p.energy_tolerance = 1e-12;
+  p.max_iterations = 4000;
   SrArapSolver s(beam.mesh, p);
   s.set_handles(src, dst);
   const PwlTriResult r = s.solve();

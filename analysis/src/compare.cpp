@@ -157,20 +157,25 @@ void run_lidef(Shared& s, MethodResult& r) {
 
 void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   const auto t0 = Clock::now();
+  // Coarse: the model's tet mesh (Table 1's DOF) or TetGen of the cage; fine: TetGen's refinement (-r) of the
+  // coarse mesh, which also works where the cage self-intersects slightly (animal) and TetGen -p cannot run.
   TetMesh tets;
   const std::filesystem::path node = std::filesystem::path(s.model.dir) / "tet.node",
                               ele = std::filesystem::path(s.model.dir) / "tet.ele";
-  TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
-  if (!fine && s.opt.use_model_tets && !s.model.dir.empty() && std::filesystem::exists(node) &&
-      std::filesystem::exists(ele)) {
+  if (s.opt.use_model_tets && !s.model.dir.empty() && std::filesystem::exists(node) && std::filesystem::exists(ele)) {
     tets = read_tet_mesh(node.string(), ele.string());
     r.detail = "model tet mesh";
   } else {
-    TetgenOptions o = fine ? s.opt.fine_tet : s.opt.coarse_tet;
-    if (fine && o.max_volume <= 0) o.max_volume = s.opt.fine_volume_factor * std::pow(s.get_sampling().side, 3);
-    s.say(r.method, "TetGen " + tetgen_switches(o));
-    tets = tetrahedralize(cage, o);
-    r.detail = "TetGen " + tetgen_switches(o);
+    const TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
+    tets = tetrahedralize(cage, s.opt.coarse_tet);
+    r.detail = "TetGen " + tetgen_switches(s.opt.coarse_tet);
+  }
+  if (fine) {
+    TetgenOptions o = s.opt.fine_tet;
+    if (o.max_volume <= 0) o.max_volume = s.opt.fine_volume_factor * std::pow(s.get_sampling().side, 3);
+    s.say(r.method, "TetGen " + tetgen_switches(o, true) + " of the " + r.detail);
+    tets = refine_tet_mesh(tets, o);
+    r.detail = "TetGen " + tetgen_switches(o, true) + " of the " + r.detail;
   }
   r.detail += ": " + std::to_string(tets.num_vertices()) + " vertices, " + std::to_string(tets.num_tets()) + " tets";
   s.say(r.method, r.detail);
@@ -330,10 +335,10 @@ double crease_measure(const TriMesh& rest, const MatX3d& X) {
     const double a0 = std::acos(std::clamp(normal(rest.V, fs[0]).dot(normal(rest.V, fs[1])), -1.0, 1.0));
     const double a1 = std::acos(std::clamp(normal(X, fs[0]).dot(normal(X, fs[1])), -1.0, 1.0));
     if (!std::isfinite(a0) || !std::isfinite(a1)) continue;
-    sum += std::abs(a1 - a0);
+    sum += (a1 - a0) * (a1 - a0);
     ++n;
   }
-  return n ? sum / n * 180.0 / M_PI : kNaN;
+  return n ? std::sqrt(sum / n) * 180.0 / M_PI : kNaN;
 }
 
 std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model, const CompareOptions& opt,

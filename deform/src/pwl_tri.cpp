@@ -12,6 +12,9 @@
 
 namespace lidef {
 
+// Energies below this (E is 0 at the rest shape) count as converged: relative decreases of rounding noise.
+constexpr double kEnergyFloor = 1e-14;
+
 using SpMat = Eigen::SparseMatrix<double>;
 
 struct SrArapSolver::Impl {
@@ -211,7 +214,7 @@ PwlTriResult SrArapSolver::solve(const std::function<bool(const PwlTriIteration&
       res.message = "interrupted";
       break;
     }
-    if (std::isfinite(prev) && prev - r.energy <= params_.energy_tolerance * std::abs(prev)) {
+    if (std::isfinite(prev) && prev - r.energy <= params_.energy_tolerance * std::abs(prev) + kEnergyFloor) {
       res.converged = true;
       res.message = "relative energy decrease below tolerance";
       break;

@@ -8,6 +8,9 @@
 
 namespace lidef {
 
+// Energies below this (E is 0 at the rest shape) count as converged: relative decreases of rounding noise.
+constexpr double kEnergyFloor = 1e-14;
+
 namespace {
 // The rotation closest to M in the Frobenius norm (polar decomposition; a reflection is turned into a rotation
 // by flipping the smallest singular direction).
@@ -121,7 +124,7 @@ VhmResult VhmSolver::solve(const std::function<bool(const VhmIteration&)>& on_it
       res.message = "interrupted";
       break;
     }
-    if (prev - r.energy <= params_.energy_tolerance * std::abs(prev)) {
+    if (prev - r.energy <= params_.energy_tolerance * std::abs(prev) + kEnergyFloor) {
       res.converged = true;
       res.message = "relative energy decrease below tolerance";
       break;

@@ -81,9 +81,11 @@ using CompareProgress = std::function<void(const std::string&, const std::string
 std::vector<MethodResult> run_comparison(const Scenario& scenario, const Model& model, const CompareOptions& opt,
                                          const CompareProgress& progress = {});
 
-// Smoothness of a deformed surface: mean over interior mesh edges of |dihedral angle (deformed) − dihedral angle
-// (rest)| in degrees. A piecewise-linear volumetric map creases the surface where it crosses tet faces; a smooth
-// map bends it gradually. rest: the mesh, deformed: #V by 3.
+// Smoothness of a deformed surface: root mean square over interior mesh edges of the change of the dihedral angle
+// (deformed − rest), in degrees. A smooth map bending the surface by curvature κ changes each angle by about κh
+// (h: mesh edge length); a piecewise-linear map with tets of size H puts the same bending into creases κH at a
+// fraction h/H of the edges, so its RMS is larger by about √(H/h) (the mean would not tell them apart).
+// rest: the mesh, deformed: #V by 3.
 double crease_measure(const TriMesh& rest, const MatX3d& deformed);
 
 // Signed volume of a closed triangle mesh (V #V by 3, F #F by 3).

@@ -27,7 +27,7 @@ namespace lidef {
 
 struct PwlTriParams {
   double lambda_p2p = 1e5;
-  double alpha = 0.02;  // smooth-rotation weight (Levi and Gotsman's α)
+  double alpha = 1e-3;  // smooth-rotation weight (Levi and Gotsman's α; docs/compare.md on the choice)
   int max_iterations = 1000;
   double energy_tolerance = 1e-5;
   double proximal = 1e-10;  // relative to the mean diagonal

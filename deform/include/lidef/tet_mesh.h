@@ -37,13 +37,21 @@ struct TetgenOptions {
   double max_volume = 0;    // > 0: maximal tet volume (TetGen -a), absolute model units³
   bool quiet = true;        // TetGen -Q
 };
-// The switch string given to TetGen, e.g. "pq2a0.001Q" (p: tetrahedralize a piecewise-linear complex).
-std::string tetgen_switches(const TetgenOptions& options);
+// The switch string given to TetGen, e.g. "pq2a0.001Q" (p: tetrahedralize a piecewise-linear complex; with
+// `refine`, r: refine an existing tet mesh).
+std::string tetgen_switches(const TetgenOptions& options, bool refine = false);
 
 // Tetrahedralizes the interior of the closed triangle mesh `cage` (#V by 3, #F by 3). The result keeps the
-// cage's vertices first (Steiner points after them). Throws InputError naming cage.source when TetGen rejects
-// the input (e.g. a self-intersecting cage) and NumericalError when it fails otherwise or returns no tet.
+// cage's vertices first (Steiner points after them). A self-intersecting cage is refused before TetGen runs
+// (find_self_intersections, exact: TetGen 1.5 can crash on such input instead of reporting it). Throws
+// InputError naming cage.source when the input is refused or TetGen rejects it, NumericalError when TetGen
+// fails otherwise or returns no tet.
 TetMesh tetrahedralize(const TriMesh& cage, const TetgenOptions& options = {});
+
+// Refines an existing tet mesh with TetGen (-r) to the quality and volume bounds of `options`, keeping its
+// vertices and boundary. Works where the cage itself cannot be tetrahedralized (e.g. the animal's slightly
+// self-intersecting cage, whose published tet mesh is valid). Errors as for tetrahedralize.
+TetMesh refine_tet_mesh(const TetMesh& mesh, const TetgenOptions& options = {});
 
 // Barycentric location of points in a tet mesh.
 struct TetEmbedding {

@@ -11,7 +11,7 @@
 // the quadratic in y — one dense (#V+#F)² system shared by the three coordinates, factored once (LLᵀ) with a
 // proximal term ρ‖y − y_prev‖² (ρ = `proximal` · trace/(#V+#F)) that keeps it definite when the anchors do not
 // determine every coefficient; it does not move the fixed points. Both steps decrease E. Stops when the
-// relative decrease of E in one iteration is below energy_tolerance, or after max_iterations.
+// relative decrease of E in one iteration is below energy_tolerance (or E below 1e-14), or after max_iterations.
 #pragma once
 #include <Eigen/Cholesky>
 #include <functional>
