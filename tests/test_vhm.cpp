@@ -25,7 +25,7 @@ struct BeamVhm {
   Cage& cage = beam.cage;
   HarmonicBasis basis{beam.cage};
   VoxelSampling sampling;
-  MatX3d anchors;
+  MatX3d anchors, boundary;
   BeamVhm() {
     SamplingParams sp;
     sp.target_count = 3000;
@@ -33,6 +33,8 @@ struct BeamVhm {
     const std::vector<int> pick = select_hessian_subset(sampling, 150.0 / sampling.size());
     anchors.resize(static_cast<Eigen::Index>(pick.size()), 3);
     for (size_t k = 0; k < pick.size(); ++k) anchors.row(static_cast<Eigen::Index>(k)) = sampling.centers.row(pick[k]);
+    boundary.resize((beam.mesh.V.rows() + 9) / 10, 3);
+    for (Eigen::Index i = 0; i < beam.mesh.V.rows(); i += 10) boundary.row(i / 10) = beam.mesh.V.row(i);
   }
 };
 
@@ -40,7 +42,7 @@ struct BeamVhm {
 
 TEST(Vhm, HandlesAtRestReproduceTheIdentity) {
   BeamVhm s;
-  VhmSolver vhm(s.cage, s.basis, s.anchors);
+  VhmSolver vhm(s.cage, s.basis, s.anchors, s.boundary);
   const MatX3d src = s.beam.mesh.V.topRows(6);
   vhm.set_handles(src, src);
   const VhmResult r = vhm.solve();
@@ -53,7 +55,7 @@ TEST(Vhm, HandlesAtRestReproduceTheIdentity) {
 TEST(Vhm, EnergyNeverIncreasesAndHandlesMove) {
   BeamVhm s;
   const Scenario sc = read_scenario(lidef::test::project_data() + "/scenarios/beam_bend.json");
-  VhmSolver vhm(s.cage, s.basis, s.anchors);
+  VhmSolver vhm(s.cage, s.basis, s.anchors, s.boundary);
   vhm.set_handles(sc.sources, sc.targets);
   double prev = vhm.energy(vhm.coefficients(), vhm.best_rotations(vhm.coefficients()));
   for (int it = 0; it < 30; ++it) {
@@ -71,7 +73,7 @@ TEST(Vhm, CertificateAgreesWithDenseSampling) {
     const Scenario sc = read_scenario(lidef::test::project_data() + "/scenarios/" + name);
     VhmParams p;
     p.max_iterations = 200;
-    VhmSolver vhm(s.cage, s.basis, s.anchors, p);
+    VhmSolver vhm(s.cage, s.basis, s.anchors, s.boundary, p);
     vhm.set_handles(sc.sources, sc.targets);
     vhm.solve();
     const MatX3d& y = vhm.coefficients();

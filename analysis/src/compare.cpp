@@ -239,7 +239,13 @@ void run_vhm(Shared& s, MethodResult& r) {
   const HarmonicBasis& basis = s.get_basis();
   VhmParams p = s.opt.vhm;
   p.lambda_p2p = s.sc.params.lambda_p2p;
-  VhmSolver solver(s.model.cage, basis, anchors, p, s.model.dir + "/vhm_anchors.xyz");
+  // Boundary samples of the smoothness term: mesh vertices, every k-th so that there are at most vhm_boundary.
+  const Eigen::Index nm = s.model.mesh.V.rows();
+  const Eigen::Index stride = std::max<Eigen::Index>(1, (nm + s.opt.vhm_boundary - 1) / std::max(1, s.opt.vhm_boundary));
+  MatX3d boundary((nm + stride - 1) / stride, 3);
+  for (Eigen::Index i = 0, k = 0; i < nm; i += stride, ++k) boundary.row(k) = s.model.mesh.V.row(i);
+  r.detail += ", " + std::to_string(boundary.rows()) + " mesh vertices as boundary samples";
+  VhmSolver solver(s.model.cage, basis, anchors, boundary, p, s.model.dir + "/vhm_anchors.xyz");
   solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
   r.preprocess_seconds = seconds_since(t0);
   std::ostringstream log;

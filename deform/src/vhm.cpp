@@ -23,16 +23,20 @@ Mat3 closest_rotation(const Mat3& M) {
 }
 }  // namespace
 
-VhmSolver::VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors, const VhmParams& params,
-                     const std::string& where)
+VhmSolver::VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors, const MatX3d& boundary,
+                     const VhmParams& params, const std::string& where)
     : cage_(cage), basis_(basis), params_(params) {
   if (anchors.rows() < 1) throw InputError(where, "VHM needs at least one anchor");
   for (Eigen::Index i = 0; i < anchors.rows(); ++i)
     if (!anchors.row(i).allFinite() || cage.winding_number(anchors.row(i).transpose()) < 0.5)
       throw InputError(where, "VHM anchor " + std::to_string(i) + " lies outside the cage");
+  if (boundary.rows() < 1) throw InputError(where, "VHM needs at least one boundary sample");
+  for (Eigen::Index i = 0; i < boundary.rows(); ++i)
+    if (!boundary.row(i).allFinite() || cage.winding_number(boundary.row(i).transpose()) < 0.5)
+      throw InputError(where, "VHM boundary sample " + std::to_string(i) + " lies outside the cage");
   G_ = basis.gradient_matrix(anchors);
-  Hs_ = basis.hessian_matrix(anchors);
-  for (Eigen::Index i = 0; i < anchors.rows(); ++i)
+  Hs_ = basis.hessian_matrix(boundary);
+  for (Eigen::Index i = 0; i < boundary.rows(); ++i)
     for (int k : {1, 2, 4}) Hs_.row(6 * i + k) *= std::sqrt(2.0);  // xy, xz, yz appear twice in the tensor
   const double diag = (cage.bbox_max - cage.bbox_min).norm();
   ws_ = params_.smooth_weight * diag * diag;
@@ -58,7 +62,7 @@ void VhmSolver::set_handles(const MatX3d& sources, const MatX3d& targets, const 
 void VhmSolver::factor() {
   const double na = static_cast<double>(num_anchors());
   A_ = (G_.transpose() * G_) / na;
-  A_.noalias() += (ws_ / na) * (Hs_.transpose() * Hs_);
+  A_.noalias() += (ws_ / static_cast<double>(Hs_.rows() / 6)) * (Hs_.transpose() * Hs_);
   A_.noalias() += params_.lambda_p2p * (D_.transpose() * D_);
   rho_ = params_.proximal * A_.trace() / static_cast<double>(A_.rows());
   MatXd Ap = A_;
@@ -80,7 +84,7 @@ double VhmSolver::energy(const MatX3d& y, const std::vector<Mat3>& R, VhmIterati
   double rigid = 0;
   for (int i = 0; i < num_anchors(); ++i) rigid += (GY.middleRows<3>(3 * i).transpose() - R[i]).squaredNorm();
   rigid /= na;
-  const double smooth = (Hs_ * y).squaredNorm() / na;
+  const double smooth = (Hs_ * y).squaredNorm() / static_cast<double>(Hs_.rows() / 6);
   const double p2p = D_.rows() ? (D_ * y - targets_).squaredNorm() : 0.0;
   if (terms) {
     terms->e_rigid = rigid;

@@ -40,6 +40,7 @@ struct CompareOptions {
   // VHM
   std::string anchors;             // anchor file; "" = <model>/vhm_anchors.xyz, else evenly spread voxel centers
   int anchor_count = 300;          // number of voxel centers used when the model has no anchors
+  int vhm_boundary = 1000;         // at most this many mesh vertices as boundary samples of VHM's smoothness term
   VhmParams vhm;
   // PWL(Tri)
   PwlTriParams tri;

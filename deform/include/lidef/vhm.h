@@ -4,9 +4,10 @@
 //
 // Energy over coefficients y (#V+#F by 3) and one rotation R_i per interior anchor a_i (n_a anchors):
 //   E(y, R) = (1/n_a) Σ_i ‖J(a_i) − R_i‖_F²                       (as-rigid-as-possible at the anchors)
-//           + w_s ℓ² (1/n_a) Σ_i ‖H(a_i)‖²                          (VHM smoothness: full Hessian tensor norm)
+//           + w_s ℓ² (1/n_b) Σ_k ‖H(b_k)‖²                          (VHM smoothness: full Hessian tensor norm)
 //           + λ1 Σ_h ‖f(p_h) − q_h‖²                               (soft handles, lidef's λ1)
-// with ℓ the cage bounding-box diagonal (makes w_s scale-free). Local/global (block coordinate descent): R_i =
+// with ℓ the cage bounding-box diagonal (makes w_s scale-free) and b_k boundary samples: Ben-Chen et al. integrate
+// ‖H‖² over the boundary of the domain (Liao et al. Sec. 6.1); we sum it over points of the deformed surface. Local/global (block coordinate descent): R_i =
 // the rotation closest to J(a_i) (polar decomposition with the reflection removed), then y = the minimiser of
 // the quadratic in y — one dense (#V+#F)² system shared by the three coordinates, factored once (LLᵀ) with a
 // proximal term ρ‖y − y_prev‖² (ρ = `proximal` · trace/(#V+#F)) that keeps it definite when the anchors do not
@@ -48,10 +49,11 @@ struct VhmResult {
 
 class VhmSolver {
  public:
-  // anchors: #A by 3 interior points (e.g. the shared models' vhm_anchors.xyz). Throws InputError(where, ...)
-  // for no anchors or an anchor outside the cage (winding number < 1/2).
-  VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors, const VhmParams& params = {},
-            const std::string& where = "anchors");
+  // anchors: #A by 3 interior points (e.g. the shared models' vhm_anchors.xyz); boundary: #B by 3 points of the
+  // shape's surface for the smoothness term (e.g. mesh vertices). Throws InputError(where, ...) for no anchors or
+  // a point outside the cage (winding number < 1/2).
+  VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors, const MatX3d& boundary,
+            const VhmParams& params = {}, const std::string& where = "anchors");
   // sources/targets: #h by 3; throws InputError for a source outside the cage. Starts from the identity.
   void set_handles(const MatX3d& sources, const MatX3d& targets, const std::string& where = "handles");
   VhmResult solve(const std::function<bool(const VhmIteration&)>& on_iteration = {});
@@ -72,7 +74,8 @@ class VhmSolver {
   const HarmonicBasis& basis_;  // must outlive the solver
   VhmParams params_;
   MatXd G_;       // 3#A by #V+#F basis gradients at the anchors (row 3i+b: ∂/∂p_b)
-  MatXd Hs_;      // 6#A by #V+#F basis Hessians, rows scaled by √(multiplicity) so ‖Hs y‖² = Σ‖H‖² (full tensor)
+  MatXd Hs_;      // 6#B by #V+#F basis Hessians at the boundary samples, rows scaled by √(multiplicity) so that
+                  // ‖Hs y‖² = Σ‖H‖² (full tensor)
   MatXd D_;       // #h by #V+#F basis values at the handles
   MatX3d targets_;
   MatXd A_;       // the system matrix (without the proximal term)
