@@ -11,7 +11,7 @@
 // solve times and ratios; progress on stderr. Exit 0; 2 on bad input.
 //
 // Usage: bench_compare [DATA_DIR] [--only a,b] [--methods m1,m2] [--threads T] [--fine-volume-factor F]
-//                      [--cache-dir DIR]
+//                      [--tet-max-iterations N] [--cache-dir DIR]
 #include <omp.h>
 #include <unistd.h>
 
@@ -70,6 +70,8 @@ int main(int argc, char** argv) {
       opt.methods = split(next());
     else if (a == "--threads")
       threads = std::atoi(next().c_str());
+    else if (a == "--tet-max-iterations")
+      opt.tet_max_iterations = std::atoi(next().c_str());
     else if (a == "--fine-volume-factor")
       opt.fine_volume_factor = std::atof(next().c_str());
     else if (a == "--cache-dir")

@@ -191,10 +191,11 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
   r.preprocess_seconds = seconds_since(t0);
   std::ostringstream log;
-  log << "iteration,energy,e_dis,e_p2p,step,halvings,max_handle_error,ms\n";
+  log << "iteration,energy,e_dis,e_p2p,newton_decrement,direction_norm,step,halvings,max_handle_error,ms\n";
   const PwlTetResult res = solver.solve([&](const PwlTetIteration& it) {
     log << it.iteration << ',' << format_double(it.energy) << ',' << format_double(it.e_dis) << ','
-        << format_double(it.e_p2p) << ',' << format_double(it.step) << ',' << it.halvings << ','
+        << format_double(it.e_p2p) << ',' << format_double(it.newton_decrement) << ','
+        << format_double(it.direction_norm) << ',' << format_double(it.step) << ',' << it.halvings << ','
         << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
     s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  step " + g(it.step, 3) +
                         "  handle err " + g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");

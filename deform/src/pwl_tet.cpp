@@ -241,6 +241,8 @@ PwlTetIteration PwlTetSolver::step() {
     }
     ++rec.halvings;
   }
+  rec.newton_decrement = -slope;
+  rec.direction_norm = d.norm();
   if (accepted) {
     X_ = trial;
     rec.step = t;
@@ -269,15 +271,17 @@ PwlTetResult PwlTetSolver::solve(const std::function<bool(const PwlTetIteration&
       res.message = "no decreasing step";
       break;
     }
+    // Convergence is judged on the Newton direction, not on the accepted step: a line search that had to shorten
+    // the step a lot (to keep every tet positive) makes t‖δ‖ and the decrease small far from a minimum.
     const double scale = std::max(1.0, std::sqrt(X_.squaredNorm()));
-    if (r.step_norm <= params_.step_tolerance * scale) {
+    if (r.direction_norm <= params_.step_tolerance * scale) {
       res.converged = true;
-      res.message = "step below tolerance";
+      res.message = "Newton step below tolerance";
       break;
     }
-    if (e_before - r.energy <= params_.energy_tolerance * std::abs(e_before)) {
+    if (0.5 * r.newton_decrement <= params_.energy_tolerance * std::abs(e_before)) {
       res.converged = true;
-      res.message = "relative energy decrease below tolerance";
+      res.message = "Newton decrement below tolerance";
       break;
     }
   }

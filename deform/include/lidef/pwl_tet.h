@@ -13,8 +13,10 @@
 // 3#V system (plus 2λ1 WᵀW and a relative diagonal shift) is factored with CHOLMOD (supernodal LLᵀ through
 // Eigen's CholmodSupport; symbolic analysis once). Line search from t = 1, halving, Armijo on E: since E = +∞
 // when any tet has det J ≤ 0 and the map is affine per tet, an accepted step never inverts a tet (exactly, not
-// only at samples). Stops when the relative energy decrease of a step is below energy_tolerance or the step
-// t‖δ‖ is below step_tolerance · max(1, ‖X‖) (lidef's criteria), or after max_iterations.
+// only at samples). Converged when the predicted decrease −∇Eᵀδ/2 (Newton decrement) is below energy_tolerance
+// · |E| or the Newton direction ‖δ‖ is below step_tolerance · max(1, ‖X‖) — judged on δ, not on the accepted
+// t δ, since a line search shortened to keep the tets positive makes t δ small far from a minimum; stops
+// otherwise after max_iterations or when no step decreases E.
 #pragma once
 #include <functional>
 #include <memory>
@@ -41,6 +43,8 @@ struct PwlTetIteration {
   double energy = 0, e_dis = 0, e_p2p = 0;  // after the step
   double step = 0;                          // accepted t (0: none)
   double step_norm = 0;                     // t‖δ‖
+  double direction_norm = 0;                // ‖δ‖ (the Newton direction before the line search)
+  double newton_decrement = 0;              // −∇Eᵀδ (half of it: the decrease the quadratic model predicts)
   int halvings = 0;
   double max_handle_error = 0;
   double ms = 0;
