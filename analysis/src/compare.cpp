@@ -174,8 +174,17 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
     TetgenOptions o = s.opt.fine_tet;
     if (o.max_volume <= 0) o.max_volume = s.opt.fine_volume_factor * std::pow(s.get_sampling().side, 3);
     s.say(r.method, "TetGen " + tetgen_switches(o, true) + " of the " + r.detail);
-    tets = refine_tet_mesh(tets, o);
-    r.detail = "TetGen " + tetgen_switches(o, true) + " of the " + r.detail;
+    try {
+      tets = refine_tet_mesh(tets, o);
+      r.detail = "TetGen " + tetgen_switches(o, true) + " of the " + r.detail;
+    } catch (const NumericalError& e) {
+      // TetGen's refinement crashes on some meshes (the horse's: a failed assertion on coplanar points); the cage
+      // itself may still be tetrahedralized directly.
+      s.say(r.method, std::string(e.what()) + "; tetrahedralizing the cage instead");
+      const TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
+      tets = tetrahedralize(cage, o);
+      r.detail = "TetGen " + tetgen_switches(o) + " of the cage (refining the " + r.detail + " crashed TetGen)";
+    }
   }
   r.detail += ": " + std::to_string(tets.num_vertices()) + " vertices, " + std::to_string(tets.num_tets()) + " tets";
   s.say(r.method, r.detail);

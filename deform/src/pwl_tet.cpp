@@ -11,6 +11,9 @@
 namespace lidef {
 
 using SpMat = Eigen::SparseMatrix<double>;
+// Below this many tets the loops run serially: a parallel region costs more than the work (and much more when
+// the cores are shared).
+constexpr int kParallelTets = 4096;
 using Mat9x12 = Eigen::Matrix<double, 9, 12>;
 using Mat12 = Eigen::Matrix<double, 12, 12>;
 
@@ -80,7 +83,7 @@ Mat3 PwlTetSolver::jacobian(const MatX3d& X, int t) const {
 
 int PwlTetSolver::inverted_count(const MatX3d& X) const {
   int n = 0;
-#pragma omp parallel for reduction(+ : n)
+#pragma omp parallel for reduction(+ : n) if (mesh_.num_tets() > kParallelTets)
   for (int t = 0; t < mesh_.num_tets(); ++t) n += jacobian(X, t).determinant() <= 0 ? 1 : 0;
   return n;
 }
@@ -88,7 +91,7 @@ int PwlTetSolver::inverted_count(const MatX3d& X) const {
 double PwlTetSolver::energy(const MatX3d& X, double* dis_out, double* p2p_out) const {
   double dis = 0;
   bool inverted = false;
-#pragma omp parallel for reduction(+ : dis) reduction(|| : inverted)
+#pragma omp parallel for reduction(+ : dis) reduction(|| : inverted) if (mesh_.num_tets() > kParallelTets)
   for (int t = 0; t < mesh_.num_tets(); ++t) {
     const double e = sd_energy(jacobian(X, t));
     if (!std::isfinite(e))
@@ -193,7 +196,7 @@ PwlTetIteration PwlTetSolver::step() {
   // Gradient and per-tet projected Hessians (parallel), then a serial scatter into the fixed pattern.
   std::vector<Mat12> local(nt);
   std::vector<Eigen::Matrix<double, 12, 1>> lg(nt);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (nt > kParallelTets)
   for (int t = 0; t < nt; ++t) {
     const Mat3 J = jacobian(X_, t);
     const Mat9x12 F = jacobian_derivative(Bm_[t]);

@@ -2,8 +2,9 @@
 // reading TetGen's .node/.ele files, tetrahedralizing a cage with the TetGen library, and locating points in
 // the tets (barycentric embedding of the mesh vertices and the handles).
 //
-// TetGen is confined to tetgen_mesher.cpp (its own object library, compiled with -DTETLIBRARY); its failures
-// (it throws an int in library mode) become lidef::InputError / NumericalError with the cage's file name.
+// TetGen is confined to tetgen_mesher.cpp (its own object library, compiled with -DTETLIBRARY) and runs in a forked
+// child process, because TetGen 1.5 can also fail by a failed assertion (abort) or a segmentation fault; all its
+// failures (thrown int codes, a crashed child) become lidef::InputError / NumericalError with the input's name.
 #pragma once
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
