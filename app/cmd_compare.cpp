@@ -1,5 +1,5 @@
-// lidef compare: the paper's comparison (Table 1, Figs. 11-12) in one run — lidef, PWL(Tet) at two resolutions,
-// VHM and PWL(Tri) on the same handles — with a Table-1-shaped table (docs/compare.md).
+// lidef compare: the paper's comparison (Table 1, Figs. 11-12) in one run — lidef, PWL(Tet) at two
+// resolutions, VHM and PWL(Tri) on the same handles — with a Table-1-shaped table (docs/compare.md).
 #include <omp.h>
 
 #include <algorithm>
@@ -25,14 +25,17 @@ namespace lidef::cli {
 
 void add_compare_command(CLI::App& app, Action& action) {
   struct Opts {
-    std::string scenario, out, models, methods = "lidef,pwl-tet,pwl-tet-fine,vhm,pwl-tri", cache_dir = "<default>";
+    std::string scenario, out, models, methods = "lidef,pwl-tet,pwl-tet-fine,vhm,pwl-tri",
+                                       cache_dir = "<default>";
     bool quiet = false, no_model_tets = false;
     CompareOptions c;
     std::map<std::string, std::string> overrides;
   };
   auto opts = std::make_shared<Opts>();
-  auto* sub = app.add_subcommand("compare", "Run lidef, PWL(Tet), VHM and PWL(Tri) on one scenario; write a table");
-  sub->add_option("SCENARIO", opts->scenario, "Scenario JSON (model, handles, optional parameters)")->required();
+  auto* sub =
+      app.add_subcommand("compare", "Run lidef, PWL(Tet), VHM and PWL(Tri) on one scenario; write a table");
+  sub->add_option("SCENARIO", opts->scenario, "Scenario JSON (model, handles, optional parameters)")
+      ->required();
   sub->add_option("--out", opts->out, "Output folder (created if missing)")->required();
   sub->add_option("--methods", opts->methods, "Comma-separated: lidef,pwl-tet,pwl-tet-fine,vhm,pwl-tri")
       ->capture_default_str();
@@ -42,9 +45,11 @@ void add_compare_command(CLI::App& app, Action& action) {
   auto& c = opts->c;
   sub->add_flag("--no-model-tets", opts->no_model_tets,
                 "pwl-tet: tetrahedralize the cage with TetGen even when the model has tet.node/tet.ele");
-  sub->add_option("--tet-quality", c.coarse_tet.min_ratio, "pwl-tet (TetGen): max radius-edge ratio, -q (<= 0: off)")
+  sub->add_option("--tet-quality", c.coarse_tet.min_ratio,
+                  "pwl-tet (TetGen): max radius-edge ratio, -q (<= 0: off)")
       ->capture_default_str();
-  sub->add_option("--tet-max-volume", c.coarse_tet.max_volume, "pwl-tet (TetGen): max tet volume, -a (0: none)")
+  sub->add_option("--tet-max-volume", c.coarse_tet.max_volume,
+                  "pwl-tet (TetGen): max tet volume, -a (0: none)")
       ->capture_default_str();
   sub->add_option("--fine-tet-quality", c.fine_tet.min_ratio, "pwl-tet-fine: max radius-edge ratio, -q")
       ->capture_default_str();
@@ -53,15 +58,19 @@ void add_compare_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--fine-volume-factor", c.fine_volume_factor, "pwl-tet-fine: max tet volume / voxel side^3")
       ->capture_default_str();
-  sub->add_option("--tet-max-iterations", c.tet_max_iterations, "pwl-tet: Newton iteration limit")->capture_default_str();
-  sub->add_option("--anchors", c.anchors, "vhm: anchor points (x y z per line; default MODEL/vhm_anchors.xyz)");
-  sub->add_option("--anchor-count", c.anchor_count, "vhm: voxel centers used as anchors when the model has none")
+  sub->add_option("--tet-max-iterations", c.tet_max_iterations, "pwl-tet: Newton iteration limit")
+      ->capture_default_str();
+  sub->add_option("--anchors", c.anchors,
+                  "vhm: anchor points (x y z per line; default MODEL/vhm_anchors.xyz)");
+  sub->add_option("--anchor-count", c.anchor_count,
+                  "vhm: voxel centers used as anchors when the model has none")
       ->capture_default_str();
   sub->add_option("--vhm-smooth", c.vhm.smooth_weight, "vhm: weight of the Hessian smoothness term")
       ->capture_default_str();
   sub->add_option("--vhm-max-iterations", c.vhm.max_iterations, "vhm: local/global iteration limit")
       ->capture_default_str();
-  sub->add_option("--tri-alpha", c.tri.alpha, "pwl-tri: SR-ARAP smooth-rotation weight alpha")->capture_default_str();
+  sub->add_option("--tri-alpha", c.tri.alpha, "pwl-tri: SR-ARAP smooth-rotation weight alpha")
+      ->capture_default_str();
   sub->add_option("--tri-max-iterations", c.tri.max_iterations, "pwl-tri: local/global iteration limit")
       ->capture_default_str();
   for (const ParamInfo& p : deform_param_table()) {
@@ -73,7 +82,8 @@ void add_compare_command(CLI::App& app, Action& action) {
         ->group(std::string("lidef parameters (shared weights/tolerances): ") + p.group);
   }
   sub->footer(
-      "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and per\n"
+      "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and "
+      "per\n"
       "method METHOD.obj, METHOD.vtp (E_iso_minus_6 and detJ for the volumetric methods) and METHOD.log.\n"
       "A failing method is reported in the table and the others still run. Exit code: 0 every method ran,\n"
       "1 some method failed (the table says why), 2 bad input. Methods and criteria: docs/compare.md.");
@@ -102,7 +112,8 @@ void add_compare_command(CLI::App& app, Action& action) {
         if (!m.empty()) o.c.methods.push_back(m);
       for (const std::string& m : o.c.methods)
         if (std::find(compare_methods().begin(), compare_methods().end(), m) == compare_methods().end())
-          throw InputError("--methods", "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
+          throw InputError("--methods",
+                           "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
       if (o.c.methods.empty()) throw InputError("--methods", "no method given");
       o.c.use_model_tets = !o.no_model_tets;
       o.c.cache_dir = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;

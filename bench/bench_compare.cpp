@@ -1,11 +1,14 @@
-// Benchmark of `lidef compare` (analysis/compare.h): every method of the paper's Table 1 on every shared scenario,
-// in one process, one scenario after the other, so the time ratios to lidef are measured side by side.
+// Benchmark of `lidef compare` (analysis/compare.h): every method of the paper's Table 1 on every shared
+// scenario, in one process, one scenario after the other, so the time ratios to lidef are measured side by
+// side.
 //
-// Scenarios: every *.json in DATA_DIR/scenarios (DATA_DIR = first positional argument, else $LIDEF_SHARED_DATA,
-// else ../shared/data beside the source tree); --only a,b picks by name or model. Methods: --methods (default all:
-// lidef, pwl-tet at the model's tet.node/.ele = Table 1's DOF, pwl-tet-fine on TetGen with max tet volume =
-// --fine-volume-factor × lidef's voxel volume, vhm, pwl-tri). --threads T sets OpenMP and OpenBLAS threads for
-// every method (the same for all). lidef's subspace is cached in --cache-dir (default /tmp/lidef-bench-cache).
+// Scenarios: every *.json in DATA_DIR/scenarios (DATA_DIR = first positional argument, else
+// $LIDEF_SHARED_DATA, else ../shared/data beside the source tree); --only a,b picks by name or model.
+// Methods: --methods (default all: lidef, pwl-tet at the model's tet.node/.ele = Table 1's DOF, pwl-tet-fine
+// on TetGen with max tet volume =
+// --fine-volume-factor × lidef's voxel volume, vhm, pwl-tri). --threads T sets OpenMP and OpenBLAS threads
+// for every method (the same for all). lidef's subspace is cached in --cache-dir (default
+// /tmp/lidef-bench-cache).
 //
 // Output: markdown on stdout — per scenario the Table-1-style table (comparison_table_md), then a summary of
 // solve times and ratios; progress on stderr. Exit 0; 2 on bad input.
@@ -83,7 +86,8 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (data.empty()) data = std::getenv("LIDEF_SHARED_DATA") ? std::getenv("LIDEF_SHARED_DATA") : LIDEF_SHARED_DATA_DIR;
+  if (data.empty())
+    data = std::getenv("LIDEF_SHARED_DATA") ? std::getenv("LIDEF_SHARED_DATA") : LIDEF_SHARED_DATA_DIR;
   if (!fs::is_directory(fs::path(data) / "scenarios")) {
     std::cerr << "bench_compare: no scenarios folder in " << data << " (skipped)\n";
     return 0;
@@ -100,8 +104,8 @@ int main(int argc, char** argv) {
   char host[256] = "?";
   gethostname(host, sizeof host);
   std::cout << "# bench_compare\n\nhost " << host << ", " << omp_get_max_threads() << " OpenMP threads"
-            << (threads > 0 ? " (OpenBLAS the same)" : "") << ", fine tets: max volume " << opt.fine_volume_factor
-            << " x voxel side^3\n\n";
+            << (threads > 0 ? " (OpenBLAS the same)" : "") << ", fine tets: max volume "
+            << opt.fine_volume_factor << " x voxel side^3\n\n";
   struct Sum {
     std::string name;
     std::vector<lidef::MethodResult> rows;
@@ -131,9 +135,11 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  std::cout << "## Summary: solve time in s (ratio to lidef in the same run); crease (°) in brackets\n\n| scenario |";
+  std::cout << "## Summary: solve time in s (ratio to lidef in the same run); crease (°) in brackets\n\n| "
+               "scenario |";
   for (const std::string& m : lidef::compare_methods())
-    if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end()) std::cout << " " << m << " |";
+    if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end())
+      std::cout << " " << m << " |";
   std::cout << "\n|---|";
   for (const std::string& m : lidef::compare_methods())
     if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end()) std::cout << "---|";
@@ -141,7 +147,9 @@ int main(int argc, char** argv) {
   for (const Sum& s : sums) {
     std::cout << "| " << s.name << " |";
     for (const auto& r : s.rows)
-      std::cout << " " << (r.ok ? g(r.seconds) + " (" + g(r.time_ratio) + "x) [" + g(r.crease_deg, 2) + "]" : "failed")
+      std::cout << " "
+                << (r.ok ? g(r.seconds) + " (" + g(r.time_ratio) + "x) [" + g(r.crease_deg, 2) + "]"
+                         : "failed")
                 << " |";
     std::cout << "\n";
   }

@@ -1,6 +1,6 @@
-// `lidef compare` end to end on the project's beam (small lidef problem): every output file, the table's columns
-// and rows, and per-method sanity (handles reached, no inverted tet, lidef certified, volume ratios near 1).
-// Bad input: a tet mesh that misses the mesh vertices, an empty tet mesh and a TetGen failure on a
+// `lidef compare` end to end on the project's beam (small lidef problem): every output file, the table's
+// columns and rows, and per-method sanity (handles reached, no inverted tet, lidef certified, volume ratios
+// near 1). Bad input: a tet mesh that misses the mesh vertices, an empty tet mesh and a TetGen failure on a
 // self-intersecting cage each fail only their method; an unknown method is an error before anything runs.
 // CompareSlow.* runs the shared bar_bend scenario with every method (ctest label "slow").
 #include <gtest/gtest.h>
@@ -29,7 +29,8 @@ int run_lidef(const std::string& args, std::string* out) {
 }
 
 // table.csv as rows of (column → text); quoted fields may hold commas.
-std::vector<std::map<std::string, std::string>> read_table(const std::string& path, std::vector<std::string>* header) {
+std::vector<std::map<std::string, std::string>> read_table(const std::string& path,
+                                                           std::vector<std::string>* header) {
   std::ifstream in(path);
   std::string line;
   std::vector<std::map<std::string, std::string>> rows;
@@ -101,9 +102,10 @@ TEST(CompareCli, BeamAllMethodsEndToEnd) {
   TempDir dir;
   const std::string out = dir / "cmp";
   std::string log;
-  const int rc = run_lidef("compare '" + lidef::test::project_data() + "/scenarios/beam_bend.json' --out '" + out +
-                               "' --methods lidef,pwl-tet,pwl-tet-fine,vhm,pwl-tri --fine-volume-factor 4 " + kSmall,
-                           &log);
+  const int rc =
+      run_lidef("compare '" + lidef::test::project_data() + "/scenarios/beam_bend.json' --out '" + out +
+                    "' --methods lidef,pwl-tet,pwl-tet-fine,vhm,pwl-tri --fine-volume-factor 4 " + kSmall,
+                &log);
   ASSERT_EQ(rc, 0) << log;
   for (const std::string m : {"lidef", "pwl-tet", "pwl-tet-fine", "vhm", "pwl-tri"}) {
     for (const char* ext : {".obj", ".vtp", ".log"}) EXPECT_TRUE(fs::exists(out + "/" + m + ext)) << m << ext;
@@ -126,8 +128,8 @@ TEST(CompareCli, BeamAllMethodsEndToEnd) {
     EXPECT_NEAR(num(r, "global_volume_ratio"), 1.0, 0.25) << r.at("method");
     EXPECT_GT(num(r, "time_ratio_to_lidef"), 0);
   }
-  const auto lidef = row_of(rows, "lidef"), tet = row_of(rows, "pwl-tet"), fine = row_of(rows, "pwl-tet-fine"),
-             vhm = row_of(rows, "vhm"), tri = row_of(rows, "pwl-tri");
+  const auto lidef = row_of(rows, "lidef"), tet = row_of(rows, "pwl-tet"),
+             fine = row_of(rows, "pwl-tet-fine"), vhm = row_of(rows, "vhm"), tri = row_of(rows, "pwl-tri");
   EXPECT_EQ(lidef.at("certified"), "1");
   EXPECT_GT(num(lidef, "min_sigma3"), 0);
   EXPECT_DOUBLE_EQ(num(lidef, "time_ratio_to_lidef"), 1.0);
@@ -136,7 +138,7 @@ TEST(CompareCli, BeamAllMethodsEndToEnd) {
   EXPECT_EQ(fine.at("inverted_elements"), "0");
   EXPECT_GT(num(fine, "dof"), 2 * num(tet, "dof"));
   EXPECT_GE(num(tet, "mean_e_iso_minus_6"), 0);
-  EXPECT_FALSE(vhm.at("certified").empty());  // judged by lidef's certificate
+  EXPECT_FALSE(vhm.at("certified").empty());          // judged by lidef's certificate
   EXPECT_TRUE(tri.at("mean_e_iso_minus_6").empty());  // no volumetric distortion for a surface method
   EXPECT_TRUE(tri.at("certified").empty());
 }
@@ -145,10 +147,12 @@ TEST(CompareCli, FailingMethodIsReportedAndOthersRun) {
   // A tet mesh of one small tet: the mesh vertices lie outside every tet.
   {
     TempDir dir;
-    const std::string sc = beam_copy(dir, {{"tet.node", "4 3 0 0\n1 0 0 0\n2 0.1 0 0\n3 0 0.1 0\n4 0 0 0.1\n"},
-                                           {"tet.ele", "1 4 0\n1 1 2 3 4\n"}});
+    const std::string sc =
+        beam_copy(dir, {{"tet.node", "4 3 0 0\n1 0 0 0\n2 0.1 0 0\n3 0 0.1 0\n4 0 0 0.1\n"},
+                        {"tet.ele", "1 4 0\n1 1 2 3 4\n"}});
     std::string log;
-    const int rc = run_lidef("compare '" + sc + "' --out '" + dir / "cmp" + "' --methods pwl-tet,pwl-tri", &log);
+    const int rc =
+        run_lidef("compare '" + sc + "' --out '" + dir / "cmp" + "' --methods pwl-tet,pwl-tri", &log);
     EXPECT_EQ(rc, 1) << log;
     std::vector<std::string> header;
     const auto rows = read_table(dir / "cmp/table.csv", &header);
@@ -163,10 +167,12 @@ TEST(CompareCli, FailingMethodIsReportedAndOthersRun) {
   // An empty tet mesh.
   {
     TempDir dir;
-    const std::string sc = beam_copy(dir, {{"tet.node", "4 3 0 0\n1 0 0 0\n2 0.1 0 0\n3 0 0.1 0\n4 0 0 0.1\n"},
-                                           {"tet.ele", "0 4 0\n"}});
+    const std::string sc = beam_copy(
+        dir, {{"tet.node", "4 3 0 0\n1 0 0 0\n2 0.1 0 0\n3 0 0.1 0\n4 0 0 0.1\n"}, {"tet.ele", "0 4 0\n"}});
     std::string log;
-    EXPECT_EQ(run_lidef("compare '" + sc + "' --out '" + dir / "cmp" + "' --methods pwl-tet,pwl-tri", &log), 1) << log;
+    EXPECT_EQ(run_lidef("compare '" + sc + "' --out '" + dir / "cmp" + "' --methods pwl-tet,pwl-tri", &log),
+              1)
+        << log;
     std::vector<std::string> header;
     const auto rows = read_table(dir / "cmp/table.csv", &header);
     EXPECT_NE(row_of(rows, "pwl-tet").at("error").find("no tetrahedra"), std::string::npos);
@@ -177,8 +183,8 @@ TEST(CompareCli, FailingMethodIsReportedAndOthersRun) {
 TEST(CompareCli, UnknownMethodIsAnErrorAndWritesNothing) {
   TempDir dir;
   std::string log;
-  EXPECT_EQ(run_lidef("compare '" + lidef::test::project_data() + "/scenarios/beam_bend.json' --out '" + dir / "cmp" +
-                          "' --methods lidef,pwl-quad",
+  EXPECT_EQ(run_lidef("compare '" + lidef::test::project_data() + "/scenarios/beam_bend.json' --out '" +
+                          dir / "cmp" + "' --methods lidef,pwl-quad",
                       &log),
             2);
   EXPECT_NE(log.find("pwl-quad"), std::string::npos) << log;
@@ -196,7 +202,8 @@ TEST(Compare, TetgenFailureFailsOnlyPwlTet) {
   cage.F.resize(a.F.rows() + b.F.rows(), 3);
   cage.F << a.F, (b.F.array() + static_cast<int>(a.V.rows())).matrix();
   cage.source = "crossing/cage.obj";
-  Model model{Cage(cage), box_surface(Vec3(0.1, 0.1, 0.1), Vec3(0.4, 0.4, 0.4), Eigen::Vector3i(4, 4, 4)), "", {}};
+  Model model{
+      Cage(cage), box_surface(Vec3(0.1, 0.1, 0.1), Vec3(0.4, 0.4, 0.4), Eigen::Vector3i(4, 4, 4)), "", {}};
   Scenario sc;
   sc.name = "crossing";
   sc.sources = model.mesh.V.topRows(2);
@@ -218,8 +225,8 @@ TEST(CompareSlow, SharedBarBendAllMethods) {
   LIDEF_REQUIRE_SHARED();
   TempDir dir;
   std::string log;
-  const int rc = run_lidef("compare '" + lidef::test::shared_data() + "/scenarios/bar_bend.json' --out '" + dir / "cmp" +
-                               "' --methods lidef,pwl-tet,vhm,pwl-tri --quiet",
+  const int rc = run_lidef("compare '" + lidef::test::shared_data() + "/scenarios/bar_bend.json' --out '" +
+                               dir / "cmp" + "' --methods lidef,pwl-tet,vhm,pwl-tri --quiet",
                            &log);
   ASSERT_EQ(rc, 0) << log;
   std::vector<std::string> header;

@@ -32,7 +32,8 @@ struct BeamVhm {
     sampling = sample_voxels(cage, sp);
     const std::vector<int> pick = select_hessian_subset(sampling, 150.0 / sampling.size());
     anchors.resize(static_cast<Eigen::Index>(pick.size()), 3);
-    for (size_t k = 0; k < pick.size(); ++k) anchors.row(static_cast<Eigen::Index>(k)) = sampling.centers.row(pick[k]);
+    for (size_t k = 0; k < pick.size(); ++k)
+      anchors.row(static_cast<Eigen::Index>(k)) = sampling.centers.row(pick[k]);
     boundary.resize((beam.mesh.V.rows() + 9) / 10, 3);
     for (Eigen::Index i = 0; i < beam.mesh.V.rows(); i += 10) boundary.row(i / 10) = beam.mesh.V.row(i);
   }

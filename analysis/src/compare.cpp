@@ -23,7 +23,9 @@ namespace lidef {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 std::string g(double x, int prec = 4) {
@@ -32,7 +34,8 @@ std::string g(double x, int prec = 4) {
   return buf;
 }
 
-// E_iso − 6 (NaN where det J ≤ 0, so that means over a mesh stay finite; the inverted count says it) and det J.
+// E_iso − 6 (NaN where det J ≤ 0, so that means over a mesh stay finite; the inverted count says it) and det
+// J.
 void add_jacobian_fields(const Mat3& J, double& e_iso, double& det_j) {
   const double e = sd_energy(J);
   e_iso = std::isfinite(e) ? e - 6 : kNaN;
@@ -99,7 +102,8 @@ CertifyParams certify_params_of(const DeformParams& p) {
   return cp;
 }
 
-// State shared by the methods of one run: the harmonic basis and lidef's voxel sampling, built when first needed.
+// State shared by the methods of one run: the harmonic basis and lidef's voxel sampling, built when first
+// needed.
 struct Shared {
   const Scenario& sc;
   const Model& model;
@@ -133,8 +137,9 @@ void run_lidef(Shared& s, MethodResult& r) {
     log << it.iteration << ',' << format_double(it.terms.total) << ',' << format_double(it.step) << ','
         << (it.certified ? 1 : 0) << ',' << format_double(it.min_lower_bound) << ','
         << format_double(it.max_handle_error) << ',' << g(it.ms_total, 6) << "\n";
-    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.terms.total, 7) + "  step " + g(it.step, 3) +
-                        "  handle err " + g(it.max_handle_error, 3) + "  " + g(it.ms_total, 4) + " ms");
+    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.terms.total, 7) + "  step " +
+                        g(it.step, 3) + "  handle err " + g(it.max_handle_error, 3) + "  " +
+                        g(it.ms_total, 4) + " ms");
     return true;
   });
   r.seconds = res.seconds;
@@ -150,8 +155,8 @@ void run_lidef(Shared& s, MethodResult& r) {
   r.certified = cert.certified ? 1 : 0;
   r.min_sigma3 = cert.min_sigma3_center;
   r.min_sigma3_bound = cert.certified ? cert.min_lower_bound : kNaN;
-  r.detail = std::to_string(solver.sampling().size()) + " samples, " + std::to_string(solver.subspace().size()) +
-             " reduced coefficients per coordinate";
+  r.detail = std::to_string(solver.sampling().size()) + " samples, " +
+             std::to_string(solver.subspace().size()) + " reduced coefficients per coordinate";
   r.log = log.str();
 }
 
@@ -162,7 +167,8 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   TetMesh tets;
   const std::filesystem::path node = std::filesystem::path(s.model.dir) / "tet.node",
                               ele = std::filesystem::path(s.model.dir) / "tet.ele";
-  if (s.opt.use_model_tets && !s.model.dir.empty() && std::filesystem::exists(node) && std::filesystem::exists(ele)) {
+  if (s.opt.use_model_tets && !s.model.dir.empty() && std::filesystem::exists(node) &&
+      std::filesystem::exists(ele)) {
     tets = read_tet_mesh(node.string(), ele.string());
     r.detail = "model tet mesh";
   } else {
@@ -178,17 +184,20 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
       tets = refine_tet_mesh(tets, o);
       r.detail = "TetGen " + tetgen_switches(o, true) + " of the " + r.detail;
     } catch (const NumericalError& e) {
-      // TetGen's refinement crashes on some meshes (the horse's: a failed assertion on coplanar points); the cage
-      // itself may still be tetrahedralized directly.
+      // TetGen's refinement crashes on some meshes (the horse's: a failed assertion on coplanar points); the
+      // cage itself may still be tetrahedralized directly.
       s.say(r.method, std::string(e.what()) + "; tetrahedralizing the cage instead");
       const TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
       tets = tetrahedralize(cage, o);
-      r.detail = "TetGen " + tetgen_switches(o) + " of the cage (refining the " + r.detail + " crashed TetGen)";
+      r.detail =
+          "TetGen " + tetgen_switches(o) + " of the cage (refining the " + r.detail + " crashed TetGen)";
     }
   }
-  r.detail += ": " + std::to_string(tets.num_vertices()) + " vertices, " + std::to_string(tets.num_tets()) + " tets";
+  r.detail +=
+      ": " + std::to_string(tets.num_vertices()) + " vertices, " + std::to_string(tets.num_tets()) + " tets";
   s.say(r.method, r.detail);
-  const TetEmbedding mesh_embedding = embed_points(tets, s.model.mesh.V, s.model.dir + ": PWL(Tet) mesh vertex");
+  const TetEmbedding mesh_embedding =
+      embed_points(tets, s.model.mesh.V, s.model.dir + ": PWL(Tet) mesh vertex");
   const auto W = mesh_embedding.weights();
   PwlTetParams p;
   p.lambda_p2p = s.sc.params.lambda_p2p;
@@ -206,8 +215,9 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
         << format_double(it.e_p2p) << ',' << format_double(it.newton_decrement) << ','
         << format_double(it.direction_norm) << ',' << format_double(it.step) << ',' << it.halvings << ','
         << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
-    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  step " + g(it.step, 3) +
-                        "  handle err " + g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
+    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  step " +
+                        g(it.step, 3) + "  handle err " + g(it.max_handle_error, 3) + "  " + g(it.ms, 4) +
+                        " ms");
     return true;
   });
   r.seconds = res.seconds;
@@ -222,7 +232,8 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   const Eigen::Index n = r.V.rows();
   r.e_iso.resize(n);
   r.det_j.resize(n);
-  for (Eigen::Index i = 0; i < n; ++i) add_jacobian_fields(solver.jacobian(X, mesh_embedding.tet(i)), r.e_iso(i), r.det_j(i));
+  for (Eigen::Index i = 0; i < n; ++i)
+    add_jacobian_fields(solver.jacobian(X, mesh_embedding.tet(i)), r.e_iso(i), r.det_j(i));
   summarize_fields(r);
   r.log = log.str();
 }
@@ -243,15 +254,18 @@ void run_vhm(Shared& s, MethodResult& r) {
     const double frac = std::min(1.0, static_cast<double>(s.opt.anchor_count) / std::max(1, vs.size()));
     const std::vector<int> pick = select_hessian_subset(vs, frac);
     anchors.resize(static_cast<Eigen::Index>(pick.size()), 3);
-    for (size_t k = 0; k < pick.size(); ++k) anchors.row(static_cast<Eigen::Index>(k)) = vs.centers.row(pick[k]);
+    for (size_t k = 0; k < pick.size(); ++k)
+      anchors.row(static_cast<Eigen::Index>(k)) = vs.centers.row(pick[k]);
     r.detail = std::to_string(anchors.rows()) + " anchors (evenly spread voxel centers)";
   }
   const HarmonicBasis& basis = s.get_basis();
   VhmParams p = s.opt.vhm;
   p.lambda_p2p = s.sc.params.lambda_p2p;
-  // Boundary samples of the smoothness term: mesh vertices, every k-th so that there are at most vhm_boundary.
+  // Boundary samples of the smoothness term: mesh vertices, every k-th so that there are at most
+  // vhm_boundary.
   const Eigen::Index nm = s.model.mesh.V.rows();
-  const Eigen::Index stride = std::max<Eigen::Index>(1, (nm + s.opt.vhm_boundary - 1) / std::max(1, s.opt.vhm_boundary));
+  const Eigen::Index stride =
+      std::max<Eigen::Index>(1, (nm + s.opt.vhm_boundary - 1) / std::max(1, s.opt.vhm_boundary));
   MatX3d boundary((nm + stride - 1) / stride, 3);
   for (Eigen::Index i = 0, k = 0; i < nm; i += stride, ++k) boundary.row(k) = s.model.mesh.V.row(i);
   r.detail += ", " + std::to_string(boundary.rows()) + " mesh vertices as boundary samples";
@@ -262,8 +276,8 @@ void run_vhm(Shared& s, MethodResult& r) {
   log << "iteration,energy,e_rigid,e_smooth,e_p2p,max_handle_error,ms\n";
   const VhmResult res = solver.solve([&](const VhmIteration& it) {
     log << it.iteration << ',' << format_double(it.energy) << ',' << format_double(it.e_rigid) << ','
-        << format_double(it.e_smooth) << ',' << format_double(it.e_p2p) << ',' << format_double(it.max_handle_error)
-        << ',' << g(it.ms, 6) << "\n";
+        << format_double(it.e_smooth) << ',' << format_double(it.e_p2p) << ','
+        << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
     if (it.iteration <= 3 || it.iteration % 50 == 0)
       s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  handle err " +
                           g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
@@ -301,8 +315,8 @@ void run_pwl_tri(Shared& s, MethodResult& r) {
   std::ostringstream log;
   log << "iteration,energy_after_rotations,energy,max_handle_error,ms\n";
   const PwlTriResult res = solver.solve([&](const PwlTriIteration& it) {
-    log << it.iteration << ',' << format_double(it.energy_after_local) << ',' << format_double(it.energy) << ','
-        << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
+    log << it.iteration << ',' << format_double(it.energy_after_local) << ',' << format_double(it.energy)
+        << ',' << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
     if (it.iteration <= 3 || it.iteration % 50 == 0)
       s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  handle err " +
                           g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
@@ -328,7 +342,8 @@ const std::vector<std::string>& compare_methods() {
 
 double mesh_volume(const MatX3d& V, const MatX3i& F) {
   double v = 0;
-  for (Eigen::Index t = 0; t < F.rows(); ++t) v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
+  for (Eigen::Index t = 0; t < F.rows(); ++t)
+    v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
   return v;
 }
 
@@ -361,7 +376,8 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
                                          const CompareProgress& progress) {
   for (const std::string& m : opt.methods)
     if (std::find(compare_methods().begin(), compare_methods().end(), m) == compare_methods().end())
-      throw InputError("--methods", "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
+      throw InputError("--methods",
+                       "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
   std::vector<std::string> order;
   for (const std::string& m : compare_methods())  // table order; lidef first
     if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end()) order.push_back(m);
@@ -406,11 +422,26 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
 }
 
 const std::vector<std::string>& comparison_table_columns() {
-  static const std::vector<std::string> c = {
-      "method",           "status",           "dof",         "time_s",          "preprocess_s", "iterations",
-      "converged",        "max_handle_error", "mean_e_iso_minus_6", "max_e_iso_minus_6", "global_volume_ratio",
-      "inverted_elements", "inverted_mesh_vertices", "certified",       "min_sigma3",  "min_sigma3_lower_bound", "crease_deg",
-      "time_ratio_to_lidef", "detail",        "error"};
+  static const std::vector<std::string> c = {"method",
+                                             "status",
+                                             "dof",
+                                             "time_s",
+                                             "preprocess_s",
+                                             "iterations",
+                                             "converged",
+                                             "max_handle_error",
+                                             "mean_e_iso_minus_6",
+                                             "max_e_iso_minus_6",
+                                             "global_volume_ratio",
+                                             "inverted_elements",
+                                             "inverted_mesh_vertices",
+                                             "certified",
+                                             "min_sigma3",
+                                             "min_sigma3_lower_bound",
+                                             "crease_deg",
+                                             "time_ratio_to_lidef",
+                                             "detail",
+                                             "error"};
   return c;
 }
 
@@ -428,7 +459,9 @@ std::string csv_quote(const std::string& s) {
   }
   return q + "\"";
 }
-std::string status_of(const MethodResult& r) { return !r.ok ? "failed" : r.converged ? "converged" : "stopped"; }
+std::string status_of(const MethodResult& r) {
+  return !r.ok ? "failed" : r.converged ? "converged" : "stopped";
+}
 }  // namespace
 
 std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
@@ -437,11 +470,12 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
   for (size_t k = 0; k < cols.size(); ++k) s << (k ? "," : "") << cols[k];
   s << "\n";
   for (const MethodResult& r : rows) {
-    s << r.method << ',' << status_of(r) << ',' << (r.ok ? std::to_string(r.dof) : "") << ',' << num(r.seconds) << ','
-      << num(r.preprocess_seconds) << ',' << (r.ok ? std::to_string(r.iterations) : "") << ','
-      << (r.ok ? (r.converged ? "1" : "0") : "") << ',' << num(r.max_handle_error) << ',' << num(r.mean_e_iso) << ','
-      << num(r.max_e_iso) << ',' << num(r.volume_ratio) << ',' << (r.inverted >= 0 ? std::to_string(r.inverted) : "")
-      << ',' << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "") << ','
+    s << r.method << ',' << status_of(r) << ',' << (r.ok ? std::to_string(r.dof) : "") << ','
+      << num(r.seconds) << ',' << num(r.preprocess_seconds) << ','
+      << (r.ok ? std::to_string(r.iterations) : "") << ',' << (r.ok ? (r.converged ? "1" : "0") : "") << ','
+      << num(r.max_handle_error) << ',' << num(r.mean_e_iso) << ',' << num(r.max_e_iso) << ','
+      << num(r.volume_ratio) << ',' << (r.inverted >= 0 ? std::to_string(r.inverted) : "") << ','
+      << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "") << ','
       << (r.certified >= 0 ? std::to_string(r.certified) : "") << ',' << num(r.min_sigma3) << ','
       << num(r.min_sigma3_bound) << ',' << num(r.crease_deg) << ',' << num(r.time_ratio) << ','
       << csv_quote(r.detail) << ',' << csv_quote(r.error) << "\n";
@@ -451,23 +485,29 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
 
 std::string comparison_table_md(const std::vector<MethodResult>& rows, const Scenario& sc) {
   std::ostringstream s;
-  auto cell = [](double x, int p = 3) { return std::isnan(x) ? std::string("—") : std::isinf(x) ? std::string("∞") : g(x, p); };
+  auto cell = [](double x, int p = 3) {
+    return std::isnan(x) ? std::string("—") : std::isinf(x) ? std::string("∞") : g(x, p);
+  };
   s << "# " << sc.name << " — comparison (paper Table 1)\n\n"
     << "| method | DOF | time (s) | time / lidef | iterations | status | max handle error | mean E_iso−6 | "
-       "max E_iso−6 | global volume ratio | inverted tets | mesh vertices det J ≤ 0 | certified | min σ3 (samples) | crease (°) |\n"
+       "max E_iso−6 | global volume ratio | inverted tets | mesh vertices det J ≤ 0 | certified | min σ3 "
+       "(samples) | crease (°) |\n"
     << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const MethodResult& r : rows) {
     if (!r.ok) {
-      s << "| " << r.method << " | — | — | — | — | FAILED: " << r.error << " | — | — | — | — | — | — | — | — | — |\n";
+      s << "| " << r.method << " | — | — | — | — | FAILED: " << r.error
+        << " | — | — | — | — | — | — | — | — | — |\n";
       continue;
     }
-    s << "| " << r.method << " | " << r.dof << " | " << cell(r.seconds) << " | " << cell(r.time_ratio, 3) << " | "
-      << r.iterations << " | " << status_of(r) << " | " << cell(r.max_handle_error) << " | " << cell(r.mean_e_iso)
-      << " | " << cell(r.max_e_iso) << " | " << cell(r.volume_ratio, 4) << " | "
+    s << "| " << r.method << " | " << r.dof << " | " << cell(r.seconds) << " | " << cell(r.time_ratio, 3)
+      << " | " << r.iterations << " | " << status_of(r) << " | " << cell(r.max_handle_error) << " | "
+      << cell(r.mean_e_iso) << " | " << cell(r.max_e_iso) << " | " << cell(r.volume_ratio, 4) << " | "
       << (r.inverted >= 0 ? std::to_string(r.inverted) : "—") << " | "
       << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "—") << " | "
-      << (r.certified < 0 ? "—" : r.certified ? "yes" : "NO") << " | " << cell(r.min_sigma3) << " | "
-      << cell(r.crease_deg) << " |\n";
+      << (r.certified < 0 ? "—"
+          : r.certified   ? "yes"
+                          : "NO")
+      << " | " << cell(r.min_sigma3) << " | " << cell(r.crease_deg) << " |\n";
   }
   s << "\nTime = solve time in this run (preprocessing excluded; see table.csv). Details:\n\n";
   for (const MethodResult& r : rows)

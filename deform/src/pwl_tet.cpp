@@ -18,9 +18,9 @@ using Mat9x12 = Eigen::Matrix<double, 9, 12>;
 using Mat12 = Eigen::Matrix<double, 12, 12>;
 
 struct PwlTetSolver::Impl {
-  SpMat H;                         // 3#V square, full symmetric pattern (tets + handles + diagonal)
-  std::vector<int> tet_slot;       // #T * 144: index into H.valuePtr() of local entry (r, c), r*12 + c
-  std::vector<int> diag_slot;      // 3#V
+  SpMat H;                     // 3#V square, full symmetric pattern (tets + handles + diagonal)
+  std::vector<int> tet_slot;   // #T * 144: index into H.valuePtr() of local entry (r, c), r*12 + c
+  std::vector<int> diag_slot;  // 3#V
   std::vector<std::pair<int, double>> handle_slots;  // (value index, coefficient) of 2λ WᵀW ⊗ I₃
   Eigen::CholmodSupernodalLLT<SpMat, Eigen::Lower> chol;
   bool analyzed = false;
@@ -47,9 +47,12 @@ PwlTetSolver::PwlTetSolver(const TetMesh& mesh, const PwlTetParams& params)
   w_.resize(nt);
   for (int t = 0; t < nt; ++t) {
     Mat3 D;
-    for (int k = 0; k < 3; ++k) D.col(k) = (mesh_.V.row(mesh_.T(t, k + 1)) - mesh_.V.row(mesh_.T(t, 0))).transpose();
+    for (int k = 0; k < 3; ++k)
+      D.col(k) = (mesh_.V.row(mesh_.T(t, k + 1)) - mesh_.V.row(mesh_.T(t, 0))).transpose();
     const double v = D.determinant() / 6;
-    if (!(v > 0)) throw InputError(mesh_.source, "PWL(Tet): tetrahedron " + std::to_string(t) + " has non-positive volume");
+    if (!(v > 0))
+      throw InputError(mesh_.source,
+                       "PWL(Tet): tetrahedron " + std::to_string(t) + " has non-positive volume");
     Bm_[t] = D.inverse();
     w_(t) = v;
   }
@@ -62,7 +65,8 @@ PwlTetSolver::~PwlTetSolver() = default;
 void PwlTetSolver::set_handles(const MatX3d& sources, const MatX3d& targets, const std::string& where) {
   if (sources.rows() < 1 || sources.rows() != targets.rows())
     throw InputError(where, "PWL(Tet): need at least one handle and as many targets as sources");
-  if (!sources.allFinite() || !targets.allFinite()) throw InputError(where, "PWL(Tet): non-finite handle coordinate");
+  if (!sources.allFinite() || !targets.allFinite())
+    throw InputError(where, "PWL(Tet): non-finite handle coordinate");
   const TetEmbedding e = embed_points(mesh_, sources, where + ": PWL(Tet) handle");
   W_ = e.weights();
   targets_ = targets;
@@ -112,7 +116,8 @@ MatX3d PwlTetSolver::gradient(const MatX3d& X) const {
   for (int t = 0; t < mesh_.num_tets(); ++t) {
     const Mat3 J = jacobian(X, t);
     const Mat3 P = sd_gradient(J);
-    const Eigen::Matrix<double, 12, 1> g = w_(t) * jacobian_derivative(Bm_[t]).transpose() * Eigen::Map<const Vec9>(P.data());
+    const Eigen::Matrix<double, 12, 1> g =
+        w_(t) * jacobian_derivative(Bm_[t]).transpose() * Eigen::Map<const Vec9>(P.data());
     for (int j = 0; j < 4; ++j) G.row(mesh_.T(t, j)) += g.segment<3>(3 * j).transpose();
   }
   if (W_.rows() > 0) G += 2 * params_.lambda_p2p * (W_.transpose() * (W_ * X - targets_));
@@ -155,7 +160,8 @@ void PwlTetSolver::analyze() {
     trip.reserve(144 * nt + n);
     for (int t = 0; t < nt; ++t)
       for (int r = 0; r < 12; ++r)
-        for (int c = 0; c < 12; ++c) trip.emplace_back(3 * mesh_.T(t, r / 3) + r % 3, 3 * mesh_.T(t, c / 3) + c % 3, 0.0);
+        for (int c = 0; c < 12; ++c)
+          trip.emplace_back(3 * mesh_.T(t, r / 3) + r % 3, 3 * mesh_.T(t, c / 3) + c % 3, 0.0);
     for (int i = 0; i < n; ++i) trip.emplace_back(i, i, 0.0);
     const SpMat WtW = SpMat(W_.transpose() * W_);
     for (int k = 0; k < WtW.outerSize(); ++k)
@@ -177,7 +183,8 @@ void PwlTetSolver::analyze() {
     for (int k = 0; k < WtW.outerSize(); ++k)
       for (SpMat::InnerIterator it(WtW, k); it; ++it)
         for (int a = 0; a < 3; ++a)
-          im.handle_slots.emplace_back(slot(3 * it.row() + a, 3 * it.col() + a), 2 * params_.lambda_p2p * it.value());
+          im.handle_slots.emplace_back(slot(3 * it.row() + a, 3 * it.col() + a),
+                                       2 * params_.lambda_p2p * it.value());
     im.chol.analyzePattern(im.H);
     if (im.chol.info() != Eigen::Success) throw NumericalError("PWL(Tet): CHOLMOD symbolic analysis failed");
     im.analyzed = true;
@@ -225,7 +232,8 @@ PwlTetIteration PwlTetSolver::step() {
   VecXd g(n);
   for (int i = 0; i < X_.rows(); ++i) g.segment<3>(3 * i) = G.row(i).transpose();
   const VecXd d = im.chol.solve(-g);
-  if (im.chol.info() != Eigen::Success || !d.allFinite()) throw NumericalError("PWL(Tet): CHOLMOD solve failed");
+  if (im.chol.info() != Eigen::Success || !d.allFinite())
+    throw NumericalError("PWL(Tet): CHOLMOD solve failed");
   MatX3d D(X_.rows(), 3);
   for (int i = 0; i < X_.rows(); ++i) D.row(i) = d.segment<3>(3 * i).transpose();
 
@@ -274,8 +282,9 @@ PwlTetResult PwlTetSolver::solve(const std::function<bool(const PwlTetIteration&
       res.message = "no decreasing step";
       break;
     }
-    // Convergence is judged on the Newton direction, not on the accepted step: a line search that had to shorten
-    // the step a lot (to keep every tet positive) makes t‖δ‖ and the decrease small far from a minimum.
+    // Convergence is judged on the Newton direction, not on the accepted step: a line search that had to
+    // shorten the step a lot (to keep every tet positive) makes t‖δ‖ and the decrease small far from a
+    // minimum.
     const double scale = std::max(1.0, std::sqrt(X_.squaredNorm()));
     if (r.direction_norm <= params_.step_tolerance * scale) {
       res.converged = true;

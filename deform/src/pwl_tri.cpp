@@ -61,7 +61,8 @@ SrArapSolver::SrArapSolver(const TriMesh& mesh, const PwlTriParams& params)
     : mesh_(mesh), params_(params), impl_(std::make_unique<Impl>()) {
   const int nv = static_cast<int>(mesh_.V.rows());
   if (nv == 0 || mesh_.F.rows() == 0) throw InputError(mesh_.source, "PWL(Tri): the mesh is empty");
-  if (mesh_.F.minCoeff() < 0 || mesh_.F.maxCoeff() >= nv) throw InputError(mesh_.source, "PWL(Tri): bad face index");
+  if (mesh_.F.minCoeff() < 0 || mesh_.F.maxCoeff() >= nv)
+    throw InputError(mesh_.source, "PWL(Tri): bad face index");
   // Cotangent weights: w_ij = ½ Σ over the faces of edge ij of the cotangent of the opposite angle.
   std::map<std::pair<int, int>, double> w;
   area_ = 0;
@@ -102,7 +103,8 @@ void SrArapSolver::set_handles(const MatX3d& sources, const MatX3d& targets, con
     Eigen::Index bf = 0;
     Vec3 bb;
     for (Eigen::Index f = 0; f < mesh_.F.rows(); ++f) {
-      const Vec3 a = mesh_.V.row(mesh_.F(f, 0)), b = mesh_.V.row(mesh_.F(f, 1)), c = mesh_.V.row(mesh_.F(f, 2));
+      const Vec3 a = mesh_.V.row(mesh_.F(f, 0)), b = mesh_.V.row(mesh_.F(f, 1)),
+                 c = mesh_.V.row(mesh_.F(f, 2));
       const Vec3 l = closest_bary(p, a, b, c);
       const double d = (l(0) * a + l(1) * b + l(2) * c - p).squaredNorm();
       if (d < best) {
@@ -112,8 +114,9 @@ void SrArapSolver::set_handles(const MatX3d& sources, const MatX3d& targets, con
       }
     }
     if (std::sqrt(best) > 1e-6 * diag)
-      throw InputError(where, "PWL(Tri): handle " + std::to_string(h) + " is not on the mesh surface (distance " +
-                                  std::to_string(std::sqrt(best)) + ")");
+      throw InputError(where, "PWL(Tri): handle " + std::to_string(h) +
+                                  " is not on the mesh surface (distance " + std::to_string(std::sqrt(best)) +
+                                  ")");
     for (int k = 0; k < 3; ++k) trip.emplace_back(static_cast<int>(h), mesh_.F(bf, k), bb(k));
   }
   W_.resize(sources.rows(), nv);
@@ -122,7 +125,8 @@ void SrArapSolver::set_handles(const MatX3d& sources, const MatX3d& targets, con
   X_ = mesh_.V;
   R_.assign(nv, Mat3::Identity());
   history_.clear();
-  // Global matrix: (2/A) Σ_ij w_ij (rows of the Laplacian; each undirected edge counted from both ends) + λ1 WᵀW.
+  // Global matrix: (2/A) Σ_ij w_ij (rows of the Laplacian; each undirected edge counted from both ends) + λ1
+  // WᵀW.
   std::vector<Eigen::Triplet<double>> lt;
   for (int i = 0; i < nv; ++i)
     for (const auto& [j, wij] : nbr_[i]) {
@@ -154,7 +158,9 @@ double SrArapSolver::energy(const MatX3d& X, const std::vector<Mat3>& R) const {
   return arap / area_ + params_.alpha * smooth + params_.lambda_p2p * p2p;
 }
 
-VecXd SrArapSolver::handle_errors() const { return (W_ * X_ - targets_).rowwise().norm(); }
+VecXd SrArapSolver::handle_errors() const {
+  return (W_ * X_ - targets_).rowwise().norm();
+}
 
 void SrArapSolver::local_step() {
   for (size_t i = 0; i < nbr_.size(); ++i) {
@@ -177,13 +183,15 @@ void SrArapSolver::global_step() {
   MatXd rhs(nv, 3);
   for (int i = 0; i < nv; ++i) {
     Vec3 r = Vec3::Zero();
-    for (const auto& [j, wij] : nbr_[i]) r += wij * (R_[i] + R_[j]) * (mesh_.V.row(i) - mesh_.V.row(j)).transpose();
+    for (const auto& [j, wij] : nbr_[i])
+      r += wij * (R_[i] + R_[j]) * (mesh_.V.row(i) - mesh_.V.row(j)).transpose();
     rhs.row(i) = (r / area_).transpose();
   }
   rhs += params_.lambda_p2p * (W_.transpose() * targets_);
   rhs += impl_->rho * X_;
   const MatXd X = impl_->chol.solve(rhs);
-  if (impl_->chol.info() != Eigen::Success || !X.allFinite()) throw NumericalError("PWL(Tri): CHOLMOD solve failed");
+  if (impl_->chol.info() != Eigen::Success || !X.allFinite())
+    throw NumericalError("PWL(Tri): CHOLMOD solve failed");
   X_ = X;
 }
 

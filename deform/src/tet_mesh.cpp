@@ -39,11 +39,13 @@ TetMesh read_tet_mesh(const std::string& node_path, const std::string& ele_path)
     if (!next_line(in, line, ln)) throw InputError(node_path, "empty .node file");
     long n = 0, dim = 0;
     std::istringstream h(line);
-    if (!(h >> n >> dim) || dim != 3 || n < 0) throw InputError(node_path, "bad header (expected 'n 3 ...')", ln);
+    if (!(h >> n >> dim) || dim != 3 || n < 0)
+      throw InputError(node_path, "bad header (expected 'n 3 ...')", ln);
     if (n == 0) throw InputError(node_path, "the tet mesh has no vertices", ln);
     m.V.resize(n, 3);
     for (long i = 0; i < n; ++i) {
-      if (!next_line(in, line, ln)) throw InputError(node_path, "expected " + std::to_string(n) + " vertices", ln);
+      if (!next_line(in, line, ln))
+        throw InputError(node_path, "expected " + std::to_string(n) + " vertices", ln);
       std::istringstream s(line);
       long id;
       double x, y, z;
@@ -66,10 +68,12 @@ TetMesh read_tet_mesh(const std::string& node_path, const std::string& ele_path)
   if (n == 0) throw InputError(ele_path, "the tet mesh has no tetrahedra", ln);
   m.T.resize(n, 4);
   for (long t = 0; t < n; ++t) {
-    if (!next_line(in, line, ln)) throw InputError(ele_path, "expected " + std::to_string(n) + " tetrahedra", ln);
+    if (!next_line(in, line, ln))
+      throw InputError(ele_path, "expected " + std::to_string(n) + " tetrahedra", ln);
     std::istringstream s(line);
     long id, v[4];
-    if (!(s >> id >> v[0] >> v[1] >> v[2] >> v[3])) throw InputError(ele_path, "expected 'index a b c d'", ln);
+    if (!(s >> id >> v[0] >> v[1] >> v[2] >> v[3]))
+      throw InputError(ele_path, "expected 'index a b c d'", ln);
     for (int k = 0; k < 4; ++k) {
       if (v[k] - base < 0 || v[k] - base >= m.V.rows())
         throw InputError(ele_path, "vertex index " + std::to_string(v[k]) + " out of range", ln);
@@ -105,7 +109,8 @@ TetEmbedding embed_points(const TetMesh& mesh, const MatX3d& P, const std::strin
   // Grid of about nt cells over the bounding box; each cell lists the tets whose box overlaps it.
   const double cell = std::cbrt((hi - lo).prod() / std::max(1, nt)) + 1e-12 * diag;
   int dims[3];
-  for (int k = 0; k < 3; ++k) dims[k] = std::max(1, std::min(512, static_cast<int>(std::ceil((hi(k) - lo(k)) / cell))));
+  for (int k = 0; k < 3; ++k)
+    dims[k] = std::max(1, std::min(512, static_cast<int>(std::ceil((hi(k) - lo(k)) / cell))));
   auto clampi = [&](double x, int k) {
     return std::max(0, std::min(dims[k] - 1, static_cast<int>(std::floor((x - lo(k)) / cell))));
   };
@@ -141,7 +146,8 @@ TetEmbedding embed_points(const TetMesh& mesh, const MatX3d& P, const std::strin
     bool in_box = true;
     for (int k = 0; k < 3; ++k) in_box = in_box && x(k) >= lo(k) - 1e-9 * diag && x(k) <= hi(k) + 1e-9 * diag;
     if (in_box) {
-      const auto& list = grid[(static_cast<size_t>(clampi(x(2), 2)) * dims[1] + clampi(x(1), 1)) * dims[0] + clampi(x(0), 0)];
+      const auto& list = grid[(static_cast<size_t>(clampi(x(2), 2)) * dims[1] + clampi(x(1), 1)) * dims[0] +
+                              clampi(x(0), 0)];
       for (int t : list) {
         const Vec3 l = inv[t] * (x - mesh.V.row(mesh.T(t, 0)).transpose());
         const Eigen::Vector4d b(1 - l.sum(), l(0), l(1), l(2));
@@ -151,7 +157,8 @@ TetEmbedding embed_points(const TetMesh& mesh, const MatX3d& P, const std::strin
           best = t;
           best_b = b;
         }
-        if (mn >= 0) break;  // strictly or on the boundary inside: good enough, any containing tet gives the same map
+        if (mn >= 0)
+          break;  // strictly or on the boundary inside: good enough, any containing tet gives the same map
       }
     }
     if (best < 0 || best_min < -tolerance) {

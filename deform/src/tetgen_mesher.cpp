@@ -1,5 +1,5 @@
-// The only translation unit that includes TetGen (compiled with -DTETLIBRARY, see deform/CMakeLists.txt). TetGen runs
-// in a forked child process (run_tetgen): it can abort or crash instead of throwing.
+// The only translation unit that includes TetGen (compiled with -DTETLIBRARY, see deform/CMakeLists.txt).
+// TetGen runs in a forked child process (run_tetgen): it can abort or crash instead of throwing.
 #include <sys/wait.h>
 #include <tetgen.h>
 #include <unistd.h>
@@ -8,11 +8,10 @@
 #include <cerrno>
 #include <csignal>
 #include <cstdint>
-#include <cstring>
-#include <vector>
-
 #include <cstdio>
+#include <cstring>
 #include <sstream>
+#include <vector>
 
 #include "lidef/errors.h"
 #include "lidef/self_intersections.h"
@@ -34,13 +33,20 @@ namespace {
 // TetGen's exit codes in library mode (tetgen.h, terminatetetgen).
 std::string tetgen_error_text(int code) {
   switch (code) {
-    case 1: return "out of memory";
-    case 2: return "internal error (TetGen bug or degenerate input)";
-    case 3: return "the input surface self-intersects";
-    case 4: return "a very small input feature size was detected (nearly degenerate input)";
-    case 5: return "two very close input facets were detected";
-    case 10: return "the input has no valid facets or is otherwise invalid";
-    default: return "TetGen failed with code " + std::to_string(code);
+    case 1:
+      return "out of memory";
+    case 2:
+      return "internal error (TetGen bug or degenerate input)";
+    case 3:
+      return "the input surface self-intersects";
+    case 4:
+      return "a very small input feature size was detected (nearly degenerate input)";
+    case 5:
+      return "two very close input facets were detected";
+    case 10:
+      return "the input has no valid facets or is otherwise invalid";
+    default:
+      return "TetGen failed with code " + std::to_string(code);
   }
 }
 }  // namespace
@@ -60,9 +66,9 @@ bool write_all(int fd, const void* data, size_t n) {
 }
 
 // Runs TetGen in a child process. TetGen 1.5 can end the process instead of throwing: a failed assertion
-// (abort) on some refinements, a segmentation fault on some self-intersecting input; in a child that only costs
-// the child, and the parent turns it into an error. The child sends: int32 status (0 ok, else TetGen's code),
-// then int32 #points, int32 #tets, #points*3 doubles, #tets*4 int32 (0-based).
+// (abort) on some refinements, a segmentation fault on some self-intersecting input; in a child that only
+// costs the child, and the parent turns it into an error. The child sends: int32 status (0 ok, else TetGen's
+// code), then int32 #points, int32 #tets, #points*3 doubles, #tets*4 int32 (0-based).
 TetMesh run_tetgen(tetgenio& in, std::string sw, const std::string& where) {
   int fds[2];
   if (::pipe(fds) != 0) throw NumericalError(where + ": cannot create a pipe for TetGen");
@@ -82,8 +88,10 @@ TetMesh run_tetgen(tetgenio& in, std::string sw, const std::string& where) {
       const int32_t np = out.numberofpoints, nt = out.numberofcorners >= 4 ? out.numberoftetrahedra : 0;
       std::vector<int32_t> tets(4 * static_cast<size_t>(std::max(nt, 0)));
       for (int32_t t = 0; t < nt; ++t)
-        for (int k = 0; k < 4; ++k) tets[4 * t + k] = out.tetrahedronlist[t * out.numberofcorners + k] - out.firstnumber;
-      const bool ok = write_all(fds[1], &status, 4) && write_all(fds[1], &np, 4) && write_all(fds[1], &nt, 4) &&
+        for (int k = 0; k < 4; ++k)
+          tets[4 * t + k] = out.tetrahedronlist[t * out.numberofcorners + k] - out.firstnumber;
+      const bool ok = write_all(fds[1], &status, 4) && write_all(fds[1], &np, 4) &&
+                      write_all(fds[1], &nt, 4) &&
                       write_all(fds[1], out.pointlist, sizeof(double) * 3 * static_cast<size_t>(np)) &&
                       write_all(fds[1], tets.data(), 4 * tets.size());
       ::_exit(ok ? 0 : 1);
@@ -121,7 +129,8 @@ TetMesh run_tetgen(tetgenio& in, std::string sw, const std::string& where) {
     throw NumericalError(where + ": " + what + " failed: " + tetgen_error_text(head[0]));
   }
   const size_t np = static_cast<size_t>(std::max(head[1], 0)), nt = static_cast<size_t>(std::max(head[2], 0));
-  if (buf.size() != 12 + 24 * np + 16 * nt) throw NumericalError(where + ": " + what + " returned a truncated result");
+  if (buf.size() != 12 + 24 * np + 16 * nt)
+    throw NumericalError(where + ": " + what + " returned a truncated result");
   if (nt == 0) throw NumericalError(where + ": " + what + " produced no tetrahedra");
   TetMesh m;
   m.source = "tetgen " + sw + " of " + where;
@@ -167,14 +176,17 @@ TetMesh refine_tet_mesh(const TetMesh& mesh, const TetgenOptions& options) {
 
 TetMesh tetrahedralize(const TriMesh& cage, const TetgenOptions& options) {
   const std::string where = cage.source.empty() ? "cage" : cage.source;
-  if (cage.V.rows() < 4 || cage.F.rows() < 4) throw InputError(where, "tetrahedralize: the cage has too few faces");
-  // TetGen 1.5 crashes (segmentation fault) on some self-intersecting surfaces instead of reporting them: check
-  // with exact predicates first, for a message that names the faces (run_tetgen would also survive the crash).
+  if (cage.V.rows() < 4 || cage.F.rows() < 4)
+    throw InputError(where, "tetrahedralize: the cage has too few faces");
+  // TetGen 1.5 crashes (segmentation fault) on some self-intersecting surfaces instead of reporting them:
+  // check with exact predicates first, for a message that names the faces (run_tetgen would also survive the
+  // crash).
   const auto crossing = find_self_intersections(cage.V, cage.F);
   if (!crossing.empty())
     throw InputError(where, "TetGen is not run on a self-intersecting cage: faces " +
-                                std::to_string(crossing[0].first + 1) + " and " + std::to_string(crossing[0].second + 1) +
-                                " intersect (" + std::to_string(crossing.size()) + " pair(s); 1-based `f` order)");
+                                std::to_string(crossing[0].first + 1) + " and " +
+                                std::to_string(crossing[0].second + 1) + " intersect (" +
+                                std::to_string(crossing.size()) + " pair(s); 1-based `f` order)");
   tetgenio in;
   in.firstnumber = 0;
   in.numberofpoints = static_cast<int>(cage.V.rows());

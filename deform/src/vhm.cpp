@@ -12,8 +12,8 @@ namespace lidef {
 constexpr double kEnergyFloor = 1e-14;
 
 namespace {
-// The rotation closest to M in the Frobenius norm (polar decomposition; a reflection is turned into a rotation
-// by flipping the smallest singular direction).
+// The rotation closest to M in the Frobenius norm (polar decomposition; a reflection is turned into a
+// rotation by flipping the smallest singular direction).
 Mat3 closest_rotation(const Mat3& M) {
   Eigen::JacobiSVD<Mat3> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 U = svd.matrixU();
@@ -23,8 +23,8 @@ Mat3 closest_rotation(const Mat3& M) {
 }
 }  // namespace
 
-VhmSolver::VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors, const MatX3d& boundary,
-                     const VhmParams& params, const std::string& where)
+VhmSolver::VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors,
+                     const MatX3d& boundary, const VhmParams& params, const std::string& where)
     : cage_(cage), basis_(basis), params_(params) {
   if (anchors.rows() < 1) throw InputError(where, "VHM needs at least one anchor");
   for (Eigen::Index i = 0; i < anchors.rows(); ++i)
@@ -94,7 +94,9 @@ double VhmSolver::energy(const MatX3d& y, const std::vector<Mat3>& R, VhmIterati
   return rigid + ws_ * smooth + params_.lambda_p2p * p2p;
 }
 
-VecXd VhmSolver::handle_errors() const { return (D_ * y_ - targets_).rowwise().norm(); }
+VecXd VhmSolver::handle_errors() const {
+  return (D_ * y_ - targets_).rowwise().norm();
+}
 
 VhmIteration VhmSolver::step() {
   const auto t0 = std::chrono::steady_clock::now();

@@ -4,19 +4,19 @@
 //
 // Energy (the same terms and weights as lidef's, so the two minimise the same thing on different spaces):
 //   E(X) = Σ_t w_t (E_iso(J_t) − 6) + λ1 Σ_h ‖W_h X − q_h‖²,    w_t = vol_t / Σ vol  (rest volumes),
-// J_t = D_s(X) D_m⁻¹ the constant Jacobian of tet t (D = [x1−x0, x2−x0, x3−x0]), E_iso the symmetric Dirichlet
-// energy (symmetric_dirichlet.h: +∞ when det J_t ≤ 0) and W_h the barycentric weights of handle h (soft
-// handles). The volume-weighted mean is lidef's mean over equal voxels.
+// J_t = D_s(X) D_m⁻¹ the constant Jacobian of tet t (D = [x1−x0, x2−x0, x3−x0]), E_iso the symmetric
+// Dirichlet energy (symmetric_dirichlet.h: +∞ when det J_t ≤ 0) and W_h the barycentric weights of handle h
+// (soft handles). The volume-weighted mean is lidef's mean over equal voxels.
 //
-// Solver: projected Newton. Per tet the 9x9 Hessian in vec(J) is projected to PSD with the analytic eigensystem
-// (sd_hessian_psd) and mapped to the 12 vertex coordinates by the constant 9x12 matrix ∂vec(J)/∂x; the sparse
-// 3#V system (plus 2λ1 WᵀW and a relative diagonal shift) is factored with CHOLMOD (supernodal LLᵀ through
-// Eigen's CholmodSupport; symbolic analysis once). Line search from t = 1, halving, Armijo on E: since E = +∞
-// when any tet has det J ≤ 0 and the map is affine per tet, an accepted step never inverts a tet (exactly, not
-// only at samples). Converged when the predicted decrease −∇Eᵀδ/2 (Newton decrement) is below energy_tolerance
-// · |E| or the Newton direction ‖δ‖ is below step_tolerance · max(1, ‖X‖) — judged on δ, not on the accepted
-// t δ, since a line search shortened to keep the tets positive makes t δ small far from a minimum; stops
-// otherwise after max_iterations or when no step decreases E.
+// Solver: projected Newton. Per tet the 9x9 Hessian in vec(J) is projected to PSD with the analytic
+// eigensystem (sd_hessian_psd) and mapped to the 12 vertex coordinates by the constant 9x12 matrix
+// ∂vec(J)/∂x; the sparse 3#V system (plus 2λ1 WᵀW and a relative diagonal shift) is factored with CHOLMOD
+// (supernodal LLᵀ through Eigen's CholmodSupport; symbolic analysis once). Line search from t = 1, halving,
+// Armijo on E: since E = +∞ when any tet has det J ≤ 0 and the map is affine per tet, an accepted step never
+// inverts a tet (exactly, not only at samples). Converged when the predicted decrease −∇Eᵀδ/2 (Newton
+// decrement) is below energy_tolerance · |E| or the Newton direction ‖δ‖ is below step_tolerance · max(1,
+// ‖X‖) — judged on δ, not on the accepted t δ, since a line search shortened to keep the tets positive makes
+// t δ small far from a minimum; stops otherwise after max_iterations or when no step decreases E.
 #pragma once
 #include <functional>
 #include <memory>
@@ -39,12 +39,12 @@ struct PwlTetParams {
 };
 
 struct PwlTetIteration {
-  int iteration = 0;  // 1-based
+  int iteration = 0;                        // 1-based
   double energy = 0, e_dis = 0, e_p2p = 0;  // after the step
   double step = 0;                          // accepted t (0: none)
   double step_norm = 0;                     // t‖δ‖
   double direction_norm = 0;                // ‖δ‖ (the Newton direction before the line search)
-  double newton_decrement = 0;              // −∇Eᵀδ (half of it: the decrease the quadratic model predicts)
+  double newton_decrement = 0;  // −∇Eᵀδ (half of it: the decrease the quadratic model predicts)
   int halvings = 0;
   double max_handle_error = 0;
   double ms = 0;
@@ -95,8 +95,8 @@ class PwlTetSolver {
   void analyze();  // sparsity pattern, value slots and CHOLMOD's symbolic factorization
   TetMesh mesh_;
   PwlTetParams params_;
-  std::vector<Mat3> Bm_;  // #T rest-shape inverses
-  VecXd w_;               // #T volume weights, Σ = 1
+  std::vector<Mat3> Bm_;                            // #T rest-shape inverses
+  VecXd w_;                                         // #T volume weights, Σ = 1
   Eigen::SparseMatrix<double, Eigen::RowMajor> W_;  // #h by #V handle weights
   MatX3d targets_;
   MatX3d X_;

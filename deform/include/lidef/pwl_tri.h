@@ -1,17 +1,18 @@
-// PWL(Tri): surface ARAP with the smooth-rotation term, SR-ARAP (Levi and Gotsman 2015), the surface method the
-// paper compares with (Liao et al. 2021 Sec. 8, Table 1). Unknowns: the full-resolution mesh vertices X (#V by 3,
-// 3#V DOF) and one rotation R_i per vertex; no interior, so no volumetric distortion and no injectivity notion.
+// PWL(Tri): surface ARAP with the smooth-rotation term, SR-ARAP (Levi and Gotsman 2015), the surface method
+// the paper compares with (Liao et al. 2021 Sec. 8, Table 1). Unknowns: the full-resolution mesh vertices X
+// (#V by 3, 3#V DOF) and one rotation R_i per vertex; no interior, so no volumetric distortion and no
+// injectivity notion.
 //
 //   E(X, R) = (1/A) Σ_i Σ_{j∈N(i)} w_ij ‖(x_i − x_j) − R_i (p_i − p_j)‖²      (ARAP, cotangent weights)
 //           + α Σ_i Σ_{j∈N(i)} w_ij ‖R_i − R_j‖_F²                              (smooth rotations)
 //           + λ1 Σ_h ‖W_h X − q_h‖²                                              (soft handles, lidef's λ1)
 // A = total rest area (Levi and Gotsman's αA weighting, divided through by A so λ1 keeps lidef's meaning),
-// w_ij = ½(cot α_ij + cot β_ij) clamped at 0 (negative weights would make the global step indefinite), handles
-// embedded barycentrically at the closest surface point. Local step: Gauss–Seidel over vertices, R_i =
-// argmax tr(R S_i) with S_i = Σ_j w_ij e_ij e'_ijᵀ + 2αA Σ_j w_ij R_jᵀ (each update is exact given the others, so
-// E never increases; a simultaneous update could). Global step: the sparse Laplacian system (constant;
-// CHOLMOD LLᵀ factored once) with a tiny proximal term ρ‖X − X_prev‖² that keeps it definite (e.g. for a
-// component without handles) without moving fixed points. Stops when the relative decrease of E in an
+// w_ij = ½(cot α_ij + cot β_ij) clamped at 0 (negative weights would make the global step indefinite),
+// handles embedded barycentrically at the closest surface point. Local step: Gauss–Seidel over vertices, R_i
+// = argmax tr(R S_i) with S_i = Σ_j w_ij e_ij e'_ijᵀ + 2αA Σ_j w_ij R_jᵀ (each update is exact given the
+// others, so E never increases; a simultaneous update could). Global step: the sparse Laplacian system
+// (constant; CHOLMOD LLᵀ factored once) with a tiny proximal term ρ‖X − X_prev‖² that keeps it definite (e.g.
+// for a component without handles) without moving fixed points. Stops when the relative decrease of E in an
 // iteration is below energy_tolerance, or after max_iterations.
 #pragma once
 #include <Eigen/SparseCore>

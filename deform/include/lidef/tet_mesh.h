@@ -2,9 +2,10 @@
 // reading TetGen's .node/.ele files, tetrahedralizing a cage with the TetGen library, and locating points in
 // the tets (barycentric embedding of the mesh vertices and the handles).
 //
-// TetGen is confined to tetgen_mesher.cpp (its own object library, compiled with -DTETLIBRARY) and runs in a forked
-// child process, because TetGen 1.5 can also fail by a failed assertion (abort) or a segmentation fault; all its
-// failures (thrown int codes, a crashed child) become lidef::InputError / NumericalError with the input's name.
+// TetGen is confined to tetgen_mesher.cpp (its own object library, compiled with -DTETLIBRARY) and runs in a
+// forked child process, because TetGen 1.5 can also fail by a failed assertion (abort) or a segmentation
+// fault; all its failures (thrown int codes, a crashed child) become lidef::InputError / NumericalError with
+// the input's name.
 #pragma once
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
@@ -34,9 +35,9 @@ TetMesh read_tet_mesh(const std::string& node_path, const std::string& ele_path)
 
 // TetGen switches of the PWL(Tet) tetrahedralization (docs/compare.md).
 struct TetgenOptions {
-  double min_ratio = 2.0;   // quality: maximal radius-edge ratio (TetGen -q); <= 0 = no quality refinement
-  double max_volume = 0;    // > 0: maximal tet volume (TetGen -a), absolute model units³
-  bool quiet = true;        // TetGen -Q
+  double min_ratio = 2.0;  // quality: maximal radius-edge ratio (TetGen -q); <= 0 = no quality refinement
+  double max_volume = 0;   // > 0: maximal tet volume (TetGen -a), absolute model units³
+  bool quiet = true;       // TetGen -Q
 };
 // The switch string given to TetGen, e.g. "pq2a0.001Q" (p: tetrahedralize a piecewise-linear complex; with
 // `refine`, r: refine an existing tet mesh).
@@ -56,9 +57,9 @@ TetMesh refine_tet_mesh(const TetMesh& mesh, const TetgenOptions& options = {});
 
 // Barycentric location of points in a tet mesh.
 struct TetEmbedding {
-  VecXi tet;         // #P: containing tet
-  MatX4i corners;    // #P by 4: the vertices of that tet
-  MatXd bary;        // #P by 4 barycentric coordinates (sum 1, each >= -tolerance)
+  VecXi tet;       // #P: containing tet
+  MatX4i corners;  // #P by 4: the vertices of that tet
+  MatXd bary;      // #P by 4 barycentric coordinates (sum 1, each >= -tolerance)
   // The point positions reproduced: Σ_k bary(i,k) V(T(tet(i),k)) — exactly linear in V, so the map of the
   // points is Eigen's sparse product `weights * X` (#P by #V) of the tet vertices X.
   Eigen::SparseMatrix<double, Eigen::RowMajor> weights() const;
