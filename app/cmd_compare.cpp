@@ -67,6 +67,9 @@ void add_compare_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--vhm-smooth", c.vhm.smooth_weight, "vhm: weight of the Hessian smoothness term")
       ->capture_default_str();
+  sub->add_option("--vhm-boundary", c.vhm_boundary,
+                  "vhm: at most this many mesh vertices as boundary samples of the smoothness term")
+      ->capture_default_str();
   sub->add_option("--vhm-max-iterations", c.vhm.max_iterations, "vhm: local/global iteration limit")
       ->capture_default_str();
   sub->add_option("--tri-alpha", c.tri.alpha, "pwl-tri: SR-ARAP smooth-rotation weight alpha")
