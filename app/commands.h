@@ -19,6 +19,7 @@ using Action = std::function<int()>;
 
 void add_certify_command(CLI::App& app, Action& action);
 void add_check_command(CLI::App& app, Action& action);
+void add_compare_command(CLI::App& app, Action& action);
 void add_deform_command(CLI::App& app, Action& action);
 void add_devices_command(CLI::App& app, Action& action);
 void add_eval_command(CLI::App& app, Action& action);

@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   Action action;
   add_certify_command(app, action);
   add_check_command(app, action);
+  add_compare_command(app, action);
   add_deform_command(app, action);
   add_devices_command(app, action);
   add_eval_command(app, action);

@@ -1,0 +1,518 @@
+#include "lidef/compare.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+#include "lidef/errors.h"
+#include "lidef/mesh_io.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/projected_newton.h"
+#include "lidef/sampling.h"
+#include "lidef/signed_svd.h"
+#include "lidef/symmetric_dirichlet.h"
+
+namespace lidef {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::string g(double x, int prec = 4) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*g", prec, x);
+  return buf;
+}
+
+// E_iso − 6 (NaN where det J ≤ 0, so that means over a mesh stay finite; the inverted count says it) and det
+// J.
+void add_jacobian_fields(const Mat3& J, double& e_iso, double& det_j) {
+  const double e = sd_energy(J);
+  e_iso = std::isfinite(e) ? e - 6 : kNaN;
+  det_j = J.determinant();
+}
+
+void summarize_fields(MethodResult& r) {
+  double sum = 0, mx = -std::numeric_limits<double>::infinity();
+  long n = 0, bad = 0;
+  for (Eigen::Index i = 0; i < r.e_iso.size(); ++i) {
+    if (std::isnan(r.e_iso(i))) {
+      ++bad;
+      continue;
+    }
+    sum += r.e_iso(i);
+    mx = std::max(mx, r.e_iso(i));
+    ++n;
+  }
+  r.inverted_vertices = bad;
+  r.mean_e_iso = n ? sum / n : kNaN;
+  r.max_e_iso = bad ? std::numeric_limits<double>::infinity() : (n ? mx : kNaN);
+}
+
+// Map of a harmonic method at the mesh vertices: positions, E_iso − 6, det J.
+void harmonic_fields(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P, MethodResult& r) {
+  const Eigen::Index n = P.rows();
+  r.V.resize(n, 3);
+  r.e_iso.resize(n);
+  r.det_j.resize(n);
+#pragma omp parallel for schedule(dynamic, 64)
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const MapJet jet = basis.map_jet(y, P.row(i).transpose(), 1);
+    r.V.row(i) = jet.f.transpose();
+    add_jacobian_fields(jet.J, r.e_iso(i), r.det_j(i));
+  }
+  summarize_fields(r);
+}
+
+// min σ3 over the voxel centers of a full-coefficient map.
+double min_sigma3_at(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& centers) {
+  double mn = std::numeric_limits<double>::infinity();
+#pragma omp parallel for reduction(min : mn) schedule(dynamic, 64)
+  for (Eigen::Index i = 0; i < centers.rows(); ++i)
+    mn = std::min(mn, signed_singular_values(basis.map_jet(y, centers.row(i).transpose(), 1).J)(2));
+  return mn;
+}
+
+SamplingParams sampling_params_of(const DeformParams& p) {
+  SamplingParams sp;
+  sp.target_count = p.samples;
+  sp.voxel_side = p.voxel_side;
+  sp.safety = p.safety;
+  sp.hessian_fraction = p.hessian_fraction;
+  return sp;
+}
+
+CertifyParams certify_params_of(const DeformParams& p) {
+  CertifyParams cp;
+  cp.bound = lipschitz_bound_from_string(p.bound);
+  cp.max_depth = p.max_depth;
+  cp.max_refined_voxels = p.max_refined;
+  cp.stop_on_failure = true;
+  cp.keep_leaves = false;
+  return cp;
+}
+
+// State shared by the methods of one run: the harmonic basis and lidef's voxel sampling, built when first
+// needed.
+struct Shared {
+  const Scenario& sc;
+  const Model& model;
+  const CompareOptions& opt;
+  const CompareProgress& progress;
+  std::unique_ptr<HarmonicBasis> basis;
+  std::optional<VoxelSampling> sampling;
+  const HarmonicBasis& get_basis() {
+    if (!basis) basis = std::make_unique<HarmonicBasis>(model.cage);
+    return *basis;
+  }
+  const VoxelSampling& get_sampling() {
+    if (!sampling) sampling = sample_voxels(model.cage, sampling_params_of(sc.params));
+    return *sampling;
+  }
+  void say(const std::string& m, const std::string& line) {
+    if (progress) progress(m, line);
+  }
+};
+
+void run_lidef(Shared& s, MethodResult& r) {
+  const auto t0 = Clock::now();
+  DeformationSolver solver(s.model.cage, s.sc.params, s.opt.cache_dir,
+                           [&](const std::string& l) { s.say(r.method, l); });
+  solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
+  r.preprocess_seconds = seconds_since(t0);
+  if (!s.sampling) s.sampling = solver.sampling();  // the same parameters give the same voxels
+  std::ostringstream log;
+  log << "iteration,energy,step,certified,min_lower_bound,max_handle_error,ms\n";
+  const SolveResult res = solver.solve([&](const IterationRecord& it) {
+    log << it.iteration << ',' << format_double(it.terms.total) << ',' << format_double(it.step) << ','
+        << (it.certified ? 1 : 0) << ',' << format_double(it.min_lower_bound) << ','
+        << format_double(it.max_handle_error) << ',' << g(it.ms_total, 6) << "\n";
+    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.terms.total, 7) + "  step " +
+                        g(it.step, 3) + "  handle err " + g(it.max_handle_error, 3) + "  " +
+                        g(it.ms_total, 4) + " ms");
+    return true;
+  });
+  r.seconds = res.seconds;
+  r.iterations = static_cast<int>(solver.history().size());
+  r.converged = res.converged();
+  r.stop = std::string(to_string(res.reason)) + (res.message.empty() ? "" : ": " + res.message);
+  r.dof = 3L * solver.subspace().size();
+  const VecXd he = solver.handle_errors();
+  r.max_handle_error = he.size() ? he.maxCoeff() : 0.0;
+  const MatX3d y = solver.coefficients();
+  harmonic_fields(solver.basis(), y, s.model.mesh.V, r);
+  const Certificate& cert = solver.certificate();
+  r.certified = cert.certified ? 1 : 0;
+  r.min_sigma3 = cert.min_sigma3_center;
+  r.min_sigma3_bound = cert.certified ? cert.min_lower_bound : kNaN;
+  r.detail = std::to_string(solver.sampling().size()) + " samples, " +
+             std::to_string(solver.subspace().size()) + " reduced coefficients per coordinate";
+  r.log = log.str();
+}
+
+void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
+  const auto t0 = Clock::now();
+  // Coarse: the model's tet mesh (Table 1's DOF) or TetGen of the cage; fine: TetGen's refinement (-r) of the
+  // coarse mesh, which also works where the cage self-intersects slightly (animal) and TetGen -p cannot run.
+  TetMesh tets;
+  const std::filesystem::path node = std::filesystem::path(s.model.dir) / "tet.node",
+                              ele = std::filesystem::path(s.model.dir) / "tet.ele";
+  if (s.opt.use_model_tets && !s.model.dir.empty() && std::filesystem::exists(node) &&
+      std::filesystem::exists(ele)) {
+    tets = read_tet_mesh(node.string(), ele.string());
+    r.detail = "model tet mesh";
+  } else {
+    const TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
+    tets = tetrahedralize(cage, s.opt.coarse_tet);
+    r.detail = "TetGen " + tetgen_switches(s.opt.coarse_tet);
+  }
+  if (fine) {
+    TetgenOptions o = s.opt.fine_tet;
+    if (o.max_volume <= 0) o.max_volume = s.opt.fine_volume_factor * std::pow(s.get_sampling().side, 3);
+    s.say(r.method, "TetGen " + tetgen_switches(o, true) + " of the " + r.detail);
+    try {
+      tets = refine_tet_mesh(tets, o);
+      r.detail = "TetGen " + tetgen_switches(o, true) + " of the " + r.detail;
+    } catch (const NumericalError& e) {
+      // TetGen's refinement crashes on some meshes (the horse's: a failed assertion on coplanar points); the
+      // cage itself may still be tetrahedralized directly.
+      s.say(r.method, std::string(e.what()) + "; tetrahedralizing the cage instead");
+      const TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
+      tets = tetrahedralize(cage, o);
+      r.detail =
+          "TetGen " + tetgen_switches(o) + " of the cage (refining the " + r.detail + " crashed TetGen)";
+    }
+  }
+  r.detail +=
+      ": " + std::to_string(tets.num_vertices()) + " vertices, " + std::to_string(tets.num_tets()) + " tets";
+  s.say(r.method, r.detail);
+  const TetEmbedding mesh_embedding =
+      embed_points(tets, s.model.mesh.V, s.model.dir + ": PWL(Tet) mesh vertex");
+  const auto W = mesh_embedding.weights();
+  PwlTetParams p;
+  p.lambda_p2p = s.sc.params.lambda_p2p;
+  p.energy_tolerance = s.sc.params.energy_tolerance;
+  p.step_tolerance = s.sc.params.step_tolerance;
+  p.armijo = s.sc.params.armijo;
+  p.max_iterations = s.opt.tet_max_iterations;
+  PwlTetSolver solver(tets, p);
+  solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
+  r.preprocess_seconds = seconds_since(t0);
+  std::ostringstream log;
+  log << "iteration,energy,e_dis,e_p2p,newton_decrement,direction_norm,step,halvings,max_handle_error,ms\n";
+  const PwlTetResult res = solver.solve([&](const PwlTetIteration& it) {
+    log << it.iteration << ',' << format_double(it.energy) << ',' << format_double(it.e_dis) << ','
+        << format_double(it.e_p2p) << ',' << format_double(it.newton_decrement) << ','
+        << format_double(it.direction_norm) << ',' << format_double(it.step) << ',' << it.halvings << ','
+        << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
+    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  step " +
+                        g(it.step, 3) + "  handle err " + g(it.max_handle_error, 3) + "  " + g(it.ms, 4) +
+                        " ms");
+    return true;
+  });
+  r.seconds = res.seconds;
+  r.iterations = res.iterations;
+  r.converged = res.converged;
+  r.stop = res.message;
+  r.dof = solver.dof();
+  r.max_handle_error = solver.handle_errors().maxCoeff();
+  const MatX3d& X = solver.positions();
+  r.inverted = solver.inverted_count(X);
+  r.V = W * X;
+  const Eigen::Index n = r.V.rows();
+  r.e_iso.resize(n);
+  r.det_j.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    add_jacobian_fields(solver.jacobian(X, mesh_embedding.tet(i)), r.e_iso(i), r.det_j(i));
+  summarize_fields(r);
+  r.log = log.str();
+}
+
+void run_vhm(Shared& s, MethodResult& r) {
+  const auto t0 = Clock::now();
+  MatX3d anchors;
+  const std::filesystem::path model_anchors = std::filesystem::path(s.model.dir) / "vhm_anchors.xyz";
+  if (!s.opt.anchors.empty()) {
+    anchors = read_points_xyz(s.opt.anchors);
+    r.detail = std::to_string(anchors.rows()) + " anchors from " + s.opt.anchors;
+  } else if (!s.model.dir.empty() && std::filesystem::exists(model_anchors)) {
+    anchors = read_points_xyz(model_anchors.string());
+    r.detail = std::to_string(anchors.rows()) + " anchors (vhm_anchors.xyz)";
+  } else {
+    // No medial samples: evenly spread voxel centers (the "modified VHM" of the paper's Fig. 11).
+    const VoxelSampling& vs = s.get_sampling();
+    const double frac = std::min(1.0, static_cast<double>(s.opt.anchor_count) / std::max(1, vs.size()));
+    const std::vector<int> pick = select_hessian_subset(vs, frac);
+    anchors.resize(static_cast<Eigen::Index>(pick.size()), 3);
+    for (size_t k = 0; k < pick.size(); ++k)
+      anchors.row(static_cast<Eigen::Index>(k)) = vs.centers.row(pick[k]);
+    r.detail = std::to_string(anchors.rows()) + " anchors (evenly spread voxel centers)";
+  }
+  const HarmonicBasis& basis = s.get_basis();
+  VhmParams p = s.opt.vhm;
+  p.lambda_p2p = s.sc.params.lambda_p2p;
+  // Boundary samples of the smoothness term: mesh vertices, every k-th so that there are at most
+  // vhm_boundary.
+  const Eigen::Index nm = s.model.mesh.V.rows();
+  const Eigen::Index stride =
+      std::max<Eigen::Index>(1, (nm + s.opt.vhm_boundary - 1) / std::max(1, s.opt.vhm_boundary));
+  MatX3d boundary((nm + stride - 1) / stride, 3);
+  for (Eigen::Index i = 0, k = 0; i < nm; i += stride, ++k) boundary.row(k) = s.model.mesh.V.row(i);
+  r.detail += ", " + std::to_string(boundary.rows()) + " mesh vertices as boundary samples";
+  VhmSolver solver(s.model.cage, basis, anchors, boundary, p, s.model.dir + "/vhm_anchors.xyz");
+  solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
+  r.preprocess_seconds = seconds_since(t0);
+  std::ostringstream log;
+  log << "iteration,energy,e_rigid,e_smooth,e_p2p,max_handle_error,ms\n";
+  const VhmResult res = solver.solve([&](const VhmIteration& it) {
+    log << it.iteration << ',' << format_double(it.energy) << ',' << format_double(it.e_rigid) << ','
+        << format_double(it.e_smooth) << ',' << format_double(it.e_p2p) << ','
+        << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
+    if (it.iteration <= 3 || it.iteration % 50 == 0)
+      s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  handle err " +
+                          g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
+    return true;
+  });
+  r.seconds = res.seconds;
+  r.iterations = res.iterations;
+  r.converged = res.converged;
+  r.stop = res.message;
+  r.dof = solver.dof();
+  r.max_handle_error = solver.handle_errors().maxCoeff();
+  harmonic_fields(basis, solver.coefficients(), s.model.mesh.V, r);
+  // Fig. 11: lidef's certificate on lidef's voxels judges VHM's injectivity (not part of VHM's time).
+  s.say(r.method, "certifying the result");
+  const VoxelSampling& vs = s.get_sampling();
+  r.min_sigma3 = min_sigma3_at(basis, solver.coefficients(), vs.centers);
+  if (r.min_sigma3 > 0) {
+    OctreeCertifier certifier(s.model.cage, vs);
+    const Certificate cert = certifier.certify(solver.coefficients(), certify_params_of(s.sc.params));
+    r.certified = cert.certified ? 1 : 0;
+    if (cert.certified) r.min_sigma3_bound = cert.min_lower_bound;
+  } else {
+    r.certified = 0;  // σ3 ≤ 0 at a voxel center: not locally injective there
+  }
+  r.log = log.str();
+}
+
+void run_pwl_tri(Shared& s, MethodResult& r) {
+  const auto t0 = Clock::now();
+  PwlTriParams p = s.opt.tri;
+  p.lambda_p2p = s.sc.params.lambda_p2p;
+  SrArapSolver solver(s.model.mesh, p);
+  solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
+  r.preprocess_seconds = seconds_since(t0);
+  std::ostringstream log;
+  log << "iteration,energy_after_rotations,energy,max_handle_error,ms\n";
+  const PwlTriResult res = solver.solve([&](const PwlTriIteration& it) {
+    log << it.iteration << ',' << format_double(it.energy_after_local) << ',' << format_double(it.energy)
+        << ',' << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
+    if (it.iteration <= 3 || it.iteration % 50 == 0)
+      s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  handle err " +
+                          g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
+    return true;
+  });
+  r.seconds = res.seconds;
+  r.iterations = res.iterations;
+  r.converged = res.converged;
+  r.stop = res.message;
+  r.dof = solver.dof();
+  r.max_handle_error = solver.handle_errors().maxCoeff();
+  r.V = solver.positions();
+  r.detail = std::to_string(s.model.mesh.V.rows()) + " mesh vertices";
+  r.log = log.str();
+}
+
+}  // namespace
+
+const std::vector<std::string>& compare_methods() {
+  static const std::vector<std::string> m = {"lidef", "pwl-tet", "pwl-tet-fine", "vhm", "pwl-tri"};
+  return m;
+}
+
+double mesh_volume(const MatX3d& V, const MatX3i& F) {
+  double v = 0;
+  for (Eigen::Index t = 0; t < F.rows(); ++t)
+    v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
+  return v;
+}
+
+double crease_measure(const TriMesh& rest, const MatX3d& X) {
+  // Interior edges: pairs of faces sharing an (unordered) edge.
+  std::map<std::pair<int, int>, std::vector<int>> edge_faces;
+  for (Eigen::Index f = 0; f < rest.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = rest.F(f, k), b = rest.F(f, (k + 1) % 3);
+      edge_faces[{std::min(a, b), std::max(a, b)}].push_back(static_cast<int>(f));
+    }
+  auto normal = [&](const MatX3d& V, int f) {
+    const Vec3 a = V.row(rest.F(f, 0)), b = V.row(rest.F(f, 1)), c = V.row(rest.F(f, 2));
+    return Vec3((b - a).cross(c - a).normalized());
+  };
+  double sum = 0;
+  long n = 0;
+  for (const auto& [e, fs] : edge_faces) {
+    if (fs.size() != 2) continue;
+    const double a0 = std::acos(std::clamp(normal(rest.V, fs[0]).dot(normal(rest.V, fs[1])), -1.0, 1.0));
+    const double a1 = std::acos(std::clamp(normal(X, fs[0]).dot(normal(X, fs[1])), -1.0, 1.0));
+    if (!std::isfinite(a0) || !std::isfinite(a1)) continue;
+    sum += (a1 - a0) * (a1 - a0);
+    ++n;
+  }
+  return n ? std::sqrt(sum / n) * 180.0 / M_PI : kNaN;
+}
+
+std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model, const CompareOptions& opt,
+                                         const CompareProgress& progress) {
+  for (const std::string& m : opt.methods)
+    if (std::find(compare_methods().begin(), compare_methods().end(), m) == compare_methods().end())
+      throw InputError("--methods",
+                       "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
+  std::vector<std::string> order;
+  for (const std::string& m : compare_methods())  // table order; lidef first
+    if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end()) order.push_back(m);
+  Shared s{sc, model, opt, progress, nullptr, std::nullopt};
+  std::vector<MethodResult> rows;
+  const double rest_volume = mesh_volume(model.mesh.V, model.mesh.F);
+  for (const std::string& m : order) {
+    MethodResult r;
+    r.method = m;
+    s.say(m, "starting");
+    try {
+      if (m == "lidef")
+        run_lidef(s, r);
+      else if (m == "pwl-tet")
+        run_pwl_tet(s, r, false);
+      else if (m == "pwl-tet-fine")
+        run_pwl_tet(s, r, true);
+      else if (m == "vhm")
+        run_vhm(s, r);
+      else
+        run_pwl_tri(s, r);
+      r.ok = true;
+      r.volume_ratio = mesh_volume(r.V, model.mesh.F) / rest_volume;
+      r.crease_deg = crease_measure(model.mesh, r.V);
+      s.say(m, std::string(r.converged ? "converged" : "stopped") + " (" + r.stop + ") after " +
+                   std::to_string(r.iterations) + " iterations, " + g(r.seconds, 3) + " s");
+    } catch (const std::exception& e) {
+      r = MethodResult();
+      r.method = m;
+      r.ok = false;
+      r.error = e.what();
+      s.say(m, std::string("FAILED: ") + e.what());
+    }
+    rows.push_back(std::move(r));
+  }
+  double lidef_s = kNaN;
+  for (const MethodResult& r : rows)
+    if (r.method == "lidef" && r.ok) lidef_s = r.seconds;
+  for (MethodResult& r : rows)
+    if (r.ok) r.time_ratio = r.seconds / lidef_s;
+  return rows;
+}
+
+const std::vector<std::string>& comparison_table_columns() {
+  static const std::vector<std::string> c = {"method",
+                                             "status",
+                                             "dof",
+                                             "time_s",
+                                             "preprocess_s",
+                                             "iterations",
+                                             "converged",
+                                             "max_handle_error",
+                                             "mean_e_iso_minus_6",
+                                             "max_e_iso_minus_6",
+                                             "global_volume_ratio",
+                                             "inverted_elements",
+                                             "inverted_mesh_vertices",
+                                             "certified",
+                                             "min_sigma3",
+                                             "min_sigma3_lower_bound",
+                                             "crease_deg",
+                                             "time_ratio_to_lidef",
+                                             "detail",
+                                             "error"};
+  return c;
+}
+
+namespace {
+std::string num(double x) {
+  if (std::isnan(x)) return "";
+  if (std::isinf(x)) return x > 0 ? "inf" : "-inf";
+  return g(x, 6);
+}
+std::string csv_quote(const std::string& s) {
+  std::string q = "\"";
+  for (char c : s) {
+    if (c == '"') q += '"';
+    q += (c == '\n' ? ' ' : c);
+  }
+  return q + "\"";
+}
+std::string status_of(const MethodResult& r) {
+  return !r.ok ? "failed" : r.converged ? "converged" : "stopped";
+}
+}  // namespace
+
+std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
+  std::ostringstream s;
+  const auto& cols = comparison_table_columns();
+  for (size_t k = 0; k < cols.size(); ++k) s << (k ? "," : "") << cols[k];
+  s << "\n";
+  for (const MethodResult& r : rows) {
+    s << r.method << ',' << status_of(r) << ',' << (r.ok ? std::to_string(r.dof) : "") << ','
+      << num(r.seconds) << ',' << num(r.preprocess_seconds) << ','
+      << (r.ok ? std::to_string(r.iterations) : "") << ',' << (r.ok ? (r.converged ? "1" : "0") : "") << ','
+      << num(r.max_handle_error) << ',' << num(r.mean_e_iso) << ',' << num(r.max_e_iso) << ','
+      << num(r.volume_ratio) << ',' << (r.inverted >= 0 ? std::to_string(r.inverted) : "") << ','
+      << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "") << ','
+      << (r.certified >= 0 ? std::to_string(r.certified) : "") << ',' << num(r.min_sigma3) << ','
+      << num(r.min_sigma3_bound) << ',' << num(r.crease_deg) << ',' << num(r.time_ratio) << ','
+      << csv_quote(r.detail) << ',' << csv_quote(r.error) << "\n";
+  }
+  return s.str();
+}
+
+std::string comparison_table_md(const std::vector<MethodResult>& rows, const Scenario& sc) {
+  std::ostringstream s;
+  auto cell = [](double x, int p = 3) {
+    return std::isnan(x) ? std::string("—") : std::isinf(x) ? std::string("∞") : g(x, p);
+  };
+  s << "# " << sc.name << " — comparison (paper Table 1)\n\n"
+    << "| method | DOF | time (s) | time / lidef | iterations | status | max handle error | mean E_iso−6 | "
+       "max E_iso−6 | global volume ratio | inverted tets | mesh vertices det J ≤ 0 | certified | min σ3 "
+       "(samples) | crease (°) |\n"
+    << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const MethodResult& r : rows) {
+    if (!r.ok) {
+      s << "| " << r.method << " | — | — | — | — | FAILED: " << r.error
+        << " | — | — | — | — | — | — | — | — | — |\n";
+      continue;
+    }
+    s << "| " << r.method << " | " << r.dof << " | " << cell(r.seconds) << " | " << cell(r.time_ratio, 3)
+      << " | " << r.iterations << " | " << status_of(r) << " | " << cell(r.max_handle_error) << " | "
+      << cell(r.mean_e_iso) << " | " << cell(r.max_e_iso) << " | " << cell(r.volume_ratio, 4) << " | "
+      << (r.inverted >= 0 ? std::to_string(r.inverted) : "—") << " | "
+      << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "—") << " | "
+      << (r.certified < 0 ? "—"
+          : r.certified   ? "yes"
+                          : "NO")
+      << " | " << cell(r.min_sigma3) << " | " << cell(r.crease_deg) << " |\n";
+  }
+  s << "\nTime = solve time in this run (preprocessing excluded; see table.csv). Details:\n\n";
+  for (const MethodResult& r : rows)
+    if (r.ok) s << "- " << r.method << ": " << r.detail << "; " << r.stop << "\n";
+  return s.str();
+}
+
+}  // namespace lidef
