@@ -46,6 +46,14 @@ std::shared_ptr<const ComputeBackend> opencl(std::string* why = nullptr) {
   return b;
 }
 
+// A second backend on the same device that takes the GPU code paths even on a CPU device.
+std::shared_ptr<const ComputeBackend> as_gpu_backend(const std::string& cache) {
+  setenv("LIDEF_OPENCL_AS_GPU", "1", 1);
+  auto b = make_opencl_backend(opencl_device_filter_from_env(), cache);
+  unsetenv("LIDEF_OPENCL_AS_GPU");
+  return b;
+}
+
 #define REQUIRE_OPENCL()                                                                           \
   std::string why_;                                                                                \
   if (!opencl(&why_)) {                                                                            \
@@ -109,7 +117,7 @@ TEST(OpenCL, DevicesAreListedWithoutThrowing) {
 }
 
 // Both ways of forming the Hessian product: on the host BLAS (what a CPU device such as PoCL does) and on the
-// device with CLBlast (what a GPU does; forced here by LIDEF_OPENCL_DEVICE_PRODUCT).
+// device with CLBlast and the transposed layouts (what a GPU does; forced here by LIDEF_OPENCL_AS_GPU).
 class OpenCLEnergy : public ::testing::TestWithParam<bool> {};
 
 TEST_P(OpenCLEnergy, KernelsMatchCpu) {
@@ -117,9 +125,7 @@ TEST_P(OpenCLEnergy, KernelsMatchCpu) {
   std::shared_ptr<const ComputeBackend> backend = opencl();
   lidef::test::TempDir cache;
   if (GetParam()) {
-    setenv("LIDEF_OPENCL_DEVICE_PRODUCT", "1", 1);
-    backend = make_opencl_backend(opencl_device_filter_from_env(), cache.str());
-    unsetenv("LIDEF_OPENCL_DEVICE_PRODUCT");
+    backend = as_gpu_backend(cache.str());
   }
   const RandomEnergy r = random_energy(1500, 24, 3, 0.02);
   auto cpu = cpu_backend()->energy_kernels(*r.energy);
@@ -214,28 +220,31 @@ TEST(OpenCL, SignedSigma3MatchesCpuOnHardMatrices) {
     data.edge_u.push_back(cage.V.row(e.v0));
     data.edge_w.push_back(cage.V.row(e.v1));
   }
-  auto k = opencl()->certifier_kernels(data);
-  ASSERT_TRUE(k);
-  const long E = cage.num_edges();
-  std::vector<float> F(static_cast<size_t>(N) * E, 1.0f);
-  k->set_factors(true, F.data(), E);
-  const double Y[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  VecXd s3, hn, T;
-  const VecXd delta = VecXd::LinSpaced(E, 0.0, 1.0);
-  k->base_stage(Y, true, delta, s3, hn, T);
-  int worst = -1;
-  double worst_err = 0;
-  for (long i = 0; i < N; ++i) {
-    const Vec3 ref = signed_singular_values(Js[i]);
-    const double err = std::abs(s3(i) - ref(2)) / std::max(ref(0), 1e-300);
-    if (err > worst_err) worst_err = err, worst = static_cast<int>(i);
-    if (ref(2) != 0 && std::abs(ref(2)) > 1e-10 * ref(0)) {
-      EXPECT_EQ(s3(i) < 0, ref(2) < 0) << "matrix " << i;
+  lidef::test::TempDir cache;
+  for (const auto& backend : {opencl(), as_gpu_backend(cache.str())}) {
+    auto k = backend->certifier_kernels(data);
+    ASSERT_TRUE(k);
+    const long E = cage.num_edges();
+    std::vector<float> F(static_cast<size_t>(N) * E, 1.0f);
+    k->set_factors(true, F.data(), E);
+    const double Y[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    VecXd s3, hn, T;
+    const VecXd delta = VecXd::LinSpaced(E, 0.0, 1.0);
+    k->base_stage(Y, true, delta, s3, hn, T);
+    int worst = -1;
+    double worst_err = 0;
+    for (long i = 0; i < N; ++i) {
+      const Vec3 ref = signed_singular_values(Js[i]);
+      const double err = std::abs(s3(i) - ref(2)) / std::max(ref(0), 1e-300);
+      if (err > worst_err) worst_err = err, worst = static_cast<int>(i);
+      if (ref(2) != 0 && std::abs(ref(2)) > 1e-10 * ref(0)) {
+        EXPECT_EQ(s3(i) < 0, ref(2) < 0) << "matrix " << i;
+      }
+      EXPECT_DOUBLE_EQ(hn(i), 0.0);
+      EXPECT_NEAR(T(i), delta.sum(), 1e-12 * delta.sum());
     }
-    EXPECT_DOUBLE_EQ(hn(i), 0.0);
-    EXPECT_NEAR(T(i), delta.sum(), 1e-12 * delta.sum());
+    EXPECT_LT(worst_err, 1e-14) << "worst matrix " << worst << ":\n" << Js[worst];
   }
-  EXPECT_LT(worst_err, 1e-14) << "worst matrix " << worst << ":\n" << Js[worst];
 }
 
 // The node kernel (differential representation + own edge bound) against the CPU functions it mirrors.
@@ -371,8 +380,10 @@ TEST(OpenCL, CertificatesMatchCpu) {
   SamplingParams sp;
   sp.target_count = 3000;
   const VoxelSampling sampling = sample_voxels(cage, sp);
-  OctreeCertifier cpu(cage, sampling), gpu(cage, sampling);
+  OctreeCertifier cpu(cage, sampling), gpu(cage, sampling), gpu_layout(cage, sampling);
   gpu.set_backend(*opencl());
+  lidef::test::TempDir cache;
+  gpu_layout.set_backend(*as_gpu_backend(cache.str()));  // the GPU kernels and layouts, whatever the device
   const MatX3d id = cage.identity_coefficients();
   // A bend (y = p + a x² e_y), strong enough to need refinement, and a fold.
   auto bent = [&](double a) {
@@ -386,9 +397,11 @@ TEST(OpenCL, CertificatesMatchCpu) {
       CertifyParams cp;
       cp.bound = bound;
       cp.max_refined_voxels = 20000;
-      const Certificate c = cpu.certify(bent(a), cp), g = gpu.certify(bent(a), cp);
+      const Certificate c = cpu.certify(bent(a), cp), g = gpu.certify(bent(a), cp),
+                        g2 = gpu_layout.certify(bent(a), cp);
       SCOPED_TRACE("a = " + std::to_string(a) + " bound " + to_string(bound));
       expect_same_certificate(c, g, 1e-10);
+      expect_same_certificate(c, g2, 1e-10);
       if (c.refined > 0) ++refined_cases;
     }
   EXPECT_GE(refined_cases, 2) << "the test maps should exercise the refinement";
@@ -512,8 +525,9 @@ TEST(OpenCLCli, CertifyBackendsAgree) {
 }
 
 // --- The paper's scenarios (../shared/data; ctest label "slow"): default parameters with double-precision
-// Hessian products on both backends, the first 4 iterations of each solve (bar_twist180: 2): the same accepted steps and
-// certificate verdicts, coefficients equal to ~1e-9 relative, the final maps certified alike.
+// Hessian products on both backends, the first 4 iterations of each solve (bar_twist180: 2): the same
+// accepted steps and certificate verdicts, coefficients equal to ~1e-9 relative, the final maps certified
+// alike.
 class OpenCLShared : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(OpenCLShared, SameStepsVerdictsAndCoefficients) {
@@ -526,8 +540,8 @@ TEST_P(OpenCLShared, SameStepsVerdictsAndCoefficients) {
   const Model model = load_model(sc.model_dir);
   DeformParams p = sc.params;
   p.hessian_precision = "double";
-  // The first iterations only: on PoCL with 2 cores each costs up to seconds; docs/benchmarks.md has whole solves
-  // (on the H100: every iteration of every scenario the same on both backends).
+  // The first iterations only: on PoCL with 2 cores each costs up to seconds; docs/benchmarks.md has whole
+  // solves (on the H100: every iteration of every scenario the same on both backends).
   p.max_iterations = std::string(GetParam()) == "bar_twist180" ? 2 : 4;
   DeformationSolver cpu(model.cage, p, cache.str());
   DeformationSolver gpu(model.cage, p, cache.str(), {}, opencl());

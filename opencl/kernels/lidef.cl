@@ -149,6 +149,44 @@ __kernel void jacobians(__global const float* Gt, long R, int s, __global const 
   Jout[3 * r + 2] = a2;
 }
 
+// The same dot products for CPU devices (PoCL). A CPU OpenCL compiler vectorizes across work-items only when
+// the kernel body has no inner loop, so the layouts above leave the k loop scalar there. These kernels read one
+// contiguous row per work-item (the host's layout) in explicit 4-wide vectors instead: fixed summation order
+// (deterministic), no fast-math needed.
+inline void dot3_rows4(__global const float* g, int m, __global const double* Y, double* o) {
+  double4 a0 = (double4)(0.0), a1 = (double4)(0.0), a2 = (double4)(0.0);
+  int k = 0;
+  for (; k + 4 <= m; k += 4) {
+    const double4 gk = convert_double4(vload4(0, g + k));
+    a0 += gk * vload4(0, Y + k);
+    a1 += gk * vload4(0, Y + m + k);
+    a2 += gk * vload4(0, Y + 2 * m + k);
+  }
+  double s0 = (a0.s0 + a0.s1) + (a0.s2 + a0.s3), s1 = (a1.s0 + a1.s1) + (a1.s2 + a1.s3),
+         s2 = (a2.s0 + a2.s1) + (a2.s2 + a2.s3);
+  for (; k < m; ++k) {
+    const double gk = g[k];
+    s0 += gk * Y[k];
+    s1 += gk * Y[m + k];
+    s2 += gk * Y[2 * m + k];
+  }
+  o[0] = s0;
+  o[1] = s1;
+  o[2] = s2;
+}
+
+// J = G y with G row-major (R by s).
+__kernel void jacobians_rows(__global const float* G, long R, int s, __global const double* y,
+                             __global double* Jout) {
+  const long r = get_global_id(0);
+  if (r >= R) return;
+  double o[3];
+  dot3_rows4(G + r * s, s, y, o);
+  Jout[3 * r] = o[0];
+  Jout[3 * r + 1] = o[1];
+  Jout[3 * r + 2] = o[2];
+}
+
 // Work-group sums of E_iso(J_i + t dJ_i) − 6 (fixed tree order: deterministic); partial[group].
 __kernel void sd_sum(__global const double* Jc, __global const double* dJ, double t, int use_dJ, long n,
                      __global double* partial, __local double* scratch) {
@@ -221,6 +259,43 @@ __kernel void gradient_reduce(__global const float* Gt, long R, int s, __global 
   }
   if (lid == 0)
     for (int c = 0; c < 3; ++c) out[c * s + k] = scratch[c];
+}
+
+// The gradient product for CPU devices: work-item c accumulates rows [c rpc, (c+1) rpc) of Gᵀ P into its own
+// slice of `partial` (3s doubles, layout a s + k) with 4-wide vectors; sum_partials adds the slices in order.
+__kernel void gradient_rows_partial(__global const float* G, long R, int s, __global const double* P, int rpc,
+                                    __global double* partial) {
+  const long c = get_global_id(0);
+  const long r0 = c * rpc;
+  if (r0 >= R) return;
+  const long r1 = min(R, r0 + rpc);
+  __global double* out = partial + c * 3L * s;
+  for (int q = 0; q < 3 * s; ++q) out[q] = 0;
+  for (long r = r0; r < r1; ++r) {
+    const double p0 = P[3 * r], p1 = P[3 * r + 1], p2 = P[3 * r + 2];
+    __global const float* g = G + r * s;
+    int k = 0;
+    for (; k + 4 <= s; k += 4) {
+      const double4 gk = convert_double4(vload4(0, g + k));
+      vstore4(vload4(0, out + k) + gk * p0, 0, out + k);
+      vstore4(vload4(0, out + s + k) + gk * p1, 0, out + s + k);
+      vstore4(vload4(0, out + 2 * s + k) + gk * p2, 0, out + 2 * s + k);
+    }
+    for (; k < s; ++k) {
+      const double gk = g[k];
+      out[k] += gk * p0;
+      out[s + k] += gk * p1;
+      out[2 * s + k] += gk * p2;
+    }
+  }
+}
+
+__kernel void sum_partials(__global const double* partial, int chunks, int len, __global double* out) {
+  const int j = get_global_id(0);
+  if (j >= len) return;
+  double acc = 0;
+  for (int c = 0; c < chunks; ++c) acc += partial[(long)c * len + j];
+  out[j] = acc;
 }
 
 // Jc ← Jc + t dJ.
@@ -318,6 +393,20 @@ __kernel void certify_rows(__global const float* GHt, long N, int m, __global co
     JH[(3L * row) * N + i] = a0;
     JH[(3L * row + 1) * N + i] = a1;
     JH[(3L * row + 2) * N + i] = a2;
+  }
+}
+
+// Base stage, part 1 for CPU devices: voxel i's block of 9 contiguous rows of m floats (GH[(9 i + row) m + k]).
+__kernel void certify_rows_blocks(__global const float* GH, long N, int m, __global const double* Y, int rows,
+                                  __global double* JH) {
+  const long i = get_global_id(0);
+  if (i >= N) return;
+  for (int row = 0; row < rows; ++row) {
+    double o[3];
+    dot3_rows4(GH + (9 * i + row) * (long)m, m, Y, o);
+    JH[(3L * row) * N + i] = o[0];
+    JH[(3L * row + 1) * N + i] = o[1];
+    JH[(3L * row + 2) * N + i] = o[2];
   }
 }
 

@@ -121,7 +121,10 @@ struct Device {
   cl::Program program;
   std::string label;  // "<device> (<platform>)"
   size_t max_group = 1;
-  bool cpu_device = false;  // the device is the host's CPU (PoCL): dense products go to the host BLAS
+  // The device is the host's CPU (PoCL): dense products go to the host BLAS and the streaming kernels use the
+  // row layouts with explicit vectors (lidef.cl). LIDEF_OPENCL_AS_GPU=1 treats it as a GPU anyway (tests of
+  // the GPU paths on PoCL).
+  bool cpu_device = false;
   unsigned long long max_alloc = 0, global_mem = 0;
   std::mutex mutex;  // kernels of one backend are used by one thread at a time; this guards the queue anyway
 };
@@ -236,6 +239,13 @@ class OpenCLEnergyKernels final : public EnergyKernels {
                              Gt.data());
     Gt.clear();
     Gt.shrink_to_fit();
+    if (d_->cpu_device) {  // G as the host stores it, for jacobians_rows and gradient_rows_partial (lidef.cl)
+      Grow_ = make_buffer<float>(*d_, G.size(), "uploading the reduced basis gradients", CL_MEM_READ_ONLY,
+                                 G.data());
+      chunks_ = (R_ + kRowsPerChunk - 1) / kRowsPerChunk;
+      partial_g_ = make_buffer<double>(*d_, static_cast<size_t>(round_up(chunks_, 8)) * 3 * s_,
+                                       "allocating gradient partial sums");
+    }
     const MatXfR& GH = e.subset_gradient_matrix();  // 3m by s row-major
     GHf_ = make_buffer<float>(*d_, GH.size(), "uploading the Hessian subset", CL_MEM_READ_ONLY, GH.data());
     subset_ =
@@ -250,10 +260,12 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     partial_ = make_buffer<double>(*d_, groups_, "allocating partial sums");
     blocks_ = make_buffer<double>(*d_, static_cast<size_t>(m_) * 81, "allocating Hessian blocks");
     guarded(d_->label, "creating kernels", [&] {
-      k_jac_ = cl::Kernel(d_->program, "jacobians");
+      k_jac_ = cl::Kernel(d_->program, d_->cpu_device ? "jacobians_rows" : "jacobians");
       k_sum_ = cl::Kernel(d_->program, "sd_sum");
       k_grad_ = cl::Kernel(d_->program, "sd_gradient");
       k_red_ = cl::Kernel(d_->program, "gradient_reduce");
+      k_gpart_ = cl::Kernel(d_->program, "gradient_rows_partial");
+      k_gsum_ = cl::Kernel(d_->program, "sum_partials");
       k_axpy_ = cl::Kernel(d_->program, "axpy_J");
       k_psd_ = cl::Kernel(d_->program, "psd_blocks");
       k_wf_ = cl::Kernel(d_->program, "fill_w_float");
@@ -334,13 +346,30 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_grad_.setArg(1, static_cast<cl_long>(n_));
       k_grad_.setArg(2, P_);
       d_->queue.enqueueNDRangeKernel(k_grad_, cl::NullRange, cl::NDRange(round_up(n_, 64)), cl::NDRange(64));
-      k_red_.setArg(0, Gt_);
-      k_red_.setArg(1, static_cast<cl_long>(R_));
-      k_red_.setArg(2, s_);
-      k_red_.setArg(3, P_);
-      k_red_.setArg(4, g_);
-      k_red_.setArg(5, cl::Local(3 * ls_ * sizeof(double)));
-      d_->queue.enqueueNDRangeKernel(k_red_, cl::NullRange, cl::NDRange(s_ * ls_), cl::NDRange(ls_));
+      if (d_->cpu_device) {
+        k_gpart_.setArg(0, Grow_);
+        k_gpart_.setArg(1, static_cast<cl_long>(R_));
+        k_gpart_.setArg(2, s_);
+        k_gpart_.setArg(3, P_);
+        k_gpart_.setArg(4, kRowsPerChunk);
+        k_gpart_.setArg(5, partial_g_);
+        d_->queue.enqueueNDRangeKernel(k_gpart_, cl::NullRange, cl::NDRange(round_up(chunks_, 8)),
+                                       cl::NDRange(8));
+        k_gsum_.setArg(0, partial_g_);
+        k_gsum_.setArg(1, static_cast<int>(chunks_));
+        k_gsum_.setArg(2, 3 * s_);
+        k_gsum_.setArg(3, g_);
+        d_->queue.enqueueNDRangeKernel(k_gsum_, cl::NullRange, cl::NDRange(round_up(3 * s_, 64)),
+                                       cl::NDRange(64));
+      } else {
+        k_red_.setArg(0, Gt_);
+        k_red_.setArg(1, static_cast<cl_long>(R_));
+        k_red_.setArg(2, s_);
+        k_red_.setArg(3, P_);
+        k_red_.setArg(4, g_);
+        k_red_.setArg(5, cl::Local(3 * ls_ * sizeof(double)));
+        d_->queue.enqueueNDRangeKernel(k_red_, cl::NullRange, cl::NDRange(s_ * ls_), cl::NDRange(ls_));
+      }
       d_->queue.enqueueReadBuffer(g_, CL_TRUE, 0, 3 * s_ * sizeof(double), g.data());  // column-major s by 3
       return 0;
     });
@@ -388,8 +417,8 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       kw.setArg(2, m_);
       kw.setArg(3, s_);
       kw.setArg(4, double_precision ? Wd_ : Wf_);
-      d_->queue.enqueueNDRangeKernel(kw, cl::NullRange,
-                                     cl::NDRange(round_up(3 * m_, 16), round_up(6 * s_, 16)));
+      d_->queue.enqueueNDRangeKernel(
+          kw, cl::NullRange, cl::NDRange(round_up(3 * m_, 16), round_up(6 * s_, 16)), cl::NDRange(16, 16));
       cl_command_queue q = d_->queue();
       // Ball (s by 6s, column-major) = GHᵀ W: row-major GH (3m by s) is column-major GHᵀ, row-major W is
       // column-major Wᵀ — the same call as the CPU's cblas_sgemm.
@@ -428,7 +457,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     std::lock_guard<std::mutex> lock(d_->mutex);
     guarded(d_->label, stage, [&] {
       d_->queue.enqueueWriteBuffer(y_, CL_FALSE, 0, 3 * s_ * sizeof(double), y.data());
-      k_jac_.setArg(0, Gt_);
+      k_jac_.setArg(0, d_->cpu_device ? Grow_ : Gt_);
       k_jac_.setArg(1, static_cast<cl_long>(R_));
       k_jac_.setArg(2, s_);
       k_jac_.setArg(3, y_);
@@ -444,7 +473,11 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   long R_ = 0, n_ = 0;
   int s_ = 0, m_ = 0;
   size_t ls_ = 64, groups_ = 1;
-  cl::Buffer Gt_, GHf_, GHd_, subset_, y_, J_, dJ_, P_, g_, partial_, blocks_, Wf_, Wd_, Bf_, Bd_;
+  static constexpr int kRowsPerChunk = 96;  // 32 samples per partial sum (CPU devices)
+  long chunks_ = 0;
+  cl::Buffer partial_g_;
+  cl::Buffer Gt_, Grow_, GHf_, GHd_, subset_, y_, J_, dJ_, P_, g_, partial_, blocks_, Wf_, Wd_, Bf_, Bd_;
+  cl::Kernel k_gpart_, k_gsum_;
   cl::Kernel k_jac_, k_sum_, k_grad_, k_red_, k_axpy_, k_psd_, k_wf_, k_wd_;
 };
 
@@ -456,7 +489,11 @@ class OpenCLCertifierKernels final : public CertifierKernels {
   OpenCLCertifierKernels(std::shared_ptr<Device> dev, const CertifierData& data)
       : d_(std::move(dev)), N_(data.voxels), m_(data.m) {
     const Cage& cage = *data.cage;
-    if (m_ > 0) {
+    if (m_ > 0 && d_->cpu_device) {
+      // The host's layout (blocks of 9 rows per voxel) for certify_rows_blocks.
+      GHt_ = make_buffer<float>(*d_, static_cast<size_t>(9) * m_ * N_,
+                                "uploading the certificate's basis derivatives", CL_MEM_READ_ONLY, data.GH);
+    } else if (m_ > 0) {
       // GHt[(row m + k) N + i]: adjacent work-items (voxels) read adjacent words.
       std::vector<float> t(static_cast<size_t>(9) * m_ * N_);
       for (long i = 0; i < N_; ++i) {
@@ -495,7 +532,7 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       JH_ = make_buffer<double>(*d_, 27 * static_cast<size_t>(N_), "allocating certificate Jacobians");
     }
     guarded(d_->label, "creating kernels", [&] {
-      k_rows_ = cl::Kernel(d_->program, "certify_rows");
+      k_rows_ = cl::Kernel(d_->program, d_->cpu_device ? "certify_rows_blocks" : "certify_rows");
       k_finish_ = cl::Kernel(d_->program, "certify_finish");
       k_nodes_ = cl::Kernel(d_->program, "eval_nodes");
       return 0;
@@ -589,7 +626,8 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       k_nodes_.setArg(8, delta_);
       k_nodes_.setArg(9, E_);
       k_nodes_.setArg(10, out_);
-      d_->queue.enqueueNDRangeKernel(k_nodes_, cl::NullRange, cl::NDRange(round_up(count, 32)));
+      d_->queue.enqueueNDRangeKernel(k_nodes_, cl::NullRange, cl::NDRange(round_up(count, 32)),
+                                     cl::NDRange(32));
       d_->queue.enqueueReadBuffer(out_, CL_TRUE, 0, res.size() * sizeof(double), res.data());
       return 0;
     });
@@ -714,9 +752,8 @@ std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& fil
     d->context = cl::Context(d->device);
     d->queue = cl::CommandQueue(d->context, d->device);
     d->max_group = d->device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>();
-    // LIDEF_OPENCL_DEVICE_PRODUCT=1 keeps the product on the device anyway (tests of that path on PoCL).
     d->cpu_device = (d->device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_CPU) != 0 &&
-                    std::getenv("LIDEF_OPENCL_DEVICE_PRODUCT") == nullptr;
+                    std::getenv("LIDEF_OPENCL_AS_GPU") == nullptr;
     d->max_alloc = d->device.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
     // Test hook (tests/test_opencl.cpp): pretend the device allows smaller buffers, to exercise that path.
     if (const char* cap = std::getenv("LIDEF_TEST_OPENCL_MAX_ALLOC"))
