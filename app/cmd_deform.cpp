@@ -172,18 +172,8 @@ void add_deform_command(CLI::App& app, Action& action) {
       // --- Inputs and parameters; nothing is written before they all check out.
       Scenario sc = read_scenario(o.scenario, o.models);
       for (const auto& [name, text] : o.overrides) {
-        const ParamInfo* p = find_param(name);  // never null: the flags are made from the table
-        nlohmann::json v;
-        if (p && std::holds_alternative<std::string DeformParams::*>(p->member)) {
-          v = text;
-        } else {
-          try {
-            v = nlohmann::json::parse(text);
-          } catch (const nlohmann::json::exception&) {
-            throw InputError(param_flag(*p), "'" + text + "' is not a number or true/false");
-          }
-        }
-        set_param(sc.params, name, v, param_flag(*p));
+        set_param_from_text(sc.params, name, text,
+                            param_flag(*find_param(name)));  // flags come from the table
         sc.params_given.push_back(name);
       }
       validate_params(sc.params, o.scenario);

@@ -13,19 +13,7 @@
 #include "vtk_write_atomic.h"
 
 namespace lidef {
-namespace {
-
-template <class Array, class T>
-vtkSmartPointer<Array> make_array(const char* name, const std::vector<T>& v) {
-  auto a = vtkSmartPointer<Array>::New();
-  a->SetName(name);
-  a->SetNumberOfComponents(1);
-  a->SetNumberOfTuples(static_cast<vtkIdType>(v.size()));
-  std::copy(v.begin(), v.end(), a->GetPointer(0));
-  return a;
-}
-
-}  // namespace
+using detail::make_array;
 
 void write_ball_fields_vti(const std::string& path, const BallFieldGrid& g) {
   vtkNew<vtkImageData> image;

@@ -41,24 +41,6 @@ vtkSmartPointer<vtkDoubleArray> double_array(const char* name, vtkIdType n) {
   return a;
 }
 
-vtkSmartPointer<vtkFloatArray> float_array(const char* name, const std::vector<float>& v) {
-  auto a = vtkSmartPointer<vtkFloatArray>::New();
-  a->SetName(name);
-  a->SetNumberOfComponents(1);
-  a->SetNumberOfTuples(static_cast<vtkIdType>(v.size()));
-  std::copy(v.begin(), v.end(), a->GetPointer(0));
-  return a;
-}
-
-vtkSmartPointer<vtkUnsignedCharArray> uchar_array(const char* name, const std::vector<unsigned char>& v) {
-  auto a = vtkSmartPointer<vtkUnsignedCharArray>::New();
-  a->SetName(name);
-  a->SetNumberOfComponents(1);
-  a->SetNumberOfTuples(static_cast<vtkIdType>(v.size()));
-  std::copy(v.begin(), v.end(), a->GetPointer(0));
-  return a;
-}
-
 }  // namespace
 
 void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leaves) {
@@ -83,7 +65,8 @@ void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leav
   for (vtkIdType i = 0; i < n; ++i) {
     const CertLeaf& l = leaves[i];
     for (int k = 0; k < 8; ++k) {
-      const Vec3 p = l.center + l.side * (Vec3(corner[k][0], corner[k][1], corner[k][2]) - Vec3::Constant(0.5));
+      const Vec3 p =
+          l.center + l.side * (Vec3(corner[k][0], corner[k][1], corner[k][2]) - Vec3::Constant(0.5));
       points->SetPoint(8 * i + k, p.x(), p.y(), p.z());
       connectivity->SetValue(8 * i + k, 8 * i + k);
     }
@@ -123,10 +106,11 @@ long FieldGrid::count_inside_sampled() const {
 
 FieldGrid compute_field_grid(const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
                              const VoxelSampling& sampling, int resolution) {
-  if (resolution < 2) throw InputError("", "field grid resolution must be >= 2 (got " + std::to_string(resolution) + ")");
+  if (resolution < 2)
+    throw InputError("", "field grid resolution must be >= 2 (got " + std::to_string(resolution) + ")");
   if (y.rows() != basis.size())
-    throw InputError("", "coefficients have " + std::to_string(y.rows()) + " rows, expected #V+#F = " +
-                             std::to_string(basis.size()));
+    throw InputError("", "coefficients have " + std::to_string(y.rows()) +
+                             " rows, expected #V+#F = " + std::to_string(basis.size()));
   FieldGrid g;
   const Vec3 ext = cage.bbox_max - cage.bbox_min;
   g.spacing = ext.maxCoeff() / (resolution - 1);
@@ -141,7 +125,8 @@ FieldGrid compute_field_grid(const Cage& cage, const HarmonicBasis& basis, const
   const long np = g.points();
   MatX3d P(np, 3);
   for (long i = 0; i < np; ++i) {
-    const long ix = i % g.dims[0], iy = (i / g.dims[0]) % g.dims[1], iz = i / (static_cast<long>(g.dims[0]) * g.dims[1]);
+    const long ix = i % g.dims[0], iy = (i / g.dims[0]) % g.dims[1],
+               iz = i / (static_cast<long>(g.dims[0]) * g.dims[1]);
     P.row(i) = (g.origin + g.spacing * Vec3(ix, iy, iz)).transpose();
   }
   const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -165,7 +150,8 @@ FieldGrid compute_field_grid(const Cage& cage, const HarmonicBasis& basis, const
       g.inside_cage[i] = 1;
       basis.evaluate(p, 1, nullptr, gb.data(), nullptr);
       Mat3 J = Mat3::Zero();
-      for (int k = 0; k < n; ++k) J.noalias() += y.row(k).transpose() * Eigen::Map<const Eigen::RowVector3d>(&gb[3 * k]);
+      for (int k = 0; k < n; ++k)
+        J.noalias() += y.row(k).transpose() * Eigen::Map<const Eigen::RowVector3d>(&gb[3 * k]);
       const Vec3 s = signed_singular_values(J);
       const double det = J.determinant();
       g.sigma1[i] = static_cast<float>(s(0));
@@ -187,20 +173,20 @@ void write_field_vti(const std::string& path, const FieldGrid& g) {
   image->SetOrigin(g.origin.x(), g.origin.y(), g.origin.z());
   image->SetSpacing(g.spacing, g.spacing, g.spacing);
   vtkPointData* pd = image->GetPointData();
-  pd->AddArray(float_array("sigma1", g.sigma1));
-  pd->AddArray(float_array("sigma3", g.sigma3));
-  pd->AddArray(float_array("detJ", g.det_j));
-  pd->AddArray(float_array("E_iso", g.e_iso));
-  pd->AddArray(uchar_array("inside_cage", g.inside_cage));
-  pd->AddArray(uchar_array("inside_sampled", g.inside_sampled));
+  pd->AddArray(detail::make_array<vtkFloatArray>("sigma1", g.sigma1));
+  pd->AddArray(detail::make_array<vtkFloatArray>("sigma3", g.sigma3));
+  pd->AddArray(detail::make_array<vtkFloatArray>("detJ", g.det_j));
+  pd->AddArray(detail::make_array<vtkFloatArray>("E_iso", g.e_iso));
+  pd->AddArray(detail::make_array<vtkUnsignedCharArray>("inside_cage", g.inside_cage));
+  pd->AddArray(detail::make_array<vtkUnsignedCharArray>("inside_sampled", g.inside_sampled));
   pd->SetActiveScalars("sigma3");
   vtkNew<vtkXMLImageDataWriter> writer;
   writer->SetInputData(image);
   detail::write_vtk_atomic(writer, path, ".vti");
 }
 
-FieldGrid write_field_vti(const std::string& path, const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
-                          const VoxelSampling& sampling, int resolution) {
+FieldGrid write_field_vti(const std::string& path, const Cage& cage, const HarmonicBasis& basis,
+                          const MatX3d& y, const VoxelSampling& sampling, int resolution) {
   FieldGrid g = compute_field_grid(cage, basis, y, sampling, resolution);
   write_field_vti(path, g);
   return g;

@@ -233,6 +233,22 @@ void set_param(DeformParams& params, const std::string& name, const nlohmann::js
   std::visit([&](auto member) { assign(params.*member, *p, value, where); }, p->member);
 }
 
+void set_param_from_text(DeformParams& params, const std::string& name, const std::string& text,
+                         const std::string& where) {
+  const ParamInfo* p = find_param(name);
+  json v;
+  if (p && std::holds_alternative<std::string DeformParams::*>(p->member)) {
+    v = text;
+  } else {
+    try {
+      v = json::parse(text);
+    } catch (const json::exception&) {
+      throw InputError(where, "'" + text + "' is not a number or true/false");
+    }
+  }
+  set_param(params, name, v, where);
+}
+
 void apply_params(DeformParams& params, const nlohmann::json& object, const std::string& where) {
   if (!object.is_object())
     throw InputError(where,

@@ -75,6 +75,10 @@ std::string param_flag(const ParamInfo& p);
 // ones), a wrong type, a non-finite number or a value out of range.
 void set_param(DeformParams& params, const std::string& name, const nlohmann::json& value,
                const std::string& where);
+// The same from command-line text: string parameters take `text` verbatim, the others read it as JSON (a number
+// or true/false); throws InputError(where, ...) for text that is neither, and as set_param does.
+void set_param_from_text(DeformParams& params, const std::string& name, const std::string& text,
+                         const std::string& where);
 // Applies every key of a JSON object (set_param for each); throws on the first bad key.
 void apply_params(DeformParams& params, const nlohmann::json& object, const std::string& where);
 // Checks cross-parameter consistency (ranges of each field and e.g. bound spelled right); throws InputError.
