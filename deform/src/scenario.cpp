@@ -24,7 +24,7 @@ using nlohmann::ordered_json;
 
 namespace {
 
-const char* const kTopKeys[] = {"name", "model", "description", "handles", "parameters"};
+const char* const kTopKeys[] = {"name", "model", "description", "handles", "parameters", "studio"};
 const char* const kHandleForm = "{\"source\": [x, y, z], \"target\": [x, y, z]}";
 
 // Thrown from the parser callback; caught in parse_scenario_json only.
@@ -182,8 +182,8 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
   for (const auto& [key, value] : root.items()) {
     (void)value;
     if (std::find(std::begin(kTopKeys), std::end(kTopKeys), key) == std::end(kTopKeys))
-      throw InputError(
-          path, "unknown key \"" + key + "\" (allowed: name, model, description, handles, parameters)");
+      throw InputError(path, "unknown key \"" + key +
+                                 "\" (allowed: name, model, description, handles, parameters, studio)");
   }
 
   Scenario s;
@@ -249,6 +249,13 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
     }
   }
   validate_params(s.params, path);
+  const auto studio = root.find("studio");
+  if (studio != root.end()) {
+    if (!studio->is_object())
+      throw InputError(
+          path, "\"studio\" must be a JSON object (the studio's view settings), got " + json_type(*studio));
+    s.studio = studio->dump();
+  }
   return s;
 }
 
@@ -300,6 +307,20 @@ void write_scenario(const std::string& path, const Scenario& s) {
     out += ",\n  \"parameters\": {\n";
     for (size_t i = 0; i < changed.size(); ++i) out += changed[i] + (i + 1 < changed.size() ? ",\n" : "\n");
     out += "  }";
+  }
+  if (!s.studio.empty()) {
+    // Validated and re-indented: a saved session must read back.
+    ordered_json st;
+    try {
+      st = ordered_json::parse(s.studio);
+    } catch (const std::exception& e) {
+      throw InputError(path, std::string("studio settings are not valid JSON: ") + e.what());
+    }
+    if (!st.is_object()) throw InputError(path, "studio settings must be a JSON object");
+    std::string body = st.dump(2);
+    std::string indented;
+    for (char c : body) indented += c == '\n' ? std::string("\n  ") : std::string(1, c);
+    out += ",\n  \"studio\": " + indented;
   }
   out += "\n}\n";
 

@@ -2,7 +2,8 @@
 //
 //   {"name": "...", "model": "bar", "description": "...",
 //    "handles": [{"source": [x,y,z], "target": [x,y,z]}, ...],
-//    "parameters": {"lambda_p2p": 1e5, ...}}            // optional; keys from deform_params.h
+//    "parameters": {"lambda_p2p": 1e5, ...},           // optional; keys from deform_params.h
+//    "studio": {"camera": {...}, ...}}                 // optional; lidef-studio's session settings
 //
 // `model` names a model folder. It resolves, in this order: <models_dir>/<model> when a models directory is
 // given; <model> itself when it is an absolute path; <scenario dir>/<model>; <scenario dir>/../models/<model>
@@ -27,6 +28,8 @@ struct Scenario {
   MatX3d targets;                         // #handles by 3
   DeformParams params;                    // defaults overridden by "parameters"
   std::vector<std::string> params_given;  // names set by the file, in file order
+  std::string studio;  // the "studio" object as JSON text ("" if none): camera and views of a saved studio
+                       // session; kept verbatim, ignored by `lidef deform`
   int num_handles() const { return static_cast<int>(sources.rows()); }
 };
 

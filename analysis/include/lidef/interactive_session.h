@@ -1,0 +1,152 @@
+// The engine behind lidef-studio: one model, one DeformationSolver running on its own thread, and "frames" —
+// immutable snapshots of the last certified map with everything a view needs (deformed mesh and its
+// per-vertex fields, deformed cage, handle images, and on request the certificate's leaves, a σ3 field grid
+// and a verification). Qt- and VTK-free, so the CLI, tests and benchmarks drive exactly what the studio
+// drives.
+//
+// Threading: every public method may be called from any thread and returns at once; commands are queued and
+// applied by the engine thread between Newton iterations. The solver never waits for a consumer: frames are
+// handed to `on_frame` (called on the engine thread; the studio re-posts them to its UI thread and renders
+// only the newest). A frame's map is always certified: the solver only ever holds certified maps
+// (projected_newton.h).
+//
+// While handles are being dragged the engine calls DeformationSolver::solve() from the last map, one frame
+// per iteration, and restarts it whenever the targets change; it rests when the solve stops (converged,
+// blocked, no certified step, iteration limit) until something changes or solve() is asked for.
+#pragma once
+#include <atomic>
+#include <condition_variable>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "lidef/certificate_verification.h"
+#include "lidef/deform_params.h"
+#include "lidef/model_check.h"
+#include "lidef/projected_newton.h"
+#include "lidef/scenario.h"
+#include "lidef/vtk_export.h"
+
+namespace lidef {
+
+// What the engine is doing.
+enum class SessionState { kEmpty, kPreparing, kIterating, kResting, kFailed };
+const char* to_string(SessionState s);
+
+// One certified map and what the views show of it. Immutable once published (shared between threads).
+struct SessionFrame {
+  long serial = 0;         // increases with every frame of a session
+  long map_version = 0;    // changes whenever the map (or the model) changes
+  long model_version = 0;  // changes when a model is (re)loaded or the solver rebuilt
+  SessionState state = SessionState::kEmpty;
+  std::string status;  // one line: what happened last ("converged: ...", "preprocessing: ...")
+  std::shared_ptr<const Model> model;    // the model this frame belongs to (rest mesh, cage)
+  std::vector<IterationRecord> history;  // all iterations since the model was loaded or the map reset
+  // Certificate of this map (the solver's line-search certificate, no leaves).
+  bool certified = false;
+  double min_lower_bound = 0;  // min over leaves of σ3 − r L
+  double min_sigma3 = 0;       // min σ3 at the evaluated voxel centers
+  std::string not_certified_reason;
+  EnergyTerms energy;
+  double max_handle_error = 0;
+  // Geometry (model units).
+  MatX3d mesh_V;                    // #Vm by 3: the deformed mesh vertices f(v)
+  VecXd mesh_e_iso;                 // #Vm: E_iso − 6 at the mesh vertices (NaN where det J ≤ 0)
+  VecXd mesh_det;                   // #Vm: det J, the local volume ratio
+  MatX3d cage_V;                    // #Vc by 3: the deformed cage (the vertex coefficients y_v)
+  MatX3d sources, targets, images;  // #h by 3: handle sources, targets and their images f(source)
+  MatX3d coefficients;              // #Vc+#Fc by 3: the map (coefficients.txt)
+  // Extras, computed only when requested (set_extras) and then at most every `extras_interval` seconds while
+  // iterating, always when resting. Each carries the map_version it belongs to (it may lag the frame's).
+  std::shared_ptr<const Certificate> leaves;  // certificate with leaves (keep_leaves = true)
+  long leaves_version = -1;
+  std::shared_ptr<const FieldGrid> field;                    // σ3 etc. on a grid in rest space
+  std::shared_ptr<const std::vector<float>> field_deformed;  // 3 per grid point: f(p) (NaN outside the cage)
+  long field_version = -1;
+  std::shared_ptr<const VerificationResult> verification;  // dense-sampling check of `leaves` (Fig. 5)
+  long verification_version = -1;
+  double ms_frame = 0;  // time to build this frame's geometry
+};
+
+// What the views need besides the mesh; the engine computes only what is asked for.
+struct ExtrasRequest {
+  bool leaves = false;
+  bool field = false;
+  int field_resolution = 48;     // grid points along the longest axis of the cage's bounding box
+  double extras_interval = 1.0;  // seconds between extras while iterating (0 = every frame)
+};
+
+class InteractiveSession {
+ public:
+  using FrameCallback = std::function<void(std::shared_ptr<const SessionFrame>)>;
+  // Problems found on the engine thread (a handle outside the cage, a solver that cannot be built): the
+  // command is dropped, the previous state kept, and this is called with the message.
+  using ErrorCallback = std::function<void(const std::string&)>;
+
+  explicit InteractiveSession(FrameCallback on_frame, ErrorCallback on_error = {});
+  ~InteractiveSession();  // stops the engine thread (interrupting a running iteration)
+  InteractiveSession(const InteractiveSession&) = delete;
+  InteractiveSession& operator=(const InteractiveSession&) = delete;
+
+  // --- Loading. These read and check the files synchronously in the caller's thread and throw InputError
+  // naming the file (the current session is then untouched); the solver's precomputation runs on the engine.
+  // A scenario starts solving at once; a model starts with no handles at the identity.
+  void open_scenario(const std::string& path, const std::string& models_dir = "");
+  void open_model(const std::string& model_dir, const DeformParams& params = {});
+
+  // The session as a scenario (handles, parameters; `studio` left for the caller), for saving. Empty
+  // model_dir when nothing is loaded.
+  Scenario scenario() const;
+  // The loaded model (nullptr when none). Constant for a model_version; safe to read from any thread.
+  std::shared_ptr<const Model> model() const;
+
+  // --- Handles (#h by 3 each; sources in rest space). Checked here against the cage (inside, not on it) and
+  // thrown as InputError before anything is queued.
+  void set_handles(const MatX3d& sources, const MatX3d& targets);
+  void set_targets(const MatX3d& targets);  // same count as the current handles; the drag path
+  // Checks one source point as set_handles would; returns "" when fine, else the reason.
+  std::string check_source(const Vec3& p) const;
+
+  // --- Solver control.
+  void set_params(const DeformParams& params);  // rebuilds the solver when a precomputation parameter changed
+  void solve();  // iterate from the current map (after stop(), or to continue after the iteration limit)
+  void stop();   // interrupts the running iteration (the map stays the last certified one) and rests
+  void reset();  // back to the identity map (history cleared)
+  void set_extras(const ExtrasRequest& request);
+  // Dense sampling of the leaves of the map the engine rests at next (Fig. 5); verify_certificate().
+  void verify(int samples_per_voxel = 32);
+
+  // --- Waiting (tests, benchmarks, headless screenshots).
+  // Blocks until the engine rests (or fails) with no command pending and extras up to date; false on timeout.
+  bool wait_until_resting(double timeout_seconds);
+  std::shared_ptr<const SessionFrame> latest_frame() const;
+  SessionState state() const;
+
+ private:
+  struct Command;
+  struct Engine;
+  void post(Command c);
+  void run();
+
+  FrameCallback on_frame_;
+  ErrorCallback on_error_;
+  std::unique_ptr<Engine> engine_;  // touched by the engine thread only (after construction)
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::condition_variable rested_;
+  std::vector<Command> queue_;
+  bool quit_ = false;
+  std::atomic<bool> interrupt_{false};
+  std::shared_ptr<const SessionFrame> latest_;
+  SessionState state_ = SessionState::kEmpty;
+  bool idle_ = true;  // engine waiting with an empty queue and nothing to do
+  std::shared_ptr<const Model> model_;
+  Scenario scenario_;  // handles and parameters as last set (guarded by mutex_)
+  std::thread thread_;
+};
+
+}  // namespace lidef
