@@ -1,1 +1,120 @@
-int main() { return 0; }
+// lidef-studio: interactive certified deformation (Qt5 + VTK). With --screenshot it solves, renders one view,
+// writes a PNG and exits (docs, render tests).
+#include <QVTKOpenGLNativeWidget.h>
+
+#include <CLI/CLI.hpp>
+#include <QApplication>
+#include <QSurfaceFormat>
+#include <QTimer>
+#include <chrono>
+#include <iostream>
+#include <regex>
+
+#include "lidef/errors.h"
+#include "scene.h"
+#include "studio_window.h"
+
+int main(int argc, char** argv) {
+  using namespace lidef;
+  using namespace lidef::studio;
+  CLI::App app{
+      "lidef-studio: drag handles, watch the certified deformation, inspect sigma3, Lipschitz bounds and "
+      "the octree"};
+  std::string scenario, model, view = "mesh", screenshot, size = "1024x768";
+  double timeout = 600;
+  app.add_option("PATH", scenario, "A scenario/session JSON or a model folder to open");
+  app.add_option("--scenario", scenario, "Scenario or saved session JSON to open");
+  app.add_option("--model", model, "Model folder to open (no handles)");
+  app.add_option("--view", view, "View: mesh, sigma3, lipschitz, octree")->capture_default_str();
+  app.add_option(
+      "--screenshot", screenshot,
+      "Solve until the solver rests, render --view, write this PNG and exit (0 written, 1 timed out, "
+      "2 error)");
+  app.add_option("--size", size, "Size of the rendered view for --screenshot, WxH")->capture_default_str();
+  app.add_option("--timeout", timeout, "Seconds to wait for the solver in --screenshot mode")
+      ->capture_default_str();
+  app.footer(
+      "Mouse: click on the mesh adds a handle; drag a cyan target sphere; right-click on it deletes it.\n"
+      "Keys: Ctrl+Z / Ctrl+Shift+Z undo/redo handle edits, Esc stops the solver. Docs: docs/studio.md.");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  int w = 0, h = 0;
+  {
+    std::smatch m;
+    if (!std::regex_match(size, m, std::regex(R"((\d{2,5})x(\d{2,5}))"))) {
+      std::cerr << "lidef-studio: --size: expected WxH (e.g. 1024x768), got \"" << size << "\"\n";
+      return 2;
+    }
+    w = std::stoi(m[1]);
+    h = std::stoi(m[2]);
+  }
+  ViewSettings settings;
+  try {
+    settings.view = view_from_string(view);
+  } catch (const std::exception& e) {
+    std::cerr << "lidef-studio: " << e.what() << "\n";
+    return 2;
+  }
+  if (!screenshot.empty() && scenario.empty() && model.empty()) {
+    std::cerr << "lidef-studio: --screenshot needs --scenario (or --model)\n";
+    return 2;
+  }
+
+  QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
+  QApplication qapp(argc, argv);
+  StudioWindow win;
+  const bool headless = !screenshot.empty();
+  int exit_code = 0;
+  if (headless) {
+    win.set_error_sink([&](const std::string& e) {
+      std::cerr << "lidef-studio: " << e << "\n";
+      exit_code = 2;
+      qapp.exit(2);
+    });
+    win.set_view_only(true);
+    win.view_widget()->setFixedSize(w, h);
+    win.adjustSize();
+  }
+  win.show();
+  win.set_settings(settings);
+  const std::string path = !scenario.empty() ? scenario : model;
+  if (!path.empty() && !win.open_path(path)) {
+    if (headless) return 2;
+  }
+  if (!headless) return qapp.exec();
+
+  // Headless: wait until the engine rests with the view's extras for the final map, then grab.
+  const auto t0 = std::chrono::steady_clock::now();
+  QTimer poll;
+  QObject::connect(&poll, &QTimer::timeout, [&] {
+    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (waited > timeout) {
+      std::cerr << "lidef-studio: timed out after " << timeout << " s waiting for the solver\n";
+      exit_code = 1;
+      qapp.exit(1);
+      return;
+    }
+    if (!win.session().wait_until_resting(0.0)) return;
+    const auto f = win.session().latest_frame();
+    const auto shown = win.shown_frame();
+    if (!f || !shown || shown->serial != f->serial || f->mesh_V.rows() == 0) return;
+    const ExtrasRequest ex = extras_for(win.settings());
+    if (ex.leaves && f->leaves_version != f->map_version) return;
+    if (ex.field && f->field_version != f->map_version) return;
+    poll.stop();
+    if (!win.save_screenshot(screenshot)) {
+      exit_code = 2;
+      qapp.exit(2);
+      return;
+    }
+    std::cout << "lidef-studio: " << to_string(win.settings().view) << " view of " << path << " written to "
+              << screenshot << " (" << w << "x" << h << "); " << win.caption() << "\n";
+    qapp.exit(0);
+  });
+  poll.start(50);
+  const int rc = qapp.exec();
+  return exit_code ? exit_code : rc;
+}

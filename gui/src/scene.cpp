@@ -1,0 +1,647 @@
+#include "scene.h"
+
+#include <vtkActor.h>
+#include <vtkCellArray.h>
+#include <vtkColorTransferFunction.h>
+#include <vtkCubeSource.h>
+#include <vtkDoubleArray.h>
+#include <vtkFloatArray.h>
+#include <vtkGlyph3DMapper.h>
+#include <vtkImageData.h>
+#include <vtkLookupTable.h>
+#include <vtkPiecewiseFunction.h>
+#include <vtkPointData.h>
+#include <vtkPoints.h>
+#include <vtkPolyData.h>
+#include <vtkPolyDataMapper.h>
+#include <vtkProperty.h>
+#include <vtkRenderer.h>
+#include <vtkScalarBarActor.h>
+#include <vtkSmartVolumeMapper.h>
+#include <vtkSphereSource.h>
+#include <vtkTextActor.h>
+#include <vtkTextProperty.h>
+#include <vtkVariant.h>
+#include <vtkVolume.h>
+#include <vtkVolumeProperty.h>
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "lidef/errors.h"
+
+namespace lidef::studio {
+
+const char* to_string(View v) {
+  switch (v) {
+    case View::kMesh:
+      return "mesh";
+    case View::kSigma3:
+      return "sigma3";
+    case View::kLipschitz:
+      return "lipschitz";
+    case View::kOctree:
+      return "octree";
+  }
+  return "?";
+}
+
+View view_from_string(const std::string& name) {
+  for (View v : {View::kMesh, View::kSigma3, View::kLipschitz, View::kOctree})
+    if (name == to_string(v)) return v;
+  throw InputError("--view", "unknown view \"" + name + "\" (mesh, sigma3, lipschitz, octree)");
+}
+
+nlohmann::json settings_to_json(const ViewSettings& s) {
+  return {{"view", to_string(s.view)},
+          {"mesh_volume_ratio", s.mesh_volume_ratio},
+          {"rest_cage", s.rest_cage},
+          {"deformed_cage", s.deformed_cage},
+          {"sigma_deformed_space", s.sigma_deformed_space},
+          {"slice", {s.slice[0], s.slice[1], s.slice[2]}},
+          {"slice_pos", {s.slice_pos[0], s.slice_pos[1], s.slice_pos[2]}},
+          {"sigma_volume", s.sigma_volume},
+          {"sigma_whole_cage", s.sigma_whole_cage},
+          {"field_resolution", s.field_resolution},
+          {"lipschitz_margin", s.lipschitz_margin},
+          {"only_refined_or_failed", s.only_refined_or_failed},
+          {"octree_by_status", s.octree_by_status},
+          {"clip", s.clip},
+          {"min_depth", s.min_depth}};
+}
+
+void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::string& where) {
+  if (!j.is_object()) throw InputError(where, "studio view settings must be a JSON object");
+  try {
+    auto get = [&](const char* key, auto& v) {
+      if (j.contains(key)) j.at(key).get_to(v);
+    };
+    if (j.contains("view")) s.view = view_from_string(j.at("view").get<std::string>());
+    get("mesh_volume_ratio", s.mesh_volume_ratio);
+    get("rest_cage", s.rest_cage);
+    get("deformed_cage", s.deformed_cage);
+    get("sigma_deformed_space", s.sigma_deformed_space);
+    for (int a = 0; a < 3; ++a) {
+      if (j.contains("slice")) s.slice[a] = j.at("slice").at(a).get<bool>();
+      if (j.contains("slice_pos"))
+        s.slice_pos[a] = std::clamp(j.at("slice_pos").at(a).get<double>(), 0.0, 1.0);
+    }
+    get("sigma_volume", s.sigma_volume);
+    get("sigma_whole_cage", s.sigma_whole_cage);
+    get("field_resolution", s.field_resolution);
+    s.field_resolution = std::clamp(s.field_resolution, 8, 256);
+    get("lipschitz_margin", s.lipschitz_margin);
+    get("only_refined_or_failed", s.only_refined_or_failed);
+    get("octree_by_status", s.octree_by_status);
+    get("clip", s.clip);
+    s.clip = std::clamp(s.clip, 0.0, 1.0);
+    get("min_depth", s.min_depth);
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(where, std::string("studio view settings: ") + e.what());
+  }
+}
+
+ExtrasRequest extras_for(const ViewSettings& s) {
+  ExtrasRequest r;
+  r.leaves = s.view == View::kLipschitz || s.view == View::kOctree;
+  r.field = s.view == View::kSigma3;
+  r.field_resolution = s.field_resolution;
+  return r;
+}
+
+namespace {
+
+template <class T>
+using Ptr = vtkSmartPointer<T>;
+
+vtkSmartPointer<vtkPolyData> wireframe(const MatX3d& V, const MatX3i& F) {
+  auto pts = Ptr<vtkPoints>::New();
+  pts->SetNumberOfPoints(V.rows());
+  for (Eigen::Index i = 0; i < V.rows(); ++i) pts->SetPoint(i, V(i, 0), V(i, 1), V(i, 2));
+  auto cells = Ptr<vtkCellArray>::New();
+  for (Eigen::Index t = 0; t < F.rows(); ++t) {
+    const vtkIdType ids[3] = {F(t, 0), F(t, 1), F(t, 2)};
+    cells->InsertNextCell(3, ids);
+  }
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  pd->SetPolys(cells);
+  return pd;
+}
+
+// Heat map for E_iso − 6 (0 = isometry): white to dark red, like the paper's figures.
+void heat_lut(vtkLookupTable* lut, double hi) {
+  lut->SetNumberOfTableValues(256);
+  lut->SetTableRange(0, std::max(hi, 1e-6));
+  for (int i = 0; i < 256; ++i) {
+    const double t = i / 255.0;
+    lut->SetTableValue(i, 1.0 - 0.25 * t, 1.0 - 0.95 * t, 1.0 - 0.95 * t, 1.0);
+  }
+  lut->SetNanColor(0.2, 0.2, 0.2, 1.0);
+  lut->SetUseAboveRangeColor(false);
+}
+
+// Diverging blue–white–red around `mid` on a log or linear scale (volume ratio, margins).
+void diverging_lut(vtkLookupTable* lut, double lo, double hi, bool log_scale) {
+  lut->SetNumberOfTableValues(256);
+  if (log_scale) lut->SetScaleToLog10();
+  lut->SetTableRange(lo, hi);
+  for (int i = 0; i < 256; ++i) {
+    const double t = i / 255.0;
+    if (t < 0.5) {
+      const double u = t / 0.5;
+      lut->SetTableValue(i, 0.23 + 0.77 * u, 0.30 + 0.70 * u, 0.75 + 0.25 * u, 1.0);
+    } else {
+      const double u = (t - 0.5) / 0.5;
+      lut->SetTableValue(i, 1.0 - 0.3 * u, 1.0 - 0.9 * u, 1.0 - 0.85 * u, 1.0);
+    }
+  }
+  lut->SetNanColor(0.2, 0.2, 0.2, 1.0);
+}
+
+// σ3 colours: red below 0 (not injective), then a perceptual ramp (dark blue → yellow) for σ3 > 0.
+void sigma_ctf(vtkColorTransferFunction* ctf, double lo, double hi) {
+  ctf->RemoveAllPoints();
+  hi = std::max(hi, lo + 1e-9);
+  if (lo < 0) {
+    ctf->AddRGBPoint(lo, 0.8, 0.0, 0.0);
+    ctf->AddRGBPoint(0.0, 1.0, 0.5, 0.5);
+    lo = 0;
+  }
+  ctf->AddRGBPoint(lo, 0.18, 0.0, 0.33);
+  ctf->AddRGBPoint(lo + 0.33 * (hi - lo), 0.15, 0.40, 0.55);
+  ctf->AddRGBPoint(lo + 0.66 * (hi - lo), 0.20, 0.70, 0.45);
+  ctf->AddRGBPoint(hi, 0.99, 0.91, 0.15);
+}
+
+}  // namespace
+
+struct Scene::Impl {
+  vtkRenderer* ren;
+  Ptr<vtkPolyData> mesh = Ptr<vtkPolyData>::New();
+  Ptr<vtkActor> mesh_actor = Ptr<vtkActor>::New();
+  Ptr<vtkPolyDataMapper> mesh_mapper = Ptr<vtkPolyDataMapper>::New();
+  Ptr<vtkLookupTable> mesh_lut = Ptr<vtkLookupTable>::New();
+  Ptr<vtkActor> rest_cage = Ptr<vtkActor>::New(), def_cage = Ptr<vtkActor>::New();
+  Ptr<vtkPolyData> rest_cage_pd, def_cage_pd;
+  Ptr<vtkActor> images = Ptr<vtkActor>::New();  // handle images f(p): small black spheres
+  Ptr<vtkGlyph3DMapper> images_mapper = Ptr<vtkGlyph3DMapper>::New();
+  Ptr<vtkSphereSource> image_sphere = Ptr<vtkSphereSource>::New();
+  Ptr<vtkActor> context_mesh = Ptr<vtkActor>::New();  // faint mesh in the σ3/leaf views
+  Ptr<vtkPolyDataMapper> context_mapper = Ptr<vtkPolyDataMapper>::New();
+  Ptr<vtkPolyData> rest_mesh;  // the model's mesh in rest space (context of the rest-space views)
+  // σ3 view.
+  Ptr<vtkActor> slices = Ptr<vtkActor>::New();
+  Ptr<vtkPolyDataMapper> slices_mapper = Ptr<vtkPolyDataMapper>::New();
+  Ptr<vtkColorTransferFunction> sigma_colors = Ptr<vtkColorTransferFunction>::New();
+  Ptr<vtkVolume> volume = Ptr<vtkVolume>::New();
+  Ptr<vtkSmartVolumeMapper> volume_mapper = Ptr<vtkSmartVolumeMapper>::New();
+  Ptr<vtkImageData> volume_image;
+  long volume_version = -2;
+  // Leaves (Lipschitz and octree views).
+  Ptr<vtkActor> leaves = Ptr<vtkActor>::New();
+  Ptr<vtkGlyph3DMapper> leaves_mapper = Ptr<vtkGlyph3DMapper>::New();
+  Ptr<vtkLookupTable> leaves_lut = Ptr<vtkLookupTable>::New();
+  Ptr<vtkScalarBarActor> bar = Ptr<vtkScalarBarActor>::New();
+  Ptr<vtkTextActor> text = Ptr<vtkTextActor>::New();
+  long model_version = -1;
+  std::string caption;
+};
+
+Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
+  Impl& I = *impl_;
+  I.ren = renderer;
+  I.mesh_mapper->SetInputData(I.mesh);
+  I.mesh_mapper->SetLookupTable(I.mesh_lut);
+  I.mesh_mapper->SetScalarModeToUsePointData();
+  I.mesh_mapper->SetColorModeToMapScalars();
+  I.mesh_actor->SetMapper(I.mesh_mapper);
+  I.mesh_actor->GetProperty()->SetInterpolationToPhong();
+  I.context_mapper->ScalarVisibilityOff();
+  I.context_mesh->SetMapper(I.context_mapper);
+  I.context_mesh->GetProperty()->SetColor(0.85, 0.85, 0.85);
+  I.context_mesh->GetProperty()->SetOpacity(0.15);
+  I.context_mesh->PickableOff();
+  for (vtkActor* a : {I.rest_cage.Get(), I.def_cage.Get()}) {
+    a->SetMapper(Ptr<vtkPolyDataMapper>::New());
+    a->GetProperty()->SetRepresentationToWireframe();
+    a->GetProperty()->LightingOff();
+    a->PickableOff();
+  }
+  I.rest_cage->GetProperty()->SetColor(0.55, 0.55, 0.55);
+  I.def_cage->GetProperty()->SetColor(0.1, 0.2, 0.6);
+  I.image_sphere->SetThetaResolution(16);
+  I.image_sphere->SetPhiResolution(12);
+  I.images_mapper->SetSourceConnection(I.image_sphere->GetOutputPort());
+  I.images_mapper->ScalingOff();
+  I.images->SetMapper(I.images_mapper);
+  I.images->GetProperty()->SetColor(0, 0, 0);
+  I.images->PickableOff();
+  I.slices_mapper->SetLookupTable(I.sigma_colors);
+  I.slices_mapper->SetScalarModeToUsePointData();
+  I.slices->SetMapper(I.slices_mapper);
+  I.slices->PickableOff();
+  I.slices->GetProperty()->SetAmbient(0.5);  // colours read true from any side
+  I.slices->GetProperty()->SetDiffuse(0.5);
+  I.volume->SetMapper(I.volume_mapper);
+  I.volume->PickableOff();
+  auto cube = Ptr<vtkCubeSource>::New();
+  I.leaves_mapper->SetSourceConnection(cube->GetOutputPort());
+  I.leaves_mapper->SetScaleArray("side");
+  I.leaves_mapper->SetScaleModeToScaleByMagnitude();
+  I.leaves_mapper->SetLookupTable(I.leaves_lut);
+  I.leaves_mapper->SetScalarModeToUsePointFieldData();
+  I.leaves->SetMapper(I.leaves_mapper);
+  I.leaves->PickableOff();
+  I.bar->SetMaximumWidthInPixels(90);
+  I.bar->SetNumberOfLabels(5);
+  I.bar->SetPosition(0.88, 0.1);
+  I.bar->SetHeight(0.8);
+  I.bar->SetWidth(0.1);
+  I.bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
+  I.bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
+  I.bar->GetTitleTextProperty()->SetFontSize(14);
+  I.bar->GetLabelTextProperty()->SetFontSize(12);
+  I.bar->UnconstrainedFontSizeOn();
+  I.text->GetTextProperty()->SetColor(0.1, 0.1, 0.1);
+  I.text->GetTextProperty()->SetFontSize(15);
+  I.text->SetPosition(10, 10);
+  I.text->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
+  I.text->SetPosition(0.01, 0.94);
+  for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
+                                                    I.images, I.slices, I.volume, I.leaves, I.bar, I.text}) {
+    p->VisibilityOff();
+    renderer->AddViewProp(p);
+  }
+  I.text->VisibilityOn();
+}
+
+Scene::~Scene() = default;
+vtkActor* Scene::mesh_actor() const {
+  return impl_->mesh_actor;
+}
+vtkPolyData* Scene::mesh_data() const {
+  return impl_->mesh;
+}
+std::string Scene::caption() const {
+  return impl_->caption;
+}
+
+namespace {
+
+// Quads of one grid plane (axis a at index k) whose 4 corners are inside the cage, with σ3 at the points;
+// `deformed` places the points at f(p).
+Ptr<vtkPolyData> slice_polydata(const FieldGrid& g, const std::vector<float>* deformed, int a, int k,
+                                bool whole_cage) {
+  const int b = (a + 1) % 3, c = (a + 2) % 3;
+  auto index = [&](int i, int j) {
+    int ijk[3];
+    ijk[a] = k;
+    ijk[b] = i;
+    ijk[c] = j;
+    return static_cast<long>(ijk[0]) + g.dims[0] * (static_cast<long>(ijk[1]) + g.dims[1] * ijk[2]);
+  };
+  auto pts = Ptr<vtkPoints>::New();
+  auto sig = Ptr<vtkFloatArray>::New();
+  sig->SetName("sigma3");
+  auto quads = Ptr<vtkCellArray>::New();
+  std::vector<vtkIdType> id(static_cast<size_t>(g.dims[b]) * g.dims[c], -1);
+  for (int i = 0; i < g.dims[b]; ++i)
+    for (int j = 0; j < g.dims[c]; ++j) {
+      const long n = index(i, j);
+      if (!g.inside_cage[static_cast<size_t>(n)] || std::isnan(g.sigma3[static_cast<size_t>(n)])) continue;
+      if (!whole_cage && !g.inside_sampled[static_cast<size_t>(n)]) continue;
+      double p[3];
+      if (deformed) {
+        for (int d = 0; d < 3; ++d) p[d] = (*deformed)[3 * static_cast<size_t>(n) + d];
+        if (std::isnan(p[0])) continue;
+      } else {
+        const long ix = n % g.dims[0], iy = (n / g.dims[0]) % g.dims[1],
+                   iz = n / (static_cast<long>(g.dims[0]) * g.dims[1]);
+        p[0] = g.origin.x() + g.spacing * ix;
+        p[1] = g.origin.y() + g.spacing * iy;
+        p[2] = g.origin.z() + g.spacing * iz;
+      }
+      id[static_cast<size_t>(i) * g.dims[c] + j] = pts->InsertNextPoint(p);
+      sig->InsertNextValue(g.sigma3[static_cast<size_t>(n)]);
+    }
+  for (int i = 0; i + 1 < g.dims[b]; ++i)
+    for (int j = 0; j + 1 < g.dims[c]; ++j) {
+      const vtkIdType q[4] = {
+          id[static_cast<size_t>(i) * g.dims[c] + j], id[static_cast<size_t>(i + 1) * g.dims[c] + j],
+          id[static_cast<size_t>(i + 1) * g.dims[c] + j + 1], id[static_cast<size_t>(i) * g.dims[c] + j + 1]};
+      if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[3] < 0) continue;
+      quads->InsertNextCell(4, q);
+    }
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  pd->SetPolys(quads);
+  pd->GetPointData()->SetScalars(sig);
+  return pd;
+}
+
+std::string fmt(double x, int prec = 3) {
+  std::ostringstream s;
+  s.precision(prec);
+  s << x;
+  return s.str();
+}
+
+}  // namespace
+
+void Scene::show(const SessionFrame& f, const ViewSettings& s) {
+  Impl& I = *impl_;
+  for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
+                                                    I.images, I.slices, I.volume, I.leaves, I.bar})
+    p->VisibilityOff();
+  I.bar->SetNumberOfLabels(5);
+  if (!f.model || f.mesh_V.rows() == 0) {
+    I.caption = f.status.empty() ? "no model: File > Open (a model folder or a scenario)" : f.status;
+    I.text->SetInput(I.caption.c_str());
+    return;
+  }
+  const Model& model = *f.model;
+  if (I.model_version != f.model_version) {
+    I.model_version = f.model_version;
+    auto pd = wireframe(f.mesh_V, model.mesh.F);
+    I.mesh->SetPoints(pd->GetPoints());
+    I.mesh->SetPolys(pd->GetPolys());
+    I.rest_cage_pd = wireframe(model.cage.V, model.cage.F);
+    I.rest_mesh = wireframe(model.mesh.V, model.mesh.F);
+    I.def_cage_pd = wireframe(f.cage_V, model.cage.F);
+    static_cast<vtkPolyDataMapper*>(I.rest_cage->GetMapper())->SetInputData(I.rest_cage_pd);
+    static_cast<vtkPolyDataMapper*>(I.def_cage->GetMapper())->SetInputData(I.def_cage_pd);
+    I.volume_version = -2;
+  }
+  const double diag = (model.cage.bbox_max - model.cage.bbox_min).norm();
+  // Mesh geometry and fields (always: the handles are picked on it).
+  {
+    vtkPoints* pts = I.mesh->GetPoints();
+    for (Eigen::Index i = 0; i < f.mesh_V.rows(); ++i)
+      pts->SetPoint(i, f.mesh_V(i, 0), f.mesh_V(i, 1), f.mesh_V(i, 2));
+    pts->Modified();
+    auto arr = Ptr<vtkDoubleArray>::New();
+    const VecXd& v = s.mesh_volume_ratio ? f.mesh_det : f.mesh_e_iso;
+    arr->SetName(s.mesh_volume_ratio ? "volume ratio (det J)" : "E_iso - 6");
+    arr->SetNumberOfValues(v.size());
+    for (Eigen::Index i = 0; i < v.size(); ++i) arr->SetValue(i, v(i));
+    I.mesh->GetPointData()->SetScalars(arr);
+    I.mesh->Modified();
+    vtkPoints* cp = I.def_cage_pd->GetPoints();
+    for (Eigen::Index i = 0; i < f.cage_V.rows(); ++i)
+      cp->SetPoint(i, f.cage_V(i, 0), f.cage_V(i, 1), f.cage_V(i, 2));
+    cp->Modified();
+    I.def_cage_pd->Modified();
+  }
+  // Handle images.
+  {
+    auto pts = Ptr<vtkPoints>::New();
+    for (Eigen::Index i = 0; i < f.images.rows(); ++i)
+      pts->InsertNextPoint(f.images(i, 0), f.images(i, 1), f.images(i, 2));
+    auto pd = Ptr<vtkPolyData>::New();
+    pd->SetPoints(pts);
+    I.images_mapper->SetInputData(pd);
+    I.image_sphere->SetRadius(0.008 * diag);
+    I.images->SetVisibility(s.view == View::kMesh && f.images.rows() > 0);
+  }
+  std::string what;
+  const std::string cert = f.certified ? "certified" : "NOT certified";
+  if (s.view == View::kMesh) {
+    I.mesh_actor->VisibilityOn();
+    I.rest_cage->SetVisibility(s.rest_cage);
+    I.def_cage->SetVisibility(s.deformed_cage);
+    if (s.mesh_volume_ratio) {
+      double lo = 1, hi = 1;
+      for (Eigen::Index i = 0; i < f.mesh_det.size(); ++i)
+        if (f.mesh_det(i) > 0) {
+          lo = std::min(lo, f.mesh_det(i));
+          hi = std::max(hi, f.mesh_det(i));
+        }
+      const double m = std::max({hi, 1 / lo, 1.05});  // symmetric on a log scale around 1
+      diverging_lut(I.mesh_lut, 1 / m, m, true);
+      I.bar->SetTitle("det J");
+    } else {
+      double hi = 0;
+      for (Eigen::Index i = 0; i < f.mesh_e_iso.size(); ++i)
+        if (std::isfinite(f.mesh_e_iso(i))) hi = std::max(hi, f.mesh_e_iso(i));
+      I.mesh_lut->SetScaleToLinear();
+      heat_lut(I.mesh_lut, std::max(hi, 0.05));
+      I.bar->SetTitle("E_iso - 6");
+    }
+    I.mesh_lut->Build();
+    I.mesh_mapper->SetScalarRange(I.mesh_lut->GetTableRange());
+    I.bar->SetLookupTable(I.mesh_lut);
+    I.bar->VisibilityOn();
+    what = std::string("deformed mesh, ") + (s.mesh_volume_ratio ? "local volume ratio det J" : "E_iso - 6");
+  } else if (s.view == View::kSigma3) {
+    I.context_mapper->SetInputData(s.sigma_deformed_space ? I.mesh.Get() : I.rest_mesh.Get());
+    I.context_mesh->VisibilityOn();
+    I.rest_cage->SetVisibility(!s.sigma_deformed_space && s.rest_cage);
+    I.def_cage->SetVisibility(s.sigma_deformed_space && s.deformed_cage);
+    what = std::string("sigma3 field, ") + (s.sigma_deformed_space ? "deformed space" : "rest space");
+    if (!f.field) {
+      what += " (computing...)";
+    } else {
+      const FieldGrid& g = *f.field;
+      double lo = 1e300, hi = -1e300;
+      for (size_t i = 0; i < g.sigma3.size(); ++i)
+        if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i]) && std::isfinite(g.sigma3[i])) {
+          lo = std::min<double>(lo, g.sigma3[i]);
+          hi = std::max<double>(hi, g.sigma3[i]);
+        }
+      if (lo > hi) lo = hi = 0;
+      sigma_ctf(I.sigma_colors, lo, hi);
+      // Slices: append the chosen planes into one polydata.
+      auto all_pts = Ptr<vtkPoints>::New();
+      auto all_sig = Ptr<vtkFloatArray>::New();
+      all_sig->SetName("sigma3");
+      auto all_quads = Ptr<vtkCellArray>::New();
+      for (int a = 0; a < 3; ++a) {
+        if (!s.slice[a]) continue;
+        const int k =
+            std::clamp(static_cast<int>(std::lround(s.slice_pos[a] * (g.dims[a] - 1))), 0, g.dims[a] - 1);
+        auto pd = slice_polydata(g, s.sigma_deformed_space ? f.field_deformed.get() : nullptr, a, k,
+                                 s.sigma_whole_cage);
+        const vtkIdType off = all_pts->GetNumberOfPoints();
+        for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); ++i) {
+          all_pts->InsertNextPoint(pd->GetPoint(i));
+          all_sig->InsertNextValue(
+              static_cast<vtkFloatArray*>(pd->GetPointData()->GetScalars())->GetValue(i));
+        }
+        vtkCellArray* q = pd->GetPolys();
+        q->InitTraversal();
+        vtkIdType n;
+        const vtkIdType* ids;
+        while (q->GetNextCell(n, ids)) {
+          vtkIdType shifted[4];
+          for (int e = 0; e < 4; ++e) shifted[e] = ids[e] + off;
+          all_quads->InsertNextCell(4, shifted);
+        }
+      }
+      auto slices = Ptr<vtkPolyData>::New();
+      slices->SetPoints(all_pts);
+      slices->SetPolys(all_quads);
+      slices->GetPointData()->SetScalars(all_sig);
+      I.slices_mapper->SetInputData(slices);
+      I.slices_mapper->SetScalarRange(lo, hi);
+      I.slices->VisibilityOn();
+      if (s.sigma_volume && !s.sigma_deformed_space) {
+        const long volume_key = 2 * f.field_version + (s.sigma_whole_cage ? 1 : 0);
+        if (I.volume_version != volume_key) {
+          I.volume_version = volume_key;
+          I.volume_image = Ptr<vtkImageData>::New();
+          I.volume_image->SetDimensions(g.dims);
+          I.volume_image->SetOrigin(g.origin.x(), g.origin.y(), g.origin.z());
+          I.volume_image->SetSpacing(g.spacing, g.spacing, g.spacing);
+          auto v = Ptr<vtkFloatArray>::New();
+          v->SetName("sigma3");
+          v->SetNumberOfValues(g.points());
+          // Outside the cage: below the range, fully transparent.
+          const float outside = static_cast<float>(lo - 0.01 * (hi - lo + 1e-9));
+          for (long i = 0; i < g.points(); ++i)
+            v->SetValue(i, g.inside_cage[static_cast<size_t>(i)] &&
+                                   (s.sigma_whole_cage || g.inside_sampled[static_cast<size_t>(i)]) &&
+                                   std::isfinite(g.sigma3[static_cast<size_t>(i)])
+                               ? g.sigma3[static_cast<size_t>(i)]
+                               : outside);
+          I.volume_image->GetPointData()->SetScalars(v);
+          I.volume_mapper->SetInputData(I.volume_image);
+          auto opacity = Ptr<vtkPiecewiseFunction>::New();
+          opacity->AddPoint(outside, 0.0);
+          opacity->AddPoint(lo, 0.5);  // low σ3 (near-degenerate) stands out
+          opacity->AddPoint(lo + 0.5 * (hi - lo), 0.08);
+          opacity->AddPoint(hi, 0.02);
+          auto prop = Ptr<vtkVolumeProperty>::New();
+          prop->SetColor(I.sigma_colors);
+          prop->SetScalarOpacity(opacity);
+          prop->SetScalarOpacityUnitDistance(2 * g.spacing);
+          prop->SetInterpolationTypeToLinear();
+          I.volume->SetProperty(prop);
+        }
+        I.volume->VisibilityOn();
+      }
+      I.bar->SetLookupTable(I.sigma_colors);
+      I.bar->SetTitle("sigma3");
+      I.bar->VisibilityOn();
+      what += std::string(s.sigma_whole_cage ? " (whole cage interior; certified only inside the voxels)"
+                                             : " (inside the voxels)") +
+              ", min " + fmt(lo) + ", max " + fmt(hi);
+      if (f.field_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
+    }
+  } else {  // Lipschitz / octree: leaves in rest space
+    I.context_mapper->SetInputData(I.rest_mesh);
+    I.context_mesh->VisibilityOn();
+    I.rest_cage->SetVisibility(s.rest_cage);
+    const bool lip = s.view == View::kLipschitz;
+    what = lip ? (s.lipschitz_margin ? "leaf voxels, margin sigma3 - rL" : "leaf voxels, Lipschitz bound L")
+               : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
+    if (!f.leaves) {
+      what += " (computing...)";
+    } else {
+      const Certificate& c = *f.leaves;
+      // Clip along the longest axis of the cage's box so the inside shows.
+      const Vec3 ext = model.cage.bbox_max - model.cage.bbox_min;
+      int axis = 0;
+      for (int a = 1; a < 3; ++a)
+        if (ext(a) > ext(axis)) axis = a;
+      const double cut = model.cage.bbox_min(axis) + s.clip * ext(axis);
+      auto pts = Ptr<vtkPoints>::New();
+      auto side = Ptr<vtkDoubleArray>::New();
+      side->SetName("side");
+      auto val = Ptr<vtkDoubleArray>::New();
+      val->SetName("value");
+      long shown = 0, refined = 0, failed = 0;
+      double lo = 1e300, hi = -1e300;
+      for (const CertLeaf& l : c.leaves) {
+        if (l.depth > 0) ++refined;
+        if (!l.certified) ++failed;
+        if (l.center(axis) > cut || l.depth < s.min_depth) continue;
+        if (lip && s.only_refined_or_failed && l.depth == 0 && l.certified) continue;
+        double x;
+        if (lip)
+          x = s.lipschitz_margin ? l.margin : l.L;
+        else
+          x = s.octree_by_status ? (l.certified ? 1 : 0) : l.depth;
+        if (!std::isfinite(x)) x = lip && !s.lipschitz_margin ? 1e300 : -1e300;
+        pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
+        side->InsertNextValue(l.side * 0.97);  // a small gap shows the cells
+        val->InsertNextValue(x);
+        if (std::abs(x) < 1e299) {
+          lo = std::min(lo, x);
+          hi = std::max(hi, x);
+        }
+        ++shown;
+      }
+      if (lo > hi) lo = hi = 0;
+      auto pd = Ptr<vtkPolyData>::New();
+      pd->SetPoints(pts);
+      pd->GetPointData()->AddArray(side);
+      pd->GetPointData()->AddArray(val);
+      I.leaves_mapper->SetInputData(pd);
+      I.leaves_mapper->SelectColorArray("value");
+      I.leaves_lut->SetScaleToLinear();
+      I.leaves_lut->IndexedLookupOff();
+      I.leaves_lut->ResetAnnotations();
+      I.leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);
+      if (lip && !s.lipschitz_margin) {
+        // L spans decades: log scale.
+        lo = std::max(lo, 1e-12);
+        hi = std::max(hi, lo * 10);
+        I.leaves_lut->SetNumberOfTableValues(256);
+        I.leaves_lut->SetScaleToLog10();
+        I.leaves_lut->SetTableRange(lo, hi);
+        I.leaves_lut->SetHueRange(0.66, 0.0);
+        I.leaves_lut->SetSaturationRange(0.8, 0.8);
+        I.leaves_lut->SetValueRange(0.9, 0.9);
+        I.leaves_lut->ForceBuild();
+        I.bar->SetTitle("L");
+      } else if (lip) {
+        const double m = std::max(std::abs(lo), std::abs(hi));
+        diverging_lut(I.leaves_lut, -m, m, false);
+        I.leaves_lut->Build();
+        I.bar->SetTitle("sigma3 - rL");
+      } else if (s.octree_by_status) {
+        I.leaves_lut->SetNumberOfTableValues(2);
+        I.leaves_lut->SetTableRange(0, 1);
+        I.leaves_lut->SetTableValue(0, 0.85, 0.1, 0.1, 1);
+        I.leaves_lut->SetTableValue(1, 0.3, 0.75, 0.35, 1);
+        I.leaves_lut->ResetAnnotations();
+        I.leaves_lut->SetAnnotation(vtkVariant(0.0), "failed");
+        I.leaves_lut->SetAnnotation(vtkVariant(1.0), "certified");
+        I.leaves_lut->IndexedLookupOn();
+        I.bar->SetTitle("status");
+      } else {
+        const int dmax = std::max(1, c.max_depth_used);
+        I.leaves_lut->SetNumberOfTableValues(dmax + 1);
+        I.leaves_lut->SetTableRange(0, dmax);
+        I.leaves_lut->ResetAnnotations();
+        for (int d = 0; d <= dmax; ++d) {
+          const double t = static_cast<double>(d) / dmax;
+          I.leaves_lut->SetTableValue(d, 0.85 - 0.6 * t, 0.85 - 0.75 * t, 0.95 - 0.35 * t, 1);
+          I.leaves_lut->SetAnnotation(vtkVariant(static_cast<double>(d)), "depth " + std::to_string(d));
+        }
+        I.leaves_lut->IndexedLookupOn();
+        I.bar->SetTitle("depth");
+      }
+      I.leaves_mapper->SetScalarRange(I.leaves_lut->GetTableRange());
+      I.leaves->GetProperty()->SetEdgeVisibility(!lip);
+      I.leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
+      I.leaves->VisibilityOn();
+      I.bar->SetLookupTable(I.leaves_lut);
+      I.bar->VisibilityOn();
+      what += ": " + std::to_string(shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
+              std::to_string(c.refined) + " voxels refined, " + std::to_string(failed) + " failed";
+      if (s.clip < 1) what += ", clipped";
+      if (f.leaves_version != f.map_version)
+        what += " (of an earlier iterate; updates when the solver rests)";
+      (void)refined;
+    }
+  }
+  I.caption = what + "\n" + cert + ", min sigma3 lower bound " + fmt(f.min_lower_bound, 4) + ", iteration " +
+              std::to_string(f.history.size());
+  I.text->SetInput(I.caption.c_str());
+}
+
+}  // namespace lidef::studio

@@ -1,0 +1,68 @@
+// The studio's VTK scene: turns a SessionFrame (interactive_session.h) into actors for one of the four views.
+// No Qt here; the window owns the render window and the handle widgets, the scene everything else.
+#pragma once
+#include <vtkSmartPointer.h>
+
+#include <string>
+
+#include "lidef/interactive_session.h"
+
+class vtkActor;
+class vtkRenderer;
+class vtkPolyData;
+class vtkScalarBarActor;
+class vtkTextActor;
+class vtkVolume;
+
+namespace lidef::studio {
+
+enum class View { kMesh, kSigma3, kLipschitz, kOctree };
+const char* to_string(View v);                   // "mesh", "sigma3", "lipschitz", "octree"
+View view_from_string(const std::string& name);  // throws InputError
+
+// What each view shows; saved with the session (studio JSON) and set from the view panel.
+struct ViewSettings {
+  View view = View::kMesh;
+  // Mesh view.
+  bool mesh_volume_ratio = false;  // colour by det J instead of E_iso − 6
+  bool rest_cage = false, deformed_cage = true;
+  // σ3 view.
+  bool sigma_deformed_space = false;      // slices drawn at the deformed grid positions
+  bool slice[3] = {true, true, false};    // x, y, z slice planes
+  double slice_pos[3] = {0.5, 0.5, 0.5};  // fraction of the bounding box along each axis
+  bool sigma_volume = false;              // volume rendering (rest space)
+  bool sigma_whole_cage = false;  // also outside the voxels (near the cage, where nothing is certified)
+  int field_resolution = 48;
+  // Lipschitz and octree views: leaves in rest space.
+  bool lipschitz_margin = false;        // colour by σ3 − rL instead of L
+  bool only_refined_or_failed = false;  // Lipschitz: show only leaves that were refined or failed
+  bool octree_by_status = false;        // colour by certified/failed instead of depth
+  double clip = 0.5;  // keep leaves whose center is below this fraction of the longest axis (1 = all)
+  int min_depth = 0;  // keep leaves at least this deep
+};
+nlohmann::json settings_to_json(const ViewSettings& s);
+// Reads what settings_to_json wrote; unknown or missing keys keep `s`'s values; bad types throw InputError.
+void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::string& where);
+
+// The extras a view needs from the engine.
+ExtrasRequest extras_for(const ViewSettings& s);
+
+class Scene {
+ public:
+  explicit Scene(vtkRenderer* renderer);
+  ~Scene();
+  // Rebuilds the actors of `s.view` from the frame (cheap for the mesh view; the leaves/field views rebuild
+  // only when their extras changed). A frame without a map shows the status line only.
+  void show(const SessionFrame& frame, const ViewSettings& s);
+  // The deformed mesh actor (picking: cell ids index the model's faces) and its data.
+  vtkActor* mesh_actor() const;
+  vtkPolyData* mesh_data() const;
+  // Text shown in the top-left corner of the view (what is shown, and when extras lag the map).
+  std::string caption() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace lidef::studio

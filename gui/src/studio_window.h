@@ -1,0 +1,132 @@
+// lidef-studio's main window: the VTK view with handle widgets, the view/parameter/plot panels, menus, status
+// bar. All solving happens in lidef::InteractiveSession (engine thread); this class only forwards user edits
+// to it and renders the newest certified frame it publishes (older frames that arrive while a render is
+// pending are dropped, so neither side waits for the other).
+#pragma once
+#include <QMainWindow>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "lidef/interactive_session.h"
+#include "scene.h"
+
+class QLabel;
+class QVTKOpenGLNativeWidget;
+class vtkGenericOpenGLRenderWindow;
+class vtkRenderer;
+class vtkRenderWindow;
+class vtkHandleWidget;
+class vtkSphereHandleRepresentation;
+class vtkCallbackCommand;
+class vtkObject;
+
+namespace lidef::studio {
+
+class ParamsPanel;
+class PlotsPanel;
+
+class StudioWindow : public QMainWindow {
+  Q_OBJECT
+ public:
+  explicit StudioWindow(QWidget* parent = nullptr);
+  ~StudioWindow() override;
+
+  // Opens a model folder or a scenario/session JSON (by what `path` is). Returns false after reporting the
+  // loader's message (error dialog, or the error sink); the current session is kept.
+  bool open_path(const std::string& path);
+  bool save_session(const std::string& path);  // scenario JSON with a "studio" object (camera, views)
+  // Renders the 3D view now and writes it as PNG (atomically: temporary file, then rename).
+  bool save_screenshot(const std::string& path);
+
+  void set_settings(const ViewSettings& s);
+  // The solver parameters (panel and engine); used for models opened without a scenario.
+  void set_params(const DeformParams& p);
+  const ViewSettings& settings() const { return settings_; }
+
+  // Handle edits (what the mouse does; also called by tests). Sources in rest space.
+  bool add_handle(const Vec3& source);  // target = its current image; false (and a message) when refused
+  bool add_handle_at_display(int x,
+                             int y);  // picks the deformed mesh at VTK display coords (origin bottom left)
+  void delete_handle(int i);
+  bool delete_handle_at_display(int x, int y);  // the target within 12 pixels, if any
+  void move_target(int i, const Vec3& target);
+  void undo();
+  void redo();
+  int num_handles() const { return static_cast<int>(sources_.rows()); }
+  const MatX3d& targets() const { return targets_; }
+  const MatX3d& sources() const { return sources_; }
+  // Display position (VTK, origin bottom left) of a handle's target sphere, for scripted interaction.
+  bool target_display_position(int i, double xy[2]);
+
+  InteractiveSession& session() { return *session_; }
+  // The frame shown last, and how many frames were rendered (benchmark).
+  std::shared_ptr<const SessionFrame> shown_frame() const { return shown_; }
+  long rendered_frames() const { return rendered_; }
+  double last_render_ms() const { return last_render_ms_; }
+  vtkRenderWindow* render_window() const;
+  QVTKOpenGLNativeWidget* view_widget() const { return view_; }
+  std::string caption() const { return scene_->caption(); }
+  // Headless use (--screenshot): only the 3D view, no docks or bars.
+  void set_view_only(bool on);
+  // Where error messages go: by default a modal dialog; tests collect them instead.
+  void set_error_sink(std::function<void(const std::string&)> sink) { error_sink_ = std::move(sink); }
+  // The one place the studio reports a problem to the user.
+  void report_error(const std::string& title, const std::string& message);
+
+ signals:
+  void frame_shown();
+
+ protected:
+  void dragEnterEvent(QDragEnterEvent* e) override;
+  void dropEvent(QDropEvent* e) override;
+  void closeEvent(QCloseEvent* e) override;
+
+ private:
+  struct HandleSet {
+    MatX3d sources, targets;
+  };
+  void build_ui();
+  QWidget* build_view_panel();
+  void refresh_view_panel();
+  void on_frame(std::shared_ptr<const SessionFrame> f);  // any thread
+  void render_pending();                                 // UI thread
+  void update_status(const SessionFrame& f);
+  void sync_widgets();  // handle widgets from sources_/targets_
+  void push_undo();
+  void send_handles();
+  void settings_changed();
+  void apply_camera_json(const std::string& studio_json);
+  std::string studio_json() const;
+
+  std::unique_ptr<InteractiveSession> session_;
+  QVTKOpenGLNativeWidget* view_ = nullptr;
+  vtkGenericOpenGLRenderWindow* window_ = nullptr;
+  vtkRenderer* renderer_ = nullptr;
+  std::unique_ptr<Scene> scene_;
+  ParamsPanel* params_ = nullptr;
+  PlotsPanel* plots_ = nullptr;
+  QLabel *badge_ = nullptr, *status_ = nullptr;
+  std::vector<QWidget*> chrome_;  // docks and bars hidden in view-only mode
+  QWidget* view_panel_ = nullptr;
+  ViewSettings settings_;
+  MatX3d sources_, targets_;
+  std::vector<HandleSet> undo_, redo_;
+  struct Widget;
+  std::vector<std::unique_ptr<Widget>> widgets_;
+  int dragging_ = -1;
+  std::mutex pending_mutex_;
+  std::shared_ptr<const SessionFrame> pending_;
+  bool render_scheduled_ = false;
+  std::shared_ptr<const SessionFrame> shown_;
+  long shown_model_version_ = -1;
+  long shown_verification_version_ = -1;
+  long rendered_ = 0;
+  double last_render_ms_ = 0;
+  std::string pending_camera_;  // camera of an opened session, applied with its first frame
+  std::string scenario_name_;
+  std::function<void(const std::string&)> error_sink_;
+};
+
+}  // namespace lidef::studio

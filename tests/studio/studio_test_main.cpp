@@ -1,0 +1,24 @@
+// Test main of lidef_studio_tests: a QApplication on a real X display (run under xvfb-run; the offscreen
+// platform gives black grabs), then GoogleTest.
+#include <QVTKOpenGLNativeWidget.h>
+#include <gtest/gtest.h>
+
+#include <QApplication>
+#include <QSurfaceFormat>
+#include <cstdlib>
+#include <cstring>
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  for (int i = 1; i < argc; ++i)
+    if (std::strcmp(argv[i], "--gtest_list_tests") == 0) return RUN_ALL_TESTS();  // no display needed
+  if (!std::getenv("DISPLAY")) {
+    std::fprintf(stderr,
+                 "lidef_studio_tests: no DISPLAY; run under xvfb-run -a -s \"-screen 0 1280x800x24\"\n");
+    return 1;
+  }
+  setenv("QT_QPA_PLATFORM", "xcb", 1);
+  QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
+  QApplication app(argc, argv);
+  return RUN_ALL_TESTS();
+}
