@@ -11,17 +11,20 @@
 #include <regex>
 
 #include "lidef/errors.h"
+#include "omp_wait.h"
 #include "scene.h"
 #include "studio_window.h"
 
 int main(int argc, char** argv) {
   using namespace lidef;
   using namespace lidef::studio;
+  ensure_passive_omp_wait(argv);
   CLI::App app{
       "lidef-studio: drag handles, watch the certified deformation, inspect sigma3, Lipschitz bounds and "
       "the octree"};
   std::string scenario, model, view = "mesh", screenshot, size = "1024x768";
   double timeout = 600;
+  int multisamples = -1;
   app.add_option("PATH", scenario, "A scenario/session JSON or a model folder to open");
   app.add_option("--scenario", scenario, "Scenario or saved session JSON to open");
   app.add_option("--model", model, "Model folder to open (no handles)");
@@ -31,6 +34,8 @@ int main(int argc, char** argv) {
       "Solve until the solver rests, render --view, write this PNG and exit (0 written, 1 timed out, "
       "2 error)");
   app.add_option("--size", size, "Size of the rendered view for --screenshot, WxH")->capture_default_str();
+  app.add_option("--multisamples", multisamples,
+                 "MSAA samples of the 3D view (default: 0 interactive, 4 for --screenshot)");
   app.add_option("--timeout", timeout, "Seconds to wait for the solver in --screenshot mode")
       ->capture_default_str();
   app.footer(
@@ -67,6 +72,7 @@ int main(int argc, char** argv) {
   QApplication qapp(argc, argv);
   StudioWindow win;
   const bool headless = !screenshot.empty();
+  win.set_multisamples(multisamples >= 0 ? multisamples : headless ? 4 : 0);
   int exit_code = 0;
   if (headless) {
     win.set_error_sink([&](const std::string& e) {

@@ -31,6 +31,7 @@
 #include <sstream>
 
 #include "lidef/errors.h"
+#include "studio_common.h"
 
 namespace lidef::studio {
 
@@ -161,8 +162,22 @@ void diverging_lut(vtkLookupTable* lut, double lo, double hi, bool log_scale) {
   lut->SetNanColor(0.2, 0.2, 0.2, 1.0);
 }
 
-// σ3 colours: red below 0 (not injective), then a perceptual ramp (dark blue → yellow) for σ3 > 0.
-void sigma_ctf(vtkColorTransferFunction* ctf, double lo, double hi) {
+}  // namespace
+
+void style_scalar_bar(vtkScalarBarActor* bar, double height) {
+  bar->SetMaximumWidthInPixels(90);
+  bar->SetNumberOfLabels(5);
+  bar->SetPosition(0.88, 0.1);
+  bar->SetHeight(height);
+  bar->SetWidth(0.1);
+  bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
+  bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
+  bar->GetTitleTextProperty()->SetFontSize(14);
+  bar->GetLabelTextProperty()->SetFontSize(12);
+  bar->UnconstrainedFontSizeOn();
+}
+
+void sigma3_colors(vtkColorTransferFunction* ctf, double lo, double hi) {
   ctf->RemoveAllPoints();
   hi = std::max(hi, lo + 1e-9);
   if (lo < 0) {
@@ -175,8 +190,6 @@ void sigma_ctf(vtkColorTransferFunction* ctf, double lo, double hi) {
   ctf->AddRGBPoint(lo + 0.66 * (hi - lo), 0.20, 0.70, 0.45);
   ctf->AddRGBPoint(hi, 0.99, 0.91, 0.15);
 }
-
-}  // namespace
 
 struct Scene::Impl {
   vtkRenderer* ren;
@@ -255,16 +268,7 @@ Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
   I.leaves_mapper->SetScalarModeToUsePointFieldData();
   I.leaves->SetMapper(I.leaves_mapper);
   I.leaves->PickableOff();
-  I.bar->SetMaximumWidthInPixels(90);
-  I.bar->SetNumberOfLabels(5);
-  I.bar->SetPosition(0.88, 0.1);
-  I.bar->SetHeight(0.8);
-  I.bar->SetWidth(0.1);
-  I.bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
-  I.bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
-  I.bar->GetTitleTextProperty()->SetFontSize(14);
-  I.bar->GetLabelTextProperty()->SetFontSize(12);
-  I.bar->UnconstrainedFontSizeOn();
+  style_scalar_bar(I.bar, 0.8);
   I.text->GetTextProperty()->SetColor(0.1, 0.1, 0.1);
   I.text->GetTextProperty()->SetFontSize(15);
   I.text->SetPosition(10, 10);
@@ -452,7 +456,7 @@ void Scene::show(const SessionFrame& f, const ViewSettings& s) {
           hi = std::max<double>(hi, g.sigma3[i]);
         }
       if (lo > hi) lo = hi = 0;
-      sigma_ctf(I.sigma_colors, lo, hi);
+      sigma3_colors(I.sigma_colors, lo, hi);
       // Slices: append the chosen planes into one polydata.
       auto all_pts = Ptr<vtkPoints>::New();
       auto all_sig = Ptr<vtkFloatArray>::New();

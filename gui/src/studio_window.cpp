@@ -41,13 +41,16 @@
 #include <QVBoxLayout>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "explorer_panel.h"
 #include "lidef/errors.h"
 #include "params_panel.h"
 #include "plots_panel.h"
+#include "studio_common.h"
 
 namespace lidef::studio {
 
@@ -129,6 +132,9 @@ void StudioWindow::build_ui() {
   auto win = vtkSmartPointer<vtkGenericOpenGLRenderWindow>::New();
   view_->setRenderWindow(win);
   window_ = win;
+  // No MSAA while interacting: under Mesa's software renderer (Xvfb, this 2-core machine) 4x MSAA doubles the
+  // render time and the renderer shares the cores with the solver (docs/benchmarks.md, "Studio").
+  window_->SetMultiSamples(0);
   auto ren = vtkSmartPointer<vtkRenderer>::New();
   ren->SetBackground(1, 1, 1);
   ren->SetBackground2(0.86, 0.89, 0.94);
@@ -225,7 +231,13 @@ void StudioWindow::build_ui() {
     }
   });
   plots_ = new PlotsPanel(this);
-  dock("Plots", plots_, Qt::RightDockWidgetArea);
+  auto* plots_dock = dock("Plots", plots_, Qt::RightDockWidgetArea);
+  // The σ3 counterexample explorer (docs/explorer.md): its own map and view, beside the plots.
+  const char* data_env = std::getenv("LIDEF_DATA");
+  auto* explorer = new ExplorerPanel(data_env ? data_env : LIDEF_STUDIO_DATA_DIR, this);
+  explorer->set_error_sink([this](const std::string& e) { report_error("Explorer", e); });
+  tabifyDockWidget(plots_dock, dock("sigma3 explorer", explorer, Qt::RightDockWidgetArea));
+  plots_dock->raise();
 
   badge_ = new QLabel(" no map ");
   status_ = new QLabel("File > Open a model folder or a scenario; click on the mesh to add a handle");
@@ -328,6 +340,10 @@ QWidget* StudioWindow::build_view_panel() {
   return w;
 }
 
+void StudioWindow::set_multisamples(int n) {
+  window_->SetMultiSamples(n);
+}
+
 void StudioWindow::set_view_only(bool on) {
   for (QWidget* c : chrome_) c->setVisible(!on);
 }
@@ -368,14 +384,19 @@ void StudioWindow::settings_changed() {
       this, [this] { render_pending(); }, Qt::QueuedConnection);
 }
 
-void StudioWindow::report_error(const std::string& title, const std::string& message) {
-  status_->setText(QString::fromStdString(title + ": " + message));
-  if (error_sink_) {
-    error_sink_(message);
+void report_to_user(QWidget* parent, QLabel* status, const std::function<void(const std::string&)>& sink,
+                    const std::string& title, const std::string& message) {
+  if (status) status->setText(QString::fromStdString(title + ": " + message));
+  if (sink) {
+    sink(message);
     return;
   }
-  QMessageBox::critical(this, QString::fromStdString("lidef-studio: " + title),
+  QMessageBox::critical(parent, QString::fromStdString("lidef-studio: " + title),
                         QString::fromStdString(message));
+}
+
+void StudioWindow::report_error(const std::string& title, const std::string& message) {
+  report_to_user(this, status_, error_sink_, title, message);
 }
 
 bool StudioWindow::open_path(const std::string& path) {

@@ -68,6 +68,8 @@ class StudioWindow : public QMainWindow {
   vtkRenderWindow* render_window() const;
   QVTKOpenGLNativeWidget* view_widget() const { return view_; }
   std::string caption() const { return scene_->caption(); }
+  // MSAA samples of the 3D view (0 by default: interaction speed; call before the window is first shown).
+  void set_multisamples(int n);
   // Headless use (--screenshot): only the 3D view, no docks or bars.
   void set_view_only(bool on);
   // Where error messages go: by default a modal dialog; tests collect them instead.

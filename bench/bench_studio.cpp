@@ -1,0 +1,235 @@
+// lidef-studio while dragging (issue: studio, "Speed"): a scripted drag of the pushed end of the shared `bar`
+// (bar_bend) in the real window, one Newton step + certificate per view update. Reports view updates per
+// second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
+// the same drag on the engine alone (no window) shows whether rendering slows the solver.
+//
+// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick]. Needs an X display; without DISPLAY it
+// re-runs itself under xvfb-run.
+#include <QVTKOpenGLNativeWidget.h>
+#include <omp.h>
+#include <unistd.h>
+
+#include <QApplication>
+#include <QSurfaceFormat>
+#include <QTimer>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench_util.h"
+#include "omp_wait.h"
+#include "studio_window.h"
+
+using namespace lidef;
+using namespace lidef::studio;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+void pump(double seconds) {
+  const auto t0 = Clock::now();
+  while (since(t0) < seconds) {
+    QApplication::processEvents(QEventLoop::AllEvents, 10);
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+}
+
+bool settle(InteractiveSession& s, StudioWindow* w, double seconds) {
+  const auto t0 = Clock::now();
+  while (since(t0) < seconds) {
+    if (w) QApplication::processEvents(QEventLoop::AllEvents, 10);
+    if (s.wait_until_resting(0.01)) {
+      if (!w) return true;
+      const auto f = s.latest_frame();
+      const auto shown = w->shown_frame();
+      if (f && shown && f->serial == shown->serial) return true;
+    }
+  }
+  return false;
+}
+
+struct Config {
+  const char* name;
+  int dof, samples;
+  View view;
+};
+
+struct Result {
+  double seconds = 0;
+  long frames = 0, new_maps = 0, steps = 0, accepted = 0;
+  double ms_step = 0, ms_certificate = 0, ms_frame = 0, ms_render = 0;
+  bool all_certified = true;
+  double final_error = 0;
+};
+
+// The drag path: the pushed handles (target != source) circle around their bar_bend targets.
+MatX3d drag_targets(const MatX3d& S, const MatX3d& T0, double t, double amp) {
+  MatX3d T = T0;
+  const double w = 2 * M_PI * t / 4.0;
+  for (Eigen::Index i = 0; i < T.rows(); ++i)
+    if ((T0.row(i) - S.row(i)).norm() > 1e-9) {
+      T(i, 0) += amp * std::sin(w);
+      T(i, 2) += amp * (1 - std::cos(w));
+    }
+  return T;
+}
+
+Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
+  Result r;
+  const Scenario sc = s.scenario();
+  const auto m = s.model();
+  const double amp = 0.05 * (m->cage.bbox_max - m->cage.bbox_min).norm();
+  const auto f0 = s.latest_frame();
+  const size_t it0 = f0->history.size();
+  long last_version = f0->map_version;
+  long frames0 = w ? w->rendered_frames() : 0;
+  std::vector<double> render_ms;
+  QMetaObject::Connection conn;
+  if (w)
+    conn = QObject::connect(w, &StudioWindow::frame_shown, [&] {
+      const auto f = w->shown_frame();
+      render_ms.push_back(w->last_render_ms());
+      if (f->map_version != last_version) {
+        last_version = f->map_version;
+        ++r.new_maps;
+      }
+      if (f->mesh_V.rows() > 0 && !f->certified) r.all_certified = false;
+    });
+  const auto t0 = Clock::now();
+  long engine_maps = 0;
+  while (since(t0) < seconds) {
+    s.set_targets(drag_targets(sc.sources, sc.targets, since(t0), amp));
+    const auto tick = Clock::now();
+    while (since(tick) < 0.016) {  // ~60 Hz mouse events
+      if (w)
+        QApplication::processEvents(QEventLoop::AllEvents, 5);
+      else
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    if (!w) {
+      const auto f = s.latest_frame();
+      if (f->map_version != last_version) {
+        last_version = f->map_version;
+        ++engine_maps;
+      }
+    }
+  }
+  r.seconds = since(t0);
+  const auto f = s.latest_frame();
+  if (w) {
+    QObject::disconnect(conn);
+    r.frames = w->rendered_frames() - frames0;
+  } else {
+    r.new_maps = engine_maps;  // maps the engine published (the consumer polled them at 60 Hz)
+  }
+  for (size_t i = it0; i < f->history.size(); ++i) {
+    const IterationRecord& rec = f->history[i];
+    ++r.steps;
+    r.accepted += rec.accepted;
+    r.ms_step += rec.ms_total;
+    r.ms_certificate += rec.ms_certificate;
+  }
+  if (r.steps) {
+    r.ms_step /= r.steps;
+    r.ms_certificate /= r.steps;
+  }
+  r.ms_frame = f->ms_frame;
+  for (double x : render_ms) r.ms_render += x / render_ms.size();
+  r.final_error = f->max_handle_error;
+  return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick]\n");
+    return 2;
+  }
+  if (!std::getenv("DISPLAY")) {
+    std::vector<char*> args = {const_cast<char*>("xvfb-run"), const_cast<char*>("-a"),
+                               const_cast<char*>("-s"), const_cast<char*>("-screen 0 1280x800x24")};
+    for (int i = 0; i < argc; ++i) args.push_back(argv[i]);
+    args.push_back(nullptr);
+    execvp("xvfb-run", args.data());
+    std::perror("bench_studio: xvfb-run");
+    return 2;
+  }
+  ensure_passive_omp_wait(
+      argv);  // as lidef-studio does (omp_wait.h); OMP_WAIT_POLICY=ACTIVE measures the default
+  const std::string data = argv[1];
+  double seconds = 10;
+  bool quick = false;
+  for (int i = 2; i + 1 < argc; ++i) {
+    if (!std::strcmp(argv[i], "--seconds")) seconds = std::atof(argv[i + 1]);
+    if (!std::strcmp(argv[i], "--configs")) quick = !std::strcmp(argv[i + 1], "quick");
+  }
+  setenv("QT_QPA_PLATFORM", "xcb", 1);
+  QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
+  QApplication app(argc, argv);
+  std::vector<Config> configs = {{"default (300 DOF/coord, 30k voxels)", 300, 30000, View::kMesh},
+                                 {"200 DOF/coord, 20k voxels", 200, 20000, View::kMesh},
+                                 {"interactive preset (100 DOF/coord, 10k voxels)", 100, 10000, View::kMesh},
+                                 {"interactive preset, Lipschitz view", 100, 10000, View::kLipschitz}};
+  if (quick) configs = {configs[2]};
+  std::printf("OMP_WAIT_POLICY=%s. ", std::getenv("OMP_WAIT_POLICY"));
+  std::printf(
+      "Machine: %s, %d threads (OpenMP). Scripted drag of bar_bend's pushed end (circle of radius 5%% of\n"
+      "the bounding-box diagonal, 4 s period, target updates at 60 Hz) for %.0f s per row after the\n"
+      "scenario has converged; window 1280x800 (view 3D area ~900x700).\n\n",
+      lidef::bench::cpu_model().c_str(), omp_get_max_threads(), seconds);
+  std::printf(
+      "| parameters | view | view updates/s (new certified map shown) | frames rendered/s | Newton steps/s "
+      "| accepted | ms per step | of which certificate | ms frame geometry | ms render | steps/s engine "
+      "alone | every shown map certified | handle error at end |\n");
+  std::printf("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n");
+  const std::string scenario = data + "/scenarios/bar_bend.json";
+  for (const Config& c : configs) {
+    DeformParams p;
+    p.reduced_dof = c.dof;
+    p.samples = c.samples;
+    Result with_window, alone;
+    {
+      StudioWindow win;
+      win.set_error_sink([](const std::string& e) { std::fprintf(stderr, "bench_studio: %s\n", e.c_str()); });
+      win.resize(1280, 800);
+      win.show();
+      pump(0.3);
+      if (!win.open_path(scenario)) return 1;
+      win.set_params(p);
+      ViewSettings vs;
+      vs.view = c.view;
+      win.set_settings(vs);
+      if (!settle(win.session(), &win, 600)) {
+        std::fprintf(stderr, "bench_studio: %s did not settle\n", c.name);
+        return 1;
+      }
+      with_window = drag(win.session(), &win, seconds);
+    }
+    {
+      InteractiveSession s({}, {});
+      s.open_scenario(scenario);
+      s.set_params(p);
+      ExtrasRequest ex;
+      ex.leaves = c.view == View::kLipschitz;
+      s.set_extras(ex);
+      if (!settle(s, nullptr, 600)) return 1;
+      alone = drag(s, nullptr, seconds);
+    }
+    const Result& r = with_window;
+    std::printf("| %s | %s | %.1f | %.1f | %.1f | %ld/%ld | %.0f | %.0f | %.1f | %.1f | %.1f | %s | %.3g |\n",
+                c.name, to_string(c.view), r.new_maps / r.seconds, r.frames / r.seconds, r.steps / r.seconds,
+                r.accepted, r.steps, r.ms_step, r.ms_certificate, r.ms_frame, r.ms_render,
+                alone.steps / alone.seconds, r.all_certified ? "yes" : "NO", r.final_error);
+    std::fflush(stdout);
+  }
+  return 0;
+}

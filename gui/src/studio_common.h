@@ -1,0 +1,25 @@
+// Small pieces the studio's views and panels share.
+#pragma once
+#include <functional>
+#include <string>
+
+class QLabel;
+class QWidget;
+class vtkColorTransferFunction;
+class vtkScalarBarActor;
+
+namespace lidef::studio {
+
+// σ3 colours of every studio view: red below 0 (not injective), then a perceptual ramp (dark blue → yellow)
+// on [max(lo, 0), hi]. (scene.cpp)
+void sigma3_colors(vtkColorTransferFunction* ctf, double lo, double hi);
+
+// The studio's colour-bar look: right edge, dark text, `height` of the view. (scene.cpp)
+void style_scalar_bar(vtkScalarBarActor* bar, double height);
+
+// The one way the studio tells the user about a problem: the message in `status` and, unless a sink is set
+// (tests, headless runs), a modal error dialog titled "lidef-studio: <title>". (studio_window.cpp)
+void report_to_user(QWidget* parent, QLabel* status, const std::function<void(const std::string&)>& sink,
+                    const std::string& title, const std::string& message);
+
+}  // namespace lidef::studio
