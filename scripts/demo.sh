@@ -27,3 +27,8 @@ echo "  paraview $OUT/deformed.vtp    colour by E_iso_minus_6 (distortion), detJ
 echo "  paraview $OUT/leaves.vtu      the certification octree: Threshold depth >= 1 shows the refined voxels"
 echo "Check the certificate independently by dense sampling:"
 echo "  $LIDEF verify data/models/beam --coeffs $OUT/coefficients.txt --certificate $OUT/certificate.json --out $OUT/verify"
+STUDIO="$(dirname "$LIDEF")/../gui/lidef-studio"
+if [ -x "$STUDIO" ]; then
+  echo "Drag the handles yourself (docs/studio.md):"
+  echo "  $(realpath --relative-to=. "$STUDIO") data/scenarios/beam_bend.json"
+fi

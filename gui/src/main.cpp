@@ -10,9 +10,11 @@
 #include <iostream>
 #include <regex>
 
+#include "compare_view.h"
 #include "lidef/errors.h"
 #include "omp_wait.h"
 #include "scene.h"
+#include "studio_common.h"
 #include "studio_window.h"
 
 int main(int argc, char** argv) {
@@ -22,12 +24,15 @@ int main(int argc, char** argv) {
   CLI::App app{
       "lidef-studio: drag handles, watch the certified deformation, inspect sigma3, Lipschitz bounds and "
       "the octree"};
-  std::string scenario, model, view = "mesh", screenshot, size = "1024x768";
+  std::string scenario, model, compare, view = "mesh", screenshot, size = "1024x768";
   double timeout = 600;
   int multisamples = -1;
   app.add_option("PATH", scenario, "A scenario/session JSON or a model folder to open");
   app.add_option("--scenario", scenario, "Scenario or saved session JSON to open");
   app.add_option("--model", model, "Model folder to open (no handles)");
+  app.add_option(
+      "--compare", compare,
+      "A `lidef compare --out` folder: every method's mesh side by side (with --screenshot: that picture)");
   app.add_option("--view", view, "View: mesh, sigma3, lipschitz, octree")->capture_default_str();
   app.add_option(
       "--screenshot", screenshot,
@@ -63,15 +68,37 @@ int main(int argc, char** argv) {
     std::cerr << "lidef-studio: " << e.what() << "\n";
     return 2;
   }
-  if (!screenshot.empty() && scenario.empty() && model.empty()) {
-    std::cerr << "lidef-studio: --screenshot needs --scenario (or --model)\n";
+  if (!screenshot.empty() && scenario.empty() && model.empty() && compare.empty()) {
+    std::cerr << "lidef-studio: --screenshot needs --scenario, --model or --compare\n";
     return 2;
   }
 
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication qapp(argc, argv);
-  StudioWindow win;
   const bool headless = !screenshot.empty();
+  if (!compare.empty() && headless) {
+    std::string caption;
+    QVTKOpenGLNativeWidget* cw = nullptr;
+    try {
+      cw = open_compare_widget(compare, multisamples >= 0 ? multisamples : 4, &caption, w, h);
+    } catch (const std::exception& e) {
+      std::cerr << "lidef-studio: " << e.what() << "\n";
+      return 2;
+    }
+    cw->setFixedSize(w, h);
+    cw->show();
+    QApplication::processEvents();
+    const std::string why = write_window_png(cw->renderWindow(), screenshot);
+    cw->close();
+    if (!why.empty()) {
+      std::cerr << "lidef-studio: " << why << "\n";
+      return 2;
+    }
+    std::cout << "lidef-studio: comparison " << compare << " written to " << screenshot << "; " << caption
+              << "\n";
+    return 0;
+  }
+  StudioWindow win;
   win.set_multisamples(multisamples >= 0 ? multisamples : headless ? 4 : 0);
   int exit_code = 0;
   if (headless) {
@@ -90,6 +117,7 @@ int main(int argc, char** argv) {
   if (!path.empty() && !win.open_path(path)) {
     if (headless) return 2;
   }
+  if (!compare.empty() && !win.open_comparison(compare) && headless) return 2;
   if (!headless) return qapp.exec();
 
   // Headless: wait until the engine rests with the view's extras for the final map, then grab.

@@ -7,6 +7,7 @@ class QLabel;
 class QWidget;
 class vtkColorTransferFunction;
 class vtkScalarBarActor;
+class vtkRenderWindow;
 
 namespace lidef::studio {
 
@@ -21,5 +22,9 @@ void style_scalar_bar(vtkScalarBarActor* bar, double height);
 // (tests, headless runs), a modal error dialog titled "lidef-studio: <title>". (studio_window.cpp)
 void report_to_user(QWidget* parent, QLabel* status, const std::function<void(const std::string&)>& sink,
                     const std::string& title, const std::string& message);
+
+// Renders `window` and writes it as PNG: temporary file in the same folder, then rename. Returns "" or the
+// reason it failed (nothing is left behind then). (studio_window.cpp)
+std::string write_window_png(vtkRenderWindow* window, const std::string& path);
 
 }  // namespace lidef::studio

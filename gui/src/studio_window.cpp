@@ -46,6 +46,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "compare_view.h"
 #include "explorer_panel.h"
 #include "lidef/errors.h"
 #include "params_panel.h"
@@ -169,6 +170,10 @@ void StudioWindow::build_ui() {
     if (!f.isEmpty()) save_session(f.toStdString());
   });
   save->setShortcut(QKeySequence::Save);
+  file->addAction("Open &comparison folder (lidef compare --out)...", this, [this] {
+    const QString d = QFileDialog::getExistingDirectory(this, "Open a lidef compare output folder");
+    if (!d.isEmpty()) open_comparison(d.toStdString());
+  });
   file->addAction("Save &screenshot...", this, [this] {
     const QString f = QFileDialog::getSaveFileName(this, "Save screenshot", {}, "PNG (*.png)");
     if (!f.isEmpty()) save_screenshot(f.toStdString());
@@ -489,10 +494,10 @@ bool StudioWindow::save_session(const std::string& path) {
   return true;
 }
 
-bool StudioWindow::save_screenshot(const std::string& path) {
-  window_->Render();
+std::string write_window_png(vtkRenderWindow* window, const std::string& path) {
+  window->Render();
   auto grab = vtkSmartPointer<vtkWindowToImageFilter>::New();
-  grab->SetInput(window_);
+  grab->SetInput(window);
   grab->ReadFrontBufferOff();
   grab->ShouldRerenderOn();
   grab->Update();
@@ -504,13 +509,31 @@ bool StudioWindow::save_screenshot(const std::string& path) {
   std::error_code ec;
   if (writer->GetErrorCode() != 0 || !std::filesystem::exists(tmp, ec)) {
     std::filesystem::remove(tmp, ec);
-    report_error("Cannot save screenshot", path + ": write failed");
-    return false;
+    return path + ": write failed";
   }
   std::filesystem::rename(tmp, path, ec);
   if (ec) {
     std::filesystem::remove(tmp, ec);
-    report_error("Cannot save screenshot", path + ": " + ec.message());
+    return path + ": " + ec.message();
+  }
+  return "";
+}
+
+bool StudioWindow::save_screenshot(const std::string& path) {
+  const std::string why = write_window_png(window_, path);
+  if (!why.empty()) report_error("Cannot save screenshot", why);
+  return why.empty();
+}
+
+bool StudioWindow::open_comparison(const std::string& dir) {
+  try {
+    std::string caption;
+    QVTKOpenGLNativeWidget* w = open_compare_widget(dir, 0, &caption);
+    w->setToolTip(QString::fromStdString(caption));
+    w->show();
+    status_->setText(QString::fromStdString("comparison: " + caption));
+  } catch (const std::exception& e) {
+    report_error("Cannot open comparison " + dir, e.what());
     return false;
   }
   return true;

@@ -36,7 +36,9 @@ class StudioWindow : public QMainWindow {
   // Opens a model folder or a scenario/session JSON (by what `path` is). Returns false after reporting the
   // loader's message (error dialog, or the error sink); the current session is kept.
   bool open_path(const std::string& path);
-  bool save_session(const std::string& path);  // scenario JSON with a "studio" object (camera, views)
+  bool save_session(const std::string& path);
+  // Opens the side-by-side picture of a `lidef compare --out` folder in its own window (compare_view.h).
+  bool open_comparison(const std::string& dir);  // scenario JSON with a "studio" object (camera, views)
   // Renders the 3D view now and writes it as PNG (atomically: temporary file, then rename).
   bool save_screenshot(const std::string& path);
 

@@ -193,4 +193,42 @@ TEST(StudioRenderErrors, BadInputExitsTwoAndWritesNothing) {
             1);  // broken.json only
 }
 
+// The side-by-side picture of a `lidef compare` run (issue 7's picture): every method's mesh, labelled.
+TEST(StudioRenderCompare, SideBySidePictureOfACompareRun) {
+  TempDir dir;
+  std::string log;
+  ASSERT_EQ(
+      run_command(cli() + " compare " + project_data() + "/scenarios/beam_bend.json --out " + (dir / "cmp") +
+                      " --methods lidef,pwl-tri --samples 4000 --reduced-dof 60 --cache-dir '' --quiet",
+                  &log),
+      0)
+      << log;
+  const std::string out = dir / "cmp.png";
+  ASSERT_EQ(run_command(studio() + " --compare " + (dir / "cmp") + " --screenshot " + out + " --size 900x300",
+                        &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("2 methods"), std::string::npos) << log;
+  EXPECT_NE(log.find("lidef pwl-tri"), std::string::npos) << log;
+  const Image img = read_png(out);
+  ASSERT_EQ(img.w, 900);
+  ASSERT_EQ(img.h, 300);
+  // lidef's mesh in the heat map (reddish) on the left half, PWL(Tri)'s uncoloured surface (grey-blue) on the
+  // right.
+  Image left = img, right = img;
+  for (int y = 0; y < img.h; ++y)
+    for (int x = 0; x < img.w; ++x)
+      for (int k = 0; k < 3; ++k)
+        (x < img.w / 2 ? right : left).rgb[3 * (static_cast<size_t>(y) * img.w + x) + k] = 0;
+  EXPECT_GT(count_near(left, 215, 120, 120, 60), 20);
+  EXPECT_GT(count_near(right, 191, 199, 217, 20), 500);
+  // Not a compare folder: exit 2, the reason on stderr, nothing written.
+  fs::create_directories(dir / "empty");
+  write_text(dir / "empty/readme.txt", "");
+  EXPECT_EQ(
+      run_command(studio() + " --compare " + (dir / "empty") + " --screenshot " + (dir / "x.png"), &log), 2);
+  EXPECT_NE(log.find("table.csv"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(dir / "x.png"));
+}
+
 }  // namespace
