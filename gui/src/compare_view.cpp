@@ -147,13 +147,7 @@ std::string build_compare_scene(vtkRenderer* ren, const std::vector<CompareEntry
     meshes.push_back(pd);
   }
   auto lut = vtkSmartPointer<vtkLookupTable>::New();
-  lut->SetNumberOfTableValues(256);
-  lut->SetTableRange(0, std::max(hi, 1e-3));
-  for (int i = 0; i < 256; ++i) {
-    const double t = i / 255.0;
-    lut->SetTableValue(i, 1.0 - 0.25 * t, 1.0 - 0.95 * t, 1.0 - 0.95 * t, 1.0);
-  }
-  lut->SetNanColor(0.15, 0.15, 0.15, 1);
+  heat_lut(lut, std::max(hi, 1e-3));
   lut->SetAboveRangeColor(0.45, 0.0, 0.0, 1);
   lut->UseAboveRangeColorOn();
   lut->Build();

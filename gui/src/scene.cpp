@@ -132,18 +132,6 @@ vtkSmartPointer<vtkPolyData> wireframe(const MatX3d& V, const MatX3i& F) {
   return pd;
 }
 
-// Heat map for E_iso − 6 (0 = isometry): white to dark red, like the paper's figures.
-void heat_lut(vtkLookupTable* lut, double hi) {
-  lut->SetNumberOfTableValues(256);
-  lut->SetTableRange(0, std::max(hi, 1e-6));
-  for (int i = 0; i < 256; ++i) {
-    const double t = i / 255.0;
-    lut->SetTableValue(i, 1.0 - 0.25 * t, 1.0 - 0.95 * t, 1.0 - 0.95 * t, 1.0);
-  }
-  lut->SetNanColor(0.2, 0.2, 0.2, 1.0);
-  lut->SetUseAboveRangeColor(false);
-}
-
 // Diverging blue–white–red around `mid` on a log or linear scale (volume ratio, margins).
 void diverging_lut(vtkLookupTable* lut, double lo, double hi, bool log_scale) {
   lut->SetNumberOfTableValues(256);
@@ -175,6 +163,17 @@ void style_scalar_bar(vtkScalarBarActor* bar, double height) {
   bar->GetTitleTextProperty()->SetFontSize(14);
   bar->GetLabelTextProperty()->SetFontSize(12);
   bar->UnconstrainedFontSizeOn();
+}
+
+void heat_lut(vtkLookupTable* lut, double hi) {
+  lut->SetNumberOfTableValues(256);
+  lut->SetTableRange(0, std::max(hi, 1e-6));
+  for (int i = 0; i < 256; ++i) {
+    const double t = i / 255.0;
+    lut->SetTableValue(i, 1.0 - 0.25 * t, 1.0 - 0.95 * t, 1.0 - 0.95 * t, 1.0);
+  }
+  lut->SetNanColor(0.2, 0.2, 0.2, 1.0);
+  lut->SetUseAboveRangeColor(false);
 }
 
 void sigma3_colors(vtkColorTransferFunction* ctf, double lo, double hi) {

@@ -6,6 +6,7 @@
 class QLabel;
 class QWidget;
 class vtkColorTransferFunction;
+class vtkLookupTable;
 class vtkScalarBarActor;
 class vtkRenderWindow;
 
@@ -14,6 +15,10 @@ namespace lidef::studio {
 // σ3 colours of every studio view: red below 0 (not injective), then a perceptual ramp (dark blue → yellow)
 // on [max(lo, 0), hi]. (scene.cpp)
 void sigma3_colors(vtkColorTransferFunction* ctf, double lo, double hi);
+
+// Heat map for E_iso − 6 on [0, hi] (0 = isometry): white to dark red, like the paper's figures; NaN dark
+// grey. (scene.cpp)
+void heat_lut(vtkLookupTable* lut, double hi);
 
 // The studio's colour-bar look: right edge, dark text, `height` of the view. (scene.cpp)
 void style_scalar_bar(vtkScalarBarActor* bar, double height);
