@@ -215,6 +215,10 @@ struct Scene::Impl {
   // Leaves (Lipschitz and octree views).
   Ptr<vtkActor> leaves = Ptr<vtkActor>::New();
   Ptr<vtkGlyph3DMapper> leaves_mapper = Ptr<vtkGlyph3DMapper>::New();
+  // Lipschitz view: outlines of the shown leaves that were refined (black) or failed (red).
+  Ptr<vtkActor> marks = Ptr<vtkActor>::New();
+  Ptr<vtkGlyph3DMapper> marks_mapper = Ptr<vtkGlyph3DMapper>::New();
+  Ptr<vtkLookupTable> marks_lut = Ptr<vtkLookupTable>::New();
   Ptr<vtkLookupTable> leaves_lut = Ptr<vtkLookupTable>::New();
   Ptr<vtkScalarBarActor> bar = Ptr<vtkScalarBarActor>::New();
   Ptr<vtkTextActor> text = Ptr<vtkTextActor>::New();
@@ -267,14 +271,31 @@ Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
   I.leaves_mapper->SetScalarModeToUsePointFieldData();
   I.leaves->SetMapper(I.leaves_mapper);
   I.leaves->PickableOff();
+  I.marks_mapper->SetSourceConnection(cube->GetOutputPort());
+  I.marks_mapper->SetScaleArray("side");
+  I.marks_mapper->SetScaleModeToScaleByMagnitude();
+  I.marks_lut->SetNumberOfTableValues(2);
+  I.marks_lut->SetTableRange(0, 1);
+  I.marks_lut->SetTableValue(0, 0.05, 0.05, 0.05, 1);
+  I.marks_lut->SetTableValue(1, 0.9, 0.0, 0.0, 1);
+  I.marks_mapper->SetLookupTable(I.marks_lut);
+  I.marks_mapper->SetScalarModeToUsePointFieldData();
+  I.marks_mapper->SelectColorArray("failed");
+  I.marks_mapper->SetScalarRange(0, 1);
+  I.marks->SetMapper(I.marks_mapper);
+  I.marks->GetProperty()->SetRepresentationToWireframe();
+  I.marks->GetProperty()->LightingOff();
+  I.marks->GetProperty()->SetLineWidth(1.5);
+  I.marks->PickableOff();
   style_scalar_bar(I.bar, 0.8);
   I.text->GetTextProperty()->SetColor(0.1, 0.1, 0.1);
   I.text->GetTextProperty()->SetFontSize(15);
   I.text->SetPosition(10, 10);
   I.text->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
   I.text->SetPosition(0.01, 0.94);
-  for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
-                                                    I.images, I.slices, I.volume, I.leaves, I.bar, I.text}) {
+  for (vtkProp* p :
+       std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage, I.images,
+                                       I.slices, I.volume, I.leaves, I.marks, I.bar, I.text}) {
     p->VisibilityOff();
     renderer->AddViewProp(p);
   }
@@ -357,7 +378,7 @@ std::string fmt(double x, int prec = 3) {
 void Scene::show(const SessionFrame& f, const ViewSettings& s) {
   Impl& I = *impl_;
   for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
-                                                    I.images, I.slices, I.volume, I.leaves, I.bar})
+                                                    I.images, I.slices, I.volume, I.leaves, I.marks, I.bar})
     p->VisibilityOff();
   I.bar->SetNumberOfLabels(5);
   if (!f.model || f.mesh_V.rows() == 0) {
@@ -555,6 +576,11 @@ void Scene::show(const SessionFrame& f, const ViewSettings& s) {
       side->SetName("side");
       auto val = Ptr<vtkDoubleArray>::New();
       val->SetName("value");
+      auto mark_pts = Ptr<vtkPoints>::New();
+      auto mark_side = Ptr<vtkDoubleArray>::New();
+      mark_side->SetName("side");
+      auto mark_failed = Ptr<vtkDoubleArray>::New();
+      mark_failed->SetName("failed");
       long shown = 0, refined = 0, failed = 0;
       double lo = 1e300, hi = -1e300;
       for (const CertLeaf& l : c.leaves) {
@@ -570,6 +596,11 @@ void Scene::show(const SessionFrame& f, const ViewSettings& s) {
         if (!std::isfinite(x)) x = lip && !s.lipschitz_margin ? 1e300 : -1e300;
         pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
         side->InsertNextValue(l.side * 0.97);  // a small gap shows the cells
+        if (lip && (l.depth > 0 || !l.certified)) {
+          mark_pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
+          mark_side->InsertNextValue(l.side);
+          mark_failed->InsertNextValue(l.certified ? 0 : 1);
+        }
         val->InsertNextValue(x);
         if (std::abs(x) < 1e299) {
           lo = std::min(lo, x);
@@ -632,6 +663,14 @@ void Scene::show(const SessionFrame& f, const ViewSettings& s) {
       I.leaves->GetProperty()->SetEdgeVisibility(!lip);
       I.leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
       I.leaves->VisibilityOn();
+      if (lip && mark_pts->GetNumberOfPoints() > 0) {
+        auto mpd = Ptr<vtkPolyData>::New();
+        mpd->SetPoints(mark_pts);
+        mpd->GetPointData()->AddArray(mark_side);
+        mpd->GetPointData()->AddArray(mark_failed);
+        I.marks_mapper->SetInputData(mpd);
+        I.marks->VisibilityOn();
+      }
       I.bar->SetLookupTable(I.leaves_lut);
       I.bar->VisibilityOn();
       what += ": " + std::to_string(shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
