@@ -35,22 +35,6 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-// Parameters that reshape the solver's precomputation (projected_newton.h: constructor).
-bool needs_rebuild(const DeformParams& a, const DeformParams& b) {
-  return a.reduced_dof != b.reduced_dof || a.samples != b.samples || a.voxel_side != b.voxel_side ||
-         a.safety != b.safety || a.hessian_fraction != b.hessian_fraction || a.threads != b.threads ||
-         a.backend != b.backend;
-}
-
-std::string check_source_in(const Cage& cage, const Vec3& p) {
-  if (!p.allFinite()) return "the point is not finite";
-  const double w = cage.winding_number(p);
-  if (!(w > 0.5)) return "the point is outside the cage (winding number " + std::to_string(w) + ")";
-  const double diag = (cage.bbox_max - cage.bbox_min).norm();
-  if (cage.distance(p) < 1e-9 * diag)
-    return "the point lies on the cage, where the harmonic map is undefined";
-  return "";
-}
 }  // namespace
 
 struct InteractiveSession::Command {
@@ -123,19 +107,10 @@ void InteractiveSession::open_scenario(const std::string& path, const std::strin
   Scenario sc = read_scenario(path, models_dir);
   auto model = std::make_shared<const Model>(load_model(sc.model_dir));
   for (Eigen::Index i = 0; i < sc.sources.rows(); ++i) {
-    const std::string why = check_source_in(model->cage, sc.sources.row(i).transpose());
-    if (!why.empty()) throw InputError(path, "handle " + std::to_string(i + 1) + ": source: " + why);
+    const std::string why = handle_source_problem(model->cage, sc.sources.row(i).transpose());
+    if (!why.empty()) throw InputError(path, "handle " + std::to_string(i + 1) + ": source " + why);
   }
-  Command c(Command::kLoad);
-  c.model = model;
-  c.scenario = sc;
-  c.iterate = true;
-  {
-    std::lock_guard<std::mutex> lk(mutex_);
-    model_ = model;
-    scenario_ = sc;
-  }
-  post(std::move(c));
+  load(model, sc, true);
 }
 
 void InteractiveSession::open_model(const std::string& model_dir, const DeformParams& params) {
@@ -148,12 +123,17 @@ void InteractiveSession::open_model(const std::string& model_dir, const DeformPa
   sc.params = params;
   sc.sources.resize(0, 3);
   sc.targets.resize(0, 3);
+  load(model, sc, false);
+}
+
+void InteractiveSession::load(std::shared_ptr<const Model> model, const Scenario& sc, bool iterate) {
   Command c(Command::kLoad);
   c.model = model;
   c.scenario = sc;
+  c.iterate = iterate;
   {
     std::lock_guard<std::mutex> lk(mutex_);
-    model_ = model;
+    model_ = std::move(model);
     scenario_ = sc;
   }
   post(std::move(c));
@@ -172,7 +152,7 @@ std::shared_ptr<const Model> InteractiveSession::model() const {
 std::string InteractiveSession::check_source(const Vec3& p) const {
   const auto m = model();
   if (!m) return "no model is loaded";
-  return check_source_in(m->cage, p);
+  return handle_source_problem(m->cage, p);
 }
 
 void InteractiveSession::set_handles(const MatX3d& sources, const MatX3d& targets) {
@@ -181,8 +161,8 @@ void InteractiveSession::set_handles(const MatX3d& sources, const MatX3d& target
   if (sources.rows() != targets.rows()) throw InputError("handles", "as many targets as sources are needed");
   if (!targets.allFinite()) throw InputError("handles", "a target is not finite");
   for (Eigen::Index i = 0; i < sources.rows(); ++i) {
-    const std::string why = check_source_in(m->cage, sources.row(i).transpose());
-    if (!why.empty()) throw InputError("handles", "handle " + std::to_string(i + 1) + ": source: " + why);
+    const std::string why = handle_source_problem(m->cage, sources.row(i).transpose());
+    if (!why.empty()) throw InputError("handles", "handle " + std::to_string(i + 1) + ": source " + why);
   }
   {
     std::lock_guard<std::mutex> lk(mutex_);
@@ -336,7 +316,9 @@ void InteractiveSession::run() {
         f->mesh_det(i) = J.determinant();
       }
       if (E.sources.rows() > 0) {
-        f->energy = S.energy();
+        // The solver recorded the energy of its last iteration; recomputing it (a pass over all samples, or a
+        // device round trip) per frame would repeat that work.
+        f->energy = S.history().empty() ? S.energy() : S.history().back().terms;
         f->images = S.handle_positions();
         const VecXd err = S.handle_errors();
         f->max_handle_error = err.size() ? err.maxCoeff() : 0.0;
@@ -509,7 +491,7 @@ void InteractiveSession::run() {
               E.params = c.params;
               break;
             }
-            if (needs_rebuild(E.params, c.params)) {
+            if (changes_precomputation(E.params, c.params)) {
               build_solver(E.model, c.params);
               apply_handles();
             } else {

@@ -300,4 +300,10 @@ std::string param_value_string(const DeformParams& params, const ParamInfo& p) {
       p.member);
 }
 
+bool changes_precomputation(const DeformParams& a, const DeformParams& b) {
+  return a.reduced_dof != b.reduced_dof || a.samples != b.samples || a.voxel_side != b.voxel_side ||
+         a.safety != b.safety || a.hessian_fraction != b.hessian_fraction || a.threads != b.threads ||
+         a.backend != b.backend;
+}
+
 }  // namespace lidef

@@ -206,24 +206,26 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
   history_.clear();
 }
 
+std::string handle_source_problem(const Cage& cage, const Vec3& p) {
+  std::ostringstream pos;
+  pos.precision(9);
+  pos << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
+  if (!p.allFinite()) return pos.str() + " is not finite";
+  const double w = cage.winding_number(p);
+  if (!(w > 0.5)) return pos.str() + " is outside the cage (winding number " + fmt(w) + ")";
+  if (cage.distance(p) < 1e-9 * (cage.bbox_max - cage.bbox_min).norm())
+    return pos.str() + " lies on the cage, where the harmonic map is undefined";
+  return "";
+}
+
 void DeformationSolver::set_handles(const MatX3d& sources, const MatX3d& targets, const std::string& where) {
   if (sources.rows() == 0) throw InputError(where, "no handles: at least one handle is needed");
   if (sources.rows() != targets.rows()) throw InputError(where, "as many targets as sources are needed");
   check_finite(sources, where, "source");
   check_finite(targets, where, "target");
-  const double diag = std::sqrt(bbox_diag2_);
   for (Eigen::Index i = 0; i < sources.rows(); ++i) {
-    const Vec3 p = sources.row(i).transpose();
-    const double w = cage_.winding_number(p);
-    std::ostringstream pos;
-    pos.precision(9);
-    pos << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
-    if (!(w > 0.5))
-      throw InputError(where, "handle " + std::to_string(i + 1) + ": source " + pos.str() +
-                                  " is outside the cage (winding number " + fmt(w) + ")");
-    if (cage_.distance(p) < 1e-9 * diag)
-      throw InputError(where, "handle " + std::to_string(i + 1) + ": source " + pos.str() +
-                                  " lies on the cage, where the harmonic map is undefined");
+    const std::string why = handle_source_problem(cage_, sources.row(i).transpose());
+    if (!why.empty()) throw InputError(where, "handle " + std::to_string(i + 1) + ": source " + why);
   }
   const MatXd D = basis_.value_matrix(sources) * subspace_.basis;
   energy_->set_handles(D, targets);

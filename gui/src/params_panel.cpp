@@ -73,12 +73,6 @@ const char* kMarkedStyle = "background-color: #ffc0c0;";
 
 }  // namespace
 
-const std::vector<std::string>& ParamsPanel::rebuild_params() {
-  static const std::vector<std::string> names = {"reduced_dof",      "samples", "voxel_side", "safety",
-                                                 "hessian_fraction", "threads", "backend"};
-  return names;
-}
-
 ParamsPanel::ParamsPanel(QWidget* parent) : QWidget(parent) {
   qRegisterMetaType<lidef::DeformParams>();
   const auto& table = deform_param_table();
@@ -260,12 +254,7 @@ bool ParamsPanel::apply() {
     return false;
   }
 
-  bool needs_rebuild = false;
-  for (const std::string& name : rebuild_params()) {
-    const ParamInfo* info = find_param(name);
-    if (!info) continue;  // a renamed parameter must not break the panel; the table test catches it
-    std::visit([&](auto member) { needs_rebuild |= !(p.*member == applied_.*member); }, info->member);
-  }
+  const bool needs_rebuild = changes_precomputation(applied_, p);
   set_params(p);  // also shows the values in canonical form ("1e5" → "100000")
   emit params_applied(p, needs_rebuild);
   return true;

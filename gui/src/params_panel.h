@@ -46,11 +46,8 @@ class ParamsPanel : public QWidget {
   // The Interactive preset button: reduced_dof = 100 and samples = 10000 into the editors (not applied).
   void load_interactive_preset();
 
-  // The parameters whose change reshapes the solver's precomputation (subspace, sampling, backend).
-  static const std::vector<std::string>& rebuild_params();
-
  signals:
-  // After a successful apply. needs_rebuild: some parameter of rebuild_params() changed, so the solver must
+  // After a successful apply. needs_rebuild: changes_precomputation() (deform_params.h), so the solver must
   // be constructed again; otherwise DeformationSolver::set_params suffices.
   void params_applied(const lidef::DeformParams& p, bool needs_rebuild);
 

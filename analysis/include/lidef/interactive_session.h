@@ -51,7 +51,8 @@ struct SessionFrame {
   double min_lower_bound = 0;  // min over leaves of σ3 − r L
   double min_sigma3 = 0;       // min σ3 at the evaluated voxel centers
   std::string not_certified_reason;
-  EnergyTerms energy;
+  EnergyTerms energy;  // as the last iteration recorded it (with its weights, like the plots), else at the
+                       // current weights
   double max_handle_error = 0;
   // Geometry (model units).
   MatX3d mesh_V;                    // #Vm by 3: the deformed mesh vertices f(v)
@@ -108,7 +109,7 @@ class InteractiveSession {
   // thrown as InputError before anything is queued.
   void set_handles(const MatX3d& sources, const MatX3d& targets);
   void set_targets(const MatX3d& targets);  // same count as the current handles; the drag path
-  // Checks one source point as set_handles would; returns "" when fine, else the reason.
+  // Checks one source point as set_handles would (handle_source_problem); "" when fine, else the reason.
   std::string check_source(const Vec3& p) const;
 
   // --- Solver control.
@@ -130,6 +131,7 @@ class InteractiveSession {
   struct Command;
   struct Engine;
   void post(Command c);
+  void load(std::shared_ptr<const Model> model, const Scenario& sc, bool iterate);
   void run();
 
   FrameCallback on_frame_;

@@ -29,7 +29,7 @@ struct DeformParams {
   int max_halvings = 40;           // line-search halvings before "no certified step"
   double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
   std::string hessian_precision = "single";  // "single" or "double" products of the reduced Hessian
-  double handle_tolerance = 1e-3;  // handle error (distance, model units) reported as "reached"
+  double handle_tolerance = 1e-3;            // handle error (distance, model units) reported as "reached"
   // --- Certificate (line search and output)
   int max_depth = 6;
   std::string bound = "third";           // "first" (17) or "third" (21)
@@ -49,7 +49,7 @@ struct DeformParams {
   int max_weight_resets =
       2;  // convergence with changed weights resets them and continues, at most this often
   // --- Execution
-  int threads = 0;  // OpenMP threads (0 = all cores)
+  int threads = 0;              // OpenMP threads (0 = all cores)
   std::string backend = "cpu";  // "cpu", "opencl" or "auto" (OpenCL when a device with fp64 exists)
 };
 
@@ -75,14 +75,18 @@ std::string param_flag(const ParamInfo& p);
 // ones), a wrong type, a non-finite number or a value out of range.
 void set_param(DeformParams& params, const std::string& name, const nlohmann::json& value,
                const std::string& where);
-// The same from command-line text: string parameters take `text` verbatim, the others read it as JSON (a number
-// or true/false); throws InputError(where, ...) for text that is neither, and as set_param does.
+// The same from command-line text: string parameters take `text` verbatim, the others read it as JSON (a
+// number or true/false); throws InputError(where, ...) for text that is neither, and as set_param does.
 void set_param_from_text(DeformParams& params, const std::string& name, const std::string& text,
                          const std::string& where);
 // Applies every key of a JSON object (set_param for each); throws on the first bad key.
 void apply_params(DeformParams& params, const nlohmann::json& object, const std::string& where);
 // Checks cross-parameter consistency (ranges of each field and e.g. bound spelled right); throws InputError.
 void validate_params(const DeformParams& params, const std::string& where);
+// True when a and b differ in a parameter that shapes DeformationSolver's precomputation (reduced_dof,
+// samples, voxel_side, safety, hessian_fraction, threads, backend): the change needs a new solver, not
+// set_params().
+bool changes_precomputation(const DeformParams& a, const DeformParams& b);
 // All parameters as a JSON object in table order (for summary.json and saved sessions). ordered_json because
 // nlohmann::json sorts keys, which would scatter the groups; assign it to a nlohmann::json if order is moot.
 nlohmann::ordered_json params_to_json(const DeformParams& params);

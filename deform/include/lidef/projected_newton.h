@@ -76,6 +76,12 @@ struct SolveResult {
   double seconds = 0;
 };
 
+// Why `p` cannot be a handle source of `cage`, or "" when it can: the winding number must exceed 1/2 (inside)
+// and p must not lie on the cage (distance < 1e-9 of the bounding-box diagonal), where the harmonic map is
+// undefined. The text continues "source (x, y, z) ...". DeformationSolver::set_handles and the studio check
+// with it.
+std::string handle_source_problem(const Cage& cage, const Vec3& p);
+
 class DeformationSolver {
  public:
   // Precomputes everything that depends only on the cage and the parameters that shape it (reduced_dof,
@@ -149,7 +155,7 @@ class DeformationSolver {
   std::unique_ptr<DeformationEnergy> energy_;
   std::shared_ptr<const ComputeBackend> backend_;
   std::unique_ptr<EnergyKernels> kernels_;  // holds the Jacobians of y_ (and of the direction) at the samples
-  MatS3 y_;  // current reduced coefficients
+  MatS3 y_;                                 // current reduced coefficients
   Certificate cert_;
   EnergyWeights weights_;
   int weight_resets_ = 0;
