@@ -11,7 +11,7 @@
 
 #include "commands.h"
 #include "lidef/atomic_file.h"
-#include "lidef/compare.h"
+#include "lidef/compare/compare.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_export.h"
@@ -23,7 +23,8 @@
 
 namespace lidef::cli {
 
-void add_compare_command(CLI::App& app, Action& action) {
+// The options of lidef-compare (`lidef compare`), on its top-level app.
+void add_compare_options(CLI::App& app, Action& action) {
   struct Opts {
     std::string scenario, out, models, methods = "lidef,pwl-tet,pwl-tet-fine,vhm,pwl-tri",
                                        cache_dir = "<default>";
@@ -32,8 +33,7 @@ void add_compare_command(CLI::App& app, Action& action) {
     std::map<std::string, std::string> overrides;
   };
   auto opts = std::make_shared<Opts>();
-  auto* sub =
-      app.add_subcommand("compare", "Run lidef, PWL(Tet), VHM and PWL(Tri) on one scenario; write a table");
+  CLI::App* sub = &app;
   sub->add_option("SCENARIO", opts->scenario, "Scenario JSON (model, handles, optional parameters)")
       ->required();
   sub->add_option("--out", opts->out, "Output folder (created if missing)")->required();

@@ -26,6 +26,7 @@
 #include "lidef/mesh_export.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"

@@ -9,6 +9,7 @@
 #include "lidef/green_coordinates.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 #include "lidef/signed_svd.h"
 
 namespace lidef::cli {

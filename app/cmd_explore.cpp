@@ -18,8 +18,9 @@
 #include "lidef/explorer_export.h"
 #include "lidef/mesh_export.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 #include "lidef/procedural_models.h"
-#include "lidef/sigma_explorer.h"
+#include "lidef/explorer/sigma_explorer.h"
 #include "lidef/signed_svd.h"
 #include "staged_outputs.h"
 

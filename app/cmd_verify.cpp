@@ -20,6 +20,7 @@
 #include "lidef/green_coordinates.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 #include "lidef/subspace.h"
 #include "staged_outputs.h"
 

@@ -19,12 +19,13 @@ using Action = std::function<int()>;
 
 void add_certify_command(CLI::App& app, Action& action);
 void add_check_command(CLI::App& app, Action& action);
-void add_compare_command(CLI::App& app, Action& action);
 void add_deform_command(CLI::App& app, Action& action);
 void add_devices_command(CLI::App& app, Action& action);
 void add_eval_command(CLI::App& app, Action& action);
 void add_explore_command(CLI::App& app, Action& action);
 void add_make_model_command(CLI::App& app, Action& action);
 void add_verify_command(CLI::App& app, Action& action);
+// lidef-compare's options on its top-level app (compare_main.cpp).
+void add_compare_options(CLI::App& app, Action& action);
 
 }  // namespace lidef::cli

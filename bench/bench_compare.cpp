@@ -28,7 +28,7 @@
 #include <string>
 #include <vector>
 
-#include "lidef/compare.h"
+#include "lidef/compare/compare.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
 #include "lidef/scenario.h"

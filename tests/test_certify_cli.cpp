@@ -29,6 +29,7 @@
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 #include "test_support.h"
 
 using namespace lidef;

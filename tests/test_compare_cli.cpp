@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "lidef/compare.h"
+#include "lidef/compare/compare.h"
 #include "lidef/procedural_models.h"
 #include "lidef/scenario.h"
 #include "test_support.h"

@@ -18,6 +18,7 @@
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 #include "test_cages.h"
 #include "test_support.h"
 

@@ -18,11 +18,11 @@
 #include <filesystem>
 #include <random>
 
-#include "lidef/harmonic_polynomials.h"
+#include "lidef/explorer/harmonic_polynomials.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/procedural_models.h"
-#include "lidef/sigma_explorer.h"
+#include "lidef/explorer/sigma_explorer.h"
 #include "lidef/signed_svd.h"
 #include "lidef/singular_value_derivatives.h"
 #include "test_support.h"

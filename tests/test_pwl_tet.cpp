@@ -12,9 +12,9 @@
 #include "lidef/cage.h"
 #include "lidef/errors.h"
 #include "lidef/procedural_models.h"
-#include "lidef/pwl_tet.h"
+#include "lidef/compare/pwl_tet.h"
 #include "lidef/symmetric_dirichlet.h"
-#include "lidef/tet_mesh.h"
+#include "lidef/compare/tet_mesh.h"
 #include "test_support.h"
 
 using namespace lidef;

@@ -13,7 +13,7 @@
 #include "lidef/sampling.h"
 #include "lidef/scenario.h"
 #include "lidef/signed_svd.h"
-#include "lidef/vhm.h"
+#include "lidef/compare/vhm.h"
 #include "test_support.h"
 
 using namespace lidef;

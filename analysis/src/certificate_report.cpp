@@ -13,6 +13,7 @@
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 #include "lidef/subspace.h"
 
 namespace lidef {
@@ -28,11 +29,6 @@ ojson num(double x) {
   return format_double(x);
 }
 
-std::string hex64(std::uint64_t h) {
-  char buf[20];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
-  return buf;
-}
 
 ojson leaf_json(const CertLeaf& l) {
   ojson j;
@@ -105,15 +101,6 @@ std::string read_all(const std::string& path) {
 }
 
 }  // namespace
-
-std::uint64_t fnv1a64(const std::string& data) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (const unsigned char c : data) {
-    h ^= c;
-    h *= 1099511628211ull;
-  }
-  return h;
-}
 
 std::uint64_t coefficients_hash(const MatX3d& y) {
   std::string bytes(sizeof(long long) + sizeof(double) * static_cast<size_t>(y.size()), '\0');

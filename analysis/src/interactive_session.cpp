@@ -7,7 +7,6 @@
 #include <limits>
 
 #include "lidef/errors.h"
-#include "lidef/opencl_backend.h"
 #include "lidef/signed_svd.h"
 #include "lidef/symmetric_dirichlet.h"
 
@@ -75,8 +74,11 @@ struct InteractiveSession::Engine {
   Scenario scenario;       // what the engine runs (restored into scenario_ when a command fails)
 };
 
-InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_error)
-    : on_frame_(std::move(on_frame)), on_error_(std::move(on_error)), engine_(std::make_unique<Engine>()) {
+InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_error, BackendFactory backends)
+    : on_frame_(std::move(on_frame)),
+      on_error_(std::move(on_error)),
+      backends_(std::move(backends)),
+      engine_(std::make_unique<Engine>()) {
   thread_ = std::thread([this] { run(); });
 }
 
@@ -395,7 +397,7 @@ void InteractiveSession::run() {
     else
       omp_set_num_threads(omp_get_num_procs());
     std::string msg;
-    auto backend = select_backend(params.backend, default_cache_dir(), &msg);
+    auto backend = backends_(params.backend, &msg);
     auto log = [&](const std::string& line) {
       E.status = "preprocessing: " + line;
       publish(make_frame());
@@ -403,8 +405,9 @@ void InteractiveSession::run() {
     std::unique_ptr<DeformationSolver> solver;
     try {
       solver = std::make_unique<DeformationSolver>(model->cage, params, default_cache_dir(), log, backend);
-    } catch (const OpenCLError& e) {
-      if (params.backend != "auto") throw;
+    } catch (const Error&) {
+      // "auto" chose a device that cannot hold this problem: the CPU takes it.
+      if (params.backend != "auto" || backend->is_cpu()) throw;
       backend = cpu_backend();
       solver = std::make_unique<DeformationSolver>(model->cage, params, default_cache_dir(), log, backend);
     }

@@ -1,15 +1,14 @@
 // See vtk_write_atomic.h.
 #include "vtk_write_atomic.h"
 
-#include <unistd.h>
 #include <vtkCommand.h>
 #include <vtkExecutive.h>
 #include <vtkNew.h>
 
 #include <algorithm>
-#include <cstdio>
 #include <filesystem>
 
+#include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 
 namespace lidef::detail {
@@ -27,15 +26,8 @@ class VtkErrorCatcher : public vtkCommand {
   std::string message;
 };
 
-}  // namespace
-
-void write_vtk_atomic(vtkXMLWriter* writer, const std::string& path, const char* ext) {
-  // The commonest failure, said plainly (VTK would only report that it cannot open the temporary).
-  const fs::path folder = fs::path(path).parent_path();
-  std::error_code ec;
-  if (!folder.empty() && !fs::is_directory(folder, ec))
-    throw InputError(path, "cannot write: folder " + folder.string() + " does not exist");
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid()) + ext;
+// Writes `tmp` with the configured writer; InputError(path, VTK's message) on failure.
+void write_vtk_file(vtkXMLWriter* writer, const std::string& path, const std::string& tmp) {
   vtkNew<VtkErrorCatcher> errors;
   writer->AddObserver(vtkCommand::ErrorEvent, errors);
   writer->AddObserver(vtkCommand::WarningEvent, errors);
@@ -48,7 +40,6 @@ void write_vtk_atomic(vtkXMLWriter* writer, const std::string& path, const char*
   writer->SetHeaderTypeToUInt64();
   const int ok = writer->Write();
   if (ok != 1 || writer->GetErrorCode() != 0) {
-    std::remove(tmp.c_str());
     // VTK's message is "ERROR: In <source>, line N\n<Class> (0x...): <text>"; keep <text>, on one line.
     std::string why = errors->message;
     if (why.rfind("ERROR: In ", 0) == 0 && why.find('\n') != std::string::npos)
@@ -58,10 +49,17 @@ void write_vtk_atomic(vtkXMLWriter* writer, const std::string& path, const char*
     std::replace(why.begin(), why.end(), '\n', ' ');
     throw InputError(path, "cannot write VTK file" + (why.empty() ? std::string() : ": " + why));
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw InputError(path, "cannot rename temporary file into place");
-  }
+}
+
+}  // namespace
+
+void write_vtk_atomic(vtkXMLWriter* writer, const std::string& path, const char* ext) {
+  // The commonest failure, said plainly (VTK would only report that it cannot open the temporary).
+  const fs::path folder = fs::path(path).parent_path();
+  std::error_code ec;
+  if (!folder.empty() && !fs::is_directory(folder, ec))
+    throw InputError(path, "cannot write: folder " + folder.string() + " does not exist");
+  write_file_atomic_via_path(path, ext, [&](const std::string& tmp) { write_vtk_file(writer, path, tmp); });
 }
 
 }  // namespace lidef::detail

@@ -6,6 +6,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 
 namespace lidef {
 

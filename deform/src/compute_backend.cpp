@@ -1,5 +1,7 @@
 #include "lidef/compute_backend.h"
 
+#include "lidef/errors.h"
+
 namespace lidef {
 namespace {
 
@@ -41,6 +43,16 @@ class CpuBackend final : public ComputeBackend {
 std::shared_ptr<const ComputeBackend> cpu_backend() {
   static const auto backend = std::make_shared<const CpuBackend>();
   return backend;
+}
+
+BackendFactory cpu_backend_factory() {
+  return [](const std::string& which, std::string* message) -> std::shared_ptr<const ComputeBackend> {
+    if (which == "opencl") throw Error("backend 'opencl' is not available in this program (built without OpenCL)");
+    if (which != "cpu" && which != "auto")
+      throw InputError("", "unknown backend '" + which + "' (expected cpu, opencl or auto)");
+    if (message) *message = which == "cpu" ? "backend: cpu" : "backend: cpu (auto: built without OpenCL)";
+    return cpu_backend();
+  };
 }
 
 }  // namespace lidef

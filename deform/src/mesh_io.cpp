@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include "lidef/errors.h"
+#include "lidef/number_format.h"
 
 namespace lidef {
 namespace {
@@ -306,12 +307,6 @@ TriMesh read_mesh(const std::string& path, MeshLines* lines) {
   if (ext == ".obj") return read_obj(path, lines);
   if (ext == ".off") return read_off(path, lines);
   throw InputError(path, "unsupported mesh format '" + ext + "' (expected .obj or .off)");
-}
-
-std::string format_double(double x) {
-  char buf[32];
-  const auto res = std::to_chars(buf, buf + sizeof buf, x);
-  return std::string(buf, res.ptr);
 }
 
 void write_obj(std::ostream& out, const MatX3d& V, const MatX3i& F, const std::string& comment) {

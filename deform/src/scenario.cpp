@@ -1,3 +1,5 @@
+#include "lidef/number_format.h"
+#include "lidef/atomic_file.h"
 #include "lidef/scenario.h"
 
 #include <unistd.h>
@@ -324,25 +326,8 @@ void write_scenario(const std::string& path, const Scenario& s) {
   }
   out += "\n}\n";
 
-  // Temp file in the same folder, then rename: readers never see a half-written scenario. (deform/ cannot use
-  // analysis/'s write_file_atomic.)
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw InputError(path, "cannot open for writing (does the folder exist?)");
-    f << out;
-    f.close();
-    if (!f) {
-      std::remove(tmp.c_str());
-      throw InputError(path, "write failed (disk full?)");
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw InputError(path, "cannot rename temporary file into place: " + ec.message());
-  }
+  // Readers never see a half-written scenario.
+  write_file_atomic(path, [&](std::ostream& f) { f << out; });
 }
 
 }  // namespace lidef

@@ -17,6 +17,8 @@
 #include <iterator>
 #include <vector>
 
+#include "lidef/atomic_file.h"
+#include "lidef/hash.h"
 #include "lidef/errors.h"
 #include "lidef/smoothness.h"
 
@@ -140,14 +142,6 @@ void complement_sparse(const SpMat& M, const MatXd& Q, int m, MatXd& vecs, VecXd
   for (int i = 0; i < m; ++i) vals(i) = sigma + 1.0 / nu(i);
 }
 
-std::uint64_t fnv1a(const void* data, size_t bytes, std::uint64_t h = 1469598103934665603ull) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (size_t i = 0; i < bytes; ++i) {
-    h ^= p[i];
-    h *= 1099511628211ull;
-  }
-  return h;
-}
 
 constexpr char kMagic[8] = {'L', 'I', 'D', 'E', 'F', 'S', 'U', 'B'};
 constexpr std::uint32_t kVersion = 1;
@@ -186,7 +180,7 @@ bool read_cache(const std::string& path, std::int64_t n, std::int64_t s, std::ui
       h.s != s || h.cage_hash != cage_hash)
     return false;
   const char* p = buf.data() + sizeof h;
-  if (fnv1a(p, payload) != h.payload_hash) return false;
+  if (fnv1a64(p, payload) != h.payload_hash) return false;
   out.eigenvalues.resize(s);
   out.basis.resize(n, s);
   std::memcpy(out.eigenvalues.data(), p, sizeof(double) * s);
@@ -202,27 +196,15 @@ void write_cache(const std::string& path, const SpectralSubspace& sub) {
   h.n = sub.basis.rows();
   h.s = sub.basis.cols();
   h.cage_hash = sub.cage_hash;
-  std::uint64_t ph = fnv1a(sub.eigenvalues.data(), sizeof(double) * sub.eigenvalues.size());
-  h.payload_hash = fnv1a(sub.basis.data(), sizeof(double) * sub.basis.size(), ph);
-  // Unique temp name per process and call, in the same directory, so that rename() is atomic and two
-  // processes filling the same cache never see each other's half-written file.
-  static std::atomic<unsigned> counter{0};
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+  std::uint64_t ph = fnv1a64(sub.eigenvalues.data(), sizeof(double) * sub.eigenvalues.size());
+  h.payload_hash = fnv1a64(sub.basis.data(), sizeof(double) * sub.basis.size(), ph);
+  // Atomic (a unique temporary per process and call, renamed): two processes filling the same cache never see
+  // each other's half-written file.
+  write_file_atomic(path, [&](std::ostream& out) {
     out.write(reinterpret_cast<const char*>(&h), sizeof h);
     out.write(reinterpret_cast<const char*>(sub.eigenvalues.data()), sizeof(double) * sub.eigenvalues.size());
     out.write(reinterpret_cast<const char*>(sub.basis.data()), sizeof(double) * sub.basis.size());
-    out.flush();
-    if (!out) {
-      std::remove(tmp.c_str());
-      throw InputError(tmp, "cannot write subspace cache file");
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw InputError(path, "cannot rename subspace cache file into place");
-  }
+  });
 }
 
 }  // namespace
@@ -271,10 +253,10 @@ SpectralSubspace compute_subspace(const Cage& cage, int s, SubspaceSolver solver
 
 std::uint64_t subspace_cage_hash(const Cage& cage) {
   const std::int64_t sizes[2] = {cage.num_vertices(), cage.num_faces()};
-  std::uint64_t h = fnv1a(sizes, sizeof sizes);
-  h = fnv1a(cage.V.data(), sizeof(double) * cage.V.size(), h);
+  std::uint64_t h = fnv1a64(sizes, sizeof sizes);
+  h = fnv1a64(cage.V.data(), sizeof(double) * cage.V.size(), h);
   std::vector<std::int32_t> f(cage.F.data(), cage.F.data() + cage.F.size());
-  return fnv1a(f.data(), sizeof(std::int32_t) * f.size(), h);
+  return fnv1a64(f.data(), sizeof(std::int32_t) * f.size(), h);
 }
 
 std::string default_cache_dir() {

@@ -41,7 +41,7 @@
 #include <vector>
 
 #include "lidef/errors.h"
-#include "lidef/sigma_explorer.h"
+#include "lidef/explorer/sigma_explorer.h"
 #include "lidef/signed_svd.h"
 #include "studio_common.h"
 

@@ -48,7 +48,10 @@
 
 #include "compare_view.h"
 #include "explorer_panel.h"
+#include "lidef/atomic_file.h"
 #include "lidef/errors.h"
+#include "lidef/opencl_backend.h"
+#include "lidef/subspace.h"
 #include "params_panel.h"
 #include "plots_panel.h"
 #include "studio_common.h"
@@ -114,7 +117,8 @@ StudioWindow::StudioWindow(QWidget* parent) : QMainWindow(parent) {
       [this](const std::string& e) {
         QMetaObject::invokeMethod(
             this, [this, e] { report_error("Solver", e); }, Qt::QueuedConnection);
-      });
+      },
+      opencl_backend_factory(default_cache_dir()));
   session_->set_extras(extras_for(settings_));
 }
 
@@ -501,20 +505,16 @@ std::string write_window_png(vtkRenderWindow* window, const std::string& path) {
   grab->ReadFrontBufferOff();
   grab->ShouldRerenderOn();
   grab->Update();
-  const std::string tmp = path + ".tmp." + std::to_string(QCoreApplication::applicationPid()) + ".png";
   auto writer = vtkSmartPointer<vtkPNGWriter>::New();
-  writer->SetFileName(tmp.c_str());
   writer->SetInputConnection(grab->GetOutputPort());
-  writer->Write();
-  std::error_code ec;
-  if (writer->GetErrorCode() != 0 || !std::filesystem::exists(tmp, ec)) {
-    std::filesystem::remove(tmp, ec);
-    return path + ": write failed";
-  }
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    return path + ": " + ec.message();
+  try {
+    write_file_atomic_via_path(path, ".png", [&](const std::string& tmp) {
+      writer->SetFileName(tmp.c_str());
+      writer->Write();
+      if (writer->GetErrorCode() != 0) throw InputError(path, "write failed");
+    });
+  } catch (const InputError& e) {
+    return e.what();
   }
   return "";
 }

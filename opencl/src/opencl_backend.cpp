@@ -17,6 +17,9 @@
 #include <mutex>
 #include <sstream>
 
+#include "lidef/atomic_file.h"
+#include "lidef/hash.h"
+#include "lidef/number_format.h"
 #include "lidef_kernel_source.h"  // kLidefKernelSource: opencl/kernels/lidef.cl
 
 namespace lidef {
@@ -80,10 +83,6 @@ std::string trim(std::string s) {
   return s.substr(b);
 }
 
-std::uint64_t fnv1a(const std::string& s, std::uint64_t h = 1469598103934665603ull) {
-  for (unsigned char c : s) h = (h ^ c) * 1099511628211ull;
-  return h;
-}
 
 std::string type_name(cl_device_type t) {
   if (t & CL_DEVICE_TYPE_GPU) return "GPU";
@@ -138,9 +137,7 @@ cl::Program build_program(Device& d, const std::string& dir, std::string* how) {
                           d.platform.getInfo<CL_PLATFORM_VERSION>() + "|" +
                           d.device.getInfo<CL_DEVICE_NAME>() + "|" + d.device.getInfo<CL_DRIVER_VERSION>() +
                           "|" + options;
-  char hex[17];
-  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(fnv1a(key)));
-  const std::filesystem::path path = std::filesystem::path(dir) / (std::string(hex) + ".bin");
+  const std::filesystem::path path = std::filesystem::path(dir) / (hex64(fnv1a64(key)) + ".bin");
   std::error_code ec;
   if (!dir.empty() && std::filesystem::exists(path, ec)) {
     std::ifstream in(path, std::ios::binary);
@@ -176,14 +173,15 @@ cl::Program build_program(Device& d, const std::string& dir, std::string* how) {
       const auto bins = p.getInfo<CL_PROGRAM_BINARIES>();
       if (!bins.empty() && !bins[0].empty()) {
         std::filesystem::create_directories(dir, ec);
-        const std::string tmp = path.string() + ".tmp" + std::to_string(::getpid());
-        {
-          std::ofstream out(tmp, std::ios::binary);
-          out.write(reinterpret_cast<const char*>(bins[0].data()),
-                    static_cast<std::streamsize>(bins[0].size()));
+        try {
+          write_file_atomic(path.string(), [&](std::ostream& out) {
+            out.write(reinterpret_cast<const char*>(bins[0].data()),
+                      static_cast<std::streamsize>(bins[0].size()));
+          });
+          *how += ", cached in " + path.string();
+        } catch (const InputError&) {
+          // A cache that cannot be written only costs the next start a compile.
         }
-        std::filesystem::rename(tmp, path, ec);
-        if (!ec) *how += ", cached in " + path.string();
       }
     } catch (const cl::Error&) {
       // No binaries from this driver: every start compiles.
@@ -785,6 +783,12 @@ std::shared_ptr<const ComputeBackend> select_backend(const std::string& which, c
     say(std::string("backend: cpu (auto: no usable OpenCL device: ") + e.what() + ")");
     return cpu_backend();
   }
+}
+
+BackendFactory opencl_backend_factory(const std::string& cache_dir) {
+  return [cache_dir](const std::string& which, std::string* message) {
+    return select_backend(which, cache_dir, message);
+  };
 }
 
 }  // namespace lidef

@@ -14,6 +14,8 @@
 #include <vector>
 
 #include "lidef/cage.h"
+#include "lidef/hash.h"
+#include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "lidef/types.h"
@@ -43,8 +45,6 @@ struct CertificateReport {
   std::uint64_t voxels_csv_hash = 0;      // FNV-1a 64 of the exact bytes of voxels.csv
 };
 
-// FNV-1a 64 of the exact bytes of `data`.
-std::uint64_t fnv1a64(const std::string& data);
 // FNV-1a 64 of the coefficient doubles (#V+#F by 3, row by row, native byte order) and the row count.
 std::uint64_t coefficients_hash(const MatX3d& y);
 

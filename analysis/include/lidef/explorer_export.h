@@ -2,7 +2,7 @@
 #pragma once
 #include <string>
 
-#include "lidef/sigma_explorer.h"
+#include "lidef/explorer/sigma_explorer.h"
 
 namespace lidef {
 

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "lidef/certificate_verification.h"
+#include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
 #include "lidef/model_check.h"
 #include "lidef/projected_newton.h"
@@ -88,7 +89,10 @@ class InteractiveSession {
   // command is dropped, the previous state kept, and this is called with the message.
   using ErrorCallback = std::function<void(const std::string&)>;
 
-  explicit InteractiveSession(FrameCallback on_frame, ErrorCallback on_error = {});
+  // `backends` builds the compute backend named by the parameters (cpu_backend_factory() when this program has
+  // no OpenCL; the studio passes opencl_backend_factory()).
+  explicit InteractiveSession(FrameCallback on_frame, ErrorCallback on_error = {},
+                              BackendFactory backends = cpu_backend_factory());
   ~InteractiveSession();  // stops the engine thread (interrupting a running iteration)
   InteractiveSession(const InteractiveSession&) = delete;
   InteractiveSession& operator=(const InteractiveSession&) = delete;
@@ -136,6 +140,7 @@ class InteractiveSession {
 
   FrameCallback on_frame_;
   ErrorCallback on_error_;
+  BackendFactory backends_;
   std::unique_ptr<Engine> engine_;  // touched by the engine thread only (after construction)
   mutable std::mutex mutex_;
   std::condition_variable wake_;

@@ -42,7 +42,4 @@ void write_obj(std::ostream& out, const MatX3d& V, const MatX3i& F, const std::s
 // Throws InputError for a missing/empty/binary file, a line without exactly 3 numbers, or a non-finite value.
 MatX3d read_points_xyz(const std::string& path);
 
-// Formats a double in the shortest form that round-trips (as write_obj does).
-std::string format_double(double x);
-
 }  // namespace lidef

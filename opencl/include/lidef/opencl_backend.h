@@ -44,5 +44,7 @@ std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& fil
 // the CPU). `message` says which backend was chosen and, for auto's fallback, why.
 std::shared_ptr<const ComputeBackend> select_backend(const std::string& which, const std::string& cache_dir,
                                                      std::string* message);
+// select_backend as a BackendFactory (compute_backend.h) with kernels cached under `cache_dir`.
+BackendFactory opencl_backend_factory(const std::string& cache_dir);
 
 }  // namespace lidef

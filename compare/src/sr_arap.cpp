@@ -1,4 +1,4 @@
-#include "lidef/pwl_tri.h"
+#include "lidef/compare/sr_arap.h"
 
 #include <Eigen/CholmodSupport>
 #include <Eigen/SVD>

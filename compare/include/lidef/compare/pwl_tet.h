@@ -23,7 +23,7 @@
 #include <string>
 #include <vector>
 
-#include "lidef/tet_mesh.h"
+#include "lidef/compare/tet_mesh.h"
 #include "lidef/types.h"
 
 namespace lidef {

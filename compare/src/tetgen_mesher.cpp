@@ -15,7 +15,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/self_intersections.h"
-#include "lidef/tet_mesh.h"
+#include "lidef/compare/tet_mesh.h"
 
 namespace lidef {
 

@@ -1,4 +1,4 @@
-#include "lidef/harmonic_polynomials.h"
+#include "lidef/explorer/harmonic_polynomials.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "lidef/pwl_tet.h"
+#include "lidef/compare/pwl_tet.h"
 
 #include <Eigen/CholmodSupport>
 #include <chrono>

@@ -1,4 +1,4 @@
-#include "lidef/tet_mesh.h"
+#include "lidef/compare/tet_mesh.h"
 
 #include <algorithm>
 #include <cmath>

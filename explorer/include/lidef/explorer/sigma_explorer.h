@@ -14,7 +14,7 @@
 
 #include "lidef/cage.h"
 #include "lidef/green_coordinates.h"
-#include "lidef/harmonic_polynomials.h"
+#include "lidef/explorer/harmonic_polynomials.h"
 #include "lidef/singular_value_derivatives.h"
 #include "lidef/tri_mesh.h"
 #include "lidef/types.h"

@@ -7,7 +7,7 @@
 //   pwl-tet-fine  PWL(Tet) on a fine TetGen mesh (max tet volume = factor × lidef's voxel volume; Fig. 3)
 //   vhm           Variational Harmonic Maps (vhm.h) on the model's vhm_anchors.xyz; its result is certified
 //                 with lidef's certificate on lidef's voxels (Fig. 11)
-//   pwl-tri       SR-ARAP on the full-resolution surface (pwl_tri.h)
+//   pwl-tri       SR-ARAP on the full-resolution surface (sr_arap.h)
 // A method that fails (bad tet mesh, handle outside every tet, TetGen error, ...) gets a row with its error
 // and the others still run.
 #pragma once
@@ -17,11 +17,11 @@
 #include <vector>
 
 #include "lidef/model_check.h"
-#include "lidef/pwl_tet.h"
-#include "lidef/pwl_tri.h"
+#include "lidef/compare/pwl_tet.h"
+#include "lidef/compare/sr_arap.h"
 #include "lidef/scenario.h"
-#include "lidef/tet_mesh.h"
-#include "lidef/vhm.h"
+#include "lidef/compare/tet_mesh.h"
+#include "lidef/compare/vhm.h"
 
 namespace lidef {
 

@@ -1,4 +1,4 @@
-// PWL(Tri) / SR-ARAP (pwl_tri.h): the energy never increases over local (Gauss-Seidel rotations) and global
+// PWL(Tri) / SR-ARAP (sr_arap.h): the energy never increases over local (Gauss-Seidel rotations) and global
 // (positions) half-steps, and a rigid motion of all handles gives a rigid result.
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <cmath>
 
 #include "lidef/procedural_models.h"
-#include "lidef/pwl_tri.h"
+#include "lidef/compare/sr_arap.h"
 #include "lidef/scenario.h"
 #include "test_support.h"
 

@@ -1,4 +1,4 @@
-#include "lidef/compare.h"
+#include "lidef/compare/compare.h"
 
 #include <algorithm>
 #include <chrono>
@@ -12,6 +12,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/projected_newton.h"
 #include "lidef/sampling.h"

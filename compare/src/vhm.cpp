@@ -1,4 +1,4 @@
-#include "lidef/vhm.h"
+#include "lidef/compare/vhm.h"
 
 #include <Eigen/SVD>
 #include <chrono>

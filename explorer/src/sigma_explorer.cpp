@@ -1,4 +1,4 @@
-#include "lidef/sigma_explorer.h"
+#include "lidef/explorer/sigma_explorer.h"
 
 #include <omp.h>
 
@@ -15,6 +15,7 @@
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"
 #include "lidef/sampling.h"
