@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "commands.h"
 #include "lidef/atomic_file.h"
@@ -15,11 +16,13 @@
 #include "lidef/green_coordinates.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
 #include "lidef/vtk_export.h"
+#include "param_flags.h"
 #include "staged_outputs.h"
 
 namespace lidef::cli {
@@ -30,25 +33,25 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-std::string g6(double x) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", x);
-  return buf;
-}
-
-// Upper limits that keep a typo from exhausting memory (documented in --help).
+// Upper limits that keep a typo from exhausting memory (documented in --help); the parameter table bounds the
+// others (samples <= 5e6, max_depth <= 20).
 constexpr long kMaxVoxels = 5000000;
-constexpr int kMaxDepth = 20;
 constexpr int kMaxGrid = 1024;
+
+// The rows of the parameter table that shape a certificate (the others belong to the solver).
+bool certify_param(const ParamInfo& p) {
+  static const std::set<std::string> names = {"samples",     "voxel_side", "safety",  "max_depth",
+                                              "max_refined", "bound",      "threads", "backend"};
+  return names.count(p.name) > 0;
+}
 
 }  // namespace
 
 void add_certify_command(CLI::App& app, Action& action) {
   struct Opts {
-    std::string model, coeffs, out, bound = "third", backend = "cpu";
-    int max_depth = 6, voxels = 30000, grid = 64, threads = 0;
-    double voxel_side = 0, safety = 1.5;
-    long max_refined = 200000;
+    std::string model, coeffs, out;
+    int grid = 64;
+    ParamOverrides overrides;
   };
   auto opts = std::make_shared<Opts>();
   auto* sub =
@@ -58,26 +61,10 @@ void add_certify_command(CLI::App& app, Action& action) {
                   "Coefficient file: #V+#F rows 'x y z', vertex rows first; or the word 'identity'")
       ->required();
   sub->add_option("--out", opts->out, "Output folder (created if missing)")->required();
-  sub->add_option("--bound", opts->bound, "Lipschitz bound of sigma3: 'first' (eq. 17) or 'third' (eq. 21)")
-      ->capture_default_str();
-  sub->add_option("--max-depth", opts->max_depth,
-                  "Octree levels below the base voxels (0.." + std::to_string(kMaxDepth) + ")")
-      ->capture_default_str();
-  sub->add_option("--voxels", opts->voxels, "Target number of base voxels (the side is searched to match)")
-      ->capture_default_str();
-  auto* side_opt = sub->add_option("--voxel-side", opts->voxel_side, "Base voxel side (overrides --voxels)");
-  sub->add_option("--safety", opts->safety, "Voxel center to cage distance >= safety * voxel radius (> 1)")
-      ->capture_default_str();
-  sub->add_option("--max-refined", opts->max_refined,
-                  "Budget of child voxels evaluated in all; exhausted = not certified")
-      ->capture_default_str();
   sub->add_option("--grid", opts->grid, "Points along the longest axis of field.vti (0 = no field.vti)")
       ->capture_default_str();
-  sub->add_option("--threads", opts->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
-  sub->add_option("--backend", opts->backend,
-                  "Compute backend: cpu, opencl or auto (OpenCL when a device with fp64 exists, else CPU)")
-      ->check(CLI::IsMember({"cpu", "opencl", "auto"}))
-      ->capture_default_str();
+  // The same names as `lidef deform` and a scenario's "parameters" (one table, docs/parameters.md).
+  add_param_flags(sub, &opts->overrides, "Parameters: ", certify_param);
   sub->footer(
       "Writes into --out: certificate.json (verdict, counts, parameters; deterministic), voxels.csv (one row "
       "per\n"
@@ -88,42 +75,22 @@ void add_certify_command(CLI::App& app, Action& action) {
       "All files appear together or not at all. Exit code: 0 certified, 1 not certified, 2 error.\n"
       "The certificate covers the union of the base voxels only; certificate.json reports how many mesh\n"
       "vertices lie outside it. Details: docs/certificate-outputs.md.");
-  sub->callback([opts, side_opt, &action] {
-    action = [opts, side_opt] {
+  sub->callback([opts, &action] {
+    action = [opts] {
       const Opts& o = *opts;
       const auto t_start = Clock::now();
       // --- Parameters first: a bad option costs nothing and writes nothing.
-      CertifyParams cp;
-      try {
-        cp.bound = lipschitz_bound_from_string(o.bound);
-      } catch (const InputError& e) {
-        throw InputError("--bound", e.message());
-      }
-      if (o.max_depth < 0 || o.max_depth > kMaxDepth)
-        throw InputError("--max-depth", "must be in 0.." + std::to_string(kMaxDepth) + " (got " +
-                                            std::to_string(o.max_depth) + ")");
-      cp.max_depth = o.max_depth;
-      if (o.max_refined < 0) throw InputError("--max-refined", "must be >= 0");
-      cp.max_refined_voxels = o.max_refined;
-      SamplingParams sp;
-      if (side_opt->count() > 0) {
-        if (!(o.voxel_side > 0) || !std::isfinite(o.voxel_side))
-          throw InputError("--voxel-side", "must be a positive number (got " + g6(o.voxel_side) + ")");
-        sp.voxel_side = o.voxel_side;
-      } else {
-        if (o.voxels < 1 || o.voxels > kMaxVoxels)
-          throw InputError("--voxels", "must be in 1.." + std::to_string(kMaxVoxels) + " (got " +
-                                           std::to_string(o.voxels) + ")");
-        sp.target_count = o.voxels;
-      }
-      if (!(o.safety > 1) || !std::isfinite(o.safety))
-        throw InputError("--safety", "must be a number > 1 (got " + g6(o.safety) + ")");
-      sp.safety = o.safety;
+      DeformParams dp;
+      apply_param_overrides(dp, o.overrides);
+      // Here an explicit voxel side must be a side (the table's 0 means "search from samples").
+      if (o.overrides.count("voxel_side") && !(dp.voxel_side > 0))
+        throw InputError("--voxel-side", "must be a positive number (got " + format_g(dp.voxel_side) + ")");
+      const CertifyParams cp = certify_params_of(dp, false, true);
+      const SamplingParams sp = sampling_params_of(dp);
       if (o.grid != 0 && (o.grid < 2 || o.grid > kMaxGrid))
         throw InputError("--grid", "must be 0 (no field.vti) or in 2.." + std::to_string(kMaxGrid) +
                                        " (got " + std::to_string(o.grid) + ")");
-      if (o.threads < 0) throw InputError("--threads", "must be >= 0");
-      if (o.threads > 0) omp_set_num_threads(o.threads);
+      if (dp.threads > 0) omp_set_num_threads(dp.threads);
 
       // --- Inputs.
       auto t0 = Clock::now();
@@ -138,7 +105,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       if (sp.voxel_side > 0) {
         const double estimate = model.cage.volume / std::pow(sp.voxel_side, 3);
         if (estimate > kMaxVoxels)
-          throw InputError("--voxel-side", g6(sp.voxel_side) + " gives about " + g6(estimate) +
+          throw InputError("--voxel-side", format_g(sp.voxel_side) + " gives about " + format_g(estimate) +
                                                " voxels in this cage (limit " + std::to_string(kMaxVoxels) +
                                                ")");
       }
@@ -148,12 +115,12 @@ void add_certify_command(CLI::App& app, Action& action) {
       const VoxelSampling sampling = sample_voxels(model.cage, sp);
       const double ms_sampling = ms_since(t0);
       if (sampling.size() == 0)
-        throw InputError(o.model, "no voxel of side " + g6(sampling.side) +
-                                      " fits inside the cage at safety " + g6(sp.safety) +
-                                      " (use a smaller --voxel-side or more --voxels)");
+        throw InputError(o.model, "no voxel of side " + format_g(sampling.side) +
+                                      " fits inside the cage at safety " + format_g(sp.safety) +
+                                      " (use a smaller --voxel-side or more --samples)");
       OctreeCertifier certifier(model.cage, sampling);
       std::string backend_msg;
-      const auto backend = select_backend(o.backend, default_cache_dir(), &backend_msg);
+      const auto backend = select_backend(dp, default_cache_dir(), &backend_msg);
       std::cerr << "lidef certify: " << backend_msg << "\n";
       certifier.set_backend(*backend);
       t0 = Clock::now();
@@ -203,27 +170,31 @@ void add_certify_command(CLI::App& app, Action& action) {
                   << " voxels (" << bound << "-order bound)\n";
       else
         std::cout << "lidef certify: NOT CERTIFIED (" << bound << "-order bound): " << cert.reason << "\n";
-      std::cout << "  voxels " << cert.voxels << " (side " << g6(cert.voxel_side) << "), leaves "
+      std::cout << "  voxels " << cert.voxels << " (side " << format_g(cert.voxel_side) << "), leaves "
                 << cert.num_leaves << ", refined " << cert.refined << ", depth used " << cert.max_depth_used
                 << " of " << cp.max_depth << "\n";
-      std::cout << "  min sigma3 at centers " << g6(cert.min_sigma3_center) << ", min margin "
-                << g6(cert.min_margin) << ", min lower bound of sigma3 " << g6(cert.min_lower_bound) << "\n";
-      std::cout << "  mesh coverage " << g6(100 * report.mesh_coverage) << "% ("
+      std::cout << "  min sigma3 at centers " << format_g(cert.min_sigma3_center) << ", min margin "
+                << format_g(cert.min_margin) << ", min lower bound of sigma3 "
+                << format_g(cert.min_lower_bound) << "\n";
+      std::cout << "  mesh coverage " << format_g(100 * report.mesh_coverage) << "% ("
                 << report.mesh_vertices_uncovered << " of " << report.mesh_vertices
                 << " mesh vertices outside the voxels"
                 << (report.mesh_vertices_uncovered > 0 ? ": not covered by the certificate" : "") << ")\n";
       if (!cert.failing.empty()) {
         const CertLeaf& f = cert.failing.front();
-        std::cout << "  first failing leaf: center (" << g6(f.center.x()) << ", " << g6(f.center.y()) << ", "
-                  << g6(f.center.z()) << "), depth " << f.depth << ", sigma3 " << g6(f.sigma3) << ", L "
-                  << g6(f.L) << ", margin " << g6(f.margin) << "\n";
+        std::cout << "  first failing leaf: center (" << format_g(f.center.x()) << ", "
+                  << format_g(f.center.y()) << ", " << format_g(f.center.z()) << "), depth " << f.depth
+                  << ", sigma3 " << format_g(f.sigma3) << ", L " << format_g(f.L) << ", margin "
+                  << format_g(f.margin) << "\n";
       }
-      std::cout << "  time: sampling " << g6(ms_sampling) << " ms, precompute "
-                << g6(certifier.precompute_seconds() * 1000) << " ms, certify " << g6(ms_certify) << " ms";
+      std::cout << "  time: sampling " << format_g(ms_sampling) << " ms, precompute "
+                << format_g(certifier.precompute_seconds() * 1000) << " ms, certify " << format_g(ms_certify)
+                << " ms";
       if (o.grid > 0)
         std::cout << ", field " << field.dims[0] << "x" << field.dims[1] << "x" << field.dims[2] << " "
-                  << g6(ms_field) << " ms";
-      std::cout << ", total " << g6(ms_since(t_start)) << " ms (" << omp_get_max_threads() << " threads)\n";
+                  << format_g(ms_field) << " ms";
+      std::cout << ", total " << format_g(ms_since(t_start)) << " ms (" << omp_get_max_threads()
+                << " threads)\n";
       std::cout << "  wrote " << out.final_path("") << "{certificate.json, voxels.csv, leaves.vtu"
                 << (o.grid > 0 ? ", field.vti" : "") << ", timings.json}\n";
       return cert.certified ? kOk : kNotCertified;

@@ -7,6 +7,7 @@
 #include "commands.h"
 #include "lidef/atomic_file.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 
 namespace lidef::cli {
 namespace {
@@ -16,14 +17,9 @@ struct CheckOptions {
   std::string json;
 };
 
-std::string fmt(const char* f, double x) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, x);
-  return buf;
-}
 std::string box(const Vec3& lo, const Vec3& hi) {
-  return "[" + fmt("%.6g", lo.x()) + ", " + fmt("%.6g", hi.x()) + "] x [" + fmt("%.6g", lo.y()) + ", " +
-         fmt("%.6g", hi.y()) + "] x [" + fmt("%.6g", lo.z()) + ", " + fmt("%.6g", hi.z()) + "]";
+  return "[" + format_g(lo.x()) + ", " + format_g(hi.x()) + "] x [" + format_g(lo.y()) + ", " +
+         format_g(hi.y()) + "] x [" + format_g(lo.z()) + ", " + format_g(hi.z()) + "]";
 }
 
 void print_report(std::ostream& out, const std::string& dir, const ValidationReport& r) {
@@ -35,7 +31,7 @@ void print_report(std::ostream& out, const std::string& dir, const ValidationRep
         << ", Euler characteristic " << r.euler_characteristic;
     if (r.genus >= 0) out << ", genus " << r.genus;
     out << "\n         bounding box " << box(r.cage_bbox_min, r.cage_bbox_max) << "\n";
-    out << "         volume " << fmt("%.6g", r.cage_volume) << ", " << r.self_intersections.size()
+    out << "         volume " << format_g(r.cage_volume) << ", " << r.self_intersections.size()
         << " self-intersecting face pair" << (r.self_intersections.size() == 1 ? "" : "s") << "\n";
   }
   if (r.mesh_vertices > 0) {
@@ -43,7 +39,7 @@ void print_report(std::ostream& out, const std::string& dir, const ValidationRep
     out << "         " << r.mesh_vertices << " vertices, " << r.mesh_faces << " faces\n";
     out << "         bounding box " << box(r.mesh_bbox_min, r.mesh_bbox_max) << "\n";
     if (r.inside_checked) {
-      out << "         min distance mesh -> cage " << fmt("%.6g", r.min_distance) << " (vertex "
+      out << "         min distance mesh -> cage " << format_g(r.min_distance) << " (vertex "
           << r.min_distance_vertex + 1 << ")\n";
       out << "         " << r.mesh_vertices - r.mesh_vertices_outside - r.mesh_vertices_on_cage << " of "
           << r.mesh_vertices << " vertices strictly inside the cage\n";
@@ -55,8 +51,8 @@ void print_report(std::ostream& out, const std::string& dir, const ValidationRep
   for (const Issue& w : r.warnings) out << "  warning: " << w.str() << "\n";
   out << "errors: " << r.errors.size() << "\n";
   for (const Issue& e : r.errors) out << "  error: " << e.str() << "\n";
-  out << (r.usable() ? "result: usable" : "result: NOT usable") << " (checked in " << fmt("%.2f", r.seconds)
-      << " s)\n";
+  out << (r.usable() ? "result: usable" : "result: NOT usable") << " (checked in "
+      << format_fixed(r.seconds, 2) << " s)\n";
 }
 
 }  // namespace

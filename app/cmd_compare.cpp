@@ -19,6 +19,7 @@
 #include "lidef/model_check.h"
 #include "lidef/scenario.h"
 #include "lidef/subspace.h"
+#include "param_flags.h"
 #include "staged_outputs.h"
 
 namespace lidef::cli {
@@ -30,7 +31,7 @@ void add_compare_options(CLI::App& app, Action& action) {
                                        cache_dir = "<default>";
     bool quiet = false, no_model_tets = false;
     CompareOptions c;
-    std::map<std::string, std::string> overrides;
+    ParamOverrides overrides;
   };
   auto opts = std::make_shared<Opts>();
   CLI::App* sub = &app;
@@ -76,14 +77,7 @@ void add_compare_options(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--tri-max-iterations", c.tri.max_iterations, "pwl-tri: local/global iteration limit")
       ->capture_default_str();
-  for (const ParamInfo& p : deform_param_table()) {
-    const std::string name = p.name;
-    DeformParams defaults;
-    sub->add_option_function<std::string>(
-           param_flag(p), [opts, name](const std::string& v) { opts->overrides[name] = v; },
-           std::string(p.help) + " [default " + param_value_string(defaults, p) + "]")
-        ->group(std::string("lidef parameters (shared weights/tolerances): ") + p.group);
-  }
+  add_param_flags(sub, &opts->overrides, "lidef parameters (shared weights/tolerances): ");
   sub->footer(
       "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and "
       "per\n"
@@ -94,10 +88,7 @@ void add_compare_options(CLI::App& app, Action& action) {
     action = [opts]() -> int {
       Opts o = *opts;
       Scenario sc = read_scenario(o.scenario, o.models);
-      for (const auto& [name, text] : o.overrides) {
-        set_param_from_text(sc.params, name, text,
-                            param_flag(*find_param(name)));  // flags come from the table
-      }
+      apply_param_overrides(sc.params, o.overrides);
       validate_params(sc.params, o.scenario);
       o.c.methods.clear();
       std::stringstream ms(o.methods);

@@ -33,6 +33,7 @@
 #include "lidef/signed_svd.h"
 #include "lidef/symmetric_dirichlet.h"
 #include "lidef/vtk_export.h"
+#include "param_flags.h"
 #include "staged_outputs.h"
 
 namespace lidef::cli {
@@ -41,12 +42,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-std::string g(double x, int prec = 4) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.*g", prec, x);
-  return buf;
 }
 
 std::atomic<bool> g_stop{false};
@@ -102,9 +97,9 @@ std::string iteration_row(const IterationRecord& r) {
     << ',' << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections
     << ',' << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
     << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error)
-    << ',' << '"' << r.weight_action << '"' << ',' << g(r.ms_gradient, 6) << ',' << g(r.ms_hessian, 6) << ','
-    << g(r.ms_solve, 6) << ',' << g(r.ms_line_search, 6) << ',' << g(r.ms_certificate, 6) << ','
-    << g(r.ms_total, 6);
+    << ',' << '"' << r.weight_action << '"' << ',' << format_g(r.ms_gradient, 6) << ','
+    << format_g(r.ms_hessian, 6) << ',' << format_g(r.ms_solve, 6) << ',' << format_g(r.ms_line_search, 6)
+    << ',' << format_g(r.ms_certificate, 6) << ',' << format_g(r.ms_total, 6);
   return s.str();
 }
 
@@ -115,7 +110,7 @@ void add_deform_command(CLI::App& app, Action& action) {
     std::string scenario, out, models, init, cache_dir = "<default>";
     int grid = 0;
     bool quiet = false;
-    std::map<std::string, std::string> overrides;  // parameter name → text from the command line
+    ParamOverrides overrides;  // parameter name → text from the command line
   };
   auto opts = std::make_shared<Opts>();
   auto* sub =
@@ -135,27 +130,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_flag("--quiet", opts->quiet, "No per-iteration progress lines");
   // One flag per row of the parameter table: the scenario's "parameters" and these flags use the same names.
-  for (const ParamInfo& p : deform_param_table()) {
-    const std::string name = p.name;
-    DeformParams defaults;
-    sub->add_option_function<std::string>(
-           param_flag(p), [opts, name](const std::string& v) { opts->overrides[name] = v; },
-           std::string(p.help) + " [default " + param_value_string(defaults, p) + "]")
-        ->group(std::string("Parameters: ") + p.group)
-        ->type_name(std::visit(
-            [](auto m) -> std::string {
-              using T = std::remove_reference_t<decltype(DeformParams{}.*m)>;
-              if constexpr (std::is_same_v<T, bool>)
-                return "BOOL";
-              else if constexpr (std::is_same_v<T, std::string>)
-                return "TEXT";
-              else if constexpr (std::is_floating_point_v<T>)
-                return "REAL";
-              else
-                return "INT";
-            },
-            p.member));
-  }
+  add_param_flags(sub, &opts->overrides, "Parameters: ");
   sub->footer(
       "Writes into --out (all files appear together, or none): coefficients.txt (#V+#F rows, readable by\n"
       "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3),\n"
@@ -172,11 +147,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       const auto t_start = Clock::now();
       // --- Inputs and parameters; nothing is written before they all check out.
       Scenario sc = read_scenario(o.scenario, o.models);
-      for (const auto& [name, text] : o.overrides) {
-        set_param_from_text(sc.params, name, text,
-                            param_flag(*find_param(name)));  // flags come from the table
-        sc.params_given.push_back(name);
-      }
+      apply_param_overrides(sc.params, o.overrides, &sc.params_given);
       validate_params(sc.params, o.scenario);
       if (o.grid != 0 && (o.grid < 2 || o.grid > 1024)) throw InputError("--grid", "must be 0 or in 2..1024");
       {
@@ -207,14 +178,14 @@ void add_deform_command(CLI::App& app, Action& action) {
       };
       const std::string cache = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
       std::string backend_msg;
-      const auto backend = select_backend(sc.params.backend, cache, &backend_msg);
+      const auto backend = select_backend(sc.params, cache, &backend_msg);
       std::cerr << "lidef deform: " << backend_msg << "\n";
       std::unique_ptr<DeformationSolver> solver_ptr;
       try {
         solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, backend);
       } catch (const OpenCLError& e) {
         // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
-        if (sc.params.backend != "auto") throw;
+        if (sc.params.backend != BackendKind::kAuto) throw;
         std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
         solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, cpu_backend());
       }
@@ -225,9 +196,8 @@ void add_deform_command(CLI::App& app, Action& action) {
       // --- Solve, one progress line per iteration; Ctrl-C stops cleanly.
       g_stop.store(false);
       std::signal(SIGINT, on_sigint);
-      int interrupt_after =
-          0;  // test hook: raise SIGINT after this many iterations (tests/test_deform_cli.cpp)
-      if (const char* e = std::getenv("LIDEF_TEST_INTERRUPT_AFTER")) interrupt_after = std::atoi(e);
+      // Test hook (parameter test_interrupt_after): a real SIGINT after this many iterations.
+      const int interrupt_after = sc.params.test_interrupt_after;
       if (!o.quiet)
         std::cout
             << "  it       energy      step   min sigma3 LB  cert  handle err   lambda1   lambda2      ms\n";
@@ -318,13 +288,14 @@ void add_deform_command(CLI::App& app, Action& action) {
       out.commit(o.grid > 0 ? std::vector<std::string>{} : std::vector<std::string>{"field.vti"});
 
       std::cout << "lidef deform: " << sc.name << ": " << to_string(res.reason) << " (" << res.message
-                << ") after " << solver.history().size() << " iterations, " << g(res.seconds, 3) << " s\n"
-                << "  max handle error " << g(max_err, 3)
+                << ") after " << solver.history().size() << " iterations, " << format_g(res.seconds, 3)
+                << " s\n"
+                << "  max handle error " << format_g(max_err, 3)
                 << (max_err <= sc.params.handle_tolerance ? " (reached)" : " (NOT reached)")
-                << ", global volume ratio " << g(vol_ratio, 5) << "\n"
+                << ", global volume ratio " << format_g(vol_ratio, 5) << "\n"
                 << "  CERTIFIED locally injective on the union of " << cert.voxels
-                << " voxels, min lower bound of sigma3 " << g(cert.min_lower_bound, 4) << ", mesh coverage "
-                << g(100 * report.mesh_coverage, 3) << "%\n"
+                << " voxels, min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4)
+                << ", mesh coverage " << format_g(100 * report.mesh_coverage, 3) << "%\n"
                 << "  wrote " << out.final_path("")
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"

@@ -1,4 +1,5 @@
-// lidef verify: checks a certificate written by `lidef certify` by dense sampling inside every leaf (paper Fig. 5).
+// lidef verify: checks a certificate written by `lidef certify` by dense sampling inside every leaf (paper
+// Fig. 5).
 #include <unistd.h>
 
 #include <algorithm>
@@ -29,12 +30,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string g6(double x) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", x);
-  return buf;
-}
-
 constexpr int kPlotLeaves = 500;  // as in the paper's Fig. 5
 
 }  // namespace
@@ -46,11 +41,14 @@ void add_verify_command(CLI::App& app, Action& action) {
     unsigned seed = 1;
   };
   auto opts = std::make_shared<Opts>();
-  auto* sub = app.add_subcommand("verify", "Check a certificate by dense sampling of sigma3 inside every leaf voxel");
+  auto* sub =
+      app.add_subcommand("verify", "Check a certificate by dense sampling of sigma3 inside every leaf voxel");
   sub->add_option("MODEL_DIR", opts->model, "Model folder the certificate was computed for")->required();
-  sub->add_option("--coeffs", opts->coeffs, "Coefficient file the certificate was computed for, or 'identity'")
+  sub->add_option("--coeffs", opts->coeffs,
+                  "Coefficient file the certificate was computed for, or 'identity'")
       ->required();
-  sub->add_option("--certificate", opts->certificate, "certificate.json written by 'lidef certify' (voxels.csv beside it)")
+  sub->add_option("--certificate", opts->certificate,
+                  "certificate.json written by 'lidef certify' (voxels.csv beside it)")
       ->required();
   sub->add_option("--samples-per-voxel", opts->samples,
                   "Uniform random samples per leaf, in addition to its center and 8 corners")
@@ -59,16 +57,20 @@ void add_verify_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--out", opts->out, "Output folder (default: the certificate's folder)");
   sub->footer(
-      "Writes verify.csv (one row per leaf), violations.csv (the first sampled points where sigma3 drops below\n"
-      "the certificate's bound sigma3(c) - |p-c| L), verify_plot.png (leaves with the largest L, sorted by the\n"
+      "Writes verify.csv (one row per leaf), violations.csv (the first sampled points where sigma3 drops "
+      "below\n"
+      "the certificate's bound sigma3(c) - |p-c| L), verify_plot.png (leaves with the largest L, sorted by "
+      "the\n"
       "sampled Lipschitz estimate, log scale; paper Fig. 5) and the gnuplot script/data that draw it\n"
-      "(verify_plot.gp, verify_plot.dat). Without gnuplot ($LIDEF_GNUPLOT or PATH) the PNG is skipped with a\n"
+      "(verify_plot.gp, verify_plot.dat). Without gnuplot ($LIDEF_GNUPLOT or PATH) the PNG is skipped with "
+      "a\n"
       "warning. Exit code: 0 no violation and no sigma3 <= 0 in certified leaves, 1 otherwise, 2 error.");
   sub->callback([opts, &action] {
     action = [opts] {
       const Opts& o = *opts;
       if (o.samples < 0 || o.samples > 100000)
-        throw InputError("--samples-per-voxel", "must be in 0..100000 (got " + std::to_string(o.samples) + ")");
+        throw InputError("--samples-per-voxel",
+                         "must be in 0..100000 (got " + std::to_string(o.samples) + ")");
       const CertificateReport rep = read_certificate_json(o.certificate);
       const Model model = load_model(o.model);
       if (subspace_cage_hash(model.cage) != rep.cage_hash)
@@ -94,21 +96,23 @@ void add_verify_command(CLI::App& app, Action& action) {
         for (size_t i = 0; i < leaves.size(); ++i) {
           const CertLeaf& l = leaves[i];
           const VoxelVerification& vv = v.voxels[i];
-          s << format_double(l.center.x()) << ',' << format_double(l.center.y()) << ',' << format_double(l.center.z())
-            << ',' << format_double(l.side) << ',' << l.depth << ',' << format_double(l.L) << ','
-            << format_double(vv.sigma3_center) << ',' << format_double(vv.min_sigma3) << ','
-            << format_double(vv.max_quotient) << ',' << format_double(vv.tightness) << ',' << vv.violations << ','
-            << (l.certified ? 1 : 0) << '\n';
+          s << format_double(l.center.x()) << ',' << format_double(l.center.y()) << ','
+            << format_double(l.center.z()) << ',' << format_double(l.side) << ',' << l.depth << ','
+            << format_double(l.L) << ',' << format_double(vv.sigma3_center) << ','
+            << format_double(vv.min_sigma3) << ',' << format_double(vv.max_quotient) << ','
+            << format_double(vv.tightness) << ',' << vv.violations << ',' << (l.certified ? 1 : 0) << '\n';
         }
       });
       write_file_atomic(out.path("violations.csv"), [&](std::ostream& s) {
         s << "leaf,px,py,pz,sigma3,bound\n";
         for (const BoundViolation& b : v.violation_list)
           s << b.leaf << ',' << format_double(b.p.x()) << ',' << format_double(b.p.y()) << ','
-            << format_double(b.p.z()) << ',' << format_double(b.sigma3) << ',' << format_double(b.bound) << '\n';
+            << format_double(b.p.z()) << ',' << format_double(b.sigma3) << ',' << format_double(b.bound)
+            << '\n';
       });
 
-      // --- The Fig. 5 plot: the kPlotLeaves leaves with the largest finite L, sorted by the sampled estimate.
+      // --- The Fig. 5 plot: the kPlotLeaves leaves with the largest finite L, sorted by the sampled
+      // estimate.
       std::vector<long> idx;
       for (size_t i = 0; i < leaves.size(); ++i)
         if (std::isfinite(leaves[i].L)) idx.push_back(static_cast<long>(i));
@@ -121,12 +125,13 @@ void add_verify_command(CLI::App& app, Action& action) {
       write_file_atomic(out.path("verify_plot.dat"), [&](std::ostream& s) {
         s << "# rank  sampled_lipschitz  certificate_L  leaf (0-based row of verify.csv)\n";
         for (size_t r = 0; r < idx.size(); ++r)
-          s << r + 1 << ' ' << format_double(v.voxels[idx[r]].max_quotient) << ' ' << format_double(leaves[idx[r]].L)
-            << ' ' << idx[r] << '\n';
+          s << r + 1 << ' ' << format_double(v.voxels[idx[r]].max_quotient) << ' '
+            << format_double(leaves[idx[r]].L) << ' ' << idx[r] << '\n';
       });
       const bool log_y = max_l > 0;
       write_file_atomic(out.path("verify_plot.gp"), [&](std::ostream& s) {
-        s << "# Paper Fig. 5: the certificate's Lipschitz constant L of sigma3 against the sampled ground truth.\n"
+        s << "# Paper Fig. 5: the certificate's Lipschitz constant L of sigma3 against the sampled ground "
+             "truth.\n"
              "# Render with: gnuplot verify_plot.gp   (in this folder)\n"
              "set terminal pngcairo enhanced size 1000,600 font 'sans,11'\n"
              "set output 'verify_plot.png'\n"
@@ -134,9 +139,11 @@ void add_verify_command(CLI::App& app, Action& action) {
           << " leaves with the largest L, sorted by the sampled estimate\"\n"
           << "set xlabel 'leaf (sorted by sampled ground truth)'\n"
              "set ylabel 'Lipschitz constant'\n"
-          << (log_y ? "set logscale y\nset format y '10^{%L}'\n" : "# all L are 0 (affine map): linear axis\n")
+          << (log_y ? "set logscale y\nset format y '10^{%L}'\n"
+                    : "# all L are 0 (affine map): linear axis\n")
           << "set key below\nset grid\n"
-             "plot 'verify_plot.dat' using 1:3 with points pt 7 ps 0.5 lc rgb '#d62728' title 'certificate L', \\\n"
+             "plot 'verify_plot.dat' using 1:3 with points pt 7 ps 0.5 lc rgb '#d62728' title 'certificate "
+             "L', \\\n"
              "     '' using 1:2 with lines lw 2 lc rgb '#1f77b4' "
              "title 'sampled ground truth: max |sigma3(p) - sigma3(c)| / |p - c| over the leaf'\n";
       });
@@ -145,8 +152,10 @@ void add_verify_command(CLI::App& app, Action& action) {
       if (idx.empty()) {
         plot_note = "no leaf with a finite L: no plot";
       } else if (gnuplot.empty()) {
-        plot_note = "gnuplot not found (install gnuplot-nox or set LIDEF_GNUPLOT): verify_plot.png not drawn; "
-                    "render it later with 'gnuplot verify_plot.gp' in " + out_dir;
+        plot_note =
+            "gnuplot not found (install gnuplot-nox or set LIDEF_GNUPLOT): verify_plot.png not drawn; "
+            "render it later with 'gnuplot verify_plot.gp' in " +
+            out_dir;
         std::cerr << "lidef verify: warning: " << plot_note << "\n";
       } else {
         const std::string png = out.path("verify_plot.png");
@@ -170,14 +179,15 @@ void add_verify_command(CLI::App& app, Action& action) {
         if (std::isfinite(v.voxels[i].tightness)) max_tight = std::max(max_tight, v.voxels[i].tightness);
       }
       const bool ok = v.violations == 0 && v.nonpositive_in_certified == 0;
-      std::cout << "lidef verify: " << (ok ? "OK" : "FAILED") << ": " << v.points << " points in " << leaves.size()
-                << " leaves (" << certified_leaves << " certified; certificate says "
+      std::cout << "lidef verify: " << (ok ? "OK" : "FAILED") << ": " << v.points << " points in "
+                << leaves.size() << " leaves (" << certified_leaves << " certified; certificate says "
                 << (rep.cert.certified ? "certified" : "not certified") << ")\n";
-      std::cout << "  min sigma3 sampled in certified leaves " << g6(v.min_sigma3) << "\n";
+      std::cout << "  min sigma3 sampled in certified leaves " << format_g(v.min_sigma3) << "\n";
       std::cout << "  bound violations " << v.violations << ", samples with sigma3 <= 0 in certified leaves "
                 << v.nonpositive_in_certified << "\n";
-      std::cout << "  max tightness (sampled Lipschitz / L) " << g6(max_tight) << "\n";
-      std::cout << "  wrote " << out.final_path("") << "{verify.csv, violations.csv, verify_plot.gp, verify_plot.dat"
+      std::cout << "  max tightness (sampled Lipschitz / L) " << format_g(max_tight) << "\n";
+      std::cout << "  wrote " << out.final_path("")
+                << "{verify.csv, violations.csv, verify_plot.gp, verify_plot.dat"
                 << (have_png ? ", verify_plot.png" : "") << "}\n";
       return ok ? kOk : kNotCertified;
     };

@@ -1,8 +1,8 @@
 // All-or-nothing output of a command that writes several files into one folder: every file is first written
-// into a private staging folder inside the target (DIR/.lidef-staging-XXXXXX), and commit() moves them into DIR
-// (renames within one file system). If the command fails before commit(), the destructor removes the staging
-// folder — and DIR (with any parents) when this object created it and it is still empty — so nothing new is
-// left behind.
+// into a private staging folder inside the target (DIR/.lidef-staging-XXXXXX), and commit() moves them into
+// DIR (renames within one file system). If the command fails before commit(), the destructor removes the
+// staging folder — and DIR (with any parents) when this object created it and it is still empty — so nothing
+// new is left behind.
 #pragma once
 #include <stdlib.h>
 
@@ -21,7 +21,8 @@ class StagedOutputs {
   explicit StagedOutputs(const std::string& dir) : dir_(dir) {
     namespace fs = std::filesystem;
     std::error_code ec;
-    if (fs::exists(dir_, ec) && !fs::is_directory(dir_, ec)) throw InputError(dir_, "exists and is not a folder");
+    if (fs::exists(dir_, ec) && !fs::is_directory(dir_, ec))
+      throw InputError(dir_, "exists and is not a folder");
     // The folders this object creates (DIR and missing parents), deepest first, to remove again on failure.
     for (fs::path p = fs::absolute(fs::path(dir_), ec).lexically_normal(); !p.empty() && !fs::exists(p, ec);
          p = p.parent_path()) {
@@ -51,7 +52,9 @@ class StagedOutputs {
   }
   const std::string& staging_dir() const { return staging_; }
   // Final location of `name`.
-  std::string final_path(const std::string& name) const { return (std::filesystem::path(dir_) / name).string(); }
+  std::string final_path(const std::string& name) const {
+    return (std::filesystem::path(dir_) / name).string();
+  }
 
   // Moves every staged file that exists into DIR (replacing older versions), and removes the files listed in
   // `stale` from DIR (outputs of an earlier run that this run did not produce, which would no longer match).
@@ -61,8 +64,7 @@ class StagedOutputs {
       const fs::path from = fs::path(staging_) / name;
       std::error_code ec;
       if (!fs::exists(from, ec)) continue;
-      fs::rename(from, fs::path(dir_) / name, ec);
-      if (ec) throw InputError(final_path(name), "cannot move the output into place: " + ec.message());
+      commit_temp_file(from.string(), final_path(name));
     }
     for (const std::string& name : stale) {
       std::error_code ec;

@@ -183,7 +183,7 @@ int main(int argc, char** argv) {
 
   std::shared_ptr<const ComputeBackend> ocl;
   try {
-    ocl = make_opencl_backend(opencl_device_filter_from_env(), cache_dir);
+    ocl = make_opencl_backend({opencl_device_filter_from_env()}, cache_dir);
   } catch (const OpenCLError& ex) {
     std::cerr << "bench_opencl: " << ex.what() << "\n";
     return 3;

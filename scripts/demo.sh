@@ -16,6 +16,11 @@ if [ "$rc" -eq 2 ]; then
   echo "demo: lidef deform failed (exit 2)" >&2
   exit 1
 fi
+# The main job must end with a certified map (CI runs this demo after the test suite).
+if ! grep -q '"certified": true' "$OUT/summary.json"; then
+  echo "demo: the written map is not certified ($OUT/summary.json)" >&2
+  exit 1
+fi
 echo
 echo "Results are in $OUT/ (docs/solver.md describes every file):"
 echo "  summary.json       stop reason, iterations, handle error, global volume ratio, certified"

@@ -1,6 +1,6 @@
 // End-to-end tests of `lidef certify` and `lidef verify` (the real binary) and of the certificate files.
-// Truth: the identity map (σ3 = 1 everywhere, L = 0 up to rounding: must certify at depth 0); a map with folds
-// (σ3 < 0 at voxel centers: must not certify); dense sampling (verify) of a certified non-affine map; a
+// Truth: the identity map (σ3 = 1 everywhere, L = 0 up to rounding: must certify at depth 0); a map with
+// folds (σ3 < 0 at voxel centers: must not certify); dense sampling (verify) of a certified non-affine map; a
 // certificate whose L was understated on purpose (verify must catch it).
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -45,22 +45,26 @@ const char* const kVerifyHeader =
 using lidef::test::read_text;
 using lidef::test::write_text;
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+std::string quote(const std::string& s) {
+  return "'" + s + "'";
+}
 
-std::string ball() { return lidef::test::project_data() + "/models/ball"; }
+std::string ball() {
+  return lidef::test::project_data() + "/models/ball";
+}
 
 int run_lidef(const std::string& args, std::string* output) {
   return lidef::test::run_command(quote(lidef::test::cli()) + " " + args, output);
 }
 
-// `lidef certify MODEL --coeffs C --out OUT EXTRA`, with --voxels 2000 and --grid 16 unless EXTRA sets them.
+// `lidef certify MODEL --coeffs C --out OUT EXTRA`, with --samples 2000 and --grid 16 unless EXTRA sets them.
 int certify(const std::string& model, const std::string& coeffs, const std::string& out, std::string* output,
             const std::string& extra = "") {
   std::string opts = extra;
-  if (extra.find("--voxels ") == std::string::npos) opts += " --voxels 2000";
+  if (extra.find("--samples ") == std::string::npos) opts += " --samples 2000";
   if (extra.find("--grid ") == std::string::npos) opts += " --grid 16";
-  return run_lidef("certify " + quote(model) + " --coeffs " + quote(coeffs) + " --out " + quote(out) + " " + opts,
-                   output);
+  return run_lidef(
+      "certify " + quote(model) + " --coeffs " + quote(coeffs) + " --out " + quote(out) + " " + opts, output);
 }
 
 nlohmann::json read_json(const std::string& path) {
@@ -70,7 +74,8 @@ nlohmann::json read_json(const std::string& path) {
 }
 
 // Strict CSV: header, then rows of `columns` numeric fields.
-std::vector<std::vector<double>> read_csv(const std::string& path, const std::string& header, size_t columns) {
+std::vector<std::vector<double>> read_csv(const std::string& path, const std::string& header,
+                                          size_t columns) {
   std::ifstream in(path);
   EXPECT_TRUE(in.good()) << "cannot open " << path;
   std::string line;
@@ -125,7 +130,8 @@ std::vector<std::string> entries(const std::string& dir) {
   return names;
 }
 
-// ctest runs each test in its own process, several at once: seed std::rand (TempDir, run_command) per process.
+// ctest runs each test in its own process, several at once: seed std::rand (TempDir, run_command) per
+// process.
 class CertifyCli : public ::testing::Test {
  protected:
   void SetUp() override { std::srand(static_cast<unsigned>(::getpid()) * 2654435761u); }
@@ -237,7 +243,8 @@ TEST_F(CertifyCli, VtkFilesParseWithTheDocumentedArrays) {
   // Identity: σ1 = σ3 = det J = 1 and E_iso = 6 wherever the point is inside the cage; NaN outside.
   vtkDataArray *s1 = im->GetPointData()->GetArray("sigma1"), *s3 = im->GetPointData()->GetArray("sigma3"),
                *det = im->GetPointData()->GetArray("detJ"), *e = im->GetPointData()->GetArray("E_iso"),
-               *in = im->GetPointData()->GetArray("inside_cage"), *ins = im->GetPointData()->GetArray("inside_sampled");
+               *in = im->GetPointData()->GetArray("inside_cage"),
+               *ins = im->GetPointData()->GetArray("inside_sampled");
   long inside = 0, sampled = 0;
   for (vtkIdType i = 0; i < np; ++i) {
     if (ins->GetTuple1(i) == 1) {
@@ -307,7 +314,8 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
                       &output),
             0)
       << output;
-  EXPECT_NE(output.find("bound violations 0, samples with sigma3 <= 0 in certified leaves 0"), std::string::npos)
+  EXPECT_NE(output.find("bound violations 0, samples with sigma3 <= 0 in certified leaves 0"),
+            std::string::npos)
       << output;
   const auto rows = read_csv(tmp / "cert/verify.csv", kVerifyHeader, 12);
   ASSERT_EQ(static_cast<long>(rows.size()), leaves);
@@ -333,17 +341,17 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
   }
 
   // Without gnuplot: a warning, the script and data still written, no (stale) PNG; --out elsewhere.
-  ASSERT_EQ(lidef::test::run_command("LIDEF_GNUPLOT=none " + quote(lidef::test::cli()) + " verify " + quote(ball()) +
-                                         " --coeffs " + quote(tmp / "y.txt") + " --certificate " +
-                                         quote(tmp / "cert/certificate.json") + " --samples-per-voxel 2 --out " +
-                                         quote(tmp / "v2"),
+  ASSERT_EQ(lidef::test::run_command("LIDEF_GNUPLOT=none " + quote(lidef::test::cli()) + " verify " +
+                                         quote(ball()) + " --coeffs " + quote(tmp / "y.txt") +
+                                         " --certificate " + quote(tmp / "cert/certificate.json") +
+                                         " --samples-per-voxel 2 --out " + quote(tmp / "v2"),
                                      &output),
             0)
       << output;
   EXPECT_NE(output.find("warning"), std::string::npos) << output;
   EXPECT_NE(output.find("gnuplot"), std::string::npos) << output;
-  EXPECT_EQ(entries(tmp / "v2"), (std::vector<std::string>{"verify.csv", "verify_plot.dat", "verify_plot.gp",
-                                                           "violations.csv"}));
+  EXPECT_EQ(entries(tmp / "v2"),
+            (std::vector<std::string>{"verify.csv", "verify_plot.dat", "verify_plot.gp", "violations.csv"}));
 }
 
 TEST_F(VerifyCli, UnderstatedLipschitzConstantsAreCaught) {
@@ -351,7 +359,8 @@ TEST_F(VerifyCli, UnderstatedLipschitzConstantsAreCaught) {
   write_coeffs(tmp / "y.txt", perturbed(ball(), 0.003, 3));
   std::string output;
   // (Verified or not, a certificate's bounds must hold: verify does not need a certified map.)
-  const int rc = certify(ball(), tmp / "y.txt", tmp / "cert", &output, "--grid 0 --max-depth 0 --voxels 600");
+  const int rc =
+      certify(ball(), tmp / "y.txt", tmp / "cert", &output, "--grid 0 --max-depth 0 --samples 600");
   ASSERT_TRUE(rc == 0 || rc == 1) << output;
   // Forge the certificate: L / 1000 on every leaf, with a matching hash so that verify accepts the files.
   const std::string csv_path = tmp / "cert/voxels.csv";
@@ -396,7 +405,7 @@ TEST_F(VerifyCli, UnderstatedLipschitzConstantsAreCaught) {
 TEST_F(VerifyCli, MismatchedInputsAreRefused) {
   TempDir tmp;
   std::string output;
-  ASSERT_EQ(certify(ball(), "identity", tmp / "cert", &output, "--grid 0 --voxels 300"), 0) << output;
+  ASSERT_EQ(certify(ball(), "identity", tmp / "cert", &output, "--grid 0 --samples 300"), 0) << output;
   write_coeffs(tmp / "other.txt", perturbed(ball(), 0.001, 5));
   const std::string cert = tmp / "cert/certificate.json";
   const std::string beam = lidef::test::project_data() + "/models/beam";
@@ -404,11 +413,13 @@ TEST_F(VerifyCli, MismatchedInputsAreRefused) {
     std::string name, args, culprit;
   };
   const std::vector<Case> cases = {
-      {"other coefficients", quote(ball()) + " --coeffs " + quote(tmp / "other.txt") + " --certificate " + quote(cert), cert},
+      {"other coefficients",
+       quote(ball()) + " --coeffs " + quote(tmp / "other.txt") + " --certificate " + quote(cert), cert},
       {"other model", quote(beam) + " --coeffs identity --certificate " + quote(cert), cert},
       {"missing certificate", quote(ball()) + " --coeffs identity --certificate " + quote(tmp / "none.json"),
        tmp / "none.json"},
-      {"negative samples", quote(ball()) + " --coeffs identity --certificate " + quote(cert) + " --samples-per-voxel -1",
+      {"negative samples",
+       quote(ball()) + " --coeffs identity --certificate " + quote(cert) + " --samples-per-voxel -1",
        "--samples-per-voxel"},
   };
   for (const Case& c : cases) {
@@ -417,8 +428,8 @@ TEST_F(VerifyCli, MismatchedInputsAreRefused) {
     EXPECT_NE(output.find(c.culprit), std::string::npos) << output;
   }
   // None of them wrote anything.
-  EXPECT_EQ(entries(tmp / "cert"), (std::vector<std::string>{"certificate.json", "leaves.vtu", "timings.json",
-                                                             "voxels.csv"}));
+  EXPECT_EQ(entries(tmp / "cert"),
+            (std::vector<std::string>{"certificate.json", "leaves.vtu", "timings.json", "voxels.csv"}));
 }
 
 TEST_F(CertifyCli, BadInputsFailWithoutWritingAnything) {
@@ -427,7 +438,8 @@ TEST_F(CertifyCli, BadInputsFailWithoutWritingAnything) {
   std::ostringstream id_text;
   write_coefficients(id_text, cage.identity_coefficients());
   const std::string rows = id_text.str();
-  write_text(tmp / "wrong_rows.txt", rows.substr(0, rows.rfind('\n', rows.size() - 2) + 1));  // last row dropped
+  write_text(tmp / "wrong_rows.txt",
+             rows.substr(0, rows.rfind('\n', rows.size() - 2) + 1));  // last row dropped
   write_text(tmp / "nan.txt", "0 nan 0\n" + rows.substr(rows.find('\n') + 1));
   struct Case {
     std::string name, model, coeffs, extra, culprit;
@@ -449,7 +461,8 @@ TEST_F(CertifyCli, BadInputsFailWithoutWritingAnything) {
     const std::string out = tmp / ("out_" + c.name);
     std::string output;
     EXPECT_EQ(certify(c.model, c.coeffs, out, &output, c.extra), 2) << output;
-    EXPECT_NE(output.find(c.culprit), std::string::npos) << "message does not name " << c.culprit << ":\n" << output;
+    EXPECT_NE(output.find(c.culprit), std::string::npos) << "message does not name " << c.culprit << ":\n"
+                                                         << output;
     EXPECT_NE(output.find("error"), std::string::npos) << output;
     EXPECT_FALSE(fs::exists(out)) << out;
   }
@@ -462,7 +475,7 @@ TEST_F(CertifyCli, BadInputsFailWithoutWritingAnything) {
   EXPECT_EQ(read_text(tmp / "keep/certificate.json"), "previous\n");
   // A file where the folder should be.
   write_text(tmp / "a_file", "x");
-  EXPECT_EQ(certify(ball(), "identity", tmp / "a_file", &output, "--voxels 300 --grid 0"), 2) << output;
+  EXPECT_EQ(certify(ball(), "identity", tmp / "a_file", &output, "--samples 300 --grid 0"), 2) << output;
   EXPECT_NE(output.find(tmp / "a_file"), std::string::npos) << output;
   EXPECT_EQ(read_text(tmp / "a_file"), "x");
 }
@@ -470,11 +483,12 @@ TEST_F(CertifyCli, BadInputsFailWithoutWritingAnything) {
 TEST_F(CertifyCli, HelpDescribesTheOutputs) {
   std::string output;
   EXPECT_EQ(run_lidef("certify --help", &output), 0) << output;
-  for (const char* s : {"--coeffs", "--voxel-side", "--max-depth", "--bound", "--grid", "certificate.json", "voxels.csv",
-                        "leaves.vtu", "field.vti", "Exit code"})
+  for (const char* s : {"--coeffs", "--voxel-side", "--max-depth", "--bound", "--grid", "certificate.json",
+                        "voxels.csv", "leaves.vtu", "field.vti", "Exit code"})
     EXPECT_NE(output.find(s), std::string::npos) << s << "\n" << output;
   EXPECT_EQ(run_lidef("verify --help", &output), 0) << output;
-  for (const char* s : {"--certificate", "--samples-per-voxel", "--seed", "verify.csv", "violations.csv", "gnuplot"})
+  for (const char* s :
+       {"--certificate", "--samples-per-voxel", "--seed", "verify.csv", "violations.csv", "gnuplot"})
     EXPECT_NE(output.find(s), std::string::npos) << s << "\n" << output;
 }
 
@@ -525,7 +539,8 @@ TEST_F(CertificateFiles, RoundTripIsExactIncludingNonFiniteValues) {
   EXPECT_EQ(read_text(tmp / "certificate.json"), read_text(tmp2 / "certificate.json"));
   EXPECT_EQ(read_text(tmp / "voxels.csv"), read_text(tmp2 / "voxels.csv"));
 
-  // A leaf count that disagrees with voxels.csv, a bad header and a non-number are refused with the file named.
+  // A leaf count that disagrees with voxels.csv, a bad header and a non-number are refused with the file
+  // named.
   const std::string json = read_text(tmp / "certificate.json");
   write_text(tmp / "voxels.csv", read_text(tmp / "voxels.csv") + "0,0,0,0.1,0,1,1,1,1\n");
   EXPECT_THROW(read_certificate_json(tmp / "certificate.json"), InputError);  // hash differs
@@ -550,8 +565,8 @@ TEST_F(CertificateFiles, RoundTripIsExactIncludingNonFiniteValues) {
   EXPECT_THROW(read_certificate_json(tmp / "bad.json"), InputError);
 }
 
-// The published models: the identity certifies on each (animal has cage self-intersections: a warning, and the
-// sampling keeps its voxels out of the pockets, so it must still certify).
+// The published models: the identity certifies on each (animal has cage self-intersections: a warning, and
+// the sampling keeps its voxels out of the pockets, so it must still certify).
 class SharedModelCertify : public ::testing::TestWithParam<const char*> {
  protected:
   void SetUp() override { std::srand(static_cast<unsigned>(::getpid()) * 2654435761u); }
@@ -563,7 +578,7 @@ TEST_P(SharedModelCertify, IdentityIsCertified) {
   std::string output;
   const std::string model = lidef::test::shared_model(GetParam());
   ASSERT_EQ(run_lidef("certify " + quote(model) + " --coeffs identity --out " + quote(tmp / "out") +
-                          " --voxels 3000 --grid 0",
+                          " --samples 3000 --grid 0",
                       &output),
             0)
       << output;

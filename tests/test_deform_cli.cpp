@@ -1,6 +1,6 @@
 // End-to-end tests of `lidef deform` (the real binary): the output files and their consistency, an
 // independent re-certification (and dense verification) of the written map, re-running the written scenario,
-// determinism, Ctrl-C (through the LIDEF_TEST_INTERRUPT_AFTER hook, which raises a real SIGINT), refused
+// determinism, Ctrl-C (through the test_interrupt_after hook, which raises a real SIGINT), refused
 // inputs (exit 2, nothing written), parameter precedence (command line over scenario) and --help. The
 // project's beam with a small problem (4000 samples, 60 reduced coefficients per coordinate) keeps each run
 // at about two seconds; the DeformShared suite runs the paper's scenarios from ../shared/data with the
@@ -252,9 +252,9 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
   EXPECT_EQ(sc["parameters"], nlohmann::json::parse(R"({"reduced_dof": 60, "samples": 4000})"));
 
   // A separate certification of the written map, from coefficients.txt by `lidef certify` (full coefficients,
-  // not the solver's reduced ones; --voxels 4000 gives the solver's sampling), then dense sampling of it.
+  // not the solver's reduced ones; --samples 4000 gives the solver's sampling), then dense sampling of it.
   ASSERT_EQ(run_lidef("certify " + quote(beam()) + " --coeffs " + quote(out + "/coefficients.txt") +
-                          " --out " + quote(tmp / "cert") + " --voxels 4000 --grid 0",
+                          " --out " + quote(tmp / "cert") + " --samples 4000 --grid 0",
                       &output),
             0)
       << output;
@@ -315,7 +315,8 @@ TEST_F(DeformCli, InterruptWritesTheLastCertifiedMap) {
   const std::string cache = tmp / "cache";
   std::string output;
   // The hook raises SIGINT after iteration 2, through the same handler as a Ctrl-C.
-  ASSERT_EQ(deform(beam_bend(), tmp / "int", cache, kSmall, &output, "LIDEF_TEST_INTERRUPT_AFTER=2"), 1)
+  ASSERT_EQ(
+      deform(beam_bend(), tmp / "int", cache, std::string(kSmall) + " --test-interrupt-after 2", &output), 1)
       << output;
   EXPECT_EQ(entries(tmp / "int"), kOutputs);
   const nlohmann::json s = read_json(tmp / "int/summary.json");
@@ -339,7 +340,7 @@ TEST_F(DeformCli, InterruptWritesTheLastCertifiedMap) {
 
   // An interrupted map certifies independently as well.
   ASSERT_EQ(run_lidef("certify " + quote(beam()) + " --coeffs " + quote(tmp / "int/coefficients.txt") +
-                          " --out " + quote(tmp / "cert") + " --voxels 4000 --grid 0",
+                          " --out " + quote(tmp / "cert") + " --samples 4000 --grid 0",
                       &output),
             0)
       << output;

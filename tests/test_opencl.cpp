@@ -36,7 +36,7 @@ std::shared_ptr<const ComputeBackend> opencl(std::string* why = nullptr) {
   static const std::shared_ptr<const ComputeBackend> b = []() -> std::shared_ptr<const ComputeBackend> {
     try {
       static lidef::test::TempDir cache;
-      return make_opencl_backend(opencl_device_filter_from_env(), cache.str());
+      return make_opencl_backend({opencl_device_filter_from_env()}, cache.str());
     } catch (const OpenCLError& e) {
       reason = e.what();
       return nullptr;
@@ -48,10 +48,10 @@ std::shared_ptr<const ComputeBackend> opencl(std::string* why = nullptr) {
 
 // A second backend on the same device that takes the GPU code paths even on a CPU device.
 std::shared_ptr<const ComputeBackend> as_gpu_backend(const std::string& cache) {
-  setenv("LIDEF_OPENCL_AS_GPU", "1", 1);
-  auto b = make_opencl_backend(opencl_device_filter_from_env(), cache);
-  unsetenv("LIDEF_OPENCL_AS_GPU");
-  return b;
+  OpenCLOptions options;
+  options.device = opencl_device_filter_from_env();
+  options.gpu_layout = true;
+  return make_opencl_backend(options, cache);
 }
 
 #define REQUIRE_OPENCL()                                                                           \
@@ -117,7 +117,7 @@ TEST(OpenCL, DevicesAreListedWithoutThrowing) {
 }
 
 // Both ways of forming the Hessian product: on the host BLAS (what a CPU device such as PoCL does) and on the
-// device with CLBlast and the transposed layouts (what a GPU does; forced here by LIDEF_OPENCL_AS_GPU).
+// device with CLBlast and the transposed layouts (what a GPU does; forced here by OpenCLOptions::gpu_layout).
 class OpenCLEnergy : public ::testing::TestWithParam<bool> {};
 
 TEST_P(OpenCLEnergy, KernelsMatchCpu) {
@@ -412,8 +412,8 @@ TEST(OpenCL, CertificatesMatchCpu) {
 // directions differ by float rounding: the same verdicts, coefficients to ~1e-5.
 TEST(OpenCL, SolverMatchesCpu) {
   REQUIRE_OPENCL();
-  for (const std::string precision : {"double", "single"}) {
-    SCOPED_TRACE(precision);
+  for (const HessianPrecision precision : {HessianPrecision::kDouble, HessianPrecision::kSingle}) {
+    SCOPED_TRACE(to_string(precision));
     DeformParams p;
     p.samples = 4000;
     p.reduced_dof = 60;
@@ -424,10 +424,11 @@ TEST(OpenCL, SolverMatchesCpu) {
     EXPECT_NE(gpu.backend().name().find("opencl"), std::string::npos);
     cpu.set_handles(beam().sources, beam().targets);
     gpu.set_handles(beam().sources, beam().targets);
-    const double tol = precision == "double" ? 1e-9 : 1e-5;
+    const double tol = precision == HessianPrecision::kDouble ? 1e-9 : 1e-5;
     const double diff = expect_same_solves(cpu, gpu, tol);
     EXPECT_LT(diff, tol);
-    std::cout << "[ parity   ] " << precision << ": " << cpu.history().size() << " iterations, relative "
+    std::cout << "[ parity   ] " << to_string(precision) << ": " << cpu.history().size()
+              << " iterations, relative "
               << "coefficient difference " << diff << "\n";
   }
 }
@@ -459,18 +460,18 @@ TEST(OpenCLCli, BackendFailuresAreClearAndAutoFallsBack) {
   lidef::test::TempDir out;
   std::string log;
   // No device matches the filter: --backend opencl refuses (exit 2, nothing written) and says why ...
-  int rc = lidef::test::run_command("LIDEF_OPENCL_DEVICE=no-such-device " + lidef::test::cli() + " deform " +
-                                        beam_scenario_args() + " --backend opencl --quiet --out " +
+  int rc = lidef::test::run_command(lidef::test::cli() + " deform " + beam_scenario_args() +
+                                        " --opencl-device no-such-device --backend opencl --quiet --out " +
                                         out.str() + "/a",
                                     &log);
   EXPECT_EQ(rc, 2) << log;
   EXPECT_NE(log.find("no-such-device"), std::string::npos) << log;
   EXPECT_FALSE(std::filesystem::exists(out / "a"));
   // ... and auto says so and runs on the CPU.
-  rc =
-      lidef::test::run_command("LIDEF_OPENCL_DEVICE=no-such-device " + lidef::test::cli() + " deform " +
-                                   beam_scenario_args() + " --backend auto --quiet --out " + out.str() + "/b",
-                               &log);
+  rc = lidef::test::run_command(lidef::test::cli() + " deform " + beam_scenario_args() +
+                                    " --opencl-device no-such-device --backend auto --quiet --out " +
+                                    out.str() + "/b",
+                                &log);
   EXPECT_LE(rc, 1) << log;
   EXPECT_NE(log.find("backend: cpu (auto: no usable OpenCL device"), std::string::npos) << log;
   // No OpenCL platform at all (the ICD loader finds no vendor files).
@@ -494,8 +495,8 @@ TEST(OpenCLCli, KernelBuildFailureIsReportedWithTheCompilerLog) {
   lidef::test::TempDir out;
   std::string log;
   // Test hook: appends a line that does not compile to the kernel source.
-  const int rc = lidef::test::run_command("LIDEF_TEST_BREAK_KERNELS=1 " + lidef::test::cli() + " deform " +
-                                              beam_scenario_args() + " --backend opencl --quiet --out " +
+  const int rc = lidef::test::run_command(lidef::test::cli() + " deform " + beam_scenario_args() +
+                                              " --test-break-kernels true --backend opencl --quiet --out " +
                                               out.str() + "/a",
                                           &log);
   EXPECT_EQ(rc, 2) << log;
@@ -510,7 +511,7 @@ TEST(OpenCLCli, CertifyBackendsAgree) {
   std::string log;
   for (const char* b : {"cpu", "opencl"}) {
     const int rc = lidef::test::run_command(lidef::test::cli() + " certify " + model +
-                                                " --coeffs identity --voxels 3000 --grid 0 --backend " + b +
+                                                " --coeffs identity --samples 3000 --grid 0 --backend " + b +
                                                 " --out " + out.str() + "/" + b,
                                             &log);
     ASSERT_EQ(rc, 0) << log;
@@ -539,7 +540,7 @@ TEST_P(OpenCLShared, SameStepsVerdictsAndCoefficients) {
   const Scenario sc = read_scenario(path);
   const Model model = load_model(sc.model_dir);
   DeformParams p = sc.params;
-  p.hessian_precision = "double";
+  p.hessian_precision = HessianPrecision::kDouble;
   // The first iterations only: on PoCL with 2 cores each costs up to seconds; docs/benchmarks.md has whole
   // solves (on the H100: every iteration of every scenario the same on both backends).
   p.max_iterations = std::string(GetParam()) == "bar_twist180" ? 2 : 4;
@@ -570,14 +571,15 @@ TEST(OpenCLCli, DeviceTooSmallIsClearAndAutoFallsBack) {
   lidef::test::TempDir out;
   std::string log;
   // Test hook: the device allows at most 1 MB per buffer, less than the reduced basis gradients need.
-  const std::string env = "LIDEF_TEST_OPENCL_MAX_ALLOC=1000000 ";
-  int rc = lidef::test::run_command(env + lidef::test::cli() + " deform " + beam_scenario_args() +
+  const std::string env = "";
+  const std::string cap = " --test-opencl-max-alloc 1000000";
+  int rc = lidef::test::run_command(env + lidef::test::cli() + " deform " + beam_scenario_args() + cap +
                                         " --backend opencl --quiet --out " + out.str() + "/a",
                                     &log);
   EXPECT_EQ(rc, 2) << log;
   EXPECT_NE(log.find("the device allows at most"), std::string::npos) << log;
   EXPECT_FALSE(std::filesystem::exists(out / "a"));
-  rc = lidef::test::run_command(env + lidef::test::cli() + " deform " + beam_scenario_args() +
+  rc = lidef::test::run_command(env + lidef::test::cli() + " deform " + beam_scenario_args() + cap +
                                     " --backend auto --quiet --out " + out.str() + "/b",
                                 &log);
   EXPECT_LE(rc, 1) << log;

@@ -81,7 +81,13 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "direction_retries",
                                              "max_weight_resets",  // weighting
                                              "threads",
-                                             "backend"};
+                                             "backend",
+                                             "opencl_device",
+                                             "opencl_gpu_layout",
+                                             "trace_line_search",  // execution
+                                             "test_interrupt_after",
+                                             "test_break_kernels",
+                                             "test_opencl_max_alloc"};  // testing
   ASSERT_EQ(expected.size(), table.size());
   for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(table[i].name, expected[i]);
   EXPECT_TRUE(std::get<int DeformParams::*>(find_param("max_depth")->member) == &DeformParams::max_depth);
@@ -89,7 +95,7 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
               &DeformParams::lambda_p2p);
   EXPECT_TRUE(std::get<long DeformParams::*>(find_param("max_refined")->member) ==
               &DeformParams::max_refined);
-  EXPECT_TRUE(std::get<std::string DeformParams::*>(find_param("bound")->member) == &DeformParams::bound);
+  EXPECT_TRUE(std::get<LipschitzBound DeformParams::*>(find_param("bound")->member) == &DeformParams::bound);
   EXPECT_EQ(find_param("lamda_p2p"), nullptr);
 }
 
@@ -132,7 +138,7 @@ TEST(DeformParams, SetParamAcceptsEachType) {
   EXPECT_EQ(p.lambda_p2p, 250.0);
   EXPECT_EQ(p.max_refined, 123456789L);
   EXPECT_FALSE(p.dynamic_weighting);
-  EXPECT_EQ(p.bound, "first");
+  EXPECT_EQ(p.bound, LipschitzBound::kFirstOrder);
   EXPECT_EQ(p.safety, 1.25);
   // Range ends are inclusive.
   set_param(p, "max_depth", json(20), "f");
@@ -189,7 +195,7 @@ TEST(DeformParams, SetParamRefusesOutOfRange) {
   m = input_error([&] { validate_params(p, "here"); });
   EXPECT_NE(m.find("here: parameter 'lambda_smooth'"), std::string::npos) << m;
   p = DeformParams();
-  p.bound = "fist";
+  p.bound = static_cast<LipschitzBound>(7);  // an enum without a name, as only code can set it
   EXPECT_THROW(validate_params(p, "here"), InputError);
   p = DeformParams();
   p.armijo = std::nan("");
@@ -298,7 +304,7 @@ TEST(Scenario, ReadsParametersInFileOrder) {
   EXPECT_EQ(s.num_handles(), 2);
   EXPECT_EQ(s.targets(1, 2), -0.25);
   EXPECT_EQ(s.params.max_depth, 4);
-  EXPECT_EQ(s.params.bound, "first");
+  EXPECT_EQ(s.params.bound, LipschitzBound::kFirstOrder);
   EXPECT_EQ(s.params.lambda_p2p, 1e3);
   EXPECT_EQ(s.params.lambda_smooth, 0.1);
   EXPECT_EQ(s.params_given, (std::vector<std::string>{"max_depth", "bound", "lambda_p2p"}));
@@ -418,7 +424,7 @@ TEST(Scenario, WriteReadRoundTrip) {
   s.targets << std::nextafter(1.0, 2.0), -1.0 / 7.0, 3, 0.3, 0.7, 2.0 / 3.0, 1e-7, -1e5, 42;
   s.params.lambda_p2p = 1.0 / 3.0;
   s.params.max_depth = 8;
-  s.params.bound = "first";
+  s.params.bound = LipschitzBound::kFirstOrder;
   s.params.dynamic_weighting = false;
   s.params.max_refined = 1000000000L;
   const std::string f = (d.tmp.path / "scenarios" / "rt.json").string();

@@ -74,7 +74,8 @@ struct InteractiveSession::Engine {
   Scenario scenario;       // what the engine runs (restored into scenario_ when a command fails)
 };
 
-InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_error, BackendFactory backends)
+InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_error,
+                                       BackendFactory backends)
     : on_frame_(std::move(on_frame)),
       on_error_(std::move(on_error)),
       backends_(std::move(backends)),
@@ -397,7 +398,7 @@ void InteractiveSession::run() {
     else
       omp_set_num_threads(omp_get_num_procs());
     std::string msg;
-    auto backend = backends_(params.backend, &msg);
+    auto backend = backends_(params, &msg);
     auto log = [&](const std::string& line) {
       E.status = "preprocessing: " + line;
       publish(make_frame());
@@ -407,7 +408,7 @@ void InteractiveSession::run() {
       solver = std::make_unique<DeformationSolver>(model->cage, params, default_cache_dir(), log, backend);
     } catch (const Error&) {
       // "auto" chose a device that cannot hold this problem: the CPU takes it.
-      if (params.backend != "auto" || backend->is_cpu()) throw;
+      if (params.backend != BackendKind::kAuto || backend->is_cpu()) throw;
       backend = cpu_backend();
       solver = std::make_unique<DeformationSolver>(model->cage, params, default_cache_dir(), log, backend);
     }

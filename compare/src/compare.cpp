@@ -29,12 +29,6 @@ double seconds_since(Clock::time_point t0) {
 }
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-std::string g(double x, int prec = 4) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.*g", prec, x);
-  return buf;
-}
-
 // E_iso − 6 (NaN where det J ≤ 0, so that means over a mesh stay finite; the inverted count says it) and det
 // J.
 void add_jacobian_fields(const Mat3& J, double& e_iso, double& det_j) {
@@ -84,25 +78,6 @@ double min_sigma3_at(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& 
   return mn;
 }
 
-SamplingParams sampling_params_of(const DeformParams& p) {
-  SamplingParams sp;
-  sp.target_count = p.samples;
-  sp.voxel_side = p.voxel_side;
-  sp.safety = p.safety;
-  sp.hessian_fraction = p.hessian_fraction;
-  return sp;
-}
-
-CertifyParams certify_params_of(const DeformParams& p) {
-  CertifyParams cp;
-  cp.bound = lipschitz_bound_from_string(p.bound);
-  cp.max_depth = p.max_depth;
-  cp.max_refined_voxels = p.max_refined;
-  cp.stop_on_failure = true;
-  cp.keep_leaves = false;
-  return cp;
-}
-
 // State shared by the methods of one run: the harmonic basis and lidef's voxel sampling, built when first
 // needed.
 struct Shared {
@@ -137,10 +112,10 @@ void run_lidef(Shared& s, MethodResult& r) {
   const SolveResult res = solver.solve([&](const IterationRecord& it) {
     log << it.iteration << ',' << format_double(it.terms.total) << ',' << format_double(it.step) << ','
         << (it.certified ? 1 : 0) << ',' << format_double(it.min_lower_bound) << ','
-        << format_double(it.max_handle_error) << ',' << g(it.ms_total, 6) << "\n";
-    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.terms.total, 7) + "  step " +
-                        g(it.step, 3) + "  handle err " + g(it.max_handle_error, 3) + "  " +
-                        g(it.ms_total, 4) + " ms");
+        << format_double(it.max_handle_error) << ',' << format_g(it.ms_total, 6) << "\n";
+    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + format_g(it.terms.total, 7) + "  step " +
+                        format_g(it.step, 3) + "  handle err " + format_g(it.max_handle_error, 3) + "  " +
+                        format_g(it.ms_total, 4) + " ms");
     return true;
   });
   r.seconds = res.seconds;
@@ -215,10 +190,10 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
     log << it.iteration << ',' << format_double(it.energy) << ',' << format_double(it.e_dis) << ','
         << format_double(it.e_p2p) << ',' << format_double(it.newton_decrement) << ','
         << format_double(it.direction_norm) << ',' << format_double(it.step) << ',' << it.halvings << ','
-        << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
-    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  step " +
-                        g(it.step, 3) + "  handle err " + g(it.max_handle_error, 3) + "  " + g(it.ms, 4) +
-                        " ms");
+        << format_double(it.max_handle_error) << ',' << format_g(it.ms, 6) << "\n";
+    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + format_g(it.energy, 7) + "  step " +
+                        format_g(it.step, 3) + "  handle err " + format_g(it.max_handle_error, 3) + "  " +
+                        format_g(it.ms, 4) + " ms");
     return true;
   });
   r.seconds = res.seconds;
@@ -278,10 +253,11 @@ void run_vhm(Shared& s, MethodResult& r) {
   const VhmResult res = solver.solve([&](const VhmIteration& it) {
     log << it.iteration << ',' << format_double(it.energy) << ',' << format_double(it.e_rigid) << ','
         << format_double(it.e_smooth) << ',' << format_double(it.e_p2p) << ','
-        << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
+        << format_double(it.max_handle_error) << ',' << format_g(it.ms, 6) << "\n";
     if (it.iteration <= 3 || it.iteration % 50 == 0)
-      s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  handle err " +
-                          g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
+      s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + format_g(it.energy, 7) +
+                          "  handle err " + format_g(it.max_handle_error, 3) + "  " + format_g(it.ms, 4) +
+                          " ms");
     return true;
   });
   r.seconds = res.seconds;
@@ -297,7 +273,8 @@ void run_vhm(Shared& s, MethodResult& r) {
   r.min_sigma3 = min_sigma3_at(basis, solver.coefficients(), vs.centers);
   if (r.min_sigma3 > 0) {
     OctreeCertifier certifier(s.model.cage, vs);
-    const Certificate cert = certifier.certify(solver.coefficients(), certify_params_of(s.sc.params));
+    const Certificate cert =
+        certifier.certify(solver.coefficients(), certify_params_of(s.sc.params, true, false));
     r.certified = cert.certified ? 1 : 0;
     if (cert.certified) r.min_sigma3_bound = cert.min_lower_bound;
   } else {
@@ -317,10 +294,11 @@ void run_pwl_tri(Shared& s, MethodResult& r) {
   log << "iteration,energy_after_rotations,energy,max_handle_error,ms\n";
   const PwlTriResult res = solver.solve([&](const PwlTriIteration& it) {
     log << it.iteration << ',' << format_double(it.energy_after_local) << ',' << format_double(it.energy)
-        << ',' << format_double(it.max_handle_error) << ',' << g(it.ms, 6) << "\n";
+        << ',' << format_double(it.max_handle_error) << ',' << format_g(it.ms, 6) << "\n";
     if (it.iteration <= 3 || it.iteration % 50 == 0)
-      s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + g(it.energy, 7) + "  handle err " +
-                          g(it.max_handle_error, 3) + "  " + g(it.ms, 4) + " ms");
+      s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + format_g(it.energy, 7) +
+                          "  handle err " + format_g(it.max_handle_error, 3) + "  " + format_g(it.ms, 4) +
+                          " ms");
     return true;
   });
   r.seconds = res.seconds;
@@ -404,7 +382,7 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
       r.volume_ratio = mesh_volume(r.V, model.mesh.F) / rest_volume;
       r.crease_deg = crease_measure(model.mesh, r.V);
       s.say(m, std::string(r.converged ? "converged" : "stopped") + " (" + r.stop + ") after " +
-                   std::to_string(r.iterations) + " iterations, " + g(r.seconds, 3) + " s");
+                   std::to_string(r.iterations) + " iterations, " + format_g(r.seconds, 3) + " s");
     } catch (const std::exception& e) {
       r = MethodResult();
       r.method = m;
@@ -450,7 +428,7 @@ namespace {
 std::string num(double x) {
   if (std::isnan(x)) return "";
   if (std::isinf(x)) return x > 0 ? "inf" : "-inf";
-  return g(x, 6);
+  return format_g(x, 6);
 }
 std::string csv_quote(const std::string& s) {
   std::string q = "\"";
@@ -487,7 +465,7 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
 std::string comparison_table_md(const std::vector<MethodResult>& rows, const Scenario& sc) {
   std::ostringstream s;
   auto cell = [](double x, int p = 3) {
-    return std::isnan(x) ? std::string("—") : std::isinf(x) ? std::string("∞") : g(x, p);
+    return std::isnan(x) ? std::string("—") : std::isinf(x) ? std::string("∞") : format_g(x, p);
   };
   s << "# " << sc.name << " — comparison (paper Table 1)\n\n"
     << "| method | DOF | time (s) | time / lidef | iterations | status | max handle error | mean E_iso−6 | "

@@ -9,6 +9,7 @@
 #include <map>
 
 #include "lidef/errors.h"
+#include "lidef/geometry.h"
 
 namespace lidef {
 
@@ -22,40 +23,6 @@ struct SrArapSolver::Impl {
   Eigen::CholmodSupernodalLLT<SpMat, Eigen::Lower> chol;
   double rho = 0;
 };
-
-namespace {
-// Closest point to p on triangle (a, b, c); returns barycentric coordinates (Ericson, Real-Time Collision
-// Detection, 5.1.5).
-Vec3 closest_bary(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const double v = d1 / (d1 - d3);
-    return {1 - v, v, 0};
-  }
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const double w = d2 / (d2 - d6);
-    return {1 - w, 0, w};
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return {0, 1 - w, w};
-  }
-  const double denom = 1 / (va + vb + vc);
-  const double v = vb * denom, w = vc * denom;
-  return {1 - v - w, v, w};
-}
-}  // namespace
 
 SrArapSolver::SrArapSolver(const TriMesh& mesh, const PwlTriParams& params)
     : mesh_(mesh), params_(params), impl_(std::make_unique<Impl>()) {
@@ -105,7 +72,7 @@ void SrArapSolver::set_handles(const MatX3d& sources, const MatX3d& targets, con
     for (Eigen::Index f = 0; f < mesh_.F.rows(); ++f) {
       const Vec3 a = mesh_.V.row(mesh_.F(f, 0)), b = mesh_.V.row(mesh_.F(f, 1)),
                  c = mesh_.V.row(mesh_.F(f, 2));
-      const Vec3 l = closest_bary(p, a, b, c);
+      const Vec3 l = closest_point_on_triangle(p, a, b, c).barycentric;
       const double d = (l(0) * a + l(1) * b + l(2) * c - p).squaredNorm();
       if (d < best) {
         best = d;

@@ -1,5 +1,6 @@
 #include "lidef/compute_backend.h"
 
+#include "lidef/deform_params.h"
 #include "lidef/errors.h"
 
 namespace lidef {
@@ -46,11 +47,12 @@ std::shared_ptr<const ComputeBackend> cpu_backend() {
 }
 
 BackendFactory cpu_backend_factory() {
-  return [](const std::string& which, std::string* message) -> std::shared_ptr<const ComputeBackend> {
-    if (which == "opencl") throw Error("backend 'opencl' is not available in this program (built without OpenCL)");
-    if (which != "cpu" && which != "auto")
-      throw InputError("", "unknown backend '" + which + "' (expected cpu, opencl or auto)");
-    if (message) *message = which == "cpu" ? "backend: cpu" : "backend: cpu (auto: built without OpenCL)";
+  return [](const DeformParams& params, std::string* message) -> std::shared_ptr<const ComputeBackend> {
+    if (params.backend == BackendKind::kOpenCL)
+      throw Error("backend 'opencl' is not available in this program (built without OpenCL)");
+    if (message)
+      *message =
+          params.backend == BackendKind::kCpu ? "backend: cpu" : "backend: cpu (auto: built without OpenCL)";
     return cpu_backend();
   };
 }

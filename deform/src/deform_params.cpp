@@ -11,6 +11,8 @@
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/sampling.h"
 
 namespace lidef {
 
@@ -81,22 +83,49 @@ std::vector<ParamInfo> make_table() {
       {"threads", "execution", &D::threads, 0, 1024, "OpenMP threads (0 = all cores)"},
       {"backend", "execution", &D::backend, 0, 0,
        "compute backend: \"cpu\", \"opencl\" or \"auto\" (OpenCL when a device with fp64 exists, else CPU)"},
+      {"opencl_device", "execution", &D::opencl_device, 0, 0,
+       "OpenCL device: a case-insensitive substring of \"<platform> <device>\" (\"\" = the first with fp64, "
+       "GPUs "
+       "first)"},
+      {"opencl_gpu_layout", "execution", &D::opencl_gpu_layout, 0, 0,
+       "a CPU OpenCL device (PoCL) takes the GPU code paths, to test them without a GPU"},
+      {"trace_line_search", "execution", &D::trace_line_search, 0, 0,
+       "print every line-search trial (step, energy, certificate) to stderr"},
+      // --- Test hooks: failure injection for the test suite (docs/parameters.md).
+      {"test_interrupt_after", "testing", &D::test_interrupt_after, 0, 100000,
+       "lidef deform raises SIGINT after this many iterations (0 = never)"},
+      {"test_break_kernels", "testing", &D::test_break_kernels, 0, 0,
+       "OpenCL: the kernels get a line that does not compile"},
+      {"test_opencl_max_alloc", "testing", &D::test_opencl_max_alloc, 0, 1e18,
+       "OpenCL: pretend the device allows buffers of at most this many bytes (0 = the device's limit)"},
   };
 }
 
-// Values allowed for string parameters (bound, hessian_precision, backend).
-const std::vector<std::string>* allowed_strings(const std::string& name) {
-  static const std::vector<std::string> bound = {"first", "third"};
-  static const std::vector<std::string> precision = {"single", "double"};
-  static const std::vector<std::string> backend = {"cpu", "opencl", "auto"};
-  if (name == "bound") return &bound;
-  if (name == "hessian_precision") return &precision;
-  if (name == "backend") return &backend;
-  return nullptr;
-}
+// The names of each enum parameter type, in enum order.
+template <class T>
+struct EnumNames;
+template <>
+struct EnumNames<LipschitzBound> {
+  static constexpr const char* names[] = {"first", "third"};
+};
+template <>
+struct EnumNames<HessianPrecision> {
+  static constexpr const char* names[] = {"single", "double"};
+};
+template <>
+struct EnumNames<BackendKind> {
+  static constexpr const char* names[] = {"cpu", "opencl", "auto"};
+};
 
 template <class T>
+constexpr bool is_enum_param_v = std::is_enum_v<T>;
+template <class T>
 constexpr bool is_integer_v = std::is_same_v<T, int> || std::is_same_v<T, long>;
+
+template <class T>
+std::vector<std::string> enum_names() {
+  return std::vector<std::string>(std::begin(EnumNames<T>::names), std::end(EnumNames<T>::names));
+}
 
 // Integers print as integers; a huge out-of-range value (no long long holds it) falls back to a double.
 std::string number_text(double x, bool integral) {
@@ -174,12 +203,15 @@ void check_range(const ParamInfo& p, double x, bool integral, const std::string&
                                 number_text(p.max, integral) + "]");
 }
 
-void check_string(const ParamInfo& p, const std::string& s, const std::string& where) {
-  const auto* allowed = allowed_strings(p.name);
-  if (!allowed || std::find(allowed->begin(), allowed->end(), s) != allowed->end()) return;
+// The enum value named `s`; InputError listing the names otherwise.
+template <class T>
+T enum_from_name(const ParamInfo& p, const std::string& s, const std::string& where) {
+  const std::vector<std::string> allowed = enum_names<T>();
+  for (size_t i = 0; i < allowed.size(); ++i)
+    if (allowed[i] == s) return static_cast<T>(i);
   std::string list;
-  for (size_t i = 0; i < allowed->size(); ++i)
-    list += (i == 0 ? "" : i + 1 == allowed->size() ? " or " : ", ") + ("\"" + (*allowed)[i] + "\"");
+  for (size_t i = 0; i < allowed.size(); ++i)
+    list += (i == 0 ? "" : i + 1 == allowed.size() ? " or " : ", ") + ("\"" + allowed[i] + "\"");
   throw InputError(where, "parameter " + quoted(p.name) + " must be " + list + " (got \"" + s + "\")");
 }
 
@@ -191,8 +223,10 @@ void assign(T& field, const ParamInfo& p, const json& v, const std::string& wher
     field = v.get<bool>();
   } else if constexpr (std::is_same_v<T, std::string>) {
     if (!v.is_string()) throw InputError(where, what + ": expected a string, got " + describe(v));
-    check_string(p, v.get<std::string>(), where);
     field = v.get<std::string>();
+  } else if constexpr (is_enum_param_v<T>) {
+    if (!v.is_string()) throw InputError(where, what + ": expected a string, got " + describe(v));
+    field = enum_from_name<T>(p, v.get<std::string>(), where);
   } else {
     constexpr bool integral = is_integer_v<T>;
     if (!v.is_number())
@@ -208,6 +242,19 @@ void assign(T& field, const ParamInfo& p, const json& v, const std::string& wher
   }
 }
 
+// The value as JSON: enums by name, the others as themselves.
+nlohmann::ordered_json param_value_json(const DeformParams& params, const ParamInfo& p) {
+  return std::visit(
+      [&](auto member) -> nlohmann::ordered_json {
+        using T = std::decay_t<decltype(params.*member)>;
+        if constexpr (is_enum_param_v<T>)
+          return to_string(params.*member);
+        else
+          return params.*member;
+      },
+      p.member);
+}
+
 }  // namespace
 
 const std::vector<ParamInfo>& deform_param_table() {
@@ -219,6 +266,30 @@ const ParamInfo* find_param(const std::string& name) {
   for (const ParamInfo& p : deform_param_table())
     if (name == p.name) return &p;
   return nullptr;
+}
+
+std::vector<std::string> param_choices(const ParamInfo& p) {
+  return std::visit(
+      [](auto member) -> std::vector<std::string> {
+        using T = std::decay_t<decltype(DeformParams{}.*member)>;
+        if constexpr (is_enum_param_v<T>)
+          return enum_names<T>();
+        else
+          return {};
+      },
+      p.member);
+}
+
+bool is_test_hook(const ParamInfo& p) {
+  return std::string(p.group) == "testing";
+}
+
+const char* to_string(HessianPrecision p) {
+  return EnumNames<HessianPrecision>::names[static_cast<int>(p)];
+}
+
+const char* to_string(BackendKind b) {
+  return EnumNames<BackendKind>::names[static_cast<int>(b)];
 }
 
 std::string param_flag(const ParamInfo& p) {
@@ -238,7 +309,9 @@ void set_param_from_text(DeformParams& params, const std::string& name, const st
                          const std::string& where) {
   const ParamInfo* p = find_param(name);
   json v;
-  if (p && std::holds_alternative<std::string DeformParams::*>(p->member)) {
+  if (p && !param_choices(*p).empty()) {
+    v = text;
+  } else if (p && std::holds_alternative<std::string DeformParams::*>(p->member)) {
     v = text;
   } else {
     try {
@@ -264,9 +337,14 @@ void validate_params(const DeformParams& params, const std::string& where) {
         [&](auto member) {
           using T = std::decay_t<decltype(params.*member)>;
           const T& v = params.*member;
-          if constexpr (std::is_same_v<T, std::string>) {
-            check_string(p, v, where);
-          } else if constexpr (!std::is_same_v<T, bool>) {
+          if constexpr (is_enum_param_v<T>) {
+            // Only code can set an enum to a value without a name (a cast); JSON and text are checked by
+            // name.
+            const auto i = static_cast<size_t>(v);
+            if (i >= enum_names<T>().size())
+              throw InputError(
+                  where, "parameter " + quoted(p.name) + " has no valid value (" + std::to_string(i) + ")");
+          } else if constexpr (!std::is_same_v<T, bool> && !std::is_same_v<T, std::string>) {
             const double x = static_cast<double>(v);
             if (!std::isfinite(x))
               throw InputError(where, "parameter " + quoted(p.name) + " is not a finite number");
@@ -279,8 +357,7 @@ void validate_params(const DeformParams& params, const std::string& where) {
 
 nlohmann::ordered_json params_to_json(const DeformParams& params) {
   nlohmann::ordered_json j = nlohmann::ordered_json::object();
-  for (const ParamInfo& p : deform_param_table())
-    std::visit([&](auto member) { j[p.name] = params.*member; }, p.member);
+  for (const ParamInfo& p : deform_param_table()) j[p.name] = param_value_json(params, p);
   return j;
 }
 
@@ -291,6 +368,8 @@ std::string param_value_string(const DeformParams& params, const ParamInfo& p) {
         const T& v = params.*member;
         if constexpr (std::is_same_v<T, std::string>)
           return v;
+        else if constexpr (is_enum_param_v<T>)
+          return to_string(v);
         else if constexpr (std::is_same_v<T, bool>)
           return v ? "true" : "false";
         else if constexpr (std::is_same_v<T, double>)
@@ -301,10 +380,31 @@ std::string param_value_string(const DeformParams& params, const ParamInfo& p) {
       p.member);
 }
 
+SamplingParams sampling_params_of(const DeformParams& params) {
+  SamplingParams sp;
+  sp.target_count = params.samples;
+  sp.voxel_side = params.voxel_side;
+  sp.safety = params.safety;
+  sp.hessian_fraction = params.hessian_fraction;
+  return sp;
+}
+
+CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure, bool keep_leaves) {
+  CertifyParams cp;
+  cp.bound = params.bound;
+  cp.max_depth = params.max_depth;
+  cp.max_refined_voxels = params.max_refined;
+  cp.stop_on_failure = stop_on_failure;
+  cp.keep_leaves = keep_leaves;
+  return cp;
+}
+
 bool changes_precomputation(const DeformParams& a, const DeformParams& b) {
   return a.reduced_dof != b.reduced_dof || a.samples != b.samples || a.voxel_side != b.voxel_side ||
          a.safety != b.safety || a.hessian_fraction != b.hessian_fraction || a.threads != b.threads ||
-         a.backend != b.backend;
+         a.backend != b.backend || a.opencl_device != b.opencl_device ||
+         a.opencl_gpu_layout != b.opencl_gpu_layout || a.test_break_kernels != b.test_break_kernels ||
+         a.test_opencl_max_alloc != b.test_opencl_max_alloc;
 }
 
 }  // namespace lidef

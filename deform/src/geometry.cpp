@@ -2,26 +2,38 @@
 
 namespace lidef {
 
-double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+TriangleClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
   const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return ap.squaredNorm();
+  if (d1 <= 0 && d2 <= 0) return {a, {1, 0, 0}};
   const Vec3 bp = p - b;
   const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return bp.squaredNorm();
+  if (d3 >= 0 && d4 <= d3) return {b, {0, 1, 0}};
   const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return (a + (d1 / (d1 - d3)) * ab - p).squaredNorm();
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return {a + v * ab, {1 - v, v, 0}};
+  }
   const Vec3 cp = p - c;
   const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return cp.squaredNorm();
+  if (d6 >= 0 && d5 <= d6) return {c, {0, 0, 1}};
   const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return (a + (d2 / (d2 - d6)) * ac - p).squaredNorm();
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double w = d2 / (d2 - d6);
+    return {a + w * ac, {1 - w, 0, w}};
+  }
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-    return (b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b) - p).squaredNorm();
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {b + w * (c - b), {0, 1 - w, w}};
+  }
   const double denom = 1.0 / (va + vb + vc);
   const double v = vb * denom, w = vc * denom;
-  return (a + ab * v + ac * w - p).squaredNorm();
+  return {a + ab * v + ac * w, {1 - v - w, v, w}};
+}
+
+double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  return (closest_point_on_triangle(p, a, b, c).point - p).squaredNorm();
 }
 
 }  // namespace lidef

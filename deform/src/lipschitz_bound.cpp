@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 
+#include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
 
 namespace lidef {
@@ -62,7 +63,18 @@ double grad_beta_norm2_closed_form(const Vec3& u, const Vec3& w, const Vec3& q) 
   const double m = Lu + Lw, n = Lu * Lw;
   const double c = lu.dot(lw) / n, s2 = 1 - c * c;
   const double md = m * m - d * d;
-  return (2 * m * m * d * d * c + 4 * m * m * d * d - 2 * n * d * d * s2) / (4 * M_PI * M_PI * n * n * md * md);
+  return (2 * m * m * d * d * c + 4 * m * m * d * d - 2 * n * d * d * s2) /
+         (4 * M_PI * M_PI * n * n * md * md);
+}
+
+const char* to_string(LipschitzBound b) {
+  return b == LipschitzBound::kFirstOrder ? "first" : "third";
+}
+
+LipschitzBound lipschitz_bound_from_string(const std::string& s) {
+  if (s == "first") return LipschitzBound::kFirstOrder;
+  if (s == "third") return LipschitzBound::kThirdOrder;
+  throw InputError("", "unknown bound '" + s + "' (expected 'first' or 'third')");
 }
 
 }  // namespace lidef

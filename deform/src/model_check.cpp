@@ -14,6 +14,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
+#include "lidef/number_format.h"
 #include "lidef/self_intersections.h"
 
 namespace lidef {
@@ -33,13 +34,8 @@ namespace fs = std::filesystem;
 constexpr int kMaxListed = 10;  // issues of one kind reported one by one; the rest are counted
 constexpr int kMaxInline = 5;   // element numbers quoted inside one message
 
-std::string num(double x) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", x);
-  return buf;
-}
 std::string point(const Vec3& p) {
-  return "(" + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + ")";
+  return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
 }
 std::string face_name(int t) {
   return "face " + std::to_string(t + 1);
@@ -232,7 +228,7 @@ bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckToleranc
       else if (is_degenerate(a, b, c, diag, tol, &area))
         degenerate.add(
             face_name(t), line_of(fl, t),
-            "degenerate face (area " + num(area) + "): its corners are (nearly) collinear or coincide");
+            "degenerate face (area " + format_g(area) + "): its corners are (nearly) collinear or coincide");
       std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
       std::sort(key.begin(), key.end());
       const auto [it, fresh] = seen.emplace(key, t);
@@ -382,7 +378,7 @@ bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckToleranc
     if (r.cage_volume < 0)
       r.errors.push_back(
           {file, "", 0,
-           "the cage is inverted: signed volume " + num(r.cage_volume) +
+           "the cage is inverted: signed volume " + format_g(r.cage_volume) +
                " < 0, its faces are clockwise seen from outside (reverse the vertex order of every face)"});
     else
       r.errors.push_back({file, "", 0, "the cage encloses zero volume"});
@@ -471,7 +467,7 @@ void check_mesh(const TriMesh& mesh, const MeshLines* lines, const TriMesh* cage
       double area;
       const Vec3 a = mesh.V.row(mesh.F(t, 0)), b = mesh.V.row(mesh.F(t, 1)), c = mesh.V.row(mesh.F(t, 2));
       if (is_degenerate(a, b, c, diag, tol, &area))
-        degenerate.add(face_name(t), line_of(fl, t), "degenerate face (area " + num(area) + ")");
+        degenerate.add(face_name(t), line_of(fl, t), "degenerate face (area " + format_g(area) + ")");
     }
   }
   if (!cage) return;
@@ -507,16 +503,16 @@ void check_mesh(const TriMesh& mesh, const MeshLines* lines, const TriMesh* cage
   if (!on.empty())
     r.errors.push_back({file, vertex_name(on[0]), line_of(vl, on[0]),
                         "lies on the cage at " + point(mesh.V.row(on[0]).transpose()) + " (distance " +
-                            num(dist[on[0]]) + "); the mesh must be strictly inside the cage" +
+                            format_g(dist[on[0]]) + "); the mesh must be strictly inside the cage" +
                             count_of(on, "are on the cage")});
   if (!outside.empty())
     r.errors.push_back({file, vertex_name(outside[0]), line_of(vl, outside[0]),
                         "is outside the cage at " + point(mesh.V.row(outside[0]).transpose()) +
-                            " (winding number " + num(wind[outside[0]]) + ")" +
+                            " (winding number " + format_g(wind[outside[0]]) + ")" +
                             count_of(outside, "are outside")});
   if (!pocket.empty())
     r.warnings.push_back({file, vertex_name(pocket[0]), line_of(vl, pocket[0]),
-                          "lies where the cage overlaps itself (winding number " + num(wind[pocket[0]]) +
+                          "lies where the cage overlaps itself (winding number " + format_g(wind[pocket[0]]) +
                               ")" + count_of(pocket, "are in overlaps")});
 }
 

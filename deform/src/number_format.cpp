@@ -20,6 +20,12 @@ std::string format_g(double x, int digits) {
   return buf;
 }
 
+std::string format_fixed(double x, int decimals) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, x);
+  return buf;
+}
+
 std::string hex64(std::uint64_t h) {
   char buf[20];
   std::snprintf(buf, sizeof buf, "%016" PRIx64, h);

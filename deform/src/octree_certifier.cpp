@@ -38,16 +38,6 @@ inline double hessian_norm_sym(const double* h0, int stride_a) {
 
 }  // namespace
 
-const char* to_string(LipschitzBound b) {
-  return b == LipschitzBound::kFirstOrder ? "first" : "third";
-}
-
-LipschitzBound lipschitz_bound_from_string(const std::string& s) {
-  if (s == "first") return LipschitzBound::kFirstOrder;
-  if (s == "third") return LipschitzBound::kThirdOrder;
-  throw InputError("", "unknown bound '" + s + "' (expected 'first' or 'third')");
-}
-
 struct OctreeCertifier::Impl {
   enum class Mode { kReduced, kFull, kOnTheFly } mode = Mode::kOnTheFly;
   const MatXd* reduction = nullptr;  // #V+#F by s
@@ -169,181 +159,10 @@ Certificate OctreeCertifier::certify_reduced(const Eigen::Matrix<double, Eigen::
   return run(y, yr.data(), yr.rows(), params);
 }
 
-Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_rows,
-                                 const CertifyParams& p) const {
-  const auto t_start = Clock::now();
-  if (p.max_depth < 0) throw InputError("", "max depth must be >= 0");
-  const Impl& im = *impl_;
-  const long N = sampling_.size(), E = cage_.num_edges();
-  const double side = sampling_.side, r = sampling_.radius();
-  const bool third = p.bound == LipschitzBound::kThirdOrder;
-  Certificate cert;
-  cert.bound = p.bound;
-  cert.voxel_side = side;
-  cert.voxels = static_cast<int>(N);
-
-  // --- 1. J and H at the base centers.
-  auto t0 = Clock::now();
-  VecXd scaleJ(N), scaleH(N);
-  std::vector<Mat3> Jc(N);
-  std::vector<double> device_Y;  // coefficients for the backend's base stage (empty: CPU)
-  VecXd hnorm(N);
-  const bool use_stored = im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr_ptr);
-  if (use_stored) {
-    // Coefficients as 3 contiguous columns of m doubles.
-    const long m = im.m;
-    std::vector<double> Ycols(3 * m);
-    for (long k = 0; k < m; ++k)
-      for (int a = 0; a < 3; ++a) Ycols[a * m + k] = yr_ptr ? yr_ptr[a * yr_rows + k] : y(k, a);
-    double cmax = 0;
-    for (double v : Ycols) cmax = std::max(cmax, std::abs(v));
-    for (long i = 0; i < N; ++i) {
-      scaleJ(i) = im.scale_J(i) * cmax;
-      scaleH(i) = im.scale_H(i) * cmax;
-    }
-    if (im.kernels) {
-      // The backend's base stage also forms T (step 3), so it runs there; see below.
-      device_Y = std::move(Ycols);
-    } else {
-      const double* y0 = Ycols.data();
-      const double* y1 = y0 + m;
-      const double* y2 = y1 + m;
-#pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i) {
-        const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
-        double out[9][3];
-        for (int row = 0; row < 9; ++row) {
-          const float* g = blk + row * m;
-          double a0 = 0, a1 = 0, a2 = 0;
-#pragma omp simd reduction(+ : a0, a1, a2)
-          for (long k = 0; k < m; ++k) {
-            const double gk = g[k];
-            a0 += gk * y0[k];
-            a1 += gk * y1[k];
-            a2 += gk * y2[k];
-          }
-          out[row][0] = a0;
-          out[row][1] = a1;
-          out[row][2] = a2;
-        }
-        Mat3& J = Jc[i];
-        for (int a = 0; a < 3; ++a)
-          for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];
-        double H6[3][6];
-        for (int a = 0; a < 3; ++a)
-          for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
-        hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
-      }
-    }
-  }
-  const bool on_the_fly = !use_stored;
-  // Exact J, ‖H‖ and rounding scales at any point, from the full coefficients through the differential
-  // representation (one pass over the faces per point; see HarmonicBasis::differential_jet).
-  const HarmonicBasis::FaceMatrices fm = basis_.face_matrices(y);
-  auto eval_point = [&](const Vec3& c, Mat3& J, double& hnorm, double& sJ, double& sH) {
-    const MapJet jet = basis_.differential_jet(fm, c, third ? 2 : 1, &sJ, &sH);
-    J = jet.J;
-    hnorm = third ? jet.hessian_norm() : 0.0;
-  };
-  if (on_the_fly) {
-#pragma omp parallel for schedule(dynamic, 64)
-    for (long i = 0; i < N; ++i)
-      eval_point(sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i));
-  }
-  cert.ms_jacobian = ms_since(t0);
-
-  // --- 2. σ3 at the centers.
-  t0 = Clock::now();
-  VecXd sigma3(N);
-  const bool on_device = !device_Y.empty();
-  if (!on_device) {
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) sigma3(i) = signed_singular_values(Jc[i])(2);
-  }
-  cert.ms_sigma = ms_since(t0);
-
-  // --- 3. Lipschitz constants: δ norms (map) times the per-voxel per-edge factors (cage only).
-  t0 = Clock::now();
-  const VecXd delta = delta_norms(fm);
-  // The factor matrix of the chosen bound, built on first use (it depends only on the cage and the voxels).
-  auto build_factors = [&](auto& mat, std::vector<char>& finite,
-                           double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
-    mat.resize(N, E);
-    finite.assign(N, 1);
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i)
-      for (long e = 0; e < E; ++e) {
-        mat(i, e) = round_up(factor(im.eu[e], im.ew[e], sampling_.centers.row(i).transpose(), r));
-        if (!std::isfinite(mat(i, e))) finite[i] = 0;
-      }
-  };
-  if (third)
-    std::call_once(im.third_once,
-                   [&] { build_factors(im.third, im.third_finite, &third_order_edge_factor); });
-  else
-    std::call_once(im.first_once,
-                   [&] { build_factors(im.first, im.first_finite, &first_order_edge_factor); });
-  const auto* factors = third ? &im.third : &im.first;
-  const std::vector<char>* row_finite = third ? &im.third_finite : &im.first_finite;
-  // An edge whose factor is +∞ (the voxel's ball may touch it) makes L infinite unless δ_e = 0 exactly (then
-  // H does not depend on it). Rows without an infinite factor take a branch-free, vectorized dot product.
-  VecXd T(N);
-  const double* dl = delta.data();
-  double device_ms = 0;
-  if (on_device) {
-    // σ3, ‖H‖ and T in one pass on the device (its time is reported as the Jacobian stage).
-    bool& has = third ? im.kernels_third : im.kernels_first;
-    if (!has) {
-      im.kernels->set_factors(third, factors->data(), E);
-      has = true;
-    }
-    const auto td = Clock::now();
-    im.kernels->base_stage(device_Y.data(), third, delta, sigma3, hnorm, T);
-    device_ms = ms_since(td);
-    cert.ms_jacobian += device_ms;
-  }
-#pragma omp parallel for schedule(static)
-  for (long i = 0; i < (on_device ? 0 : N); ++i) {
-    double s = 0;
-    const float* f = factors->row(i).data();
-    if ((*row_finite)[i]) {
-#pragma omp simd reduction(+ : s)
-      for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
-    } else {
-      for (long e = 0; e < E; ++e)
-        if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
-    }
-    T(i) = s;
-  }
-  cert.min_sigma3_center = sigma3.minCoeff();
-  auto lipschitz = [&](double hn, double t, double rad) { return third ? hn + rad * t : t; };
-  // Allowance for rounding: kRoundingRel covers the double-precision evaluation and summation (relative to
-  // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
-  // within 2⁻²⁴ of the exact one, so Σ|ΔJ_ab| ≤ 2⁻²⁴·3·cmax·Σ|G| and ‖ΔH‖_F ≤ 2⁻²⁴·6·cmax·Σ|H|, and by
-  // Weyl |Δσ3| ≤ ‖ΔJ‖₂ ≤ Σ|ΔJ_ab|, |Δ‖H‖| ≤ ‖ΔH‖_F.
-  auto tolerance = [&](double sJ, double sH, double s3, double L, double rad, double storage) {
-    return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
-  };
-  const double base_storage = use_stored ? kFloatStorageRel : 0.0;
-  std::vector<CertLeaf> base(N);
-  std::vector<long> failing_base;
-  for (long i = 0; i < N; ++i) {
-    const double L = lipschitz(hnorm(i), T(i), r);
-    const double lb = sigma3(i) - r * L;
-    const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage);
-    base[i] = {
-        sampling_.centers.row(i).transpose(), side, 0, sigma3(i), L, margin, margin > 0, static_cast<int>(i)};
-    if (!(margin > 0)) failing_base.push_back(i);
-  }
-  cert.ms_bound = ms_since(t0) - device_ms;
-
-  // --- 4. Adaptive refinement of the failing voxels, one octree level at a time: all nodes of a level are
-  // evaluated in one batch (on the backend when it has kernels), then the decisions are taken here in
-  // base-voxel order, so the result does not depend on the thread schedule or the backend. Every child keeps
-  // the smaller of its parent's and its own bound (its ball lies inside the parent's). A voxel is certified
-  // iff every node of its subtree resolves; the set of evaluated nodes is the same as in a depth-first
-  // traversal whenever no budget runs out, so the order changes no verdict.
-  t0 = Clock::now();
+// One certification, as the list of its stages (run() below). Every decision is taken here, on the host, in
+// base-voxel order, so the verdict depends neither on the thread schedule nor on the backend.
+struct OctreeCertifier::Run {
+  // A node of the refinement octree below a failing base voxel.
   struct Node {
     Vec3 c;
     double side;
@@ -353,6 +172,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     int first_child;  // index of the first of its 8 children in `tree` (−1: a leaf)
     CertLeaf leaf;
   };
+  // The refinement of one failing base voxel.
   struct VoxelState {
     bool ok = true, definite_fail = false;
     long refined = 1, evaluated = 0;
@@ -360,13 +180,260 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     double min_sigma = kInf;
     int first_child = -1;
   };
-  const long F = static_cast<long>(failing_base.size());
-  std::vector<VoxelState> vs(F);
+
+  const OctreeCertifier& oc;
+  const Impl& im;
+  const MatX3d& y;
+  const double* yr_ptr;  // reduced coefficients (s by 3, column-major) or nullptr
+  long yr_rows;
+  const CertifyParams& p;
+  const long N, E;
+  const double side, r;
+  const bool third;
+  const bool use_stored;  // J and H at the base centers from the stored basis derivatives
+  const HarmonicBasis::FaceMatrices fm;
+  Certificate cert;
+  // Base voxels.
+  VecXd scaleJ, scaleH, hnorm, sigma3, T, delta;
+  std::vector<Mat3> Jc;
+  std::vector<double> device_Y;  // coefficients for the backend's base stage (empty: CPU)
+  std::vector<CertLeaf> base;
+  std::vector<long> failing_base;
+  // Refinement.
+  std::vector<VoxelState> vs;
   std::vector<Node> tree;
   std::vector<int> frontier;
   long budget_used = 0;
   bool abort = false, budget_hit = false;
-  auto add_children = [&](const Vec3& c, double sd, int depth, double bound, long fi) {
+
+  Run(const OctreeCertifier& o, const MatX3d& y_, const double* yr, long yr_n, const CertifyParams& params)
+      : oc(o),
+        im(*o.impl_),
+        y(y_),
+        yr_ptr(yr),
+        yr_rows(yr_n),
+        p(params),
+        N(o.sampling_.size()),
+        E(o.cage_.num_edges()),
+        side(o.sampling_.side),
+        r(o.sampling_.radius()),
+        third(params.bound == LipschitzBound::kThirdOrder),
+        use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
+        fm(o.basis_.face_matrices(y_)) {
+    cert.bound = p.bound;
+    cert.voxel_side = side;
+    cert.voxels = static_cast<int>(N);
+  }
+
+  // Exact J, ‖H‖ and rounding scales at any point, from the full coefficients through the differential
+  // representation (one pass over the faces per point; see HarmonicBasis::differential_jet).
+  void eval_point(const Vec3& c, Mat3& J, double& hn, double& sJ, double& sH) const {
+    const MapJet jet = oc.basis_.differential_jet(fm, c, third ? 2 : 1, &sJ, &sH);
+    J = jet.J;
+    hn = third ? jet.hessian_norm() : 0.0;
+  }
+  double lipschitz(double hn, double t, double rad) const { return third ? hn + rad * t : t; }
+  // Allowance for rounding: kRoundingRel covers the double-precision evaluation and summation (relative to
+  // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
+  // within 2⁻²⁴ of the exact one, so Σ|ΔJ_ab| ≤ 2⁻²⁴·3·cmax·Σ|G| and ‖ΔH‖_F ≤ 2⁻²⁴·6·cmax·Σ|H|, and by
+  // Weyl |Δσ3| ≤ ‖ΔJ‖₂ ≤ Σ|ΔJ_ab|, |Δ‖H‖| ≤ ‖ΔH‖_F.
+  static double tolerance(double sJ, double sH, double s3, double L, double rad, double storage) {
+    return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
+  }
+
+  // --- 1. J and H at the base centers: from the stored derivatives (CPU, or left to the backend's base
+  // stage) or on the fly.
+  void base_derivatives() {
+    const auto t0 = Clock::now();
+    scaleJ.resize(N);
+    scaleH.resize(N);
+    hnorm.resize(N);
+    Jc.resize(N);
+    if (use_stored) {
+      std::vector<double> Ycols = coefficient_columns();
+      double cmax = 0;
+      for (double v : Ycols) cmax = std::max(cmax, std::abs(v));
+      for (long i = 0; i < N; ++i) {
+        scaleJ(i) = im.scale_J(i) * cmax;
+        scaleH(i) = im.scale_H(i) * cmax;
+      }
+      if (im.kernels)
+        device_Y = std::move(Ycols);  // the backend's base stage also forms T (stage 3)
+      else
+        stored_derivatives(Ycols);
+    } else {
+#pragma omp parallel for schedule(dynamic, 64)
+      for (long i = 0; i < N; ++i)
+        eval_point(oc.sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i));
+    }
+    cert.ms_jacobian = ms_since(t0);
+  }
+  // The coefficients as 3 contiguous columns of m doubles.
+  std::vector<double> coefficient_columns() const {
+    const long m = im.m;
+    std::vector<double> Ycols(3 * m);
+    for (long k = 0; k < m; ++k)
+      for (int a = 0; a < 3; ++a) Ycols[a * m + k] = yr_ptr ? yr_ptr[a * yr_rows + k] : y(k, a);
+    return Ycols;
+  }
+  // J and ‖H‖ at every base center: the 9 stored rows of each voxel times the coefficient columns.
+  void stored_derivatives(const std::vector<double>& Ycols) {
+    const long m = im.m;
+    const double* y0 = Ycols.data();
+    const double* y1 = y0 + m;
+    const double* y2 = y1 + m;
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
+      double out[9][3];
+      for (int row = 0; row < 9; ++row) {
+        const float* g = blk + row * m;
+        double a0 = 0, a1 = 0, a2 = 0;
+#pragma omp simd reduction(+ : a0, a1, a2)
+        for (long k = 0; k < m; ++k) {
+          const double gk = g[k];
+          a0 += gk * y0[k];
+          a1 += gk * y1[k];
+          a2 += gk * y2[k];
+        }
+        out[row][0] = a0;
+        out[row][1] = a1;
+        out[row][2] = a2;
+      }
+      Mat3& J = Jc[i];
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];
+      double H6[3][6];
+      for (int a = 0; a < 3; ++a)
+        for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
+      hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
+    }
+  }
+
+  // --- 2. σ3 at the base centers (on the device, stage 3 computes it with T).
+  void base_sigma3() {
+    const auto t0 = Clock::now();
+    sigma3.resize(N);
+    if (device_Y.empty()) {
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < N; ++i) sigma3(i) = signed_singular_values(Jc[i])(2);
+    }
+    cert.ms_sigma = ms_since(t0);
+  }
+
+  // --- 3. Lipschitz constants of the base voxels: δ norms (map) times the per-voxel per-edge factors (cage
+  // only), and condition (6) for each base voxel.
+  void base_bounds() {
+    const auto t0 = Clock::now();
+    delta = oc.delta_norms(fm);
+    const auto& factors = factor_matrix();
+    const std::vector<char>& row_finite = third ? im.third_finite : im.first_finite;
+    T.resize(N);
+    double device_ms = 0;
+    const bool on_device = !device_Y.empty();
+    if (on_device) {
+      // σ3, ‖H‖ and T in one pass on the device (its time is reported as the Jacobian stage).
+      bool& has = third ? im.kernels_third : im.kernels_first;
+      if (!has) {
+        im.kernels->set_factors(third, factors.data(), E);
+        has = true;
+      }
+      const auto td = Clock::now();
+      im.kernels->base_stage(device_Y.data(), third, delta, sigma3, hnorm, T);
+      device_ms = ms_since(td);
+      cert.ms_jacobian += device_ms;
+    }
+    // An edge whose factor is +∞ (the voxel's ball may touch it) makes L infinite unless δ_e = 0 exactly
+    // (then H does not depend on it). Rows without an infinite factor take a branch-free, vectorized dot
+    // product.
+    const double* dl = delta.data();
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < (on_device ? 0 : N); ++i) {
+      double s = 0;
+      const float* f = factors.row(i).data();
+      if (row_finite[i]) {
+#pragma omp simd reduction(+ : s)
+        for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
+      } else {
+        for (long e = 0; e < E; ++e)
+          if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
+      }
+      T(i) = s;
+    }
+    cert.min_sigma3_center = sigma3.minCoeff();
+    const double base_storage = use_stored ? kFloatStorageRel : 0.0;
+    base.resize(N);
+    for (long i = 0; i < N; ++i) {
+      const double L = lipschitz(hnorm(i), T(i), r);
+      const double lb = sigma3(i) - r * L;
+      const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage);
+      base[i] = {oc.sampling_.centers.row(i).transpose(),
+                 side,
+                 0,
+                 sigma3(i),
+                 L,
+                 margin,
+                 margin > 0,
+                 static_cast<int>(i)};
+      if (!(margin > 0)) failing_base.push_back(i);
+    }
+    cert.ms_bound = ms_since(t0) - device_ms;
+  }
+  // The factor matrix of the chosen bound, built on first use (it depends only on the cage and the voxels).
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix() const {
+    auto build = [&](auto& mat, std::vector<char>& finite,
+                     double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
+      mat.resize(N, E);
+      finite.assign(N, 1);
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < N; ++i)
+        for (long e = 0; e < E; ++e) {
+          mat(i, e) = round_up(factor(im.eu[e], im.ew[e], oc.sampling_.centers.row(i).transpose(), r));
+          if (!std::isfinite(mat(i, e))) finite[i] = 0;
+        }
+    };
+    if (third) {
+      std::call_once(im.third_once, [&] { build(im.third, im.third_finite, &third_order_edge_factor); });
+      return im.third;
+    }
+    std::call_once(im.first_once, [&] { build(im.first, im.first_finite, &first_order_edge_factor); });
+    return im.first;
+  }
+
+  // --- 4. Adaptive refinement of the failing voxels, one octree level at a time: all nodes of a level are
+  // evaluated in one batch (on the backend when it has kernels), then the decisions are taken here in
+  // base-voxel order, so the result does not depend on the thread schedule or the backend. Every child keeps
+  // the smaller of its parent's and its own bound (its ball lies inside the parent's). A voxel is certified
+  // iff every node of its subtree resolves; the set of evaluated nodes is the same as in a depth-first
+  // traversal whenever no budget runs out, so the order changes no verdict.
+  void refine() {
+    const auto t0 = Clock::now();
+    const long F = static_cast<long>(failing_base.size());
+    vs.resize(F);
+    for (long fi = 0; fi < F; ++fi) {
+      const long i = failing_base[fi];
+      if (sigma3(i) <= 0 || p.max_depth == 0) {
+        vs[fi].ok = false;  // σ3 ≤ 0 at a center: no subdivision can certify it
+        if (p.stop_on_failure) abort = true;
+        continue;
+      }
+      vs[fi].first_child = add_children(base[i].center, side, 0, T(i), fi);
+    }
+    std::vector<int> batch;
+    std::vector<NodeValues> vals;
+    while (!frontier.empty()) {
+      if (p.stop_on_failure && abort) {
+        for (int id : frontier) unresolved(tree[id]);
+        break;
+      }
+      take_batch(batch);
+      evaluate_batch(batch, vals);
+      frontier.clear();
+      decide_batch(batch, vals);
+    }
+    cert.ms_refine = ms_since(t0);
+  }
+  int add_children(const Vec3& c, double sd, int depth, double bound, long fi) {
     const int first = static_cast<int>(tree.size());
     for (int k = 0; k < 8; ++k) {
       const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
@@ -374,32 +441,15 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
       frontier.push_back(first + k);
     }
     return first;
-  };
-  for (long fi = 0; fi < F; ++fi) {
-    const long i = failing_base[fi];
-    if (sigma3(i) <= 0 || p.max_depth == 0) {
-      vs[fi].ok = false;  // σ3 ≤ 0 at a center: no subdivision can certify it
-      if (p.stop_on_failure) abort = true;
-      continue;
-    }
-    vs[fi].first_child = add_children(base[i].center, side, 0, T(i), fi);
   }
-  auto unresolved = [&](Node& nd) {
-    // A leaf with unknown σ3 keeps the leaves a tiling of the voxel.
+  // A leaf with unknown σ3 keeps the leaves a tiling of the voxel.
+  void unresolved(Node& nd) {
     nd.leaf = {nd.c, nd.side, nd.depth, std::numeric_limits<double>::quiet_NaN(),
                kInf, -kInf,   false,    static_cast<int>(failing_base[nd.fi])};
     vs[nd.fi].ok = false;
-  };
-  std::vector<int> batch;
-  MatX3d bc;
-  VecXd brad;
-  std::vector<NodeValues> vals;
-  while (!frontier.empty()) {
-    if (p.stop_on_failure && abort) {
-      for (int id : frontier) unresolved(tree[id]);
-      break;
-    }
-    // Budgets, in order.
+  }
+  // The frontier's nodes within the budgets, in order; the others become unresolved leaves.
+  void take_batch(std::vector<int>& batch) {
     batch.clear();
     for (int id : frontier) {
       Node& nd = tree[id];
@@ -413,37 +463,40 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
       }
       batch.push_back(id);
     }
-    // Evaluate the batch.
+  }
+  // σ3, ‖H‖ and the node's own bound at every node of the batch.
+  void evaluate_batch(const std::vector<int>& batch, std::vector<NodeValues>& vals) const {
     const long nb = static_cast<long>(batch.size());
     vals.assign(nb, {});
     if (im.kernels && nb > 0) {
-      bc.resize(nb, 3);
-      brad.resize(nb);
+      MatX3d bc(nb, 3);
+      VecXd brad(nb);
       for (long q = 0; q < nb; ++q) {
         bc.row(q) = tree[batch[q]].c.transpose();
         brad(q) = 0.5 * std::sqrt(3.0) * tree[batch[q]].side;
       }
       im.kernels->evaluate_nodes(fm.A, fm.AD, fm.A_abs, delta, third, bc, brad, vals);
-    } else {
-#pragma omp parallel for schedule(dynamic, 4)
-      for (long q = 0; q < nb; ++q) {
-        const Node& nd = tree[batch[q]];
-        const double rad = 0.5 * std::sqrt(3.0) * nd.side;
-        Mat3 J;
-        NodeValues& v = vals[q];
-        eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H);
-        v.sigma3 = signed_singular_values(J)(2);
-        double own = 0;
-        for (long e = 0; e < E; ++e)
-          if (delta(e) != 0)
-            own += delta(e) * (third ? third_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad)
-                                     : first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad));
-        v.own_bound = own;
-      }
+      return;
     }
-    // Decide, in order.
-    frontier.clear();
+#pragma omp parallel for schedule(dynamic, 4)
     for (long q = 0; q < nb; ++q) {
+      const Node& nd = tree[batch[q]];
+      const double rad = 0.5 * std::sqrt(3.0) * nd.side;
+      Mat3 J;
+      NodeValues& v = vals[q];
+      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H);
+      v.sigma3 = signed_singular_values(J)(2);
+      double own = 0;
+      for (long e = 0; e < E; ++e)
+        if (delta(e) != 0)
+          own += delta(e) * (third ? third_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad)
+                                   : first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad));
+      v.own_bound = own;
+    }
+  }
+  // Condition (6) at each node of the batch, in order: a certified leaf, a failed leaf, or 8 children.
+  void decide_batch(const std::vector<int>& batch, const std::vector<NodeValues>& vals) {
+    for (size_t q = 0; q < batch.size(); ++q) {
       const int id = batch[q];
       const NodeValues& v = vals[q];
       const long fi = tree[id].fi;
@@ -473,68 +526,81 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
       }
     }
   }
-  cert.ms_refine = ms_since(t0);
 
   // --- 5. Assemble, in base-voxel order with each subtree depth-first (children in octant order).
-  bool all_ok = true;
-  cert.min_margin = kInf;
-  cert.min_lower_bound = kInf;
-  long leaves = 0;
-  auto emit = [&](const CertLeaf& l) {
-    ++leaves;
-    cert.min_margin = std::min(cert.min_margin, l.margin);
-    cert.min_lower_bound = std::min(cert.min_lower_bound, l.sigma3 - 0.5 * std::sqrt(3.0) * l.side * l.L);
-    if (!l.certified) {
-      all_ok = false;
-      if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
-    }
-    if (p.keep_leaves) cert.leaves.push_back(l);
-  };
-  std::vector<int> stack;
-  size_t fi = 0;
-  for (long i = 0; i < N; ++i) {
-    const bool refined_here = fi < failing_base.size() && failing_base[fi] == i;
-    if (!refined_here || vs[fi].first_child < 0) {
-      emit(base[i]);
-      if (refined_here) {
+  Certificate assemble() {
+    bool all_ok = true;
+    cert.min_margin = kInf;
+    cert.min_lower_bound = kInf;
+    long leaves = 0;
+    auto emit = [&](const CertLeaf& l) {
+      ++leaves;
+      cert.min_margin = std::min(cert.min_margin, l.margin);
+      cert.min_lower_bound = std::min(cert.min_lower_bound, l.sigma3 - 0.5 * std::sqrt(3.0) * l.side * l.L);
+      if (!l.certified) {
         all_ok = false;
-        ++fi;
+        if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
       }
-      continue;
-    }
-    const VoxelState& st = vs[fi];
-    all_ok = all_ok && st.ok;
-    cert.refined += st.refined;
-    cert.max_depth_used = std::max(cert.max_depth_used, st.depth_used);
-    cert.min_sigma3_center = std::min(cert.min_sigma3_center, st.min_sigma);
-    stack.clear();
-    for (int k = 7; k >= 0; --k) stack.push_back(st.first_child + k);
-    while (!stack.empty()) {
-      const Node& nd = tree[stack.back()];
-      stack.pop_back();
-      if (nd.first_child >= 0) {
-        for (int k = 7; k >= 0; --k) stack.push_back(nd.first_child + k);
-      } else {
-        emit(nd.leaf);
+      if (p.keep_leaves) cert.leaves.push_back(l);
+    };
+    std::vector<int> stack;
+    size_t fi = 0;
+    for (long i = 0; i < N; ++i) {
+      const bool refined_here = fi < failing_base.size() && failing_base[fi] == i;
+      if (!refined_here || vs[fi].first_child < 0) {
+        emit(base[i]);
+        if (refined_here) {
+          all_ok = false;
+          ++fi;
+        }
+        continue;
       }
+      const VoxelState& st = vs[fi];
+      all_ok = all_ok && st.ok;
+      cert.refined += st.refined;
+      cert.max_depth_used = std::max(cert.max_depth_used, st.depth_used);
+      cert.min_sigma3_center = std::min(cert.min_sigma3_center, st.min_sigma);
+      stack.clear();
+      for (int k = 7; k >= 0; --k) stack.push_back(st.first_child + k);
+      while (!stack.empty()) {
+        const Node& nd = tree[stack.back()];
+        stack.pop_back();
+        if (nd.first_child >= 0) {
+          for (int k = 7; k >= 0; --k) stack.push_back(nd.first_child + k);
+        } else {
+          emit(nd.leaf);
+        }
+      }
+      ++fi;
     }
-    ++fi;
+    cert.certified = all_ok;
+    cert.num_leaves = leaves;
+    if (!cert.certified) cert.reason = failure_reason();
+    return std::move(cert);
   }
-  cert.certified = all_ok;
-  cert.num_leaves = leaves;
-  if (!cert.certified) {
+  std::string failure_reason() const {
     if (cert.min_sigma3_center <= 0)
-      cert.reason = "sigma3 <= 0 at a sampled center: the map is not locally injective there";
-    else if (budget_hit)
-      cert.reason = "refinement budget exhausted (" + std::to_string(p.max_children_per_voxel) +
-                    " per voxel, " + std::to_string(p.max_refined_voxels) + " in all)";
-    else if (p.stop_on_failure && abort)
-      cert.reason = "a voxel failed at maximum depth " + std::to_string(p.max_depth);
-    else
-      cert.reason = "condition (6) fails on " + std::to_string(cert.failing.size()) +
-                    (cert.failing.size() == static_cast<size_t>(p.max_failing_reported) ? "+" : "") +
-                    " leaf voxel(s) at maximum depth " + std::to_string(p.max_depth);
+      return "sigma3 <= 0 at a sampled center: the map is not locally injective there";
+    if (budget_hit)
+      return "refinement budget exhausted (" + std::to_string(p.max_children_per_voxel) + " per voxel, " +
+             std::to_string(p.max_refined_voxels) + " in all)";
+    if (p.stop_on_failure && abort) return "a voxel failed at maximum depth " + std::to_string(p.max_depth);
+    return "condition (6) fails on " + std::to_string(cert.failing.size()) +
+           (cert.failing.size() == static_cast<size_t>(p.max_failing_reported) ? "+" : "") +
+           " leaf voxel(s) at maximum depth " + std::to_string(p.max_depth);
   }
+};
+
+Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_rows,
+                                 const CertifyParams& p) const {
+  const auto t_start = Clock::now();
+  if (p.max_depth < 0) throw InputError("", "max depth must be >= 0");
+  Run run(*this, y, yr_ptr, yr_rows, p);
+  run.base_derivatives();
+  run.base_sigma3();
+  run.base_bounds();
+  run.refine();
+  Certificate cert = run.assemble();
   cert.ms_total = ms_since(t_start);
   return cert;
 }

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "lidef/errors.h"
+#include "lidef/number_format.h"
 
 // LAPACK Cholesky from OpenBLAS (blocked and threaded; several times faster than Eigen::LLT at 900 x 900).
 extern "C" {
@@ -34,13 +35,6 @@ bool cholesky_solve(MatXd& H, VecXd& b) {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-std::string fmt(double x) {
-  std::ostringstream s;
-  s.precision(4);
-  s << x;
-  return s.str();
 }
 
 bool stop_requested(const std::atomic<bool>* stop) {
@@ -88,16 +82,16 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   auto t0 = Clock::now();
   subspace_ = load_or_compute_subspace(cage_, params_.reduced_dof, cache_dir);
   say("subspace: " + std::to_string(subspace_.size()) + " of " + std::to_string(cage_.num_coeffs()) +
-      " coefficients per coordinate (" + subspace_.solver + ", " + fmt(ms_since(t0)) + " ms)");
+      " coefficients per coordinate (" + subspace_.solver + ", " + format_g(ms_since(t0), 4) + " ms)");
 
   t0 = Clock::now();
   sampling_ = sample_voxels(cage_, sampling_params());
   if (sampling_.size() == 0)
-    throw InputError(cage_.source, "no voxel of side " + fmt(sampling_.side) +
+    throw InputError(cage_.source, "no voxel of side " + format_g(sampling_.side, 4) +
                                        " fits inside the cage (use a smaller voxel_side or more samples)");
-  say("sampling: " + std::to_string(sampling_.size()) + " voxels of side " + fmt(sampling_.side) + ", " +
-      std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" + fmt(ms_since(t0)) +
-      " ms)");
+  say("sampling: " + std::to_string(sampling_.size()) + " voxels of side " + format_g(sampling_.side, 4) +
+      ", " + std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" +
+      format_g(ms_since(t0), 4) + " ms)");
 
   // Reduced gradient matrix G = (∇basis at the centers) Ξ, in chunks so that the full-space matrix of a large
   // cage never exists at once.
@@ -112,16 +106,16 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   }
   energy_ = std::make_unique<DeformationEnergy>(std::move(G), sampling_.hessian_subset, subspace_.eigenvalues,
                                                 cage_.num_edges());
-  say("reduced basis gradients at the samples: " + fmt(ms_since(t0)) + " ms");
+  say("reduced basis gradients at the samples: " + format_g(ms_since(t0), 4) + " ms");
 
   t0 = Clock::now();
   certifier_ = std::make_unique<OctreeCertifier>(cage_, sampling_, &subspace_.basis);
-  say("certificate precomputation: " + fmt(ms_since(t0)) + " ms");
+  say("certificate precomputation: " + format_g(ms_since(t0), 4) + " ms");
   t0 = Clock::now();
   kernels_ = backend_->energy_kernels(*energy_);
   certifier_->set_backend(*backend_);
   if (!backend_->is_cpu())
-    say("backend " + backend_->name() + ": device buffers " + fmt(ms_since(t0)) + " ms");
+    say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
 
   bbox_diag2_ = (cage_.bbox_max - cage_.bbox_min).squaredNorm();
   reset();
@@ -131,22 +125,11 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
 DeformationSolver::~DeformationSolver() = default;
 
 SamplingParams DeformationSolver::sampling_params() const {
-  SamplingParams sp;
-  sp.target_count = params_.samples;
-  sp.voxel_side = params_.voxel_side;
-  sp.safety = params_.safety;
-  sp.hessian_fraction = params_.hessian_fraction;
-  return sp;
+  return sampling_params_of(params_);
 }
 
 CertifyParams DeformationSolver::certify_params(bool stop_on_failure, bool keep_leaves) const {
-  CertifyParams cp;
-  cp.bound = lipschitz_bound_from_string(params_.bound);
-  cp.max_depth = params_.max_depth;
-  cp.max_refined_voxels = params_.max_refined;
-  cp.stop_on_failure = stop_on_failure;
-  cp.keep_leaves = keep_leaves;
-  return cp;
+  return certify_params_of(params_, stop_on_failure, keep_leaves);
 }
 
 void DeformationSolver::set_params(const DeformParams& p) {
@@ -191,7 +174,7 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
   if (residual > 1e-9)
     throw InputError(where, "is not in the reduced subspace of this cage (" +
                                 std::to_string(subspace_.size()) +
-                                " coefficients per coordinate; relative residual " + fmt(residual) +
+                                " coefficients per coordinate; relative residual " + format_g(residual, 4) +
                                 "): projecting it would change the map. A coefficients.txt written by "
                                 "'lidef deform' with the same reduced_dof is in it.");
   const Certificate c = certifier_->certify_reduced(yr, certify_params(false, false));
@@ -212,7 +195,7 @@ std::string handle_source_problem(const Cage& cage, const Vec3& p) {
   pos << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
   if (!p.allFinite()) return pos.str() + " is not finite";
   const double w = cage.winding_number(p);
-  if (!(w > 0.5)) return pos.str() + " is outside the cage (winding number " + fmt(w) + ")";
+  if (!(w > 0.5)) return pos.str() + " is outside the cage (winding number " + format_g(w, 4) + ")";
   if (cage.distance(p) < 1e-9 * (cage.bbox_max - cage.bbox_min).norm())
     return pos.str() + " lies on the cage, where the harmonic map is undefined";
   return "";
@@ -260,7 +243,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   IterationRecord rec;
   rec.iteration = static_cast<int>(history_.size()) + 1;
   const int s = subspace_.size();
-  static const bool trace = std::getenv("LIDEF_TRACE_LINE_SEARCH") != nullptr;  // debugging aid
+  const bool trace = params_.trace_line_search;
   bool interrupted = false;
 
   // With dynamic weighting, a direction whose full step fails the certificate while the handles are still far
@@ -283,8 +266,8 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     rec.ms_gradient += ms_since(t0);
 
     t0 = Clock::now();
-    MatXd H = energy_->hessian_from(kernels_->distortion_pair_blocks(params_.hessian_precision == "double"),
-                                    weights_);
+    MatXd H = energy_->hessian_from(
+        kernels_->distortion_pair_blocks(params_.hessian_precision == HessianPrecision::kDouble), weights_);
     H.diagonal().array() += params_.diagonal_shift;
     rec.ms_hessian += ms_since(t0);
 
@@ -465,7 +448,7 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
           decrease <= params_.energy_tolerance * std::max(std::abs(rec.energy_before), 1e-300);
       if ((small_step || small_decrease) && rec.certificate_rejections > 0) {
         res.reason = StopReason::kBlocked;
-        res.message = "the certificate limits the step to " + fmt(rec.step) +
+        res.message = "the certificate limits the step to " + format_g(rec.step, 4) +
                       ": the map is at the boundary of the certified region";
         done = true;
       } else if (small_step || small_decrease) {
@@ -479,8 +462,9 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
           res.reason = StopReason::kConverged;
           res.message = small_step ? "step below tolerance" : "energy decrease below tolerance";
           if (changed)
-            res.message += " at adjusted weights (lambda_p2p " + fmt(weights_.p2p) + ", lambda_smooth " +
-                           fmt(weights_.smooth) + "; the reset limit max_weight_resets was reached)";
+            res.message += " at adjusted weights (lambda_p2p " + format_g(weights_.p2p, 4) +
+                           ", lambda_smooth " + format_g(weights_.smooth, 4) +
+                           "; the reset limit max_weight_resets was reached)";
           done = true;
         }
       }

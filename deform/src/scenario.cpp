@@ -295,6 +295,8 @@ void write_scenario(const std::string& path, const Scenario& s) {
           std::string text;
           if constexpr (std::is_same_v<T, std::string>)
             text = json_string(v, path);
+          else if constexpr (std::is_enum_v<T>)
+            text = json_string(to_string(v), path);
           else if constexpr (std::is_same_v<T, bool>)
             text = v ? "true" : "false";
           else if constexpr (std::is_same_v<T, double>)

@@ -22,16 +22,11 @@ namespace lidef::studio {
 
 namespace {
 
-// Choices of the string parameters; the core library checks them again (validate_params), so a value outside
-// these (e.g. from a newer scenario file) is still shown and then reported, not silently replaced.
-const QStringList* choices(const std::string& name) {
-  static const QStringList backend = {"cpu", "opencl", "auto"};
-  static const QStringList bound = {"first", "third"};
-  static const QStringList precision = {"single", "double"};
-  if (name == "backend") return &backend;
-  if (name == "bound") return &bound;
-  if (name == "hessian_precision") return &precision;
-  return nullptr;
+// The names of an enum parameter, from the one parameter table (empty for the other types).
+QStringList choices(const ParamInfo& p) {
+  QStringList out;
+  for (const std::string& c : param_choices(p)) out << QString::fromStdString(c);
+  return out;
 }
 
 QString group_title(const std::string& group) {
@@ -57,9 +52,9 @@ QString tooltip(const ParamInfo& p) {
   std::visit(
       [&](auto member) {
         using T = std::decay_t<decltype(defaults.*member)>;
-        if constexpr (std::is_same_v<T, std::string>) {
-          if (const QStringList* c = choices(p.name)) tip += "\nChoices: " + c->join(", ");
-        } else if constexpr (!std::is_same_v<T, bool>) {
+        if constexpr (std::is_enum_v<T>) {
+          tip += "\nChoices: " + choices(p).join(", ");
+        } else if constexpr (!std::is_same_v<T, bool> && !std::is_same_v<T, std::string>) {
           tip += QString("\nRange: [%1, %2]")
                      .arg(range_text(p.min, is_integer_v<T>), range_text(p.max, is_integer_v<T>));
         }
@@ -82,6 +77,7 @@ ParamsPanel::ParamsPanel(QWidget* parent) : QWidget(parent) {
   auto* content_layout = new QVBoxLayout(content);
   std::vector<std::pair<std::string, QFormLayout*>> groups;  // in order of first appearance in the table
   for (const ParamInfo& p : table) {
+    if (is_test_hook(p)) continue;  // failure injection for the test suite, not a setting
     auto it = std::find_if(groups.begin(), groups.end(), [&](const auto& g) { return g.first == p.group; });
     if (it == groups.end()) {
       auto* box = new QGroupBox(group_title(p.group));
@@ -96,9 +92,9 @@ ParamsPanel::ParamsPanel(QWidget* parent) : QWidget(parent) {
     const bool is_bool = std::holds_alternative<bool DeformParams::*>(p.member);
     if (is_bool) {
       row.editor = new QCheckBox;
-    } else if (const QStringList* c = choices(p.name)) {
+    } else if (const QStringList c = choices(p); !c.isEmpty()) {
       auto* combo = new QComboBox;
-      combo->addItems(*c);
+      combo->addItems(c);
       row.editor = combo;
     } else {
       auto* edit = new QLineEdit;

@@ -50,6 +50,7 @@
 #include "explorer_panel.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
+#include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/subspace.h"
 #include "params_panel.h"
@@ -57,14 +58,6 @@
 #include "studio_common.h"
 
 namespace lidef::studio {
-
-namespace {
-std::string g(double x, int prec = 4) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.*g", prec, x);
-  return buf;
-}
-}  // namespace
 
 // The camera style with the studio's clicks: a left click (press and release within 3 pixels) adds a handle,
 // a right press on a target deletes it instead of zooming. It lives in the style because the style grabs the
@@ -597,9 +590,9 @@ void StudioWindow::update_status(const SessionFrame& f) {
   badge_->setStyleSheet(f.certified ? "background:#2e7d32; color:white; font-weight:bold"
                                     : "background:#c62828; color:white; font-weight:bold");
   std::ostringstream s;
-  s << to_string(f.state) << " | iteration " << f.history.size() << " | energy " << g(f.energy.total)
-    << " | min sigma3 LB " << g(f.min_lower_bound) << " | handle error " << g(f.max_handle_error, 3) << " | "
-    << f.status;
+  s << to_string(f.state) << " | iteration " << f.history.size() << " | energy "
+    << format_g(f.energy.total, 4) << " | min sigma3 LB " << format_g(f.min_lower_bound, 4)
+    << " | handle error " << format_g(f.max_handle_error, 3) << " | " << f.status;
   status_->setText(QString::fromStdString(s.str()));
 }
 

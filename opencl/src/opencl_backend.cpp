@@ -83,7 +83,6 @@ std::string trim(std::string s) {
   return s.substr(b);
 }
 
-
 std::string type_name(cl_device_type t) {
   if (t & CL_DEVICE_TYPE_GPU) return "GPU";
   if (t & CL_DEVICE_TYPE_CPU) return "CPU";
@@ -130,9 +129,8 @@ struct Device {
 
 // Builds the program from source, or loads it from the binary cache (`dir`/<hash>.bin); writes the cache
 // after a build (temp file + rename, so that concurrent processes never read a half-written binary).
-cl::Program build_program(Device& d, const std::string& dir, std::string* how) {
+cl::Program build_program(Device& d, const std::string& dir, bool broken, std::string* how) {
   const std::string options = "-cl-std=CL1.2";
-  const bool broken = std::getenv("LIDEF_TEST_BREAK_KERNELS") != nullptr;
   const std::string key = std::string(kLidefKernelSource) + (broken ? "|broken" : "") + "|" +
                           d.platform.getInfo<CL_PLATFORM_VERSION>() + "|" +
                           d.device.getInfo<CL_DEVICE_NAME>() + "|" + d.device.getInfo<CL_DRIVER_VERSION>() +
@@ -153,8 +151,8 @@ cl::Program build_program(Device& d, const std::string& dir, std::string* how) {
     }
   }
   std::string source = kLidefKernelSource;
-  // Test hook (tests/test_opencl.cpp): a line that does not compile, to exercise the failure path.
-  if (std::getenv("LIDEF_TEST_BREAK_KERNELS")) source += "\nthis line is not OpenCL C;\n";
+  // Test hook (parameter test_break_kernels): a line that does not compile, to exercise the failure path.
+  if (broken) source += "\nthis line is not OpenCL C;\n";
   cl::Program p(d.context, source);
   try {
     p.build({d.device}, options.c_str());
@@ -701,8 +699,18 @@ std::string opencl_device_filter_from_env() {
   return f ? std::string(f) : std::string();
 }
 
-std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& filter,
+OpenCLOptions opencl_options(const DeformParams& params) {
+  OpenCLOptions o;
+  o.device = params.opencl_device;
+  o.gpu_layout = params.opencl_gpu_layout;
+  o.break_kernels = params.test_break_kernels;
+  o.max_alloc = static_cast<unsigned long long>(params.test_opencl_max_alloc);
+  return o;
+}
+
+std::shared_ptr<const ComputeBackend> make_opencl_backend(const OpenCLOptions& options,
                                                           const std::string& cache_dir) {
+  const std::string& filter = options.device;
   std::vector<cl::Platform> platforms;
   try {
     cl::Platform::get(&platforms);
@@ -734,7 +742,7 @@ std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& fil
   }
   if (all.empty())
     throw OpenCLError(filter.empty() ? std::string("OpenCL: no device found")
-                                     : "OpenCL: no device matches LIDEF_OPENCL_DEVICE='" + filter + "'");
+                                     : "OpenCL: no device matches opencl_device '" + filter + "'");
   if (usable.empty())
     throw OpenCLError("OpenCL (" + all.front().label +
                       "): the device has no double precision (cl_khr_fp64), which the certificate needs");
@@ -750,44 +758,41 @@ std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& fil
     d->context = cl::Context(d->device);
     d->queue = cl::CommandQueue(d->context, d->device);
     d->max_group = d->device.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>();
-    d->cpu_device = (d->device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_CPU) != 0 &&
-                    std::getenv("LIDEF_OPENCL_AS_GPU") == nullptr;
+    d->cpu_device = (d->device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_CPU) != 0 && !options.gpu_layout;
     d->max_alloc = d->device.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
-    // Test hook (tests/test_opencl.cpp): pretend the device allows smaller buffers, to exercise that path.
-    if (const char* cap = std::getenv("LIDEF_TEST_OPENCL_MAX_ALLOC"))
-      d->max_alloc = std::min<unsigned long long>(d->max_alloc, std::strtoull(cap, nullptr, 10));
+    // Test hook (parameter test_opencl_max_alloc): pretend the device allows smaller buffers.
+    if (options.max_alloc > 0) d->max_alloc = std::min<unsigned long long>(d->max_alloc, options.max_alloc);
     d->global_mem = d->device.getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>();
-    d->program = build_program(*d, cache_dir.empty() ? std::string() : cache_dir + "/opencl", &how);
+    d->program = build_program(*d, cache_dir.empty() ? std::string() : cache_dir + "/opencl",
+                               options.break_kernels, &how);
     return 0;
   });
   return std::make_shared<OpenCLBackend>(d, how);
 }
 
-std::shared_ptr<const ComputeBackend> select_backend(const std::string& which, const std::string& cache_dir,
+std::shared_ptr<const ComputeBackend> select_backend(const DeformParams& params, const std::string& cache_dir,
                                                      std::string* message) {
   auto say = [&](const std::string& s) {
     if (message) *message = s;
   };
-  if (which == "cpu") {
+  if (params.backend == BackendKind::kCpu) {
     say("backend: cpu");
     return cpu_backend();
   }
-  if (which != "opencl" && which != "auto")
-    throw InputError("", "unknown backend '" + which + "' (expected cpu, opencl or auto)");
   try {
-    auto b = make_opencl_backend(opencl_device_filter_from_env(), cache_dir);
+    auto b = make_opencl_backend(opencl_options(params), cache_dir);
     say("backend: " + b->name() + "; " + static_cast<const OpenCLBackend&>(*b).build_message());
     return b;
   } catch (const OpenCLError& e) {
-    if (which == "opencl") throw;
+    if (params.backend == BackendKind::kOpenCL) throw;
     say(std::string("backend: cpu (auto: no usable OpenCL device: ") + e.what() + ")");
     return cpu_backend();
   }
 }
 
 BackendFactory opencl_backend_factory(const std::string& cache_dir) {
-  return [cache_dir](const std::string& which, std::string* message) {
-    return select_backend(which, cache_dir, message);
+  return [cache_dir](const DeformParams& params, std::string* message) {
+    return select_backend(params, cache_dir, message);
   };
 }
 

@@ -27,10 +27,10 @@
 #include "lidef/certificate_verification.h"
 #include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
+#include "lidef/field_grid.h"
 #include "lidef/model_check.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
-#include "lidef/vtk_export.h"
 
 namespace lidef {
 
@@ -89,8 +89,8 @@ class InteractiveSession {
   // command is dropped, the previous state kept, and this is called with the message.
   using ErrorCallback = std::function<void(const std::string&)>;
 
-  // `backends` builds the compute backend named by the parameters (cpu_backend_factory() when this program has
-  // no OpenCL; the studio passes opencl_backend_factory()).
+  // `backends` builds the compute backend named by the parameters (cpu_backend_factory() when this program
+  // has no OpenCL; the studio passes opencl_backend_factory()).
   explicit InteractiveSession(FrameCallback on_frame, ErrorCallback on_error = {},
                               BackendFactory backends = cpu_backend_factory());
   ~InteractiveSession();  // stops the engine thread (interrupting a running iteration)

@@ -1,15 +1,17 @@
-// Files for ParaView: the certification octree as an unstructured grid (.vtu) and map fields on a regular grid
-// (.vti). This header is VTK-free; VTK (9.1) is linked privately by lidef_analysis. Arrays and suggested filters:
-// docs/certificate-outputs.md.
+// Files for ParaView: the certification octree as an unstructured grid (.vtu) and map fields on a regular
+// grid
+// (.vti). This header is VTK-free; VTK (9.1) is linked privately by lidef_analysis. Arrays and suggested
+// filters: docs/certificate-outputs.md.
 //
-// Writes are atomic: each writer writes `path.tmp.<pid>.<ext>` and renames it over `path`; on failure the temporary
-// is removed, `path` is untouched and InputError(path, ...) is thrown. Files are VTK XML, appended raw binary,
-// zlib-compressed.
+// Writes are atomic: each writer writes `path.tmp.<pid>.<ext>` and renames it over `path`; on failure the
+// temporary is removed, `path` is untouched and InputError(path, ...) is thrown. Files are VTK XML, appended
+// raw binary, zlib-compressed.
 #pragma once
 #include <string>
 #include <vector>
 
 #include "lidef/cage.h"
+#include "lidef/field_grid.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
@@ -22,36 +24,12 @@ namespace lidef {
 //   refinement budget ran out), status (UInt8: 1 certified, 0 not).
 void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leaves);
 
-// Map quantities sampled on a regular grid over the cage's bounding box.
-struct FieldGrid {
-  int dims[3] = {0, 0, 0};        // points per axis (x fastest in the arrays below)
-  Vec3 origin = Vec3::Zero();     // = cage bounding-box minimum
-  double spacing = 0;             // same on every axis
-  // One value per point; NaN where the point is outside the cage (winding number < 1/2), where the map is not
-  // the deformation. e_iso is also NaN where det J <= 0 (the energy is +inf there; NaN shows as ParaView's NaN
-  // colour instead of wrecking the colour range).
-  std::vector<float> sigma1, sigma3, det_j, e_iso;
-  std::vector<unsigned char> inside_cage;     // winding number >= 1/2
-  std::vector<unsigned char> inside_sampled;  // in the union of the voxels (closed cubes; containing_voxel)
-  long points() const { return static_cast<long>(dims[0]) * dims[1] * dims[2]; }
-  long count_inside_cage() const;
-  long count_inside_sampled() const;
-};
-
-// Samples the map with coefficients y (#V+#F by 3) on a grid with `resolution` points along the longest axis of
-// the cage's bounding box (>= 2) and the same spacing on the other axes (at least 2 points each), in parallel
-// (OpenMP). sigma1 >= |sigma3| are signed singular values (sigma3 < 0 iff det J < 0);
-// E_iso = Σ_i σ_i² + σ_i⁻² (the symmetric Dirichlet energy density, 6 at a rotation). Throws InputError when
-// resolution < 2 or y has the wrong shape.
-FieldGrid compute_field_grid(const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
-                             const VoxelSampling& sampling, int resolution = 64);
-
-// Writes a FieldGrid as .vti with point data sigma1, sigma3, detJ, E_iso (Float32), inside_cage, inside_sampled
-// (UInt8).
+// Writes a FieldGrid as .vti with point data sigma1, sigma3, detJ, E_iso (Float32), inside_cage,
+// inside_sampled (UInt8).
 void write_field_vti(const std::string& path, const FieldGrid& grid);
 
 // compute_field_grid + write_field_vti. Returns the grid (for summaries).
-FieldGrid write_field_vti(const std::string& path, const Cage& cage, const HarmonicBasis& basis, const MatX3d& y,
-                          const VoxelSampling& sampling, int resolution = 64);
+FieldGrid write_field_vti(const std::string& path, const Cage& cage, const HarmonicBasis& basis,
+                          const MatX3d& y, const VoxelSampling& sampling, int resolution = 64);
 
 }  // namespace lidef

@@ -86,11 +86,13 @@ class ComputeBackend {
 // The CPU backend (Eigen, OpenMP, OpenBLAS).
 std::shared_ptr<const ComputeBackend> cpu_backend();
 
-// Chooses the backend named by DeformParams::backend ("cpu", "opencl" or "auto") and says which it chose in
+struct DeformParams;  // deform_params.h
+
+// Makes the backend that the parameters name (backend, opencl_device, ...) and says which it chose in
 // *message. Code that must not link a device library (lidef_analysis, the studio's engine) takes one of these
 // from its caller; opencl_backend.h provides the OpenCL-aware one.
 using BackendFactory =
-    std::function<std::shared_ptr<const ComputeBackend>(const std::string& which, std::string* message)>;
+    std::function<std::shared_ptr<const ComputeBackend>(const DeformParams& params, std::string* message)>;
 // The factory of a build without OpenCL: "cpu" and "auto" give cpu_backend(); "opencl" throws Error.
 BackendFactory cpu_backend_factory();
 

@@ -9,7 +9,16 @@
 #include <variant>
 #include <vector>
 
+#include "lidef/lipschitz_bound.h"
+
 namespace lidef {
+
+// Precision of the products that assemble the reduced Hessian.
+enum class HessianPrecision { kSingle, kDouble };
+// Where the per-sample stages run: the CPU, an OpenCL device, or OpenCL when a device with fp64 works.
+enum class BackendKind { kCpu, kOpenCL, kAuto };
+const char* to_string(HessianPrecision p);  // "single" / "double"
+const char* to_string(BackendKind b);       // "cpu" / "opencl" / "auto"
 
 struct DeformParams {
   // --- Subspace and sampling
@@ -28,12 +37,12 @@ struct DeformParams {
   double armijo = 1e-4;            // sufficient-decrease constant c1
   int max_halvings = 40;           // line-search halvings before "no certified step"
   double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
-  std::string hessian_precision = "single";  // "single" or "double" products of the reduced Hessian
-  double handle_tolerance = 1e-3;            // handle error (distance, model units) reported as "reached"
+  HessianPrecision hessian_precision = HessianPrecision::kSingle;  // products of the reduced Hessian
+  double handle_tolerance = 1e-3;  // handle error (distance, model units) reported as "reached"
   // --- Certificate (line search and output)
   int max_depth = 6;
-  std::string bound = "third";           // "first" (17) or "third" (21)
-  long max_refined = 200000;             // child voxels evaluated per certification of a result
+  LipschitzBound bound = LipschitzBound::kThirdOrder;  // first (17) or third (21) order
+  long max_refined = 200000;                           // child voxels evaluated per certification of a result
   long line_search_max_refined = 20000;  // the same budget for line-search trials: a trial that needs more is
                                          // rejected (sound: "not certified") and the step halved
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
@@ -49,16 +58,32 @@ struct DeformParams {
   int max_weight_resets =
       2;  // convergence with changed weights resets them and continues, at most this often
   // --- Execution
-  int threads = 0;              // OpenMP threads (0 = all cores)
-  std::string backend = "cpu";  // "cpu", "opencl" or "auto" (OpenCL when a device with fp64 exists)
+  int threads = 0;                          // OpenMP threads (0 = all cores)
+  BackendKind backend = BackendKind::kCpu;  // OpenCL, or auto (OpenCL when a device with fp64 exists)
+  std::string opencl_device;       // substring of "<platform> <device>" choosing the device ("" = any)
+  bool opencl_gpu_layout = false;  // a CPU OpenCL device takes the GPU code paths (tests them on PoCL)
+  bool trace_line_search = false;  // print every line-search trial to stderr
+  // --- Test hooks (group "testing": not shown in --help or the studio; docs/parameters.md)
+  int test_interrupt_after = 0;     // lidef deform raises SIGINT after this many iterations (0 = never)
+  bool test_break_kernels = false;  // OpenCL: append a line that does not compile to the kernels
+  long test_opencl_max_alloc = 0;   // OpenCL: pretend the device allows buffers of at most this many bytes
 };
+
+struct SamplingParams;  // sampling.h
+struct CertifyParams;   // octree_certifier.h
+// The voxel sampling and the certificate that the parameters name: the one mapping, used by the solver,
+// `lidef certify` and `lidef compare`.
+SamplingParams sampling_params_of(const DeformParams& params);
+CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure, bool keep_leaves);
 
 // One row of the table. `member` points into DeformParams.
 struct ParamInfo {
-  using Member = std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*,
-                              bool DeformParams::*, std::string DeformParams::*>;
+  using Member =
+      std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*, bool DeformParams::*,
+                   std::string DeformParams::*, LipschitzBound DeformParams::*,
+                   HessianPrecision DeformParams::*, BackendKind DeformParams::*>;
   const char* name;   // JSON key; the CLI flag is "--" + name with '_' → '-'
-  const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution"
+  const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution", "testing"
   Member member;
   double min, max;  // valid range (inclusive) for numbers; ignored for bool/string
   const char* help;
@@ -70,6 +95,10 @@ const std::vector<ParamInfo>& deform_param_table();
 const ParamInfo* find_param(const std::string& name);
 // "--lambda-p2p" for "lambda_p2p".
 std::string param_flag(const ParamInfo& p);
+// The names an enum parameter takes, in enum order (empty for the other types).
+std::vector<std::string> param_choices(const ParamInfo& p);
+// Test hooks (group "testing") are parameters like the others but are left out of --help and the studio.
+bool is_test_hook(const ParamInfo& p);
 
 // Sets one parameter from a JSON value; throws InputError(where, ...) for an unknown name (listing the close
 // ones), a wrong type, a non-finite number or a value out of range.
@@ -84,8 +113,8 @@ void apply_params(DeformParams& params, const nlohmann::json& object, const std:
 // Checks cross-parameter consistency (ranges of each field and e.g. bound spelled right); throws InputError.
 void validate_params(const DeformParams& params, const std::string& where);
 // True when a and b differ in a parameter that shapes DeformationSolver's precomputation (reduced_dof,
-// samples, voxel_side, safety, hessian_fraction, threads, backend): the change needs a new solver, not
-// set_params().
+// samples, voxel_side, safety, hessian_fraction, threads, backend and the OpenCL options): the change needs a
+// new solver, not set_params().
 bool changes_precomputation(const DeformParams& a, const DeformParams& b);
 // All parameters as a JSON object in table order (for summary.json and saved sessions). ordered_json because
 // nlohmann::json sorts keys, which would scatter the groups; assign it to a nlohmann::json if order is moot.

@@ -31,8 +31,6 @@
 
 namespace lidef {
 
-using MatS3 = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // s by 3 reduced coefficients (column-major)
-using MatJT = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // 3|I| by 3 stacked transposed Jacobians
 using MatXdR = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using MatXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
@@ -79,9 +77,9 @@ class DeformationEnergy {
   EnergyTerms evaluate(const MatS3& y, const EnergyWeights& w) const { return evaluate(jacobians(y), y, w); }
   // ∇E (s by 3). Requires det J_i > 0 at every sample.
   MatS3 gradient(const MatJT& JT, const MatS3& y, const EnergyWeights& w) const;
-  // ∇²E as 3s by 3s (vec(ỹ) column-major), single-precision products on the subset. projected = PSD-projected blocks (the solver's matrix);
-  // all_samples = use every sample with weight 1/|I| in double precision (the exact Hessian when not
-  // projected; for tests) instead of the subset H in single precision.
+  // ∇²E as 3s by 3s (vec(ỹ) column-major), single-precision products on the subset. projected = PSD-projected
+  // blocks (the solver's matrix); all_samples = use every sample with weight 1/|I| in double precision (the
+  // exact Hessian when not projected; for tests) instead of the subset H in single precision.
   MatXd hessian(const MatJT& JT, const EnergyWeights& w, bool projected = true,
                 bool all_samples = false) const;
   // Only the E_dis part of hessian(), for benchmarks.

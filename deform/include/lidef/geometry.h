@@ -26,7 +26,15 @@ inline double point_segment_dist2(const Vec3& p, const Vec3& a, const Vec3& b) {
   return (a + t * d - p).squaredNorm();
 }
 
-// Squared distance from p to the closed triangle (a,b,c) (Ericson, Real-Time Collision Detection 5.1.5).
+// The point of the closed triangle (a,b,c) closest to p and its barycentric coordinates (u,v,w), u+v+w = 1
+// (Ericson, Real-Time Collision Detection 5.1.5). A vertex or edge region returns that vertex or edge point.
+struct TriangleClosestPoint {
+  Vec3 point;
+  Vec3 barycentric;
+};
+TriangleClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+// Squared distance from p to the closed triangle (a,b,c).
 double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
 }  // namespace lidef

@@ -8,9 +8,16 @@
 // Both use that m/(m²−d²) and 1/(m²−d²) decrease in m > d, so the worst case is the smallest m.
 // A ball that touches the edge (h ≤ d, or |p−u| ≤ r, or |p−w| ≤ r) gets +∞: never certifiable.
 #pragma once
+#include <string>
+
 #include "lidef/types.h"
 
 namespace lidef {
+
+// Which bound the certificate uses: first order (17) or third order (21) (octree_certifier.h).
+enum class LipschitzBound { kFirstOrder, kThirdOrder };
+const char* to_string(LipschitzBound b);                           // "first" / "third"
+LipschitzBound lipschitz_bound_from_string(const std::string& s);  // throws InputError
 
 // Lower bound of |q−u| + |q−w| over q in the ball B(p, r): the larger of
 // (|p−u| − r) + (|p−w| − r)  and  2 sqrt(ρ² + d²/4), ρ = max(0, dist(p, line uw) − r).

@@ -3,7 +3,8 @@
 // A map f is certified on the union of the voxels when every leaf voxel (center c, circumradius r)
 // satisfies   σ3(c) − r·L > τ,   where L is a Lipschitz constant of σ3 on the voxel's ball:
 //   first order  (17): L = Σ_e ‖δ_A^e‖_F Γ_e,  Γ_e = max_ball sqrt(|α_e|²+|β_e|²)
-//   third order  (21): L = ‖H(c)‖ + r Σ_e ‖δ_A^e‖_F Θ_e,  Θ_e = max_ball sqrt(‖∇α_e‖²+‖∇β_e‖²)  ((20),(66),(67))
+//   third order  (21): L = ‖H(c)‖ + r Σ_e ‖δ_A^e‖_F Θ_e,  Θ_e = max_ball sqrt(‖∇α_e‖²+‖∇β_e‖²)
+//   ((20),(66),(67))
 // (sums over undirected edges; the paper's ½ Σ over directed edges counts each edge twice), and τ is a
 // floating-point allowance (see Tolerance below). Failing voxels are split into 8 children, each with its
 // own exact σ3 and ‖H‖ at its center and the smaller of the parent's and its own third-order bound.
@@ -16,22 +17,20 @@
 #include "lidef/cage.h"
 #include "lidef/compute_backend.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/lipschitz_bound.h"
 #include "lidef/sampling.h"
 #include "lidef/types.h"
 
 namespace lidef {
 
-enum class LipschitzBound { kFirstOrder, kThirdOrder };
-const char* to_string(LipschitzBound b);           // "first" / "third"
-LipschitzBound lipschitz_bound_from_string(const std::string& s);  // throws InputError
-
 struct CertifyParams {
   LipschitzBound bound = LipschitzBound::kThirdOrder;
   int max_depth = 6;                 // subdivision levels below the base voxels
   long max_refined_voxels = 200000;  // budget of child voxels evaluated in all; exhausted = not certified
-  long max_children_per_voxel = 4096;  // budget per base voxel (a full depth-4 subtree); exhausted = not certified
-  bool stop_on_failure = false;      // return as soon as the verdict is "not certified" (line search)
-  bool keep_leaves = true;           // fill Certificate::leaves (reports); the verdict never depends on it
+  long max_children_per_voxel =
+      4096;                      // budget per base voxel (a full depth-4 subtree); exhausted = not certified
+  bool stop_on_failure = false;  // return as soon as the verdict is "not certified" (line search)
+  bool keep_leaves = true;       // fill Certificate::leaves (reports); the verdict never depends on it
   int max_failing_reported = 20;
 };
 
@@ -44,7 +43,7 @@ struct CertLeaf {
   double L = 0;       // Lipschitz constant of σ3 on the voxel's ball
   double margin = 0;  // σ3 − r L − τ (> 0: certified)
   bool certified = false;
-  int base = 0;       // index of the base voxel it refines
+  int base = 0;  // index of the base voxel it refines
 };
 
 struct Certificate {
@@ -52,15 +51,15 @@ struct Certificate {
   std::string reason;  // why not certified (empty when certified)
   LipschitzBound bound = LipschitzBound::kThirdOrder;
   double voxel_side = 0;
-  int voxels = 0;          // base voxels
-  long num_leaves = 0;     // leaf voxels (= voxels + 7 × refined when complete)
-  long refined = 0;        // voxels subdivided
+  int voxels = 0;       // base voxels
+  long num_leaves = 0;  // leaf voxels (= voxels + 7 × refined when complete)
+  long refined = 0;     // voxels subdivided
   int max_depth_used = 0;
-  double min_sigma3_center = 0;  // over all evaluated centers
-  double min_margin = 0;         // over leaves: σ3 − r L − τ
-  double min_lower_bound = 0;    // over leaves: σ3 − r L, a lower bound of σ3 on the covered region
-  std::vector<CertLeaf> leaves;  // when keep_leaves (in base-voxel order, children depth-first)
-  std::vector<CertLeaf> failing; // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
+  double min_sigma3_center = 0;   // over all evaluated centers
+  double min_margin = 0;          // over leaves: σ3 − r L − τ
+  double min_lower_bound = 0;     // over leaves: σ3 − r L, a lower bound of σ3 on the covered region
+  std::vector<CertLeaf> leaves;   // when keep_leaves (in base-voxel order, children depth-first)
+  std::vector<CertLeaf> failing;  // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
 
@@ -100,8 +99,10 @@ class OctreeCertifier {
 
  private:
   struct Impl;
+  struct Run;  // the stages of one certification (octree_certifier.cpp)
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
-  Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows, const CertifyParams& p) const;
+  Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,
+                  const CertifyParams& p) const;
 
   const Cage& cage_;
   VoxelSampling sampling_;

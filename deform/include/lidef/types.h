@@ -11,4 +11,6 @@ using VecXd = Eigen::VectorXd;
 using VecXi = Eigen::VectorXi;
 using Vec3 = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix3d;
+using MatS3 = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // s by 3 reduced coefficients (column-major)
+using MatJT = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // 3|I| by 3 stacked transposed Jacobians
 }  // namespace lidef

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "lidef/compute_backend.h"
+#include "lidef/deform_params.h"
 #include "lidef/errors.h"
 
 namespace lidef {
@@ -30,19 +31,28 @@ struct OpenCLDeviceInfo {
 // if any, in *why).
 std::vector<OpenCLDeviceInfo> opencl_devices(std::string* why = nullptr);
 
-// The device filter from $LIDEF_OPENCL_DEVICE ("" when unset): a case-insensitive substring of
-// "<platform> <device>".
+// The test and benchmark programs' device filter, $LIDEF_OPENCL_DEVICE ("" when unset), so that one build can
+// be pointed at a GPU host's device. lidef and the studio take the parameter opencl_device instead.
 std::string opencl_device_filter_from_env();
 
-// A backend on the first device with fp64 whose "<platform> <device>" contains `filter` (GPUs first).
+// How a backend is made: the execution parameters of the table (deform_params.h) and its OpenCL test hooks.
+struct OpenCLOptions {
+  std::string device;                // opencl_device: case-insensitive substring of "<platform> <device>"
+  bool gpu_layout = false;           // opencl_gpu_layout: a CPU device takes the GPU code paths
+  bool break_kernels = false;        // test_break_kernels
+  unsigned long long max_alloc = 0;  // test_opencl_max_alloc (0 = the device's limit)
+};
+OpenCLOptions opencl_options(const DeformParams& params);
+
+// A backend on the first device with fp64 whose "<platform> <device>" contains `options.device` (GPUs first).
 // Compiled kernels are cached under `cache_dir`/opencl (keyed by source, device, driver), so a second start
 // skips the compiler. Throws OpenCLError.
-std::shared_ptr<const ComputeBackend> make_opencl_backend(const std::string& filter,
+std::shared_ptr<const ComputeBackend> make_opencl_backend(const OpenCLOptions& options,
                                                           const std::string& cache_dir);
 
-// "cpu", "opencl" (throws OpenCLError when unusable) or "auto" (OpenCL when a device with fp64 works, else
-// the CPU). `message` says which backend was chosen and, for auto's fallback, why.
-std::shared_ptr<const ComputeBackend> select_backend(const std::string& which, const std::string& cache_dir,
+// params.backend: cpu, opencl (throws OpenCLError when unusable) or auto (OpenCL when a device with fp64
+// works, else the CPU). `message` says which backend was chosen and, for auto's fallback, why.
+std::shared_ptr<const ComputeBackend> select_backend(const DeformParams& params, const std::string& cache_dir,
                                                      std::string* message);
 // select_backend as a BackendFactory (compute_backend.h) with kernels cached under `cache_dir`.
 BackendFactory opencl_backend_factory(const std::string& cache_dir);
