@@ -24,14 +24,13 @@
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_export.h"
+#include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
-#include "lidef/signed_svd.h"
-#include "lidef/symmetric_dirichlet.h"
 #include "lidef/vtk_export.h"
 #include "param_flags.h"
 #include "staged_outputs.h"
@@ -57,30 +56,6 @@ double mesh_volume(const MatX3d& V, const MatX3i& F) {
   for (Eigen::Index t = 0; t < F.rows(); ++t)
     v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
   return v;
-}
-
-// Map values and per-vertex quantities at the mesh vertices.
-struct MeshFields {
-  MatX3d V;  // deformed positions
-  VecXd e_iso, det_j, sigma3;
-};
-MeshFields mesh_fields(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P) {
-  MeshFields m;
-  const Eigen::Index n = P.rows();
-  m.V.resize(n, 3);
-  m.e_iso.resize(n);
-  m.det_j.resize(n);
-  m.sigma3.resize(n);
-#pragma omp parallel for schedule(dynamic, 64)
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const MapJet jet = basis.map_jet(y, P.row(i).transpose(), 1);
-    m.V.row(i) = jet.f.transpose();
-    const double e = sd_energy(jet.J);
-    m.e_iso(i) = std::isfinite(e) ? e - 6.0 : std::numeric_limits<double>::quiet_NaN();
-    m.det_j(i) = jet.J.determinant();
-    m.sigma3(i) = signed_singular_values(jet.J)(2);
-  }
-  return m;
 }
 
 const char* kIterationsHeader =
@@ -227,7 +202,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       CertificateReport report =
           make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir, "coefficients.txt", sp,
                                   solver.sampling(), solver.certify_params(false, true));
-      const MeshFields mf = mesh_fields(solver.basis(), y, model.mesh.V);
+      const MeshFields mf = mesh_fields(solver.basis(), y, model.mesh.V, {/*sigma3=*/true});
       const double ms_final = ms_since(t0);
       const VecXd herr = solver.handle_errors();
       const double max_err = herr.size() ? herr.maxCoeff() : 0.0;

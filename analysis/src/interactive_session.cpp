@@ -7,8 +7,7 @@
 #include <limits>
 
 #include "lidef/errors.h"
-#include "lidef/signed_svd.h"
-#include "lidef/symmetric_dirichlet.h"
+#include "lidef/mesh_fields.h"
 
 namespace lidef {
 
@@ -48,8 +47,11 @@ struct InteractiveSession::Command {
   int samples_per_voxel = 32;
 };
 
-// State owned by the engine thread.
+// State owned by the engine thread, and the stages of its loop (run()).
 struct InteractiveSession::Engine {
+  explicit Engine(InteractiveSession& s) : session(s) {}
+  InteractiveSession& session;  // queue, mutex, callbacks and what the other threads read
+
   std::shared_ptr<const Model> model;
   DeformParams params;
   MatX3d sources, targets;
@@ -72,6 +74,44 @@ struct InteractiveSession::Engine {
   Clock::time_point last_extras = Clock::now() - std::chrono::hours(1);
   int verify_samples = 0;  // > 0: a verification is pending
   Scenario scenario;       // what the engine runs (restored into scenario_ when a command fails)
+
+  // --- Waiting for work.
+  bool take_commands(std::vector<Command>& cmds);  // false: the session is closing
+  bool commands_queued(bool or_quit) const;        // commands wait (or, with or_quit, the session closes)
+
+  // --- Commands, in the order they were posted; a failing one is dropped and the state before it kept.
+  void apply_commands(const std::vector<Command>& cmds);
+  void apply_command(const std::vector<Command>& cmds, size_t k);
+  static bool targets_superseded(const std::vector<Command>& cmds, size_t k);
+  void apply_load(const Command& c);
+  void apply_handles(const Command& c);
+  void apply_targets(const Command& c, bool superseded);
+  void apply_params(const Command& c);
+  void apply_solve();
+  void apply_stop();
+  void apply_reset();
+  void apply_extras(const Command& c);
+  void apply_verify(const Command& c);
+  void drop_command(const std::exception& e);
+
+  // --- The solver.
+  void build_solver(const std::shared_ptr<const Model>& new_model, const DeformParams& new_params);
+  void handles_to_solver();
+  bool iterate();  // false: go straight back for the waiting commands (no resting frame)
+  bool on_iteration(const IterationRecord& r);
+
+  // --- Extras (certificate leaves, σ3 field grid, verification) of the current map.
+  bool compute_extras(bool resting);  // true when something was computed
+  void compute_leaves();
+  void compute_field();
+  void compute_verification();
+
+  // --- What the other threads see.
+  void rest();  // extras up to date, then a frame of the final state
+  std::shared_ptr<SessionFrame> make_frame();
+  void publish_frame(std::shared_ptr<const SessionFrame> f);
+  void publish_state(SessionState st, const std::string& text);
+  void report_error(const std::string& what);
 };
 
 InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_error,
@@ -79,7 +119,7 @@ InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_
     : on_frame_(std::move(on_frame)),
       on_error_(std::move(on_error)),
       backends_(std::move(backends)),
-      engine_(std::make_unique<Engine>()) {
+      engine_(std::make_unique<Engine>(*this)) {
   thread_ = std::thread([this] { run(); });
 }
 
@@ -243,8 +283,7 @@ SessionState InteractiveSession::state() const {
   return state_;
 }
 
-// ---------------------------------------------------------------------------------------------- engine
-// thread
+// ------------------------------------------------------------------------------------------- engine thread
 
 namespace {
 
@@ -265,331 +304,396 @@ void reduced_mesh_matrices(const HarmonicBasis& basis, const MatXd& Xi, const Ma
 
 }  // namespace
 
+// The engine thread: take the posted commands and apply them, iterate while there is something to solve (a
+// frame per iteration; new commands interrupt), then rest (extras brought up to date, a final frame).
 void InteractiveSession::run() {
   Engine& E = *engine_;
-  auto publish_state = [&](SessionState st, const std::string& status) {
-    E.state = st;
-    E.status = status;
-    std::lock_guard<std::mutex> lk(mutex_);
-    state_ = st;
-  };
-  auto fail = [&](const std::string& what) {
-    if (on_error_) on_error_(what);
-  };
-  // A frame of the solver's current map.
-  auto make_frame = [&]() {
-    const auto t0 = Clock::now();
-    auto f = std::make_shared<SessionFrame>();
-    f->serial = ++E.serial;
-    f->map_version = E.map_version;
-    f->model_version = E.model_version;
-    f->state = E.state;
-    f->status = E.status;
-    f->model = E.model;
-    f->sources = E.sources;
-    f->targets = E.targets;
-    f->leaves = E.leaves;
-    f->leaves_version = E.leaves_version;
-    f->field = E.field;
-    f->field_deformed = E.field_deformed;
-    f->field_version = E.field_version;
-    f->verification = E.verification;
-    f->verification_version = E.verification_version;
-    if (E.solver) {
-      const DeformationSolver& S = *E.solver;
-      f->history = S.history();
-      const Certificate& c = S.certificate();
-      f->certified = c.certified;
-      f->min_lower_bound = c.min_lower_bound;
-      f->min_sigma3 = c.min_sigma3_center;
-      f->not_certified_reason = c.reason;
-      const auto& yr = S.reduced_coefficients();
-      f->coefficients = S.coefficients();
-      f->cage_V = f->coefficients.topRows(E.model->cage.num_vertices());
-      f->mesh_V = E.Mv * yr;
-      const MatXd JT = E.Mg * yr;
-      const Eigen::Index n = f->mesh_V.rows();
-      f->mesh_e_iso.resize(n);
-      f->mesh_det.resize(n);
-#pragma omp parallel for schedule(static)
-      for (Eigen::Index i = 0; i < n; ++i) {
-        const Mat3 J = JT.middleRows(3 * i, 3).transpose();
-        const double e = sd_energy(J);
-        f->mesh_e_iso(i) = std::isfinite(e) ? e - 6.0 : std::numeric_limits<double>::quiet_NaN();
-        f->mesh_det(i) = J.determinant();
-      }
-      if (E.sources.rows() > 0) {
-        // The solver recorded the energy of its last iteration; recomputing it (a pass over all samples, or a
-        // device round trip) per frame would repeat that work.
-        f->energy = S.history().empty() ? S.energy() : S.history().back().terms;
-        f->images = S.handle_positions();
-        const VecXd err = S.handle_errors();
-        f->max_handle_error = err.size() ? err.maxCoeff() : 0.0;
-      } else {
-        f->images.resize(0, 3);
-      }
-    }
-    f->ms_frame = 1000 * seconds_since(t0);
-    return f;
-  };
-  auto publish = [&](std::shared_ptr<const SessionFrame> f) {
-    {
-      std::lock_guard<std::mutex> lk(mutex_);
-      latest_ = f;
-    }
-    if (on_frame_) on_frame_(f);
-  };
-  // Extras for the current map, when requested and due. Returns true when something was computed.
-  auto update_extras = [&](bool resting) {
-    if (!E.solver) return false;
-    const bool due = resting || seconds_since(E.last_extras) >= E.extras.extras_interval;
-    bool did = false;
-    const DeformationSolver& S = *E.solver;
-    // A verification is of the map the engine rests at (one requested mid-drag waits for the rest).
-    const bool verify_now = E.verify_samples > 0 && resting;
-    const bool need_leaves = (E.extras.leaves || verify_now) && E.leaves_version != E.map_version;
-    if (need_leaves && (due || verify_now)) {
-      E.leaves = std::make_shared<const Certificate>(S.certify_current(true));
-      E.leaves_version = E.map_version;
-      did = true;
-    }
-    if (E.extras.field && E.field_version != E.map_version && due) {
-      const MatX3d y = S.coefficients();
-      auto grid = std::make_shared<FieldGrid>(
-          compute_field_grid(E.model->cage, S.basis(), y, S.sampling(), E.extras.field_resolution));
-      // f at the grid points inside the cage (the deformed-space view); NaN elsewhere.
-      std::vector<long> inside;
-      for (long i = 0; i < grid->points(); ++i)
-        if (grid->inside_cage[static_cast<size_t>(i)]) inside.push_back(i);
-      MatX3d P(static_cast<Eigen::Index>(inside.size()), 3);
-      const long nx = grid->dims[0], ny = grid->dims[1];
-      for (size_t k = 0; k < inside.size(); ++k) {
-        const long i = inside[k];
-        P.row(static_cast<Eigen::Index>(k)) =
-            (grid->origin + grid->spacing * Vec3(i % nx, (i / nx) % ny, i / (nx * ny))).transpose();
-      }
-      const MatX3d FP = S.basis().map_values(y, P);
-      auto def = std::make_shared<std::vector<float>>(3 * static_cast<size_t>(grid->points()),
-                                                      std::numeric_limits<float>::quiet_NaN());
-      for (size_t k = 0; k < inside.size(); ++k)
-        for (int a = 0; a < 3; ++a)
-          (*def)[3 * static_cast<size_t>(inside[k]) + a] =
-              static_cast<float>(FP(static_cast<Eigen::Index>(k), a));
-      E.field = grid;
-      E.field_deformed = def;
-      E.field_version = E.map_version;
-      did = true;
-    }
-    if (verify_now && E.leaves && E.leaves_version == E.map_version) {
-      E.verification = std::make_shared<const VerificationResult>(
-          verify_certificate(S.basis(), S.coefficients(), E.leaves->leaves, E.verify_samples));
-      E.verification_version = E.map_version;
-      E.verify_samples = 0;
-      did = true;
-    }
-    if (did) E.last_extras = Clock::now();
-    return did;
-  };
-  auto build_solver = [&](const std::shared_ptr<const Model>& model, const DeformParams& params) {
-    publish_state(SessionState::kPreparing, "preprocessing " + model->dir);
-    publish(make_frame());
-    if (params.threads > 0)
-      omp_set_num_threads(params.threads);
-    else
-      omp_set_num_threads(omp_get_num_procs());
-    std::string msg;
-    auto backend = backends_(params, &msg);
-    auto log = [&](const std::string& line) {
-      E.status = "preprocessing: " + line;
-      publish(make_frame());
-    };
-    std::unique_ptr<DeformationSolver> solver;
-    try {
-      solver = std::make_unique<DeformationSolver>(model->cage, params, default_cache_dir(), log, backend);
-    } catch (const Error&) {
-      // "auto" chose a device that cannot hold this problem: the CPU takes it.
-      if (params.backend != BackendKind::kAuto || backend->is_cpu()) throw;
-      backend = cpu_backend();
-      solver = std::make_unique<DeformationSolver>(model->cage, params, default_cache_dir(), log, backend);
-    }
-    MatXd Mv, Mg;
-    E.status = "preprocessing: mesh vertices in the subspace";
-    reduced_mesh_matrices(solver->basis(), solver->subspace().basis, model->mesh.V, Mv, Mg);
-    // Committed only now: a failure above leaves the previous session as it was.
-    E.solver = std::move(solver);
-    E.backend = backend;
-    E.Mv = std::move(Mv);
-    E.Mg = std::move(Mg);
-    E.model = model;
-    E.params = params;
-    ++E.model_version;
-    ++E.map_version;
-    E.leaves.reset();
-    E.field.reset();
-    E.field_deformed.reset();
-    E.verification.reset();
-    E.leaves_version = E.field_version = E.verification_version = -1;
-  };
-  auto apply_handles = [&]() {
-    if (!E.solver) return;
-    if (E.sources.rows() > 0) E.solver->set_handles(E.sources, E.targets, "handles");
-  };
-  auto apply_handles_checked = [&](const MatX3d& sources, const MatX3d& targets) {
-    if (E.solver && sources.rows() > 0) E.solver->set_handles(sources, targets, "handles");
-    E.sources = sources;
-    E.targets = targets;
-    E.scenario.sources = sources;
-    E.scenario.targets = targets;
-  };
-
   for (;;) {
     std::vector<Command> cmds;
-    {
-      std::unique_lock<std::mutex> lk(mutex_);
-      for (;;) {
-        if (quit_) return;
-        if (!queue_.empty() || E.want_iterate) break;
-        idle_ = true;
-        rested_.notify_all();
-        wake_.wait(lk);
-      }
-      cmds.swap(queue_);
-      interrupt_.store(false);  // every interrupting command is in `cmds`
-      idle_ = false;
-    }
-    for (size_t k = 0; k < cmds.size(); ++k) {
-      Command& c = cmds[k];
-      try {
-        switch (c.kind) {
-          case Command::kLoad: {
-            E.want_iterate = false;
-            build_solver(c.model, c.scenario.params);
-            E.sources = c.scenario.sources;
-            E.targets = c.scenario.targets;
-            apply_handles();
-            E.want_iterate = c.iterate && E.sources.rows() > 0;
-            E.scenario = c.scenario;
-            publish_state(SessionState::kResting, E.sources.rows() > 0 ? "loaded" : "loaded: no handles yet");
-            break;
-          }
-          case Command::kHandles:
-            apply_handles_checked(c.sources, c.targets);
-            E.want_iterate = E.sources.rows() > 0;
-            break;
-          case Command::kTargets: {
-            // Only the newest target set of a burst matters (the drag path between steps is not solved).
-            bool later = false;
-            for (size_t j = k + 1; j < cmds.size(); ++j)
-              if (cmds[j].kind == Command::kTargets || cmds[j].kind == Command::kHandles ||
-                  cmds[j].kind == Command::kLoad)
-                later = true;
-            if (later || !E.solver || c.targets.rows() != E.sources.rows()) break;
-            E.solver->set_targets(c.targets, "targets");
-            E.targets = c.targets;
-            E.scenario.targets = c.targets;
-            E.want_iterate = E.sources.rows() > 0;
-            break;
-          }
-          case Command::kParams:
-            if (!E.solver) {
-              E.params = c.params;
-              break;
-            }
-            if (changes_precomputation(E.params, c.params)) {
-              build_solver(E.model, c.params);
-              apply_handles();
-            } else {
-              E.solver->set_params(c.params);
-              E.params = c.params;
-            }
-            E.scenario.params = c.params;
-            E.want_iterate = E.sources.rows() > 0;
-            break;
-          case Command::kSolve:
-            E.want_iterate = E.solver && E.sources.rows() > 0;
-            break;
-          case Command::kStop:
-            E.want_iterate = false;
-            publish_state(SessionState::kResting, "stopped");
-            break;
-          case Command::kReset:
-            if (E.solver) {
-              E.solver->reset();
-              ++E.map_version;
-              publish_state(SessionState::kResting, "reset to the identity");
-            }
-            E.want_iterate = false;
-            break;
-          case Command::kExtras:
-            E.extras = c.extras;
-            break;
-          case Command::kVerify:
-            E.verify_samples = std::max(1, c.samples_per_voxel);
-            break;
-        }
-      } catch (const std::exception& e) {
-        // The command is dropped; what was there before stays (build_solver commits only on success).
-        E.want_iterate = false;
-        {
-          std::lock_guard<std::mutex> lk(mutex_);
-          model_ = E.model;
-          scenario_ = E.scenario;
-        }
-        publish_state(E.solver ? SessionState::kResting : SessionState::kFailed,
-                      std::string("error: ") + e.what());
-        fail(e.what());
-      }
-    }
-
-    if (E.want_iterate && E.solver) {
-      publish_state(SessionState::kIterating, "iterating");
-      bool commands_pending = false;
-      SolveResult res;
-      try {
-        res = E.solver->solve(
-            [&](const IterationRecord& r) {
-              if (r.accepted) ++E.map_version;
-              update_extras(false);
-              publish(make_frame());
-              std::lock_guard<std::mutex> lk(mutex_);
-              commands_pending = !queue_.empty() || quit_;
-              return !commands_pending;
-            },
-            &interrupt_);
-      } catch (const std::exception& e) {
-        E.want_iterate = false;
-        publish_state(SessionState::kResting, std::string("error: ") + e.what());
-        fail(e.what());
-        continue;
-      }
-      if (res.reason == StopReason::kInterrupted) {
-        // Pending commands (new targets) continue the drag; an explicit stop is among them.
-        E.want_iterate = true;
-        {
-          std::lock_guard<std::mutex> lk(mutex_);
-          if (queue_.empty() && !quit_) E.want_iterate = false;
-        }
-        if (E.want_iterate) continue;
-        publish_state(SessionState::kResting, "stopped");
-      } else {
-        E.want_iterate = false;
-        publish_state(SessionState::kResting, std::string(to_string(res.reason)) + ": " + res.message);
-      }
-    }
-    // Resting: bring the requested extras up to date and show the final state.
-    {
-      std::lock_guard<std::mutex> lk(mutex_);
-      if (!queue_.empty()) continue;  // more work first; extras when the engine rests
-    }
-    if (E.solver && E.state != SessionState::kIterating) {
-      try {
-        update_extras(true);
-      } catch (const std::exception& e) {
-        fail(e.what());
-      }
-    }
-    publish(make_frame());
+    if (!E.take_commands(cmds)) return;
+    E.apply_commands(cmds);
+    if (E.want_iterate && E.solver && !E.iterate()) continue;
+    E.rest();
   }
+}
+
+// --- Waiting for work.
+
+bool InteractiveSession::Engine::take_commands(std::vector<Command>& cmds) {
+  std::unique_lock<std::mutex> lk(session.mutex_);
+  for (;;) {
+    if (session.quit_) return false;
+    if (!session.queue_.empty() || want_iterate) break;
+    session.idle_ = true;
+    session.rested_.notify_all();
+    session.wake_.wait(lk);
+  }
+  cmds.swap(session.queue_);
+  session.interrupt_.store(false);  // every interrupting command is in `cmds`
+  session.idle_ = false;
+  return true;
+}
+
+bool InteractiveSession::Engine::commands_queued(bool or_quit) const {
+  std::lock_guard<std::mutex> lk(session.mutex_);
+  return !session.queue_.empty() || (or_quit && session.quit_);
+}
+
+// --- Commands.
+
+void InteractiveSession::Engine::apply_commands(const std::vector<Command>& cmds) {
+  for (size_t k = 0; k < cmds.size(); ++k) {
+    try {
+      apply_command(cmds, k);
+    } catch (const std::exception& e) {
+      drop_command(e);
+    }
+  }
+}
+
+void InteractiveSession::Engine::apply_command(const std::vector<Command>& cmds, size_t k) {
+  const Command& c = cmds[k];
+  switch (c.kind) {
+    case Command::kLoad:
+      return apply_load(c);
+    case Command::kHandles:
+      return apply_handles(c);
+    case Command::kTargets:
+      return apply_targets(c, targets_superseded(cmds, k));
+    case Command::kParams:
+      return apply_params(c);
+    case Command::kSolve:
+      return apply_solve();
+    case Command::kStop:
+      return apply_stop();
+    case Command::kReset:
+      return apply_reset();
+    case Command::kExtras:
+      return apply_extras(c);
+    case Command::kVerify:
+      return apply_verify(c);
+  }
+}
+
+// Only the newest target set of a burst matters (the drag path between steps is not solved).
+bool InteractiveSession::Engine::targets_superseded(const std::vector<Command>& cmds, size_t k) {
+  for (size_t j = k + 1; j < cmds.size(); ++j)
+    if (cmds[j].kind == Command::kTargets || cmds[j].kind == Command::kHandles ||
+        cmds[j].kind == Command::kLoad)
+      return true;
+  return false;
+}
+
+void InteractiveSession::Engine::apply_load(const Command& c) {
+  want_iterate = false;
+  build_solver(c.model, c.scenario.params);
+  sources = c.scenario.sources;
+  targets = c.scenario.targets;
+  handles_to_solver();
+  want_iterate = c.iterate && sources.rows() > 0;
+  scenario = c.scenario;
+  publish_state(SessionState::kResting, sources.rows() > 0 ? "loaded" : "loaded: no handles yet");
+}
+
+void InteractiveSession::Engine::apply_handles(const Command& c) {
+  if (solver && c.sources.rows() > 0) solver->set_handles(c.sources, c.targets, "handles");
+  sources = c.sources;
+  targets = c.targets;
+  scenario.sources = c.sources;
+  scenario.targets = c.targets;
+  want_iterate = sources.rows() > 0;
+}
+
+void InteractiveSession::Engine::apply_targets(const Command& c, bool superseded) {
+  if (superseded || !solver || c.targets.rows() != sources.rows()) return;
+  solver->set_targets(c.targets, "targets");
+  targets = c.targets;
+  scenario.targets = c.targets;
+  want_iterate = sources.rows() > 0;
+}
+
+void InteractiveSession::Engine::apply_params(const Command& c) {
+  if (!solver) {
+    params = c.params;
+    return;
+  }
+  if (changes_precomputation(params, c.params)) {
+    build_solver(model, c.params);
+    handles_to_solver();
+  } else {
+    solver->set_params(c.params);
+    params = c.params;
+  }
+  scenario.params = c.params;
+  want_iterate = sources.rows() > 0;
+}
+
+void InteractiveSession::Engine::apply_solve() {
+  want_iterate = solver && sources.rows() > 0;
+}
+
+void InteractiveSession::Engine::apply_stop() {
+  want_iterate = false;
+  publish_state(SessionState::kResting, "stopped");
+}
+
+void InteractiveSession::Engine::apply_reset() {
+  if (solver) {
+    solver->reset();
+    ++map_version;
+    publish_state(SessionState::kResting, "reset to the identity");
+  }
+  want_iterate = false;
+}
+
+void InteractiveSession::Engine::apply_extras(const Command& c) {
+  extras = c.extras;
+}
+
+void InteractiveSession::Engine::apply_verify(const Command& c) {
+  verify_samples = std::max(1, c.samples_per_voxel);
+}
+
+// The command is dropped; what was there before stays (build_solver commits only on success).
+void InteractiveSession::Engine::drop_command(const std::exception& e) {
+  want_iterate = false;
+  {
+    std::lock_guard<std::mutex> lk(session.mutex_);
+    session.model_ = model;
+    session.scenario_ = scenario;
+  }
+  publish_state(solver ? SessionState::kResting : SessionState::kFailed, std::string("error: ") + e.what());
+  report_error(e.what());
+}
+
+// --- The solver.
+
+void InteractiveSession::Engine::build_solver(const std::shared_ptr<const Model>& new_model,
+                                              const DeformParams& new_params) {
+  publish_state(SessionState::kPreparing, "preprocessing " + new_model->dir);
+  publish_frame(make_frame());
+  if (new_params.threads > 0)
+    omp_set_num_threads(new_params.threads);
+  else
+    omp_set_num_threads(omp_get_num_procs());
+  std::string msg;
+  auto new_backend = session.backends_(new_params, &msg);
+  auto log = [&](const std::string& line) {
+    status = "preprocessing: " + line;
+    publish_frame(make_frame());
+  };
+  std::unique_ptr<DeformationSolver> built;
+  try {
+    built = std::make_unique<DeformationSolver>(new_model->cage, new_params, default_cache_dir(), log,
+                                                new_backend);
+  } catch (const Error&) {
+    // "auto" chose a device that cannot hold this problem: the CPU takes it.
+    if (new_params.backend != BackendKind::kAuto || new_backend->is_cpu()) throw;
+    new_backend = cpu_backend();
+    built = std::make_unique<DeformationSolver>(new_model->cage, new_params, default_cache_dir(), log,
+                                                new_backend);
+  }
+  MatXd v, g;
+  status = "preprocessing: mesh vertices in the subspace";
+  reduced_mesh_matrices(built->basis(), built->subspace().basis, new_model->mesh.V, v, g);
+  // Committed only now: a failure above leaves the previous session as it was.
+  solver = std::move(built);
+  backend = new_backend;
+  Mv = std::move(v);
+  Mg = std::move(g);
+  model = new_model;
+  params = new_params;
+  ++model_version;
+  ++map_version;
+  leaves.reset();
+  field.reset();
+  field_deformed.reset();
+  verification.reset();
+  leaves_version = field_version = verification_version = -1;
+}
+
+void InteractiveSession::Engine::handles_to_solver() {
+  if (!solver) return;
+  if (sources.rows() > 0) solver->set_handles(sources, targets, "handles");
+}
+
+bool InteractiveSession::Engine::iterate() {
+  publish_state(SessionState::kIterating, "iterating");
+  SolveResult res;
+  try {
+    res = solver->solve([this](const IterationRecord& r) { return on_iteration(r); }, &session.interrupt_);
+  } catch (const std::exception& e) {
+    want_iterate = false;
+    publish_state(SessionState::kResting, std::string("error: ") + e.what());
+    report_error(e.what());
+    return false;
+  }
+  if (res.reason == StopReason::kInterrupted) {
+    // Pending commands (new targets) continue the drag; an explicit stop is among them.
+    want_iterate = commands_queued(true);
+    if (want_iterate) return false;
+    publish_state(SessionState::kResting, "stopped");
+  } else {
+    want_iterate = false;
+    publish_state(SessionState::kResting, std::string(to_string(res.reason)) + ": " + res.message);
+  }
+  return true;
+}
+
+// After each iteration: a frame of the solver's map; false (stop) when commands or the close are waiting.
+bool InteractiveSession::Engine::on_iteration(const IterationRecord& r) {
+  if (r.accepted) ++map_version;
+  compute_extras(false);
+  publish_frame(make_frame());
+  return !commands_queued(true);
+}
+
+// --- Extras.
+
+bool InteractiveSession::Engine::compute_extras(bool resting) {
+  if (!solver) return false;
+  const bool due = resting || seconds_since(last_extras) >= extras.extras_interval;
+  bool did = false;
+  // A verification is of the map the engine rests at (one requested mid-drag waits for the rest).
+  const bool verify_now = verify_samples > 0 && resting;
+  const bool need_leaves = (extras.leaves || verify_now) && leaves_version != map_version;
+  if (need_leaves && (due || verify_now)) {
+    compute_leaves();
+    did = true;
+  }
+  if (extras.field && field_version != map_version && due) {
+    compute_field();
+    did = true;
+  }
+  if (verify_now && leaves && leaves_version == map_version) {
+    compute_verification();
+    did = true;
+  }
+  if (did) last_extras = Clock::now();
+  return did;
+}
+
+void InteractiveSession::Engine::compute_leaves() {
+  leaves = std::make_shared<const Certificate>(solver->certify_current(true));
+  leaves_version = map_version;
+}
+
+// σ3 on a grid, and f at the grid points inside the cage (the deformed-space view); NaN elsewhere.
+void InteractiveSession::Engine::compute_field() {
+  const DeformationSolver& S = *solver;
+  const MatX3d y = S.coefficients();
+  auto grid = std::make_shared<FieldGrid>(
+      compute_field_grid(model->cage, S.basis(), y, S.sampling(), extras.field_resolution));
+  std::vector<long> inside;
+  for (long i = 0; i < grid->points(); ++i)
+    if (grid->inside_cage[static_cast<size_t>(i)]) inside.push_back(i);
+  MatX3d P(static_cast<Eigen::Index>(inside.size()), 3);
+  const long nx = grid->dims[0], ny = grid->dims[1];
+  for (size_t k = 0; k < inside.size(); ++k) {
+    const long i = inside[k];
+    P.row(static_cast<Eigen::Index>(k)) =
+        (grid->origin + grid->spacing * Vec3(i % nx, (i / nx) % ny, i / (nx * ny))).transpose();
+  }
+  const MatX3d FP = S.basis().map_values(y, P);
+  auto def = std::make_shared<std::vector<float>>(3 * static_cast<size_t>(grid->points()),
+                                                  std::numeric_limits<float>::quiet_NaN());
+  for (size_t k = 0; k < inside.size(); ++k)
+    for (int a = 0; a < 3; ++a)
+      (*def)[3 * static_cast<size_t>(inside[k]) + a] =
+          static_cast<float>(FP(static_cast<Eigen::Index>(k), a));
+  field = grid;
+  field_deformed = def;
+  field_version = map_version;
+}
+
+void InteractiveSession::Engine::compute_verification() {
+  verification = std::make_shared<const VerificationResult>(
+      verify_certificate(solver->basis(), solver->coefficients(), leaves->leaves, verify_samples));
+  verification_version = map_version;
+  verify_samples = 0;
+}
+
+// --- What the other threads see.
+
+void InteractiveSession::Engine::rest() {
+  if (commands_queued(false)) return;  // more work first; extras when the engine rests
+  if (solver && state != SessionState::kIterating) {
+    try {
+      compute_extras(true);
+    } catch (const std::exception& e) {
+      report_error(e.what());
+    }
+  }
+  publish_frame(make_frame());
+}
+
+// A frame of the solver's current map.
+std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
+  const auto t0 = Clock::now();
+  auto f = std::make_shared<SessionFrame>();
+  f->serial = ++serial;
+  f->map_version = map_version;
+  f->model_version = model_version;
+  f->state = state;
+  f->status = status;
+  f->model = model;
+  f->sources = sources;
+  f->targets = targets;
+  f->leaves = leaves;
+  f->leaves_version = leaves_version;
+  f->field = field;
+  f->field_deformed = field_deformed;
+  f->field_version = field_version;
+  f->verification = verification;
+  f->verification_version = verification_version;
+  if (solver) {
+    const DeformationSolver& S = *solver;
+    f->history = S.history();
+    const Certificate& c = S.certificate();
+    f->certified = c.certified;
+    f->min_lower_bound = c.min_lower_bound;
+    f->min_sigma3 = c.min_sigma3_center;
+    f->not_certified_reason = c.reason;
+    const auto& yr = S.reduced_coefficients();
+    f->coefficients = S.coefficients();
+    f->cage_V = f->coefficients.topRows(model->cage.num_vertices());
+    MatX3d mesh_V = Mv * yr;
+    MeshFields m = mesh_fields(std::move(mesh_V), Mg * yr);
+    f->mesh_V = std::move(m.V);
+    f->mesh_e_iso = std::move(m.e_iso);
+    f->mesh_det = std::move(m.det_j);
+    if (sources.rows() > 0) {
+      // The solver recorded the energy of its last iteration; recomputing it (a pass over all samples, or a
+      // device round trip) per frame would repeat that work.
+      f->energy = S.history().empty() ? S.energy() : S.history().back().terms;
+      f->images = S.handle_positions();
+      const VecXd err = S.handle_errors();
+      f->max_handle_error = err.size() ? err.maxCoeff() : 0.0;
+    } else {
+      f->images.resize(0, 3);
+    }
+  }
+  f->ms_frame = 1000 * seconds_since(t0);
+  return f;
+}
+
+void InteractiveSession::Engine::publish_frame(std::shared_ptr<const SessionFrame> f) {
+  {
+    std::lock_guard<std::mutex> lk(session.mutex_);
+    session.latest_ = f;
+  }
+  if (session.on_frame_) session.on_frame_(f);
+}
+
+void InteractiveSession::Engine::publish_state(SessionState st, const std::string& text) {
+  state = st;
+  status = text;
+  std::lock_guard<std::mutex> lk(session.mutex_);
+  session.state_ = st;
+}
+
+void InteractiveSession::Engine::report_error(const std::string& what) {
+  if (session.on_error_) session.on_error_(what);
 }
 
 }  // namespace lidef

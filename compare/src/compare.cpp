@@ -11,13 +11,13 @@
 #include <sstream>
 
 #include "lidef/errors.h"
+#include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/projected_newton.h"
 #include "lidef/sampling.h"
 #include "lidef/signed_svd.h"
-#include "lidef/symmetric_dirichlet.h"
 
 namespace lidef {
 
@@ -28,14 +28,6 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-// E_iso − 6 (NaN where det J ≤ 0, so that means over a mesh stay finite; the inverted count says it) and det
-// J.
-void add_jacobian_fields(const Mat3& J, double& e_iso, double& det_j) {
-  const double e = sd_energy(J);
-  e_iso = std::isfinite(e) ? e - 6 : kNaN;
-  det_j = J.determinant();
-}
 
 void summarize_fields(MethodResult& r) {
   double sum = 0, mx = -std::numeric_limits<double>::infinity();
@@ -54,18 +46,11 @@ void summarize_fields(MethodResult& r) {
   r.max_e_iso = bad ? std::numeric_limits<double>::infinity() : (n ? mx : kNaN);
 }
 
-// Map of a harmonic method at the mesh vertices: positions, E_iso − 6, det J.
-void harmonic_fields(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P, MethodResult& r) {
-  const Eigen::Index n = P.rows();
-  r.V.resize(n, 3);
-  r.e_iso.resize(n);
-  r.det_j.resize(n);
-#pragma omp parallel for schedule(dynamic, 64)
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const MapJet jet = basis.map_jet(y, P.row(i).transpose(), 1);
-    r.V.row(i) = jet.f.transpose();
-    add_jacobian_fields(jet.J, r.e_iso(i), r.det_j(i));
-  }
+// The fields of a method's map at the mesh vertices (positions, E_iso − 6, det J) and their summary.
+void set_fields(MeshFields m, MethodResult& r) {
+  r.V = std::move(m.V);
+  r.e_iso = std::move(m.e_iso);
+  r.det_j = std::move(m.det_j);
   summarize_fields(r);
 }
 
@@ -126,7 +111,7 @@ void run_lidef(Shared& s, MethodResult& r) {
   const VecXd he = solver.handle_errors();
   r.max_handle_error = he.size() ? he.maxCoeff() : 0.0;
   const MatX3d y = solver.coefficients();
-  harmonic_fields(solver.basis(), y, s.model.mesh.V, r);
+  set_fields(mesh_fields(solver.basis(), y, s.model.mesh.V), r);
   const Certificate& cert = solver.certificate();
   r.certified = cert.certified ? 1 : 0;
   r.min_sigma3 = cert.min_sigma3_center;
@@ -204,13 +189,11 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   r.max_handle_error = solver.handle_errors().maxCoeff();
   const MatX3d& X = solver.positions();
   r.inverted = solver.inverted_count(X);
-  r.V = W * X;
-  const Eigen::Index n = r.V.rows();
-  r.e_iso.resize(n);
-  r.det_j.resize(n);
+  const Eigen::Index n = s.model.mesh.V.rows();
+  MatXd JT(3 * n, 3);  // J of the vertex's tet, transposed
   for (Eigen::Index i = 0; i < n; ++i)
-    add_jacobian_fields(solver.jacobian(X, mesh_embedding.tet(i)), r.e_iso(i), r.det_j(i));
-  summarize_fields(r);
+    JT.middleRows(3 * i, 3) = solver.jacobian(X, mesh_embedding.tet(i)).transpose();
+  set_fields(mesh_fields(W * X, JT), r);
   r.log = log.str();
 }
 
@@ -266,7 +249,7 @@ void run_vhm(Shared& s, MethodResult& r) {
   r.stop = res.message;
   r.dof = solver.dof();
   r.max_handle_error = solver.handle_errors().maxCoeff();
-  harmonic_fields(basis, solver.coefficients(), s.model.mesh.V, r);
+  set_fields(mesh_fields(basis, solver.coefficients(), s.model.mesh.V), r);
   // Fig. 11: lidef's certificate on lidef's voxels judges VHM's injectivity (not part of VHM's time).
   s.say(r.method, "certifying the result");
   const VoxelSampling& vs = s.get_sampling();

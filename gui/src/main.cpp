@@ -7,6 +7,7 @@
 #include <QSurfaceFormat>
 #include <QTimer>
 #include <chrono>
+#include <clocale>
 #include <iostream>
 #include <regex>
 
@@ -75,6 +76,9 @@ int main(int argc, char** argv) {
 
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication qapp(argc, argv);
+  // QApplication adopts the user's locale (setlocale(LC_ALL, "")); numbers in captions and files are written
+  // with printf (format_g), which must keep the '.' of the C locale.
+  std::setlocale(LC_NUMERIC, "C");
   const bool headless = !screenshot.empty();
   if (!compare.empty() && headless) {
     std::string caption;

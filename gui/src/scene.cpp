@@ -17,6 +17,7 @@
 #include <vtkProperty.h>
 #include <vtkRenderer.h>
 #include <vtkScalarBarActor.h>
+#include <vtkScalarsToColors.h>
 #include <vtkSmartVolumeMapper.h>
 #include <vtkSphereSource.h>
 #include <vtkTextActor.h>
@@ -28,9 +29,10 @@
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
-#include <sstream>
+#include <utility>
 
 #include "lidef/errors.h"
+#include "lidef/number_format.h"
 #include "studio_common.h"
 
 namespace lidef::studio {
@@ -117,6 +119,15 @@ namespace {
 template <class T>
 using Ptr = vtkSmartPointer<T>;
 
+// Polygons on points, with optional point scalars.
+Ptr<vtkPolyData> polydata(vtkPoints* pts, vtkCellArray* polys, vtkDataArray* scalars = nullptr) {
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  pd->SetPolys(polys);
+  if (scalars) pd->GetPointData()->SetScalars(scalars);
+  return pd;
+}
+
 vtkSmartPointer<vtkPolyData> wireframe(const MatX3d& V, const MatX3i& F) {
   auto pts = Ptr<vtkPoints>::New();
   pts->SetNumberOfPoints(V.rows());
@@ -126,10 +137,7 @@ vtkSmartPointer<vtkPolyData> wireframe(const MatX3d& V, const MatX3i& F) {
     const vtkIdType ids[3] = {F(t, 0), F(t, 1), F(t, 2)};
     cells->InsertNextCell(3, ids);
   }
-  auto pd = Ptr<vtkPolyData>::New();
-  pd->SetPoints(pts);
-  pd->SetPolys(cells);
-  return pd;
+  return polydata(pts, cells);
 }
 
 // Diverging blue–white–red around `mid` on a log or linear scale (volume ratio, margins).
@@ -224,6 +232,20 @@ struct Scene::Impl {
   Ptr<vtkTextActor> text = Ptr<vtkTextActor>::New();
   long model_version = -1;
   std::string caption;
+
+  // Stages of Scene::show.
+  void hide_all();
+  void show_no_model(const SessionFrame& f);
+  void adopt_model(const SessionFrame& f);
+  void update_mesh(const SessionFrame& f, const ViewSettings& s);
+  void update_handle_images(const SessionFrame& f, const ViewSettings& s);
+  std::string show_mesh_view(const SessionFrame& f, const ViewSettings& s);
+  std::string show_sigma3_view(const SessionFrame& f, const ViewSettings& s);
+  void show_sigma3_volume(const SessionFrame& f, const ViewSettings& s, double lo, double hi);
+  std::string show_leaves_view(const SessionFrame& f, const ViewSettings& s);
+  const char* color_leaves(const Certificate& c, const ViewSettings& s, double lo, double hi);
+  void show_bar(vtkScalarsToColors* colors, const char* title);
+  void set_caption(const std::string& what, const SessionFrame& f);
 };
 
 Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
@@ -359,331 +381,380 @@ Ptr<vtkPolyData> slice_polydata(const FieldGrid& g, const std::vector<float>* de
       if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[3] < 0) continue;
       quads->InsertNextCell(4, q);
     }
-  auto pd = Ptr<vtkPolyData>::New();
-  pd->SetPoints(pts);
-  pd->SetPolys(quads);
-  pd->GetPointData()->SetScalars(sig);
-  return pd;
+  return polydata(pts, quads, sig);
 }
 
-std::string fmt(double x, int prec = 3) {
-  std::ostringstream s;
-  s.precision(prec);
-  s << x;
-  return s.str();
+// Lowest and highest σ3 of the grid points a view shows (inside the cage, inside the voxels unless the whole
+// cage is asked for); 0, 0 when there are none.
+std::pair<double, double> sigma3_range(const FieldGrid& g, const ViewSettings& s) {
+  double lo = 1e300, hi = -1e300;
+  for (size_t i = 0; i < g.sigma3.size(); ++i)
+    if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i]) && std::isfinite(g.sigma3[i])) {
+      lo = std::min<double>(lo, g.sigma3[i]);
+      hi = std::max<double>(hi, g.sigma3[i]);
+    }
+  if (lo > hi) lo = hi = 0;
+  return {lo, hi};
+}
+
+// The chosen grid planes appended into one polydata with σ3 at the points.
+Ptr<vtkPolyData> sigma3_slices(const SessionFrame& f, const ViewSettings& s) {
+  const FieldGrid& g = *f.field;
+  auto all_pts = Ptr<vtkPoints>::New();
+  auto all_sig = Ptr<vtkFloatArray>::New();
+  all_sig->SetName("sigma3");
+  auto all_quads = Ptr<vtkCellArray>::New();
+  for (int a = 0; a < 3; ++a) {
+    if (!s.slice[a]) continue;
+    const int k =
+        std::clamp(static_cast<int>(std::lround(s.slice_pos[a] * (g.dims[a] - 1))), 0, g.dims[a] - 1);
+    auto pd = slice_polydata(g, s.sigma_deformed_space ? f.field_deformed.get() : nullptr, a, k,
+                             s.sigma_whole_cage);
+    const vtkIdType off = all_pts->GetNumberOfPoints();
+    for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); ++i) {
+      all_pts->InsertNextPoint(pd->GetPoint(i));
+      all_sig->InsertNextValue(static_cast<vtkFloatArray*>(pd->GetPointData()->GetScalars())->GetValue(i));
+    }
+    vtkCellArray* q = pd->GetPolys();
+    q->InitTraversal();
+    vtkIdType n;
+    const vtkIdType* ids;
+    while (q->GetNextCell(n, ids)) {
+      vtkIdType shifted[4];
+      for (int e = 0; e < 4; ++e) shifted[e] = ids[e] + off;
+      all_quads->InsertNextCell(4, shifted);
+    }
+  }
+  return polydata(all_pts, all_quads, all_sig);
+}
+
+// The leaves a Lipschitz/octree view shows, as glyph points (cubes of side `side` coloured by `value`), and
+// the outlines of the refined or failed ones (Lipschitz view).
+struct LeafGlyphs {
+  Ptr<vtkPoints> pts = Ptr<vtkPoints>::New();
+  Ptr<vtkDoubleArray> side = Ptr<vtkDoubleArray>::New();
+  Ptr<vtkDoubleArray> value = Ptr<vtkDoubleArray>::New();
+  Ptr<vtkPoints> mark_pts = Ptr<vtkPoints>::New();
+  Ptr<vtkDoubleArray> mark_side = Ptr<vtkDoubleArray>::New();
+  Ptr<vtkDoubleArray> mark_failed = Ptr<vtkDoubleArray>::New();
+  long shown = 0, failed = 0;
+  double lo = 1e300, hi = -1e300;  // range of the finite values shown (0, 0 when none)
+};
+
+// Leaves in front of the clip plane across the longest axis of the cage's box (so the inside shows).
+LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSettings& s) {
+  const bool lip = s.view == View::kLipschitz;
+  const Vec3 ext = model.cage.bbox_max - model.cage.bbox_min;
+  int axis = 0;
+  for (int a = 1; a < 3; ++a)
+    if (ext(a) > ext(axis)) axis = a;
+  const double cut = model.cage.bbox_min(axis) + s.clip * ext(axis);
+  LeafGlyphs L;
+  L.side->SetName("side");
+  L.value->SetName("value");
+  L.mark_side->SetName("side");
+  L.mark_failed->SetName("failed");
+  for (const CertLeaf& l : c.leaves) {
+    if (!l.certified) ++L.failed;
+    if (l.center(axis) > cut || l.depth < s.min_depth) continue;
+    if (lip && s.only_refined_or_failed && l.depth == 0 && l.certified) continue;
+    double x;
+    if (lip)
+      x = s.lipschitz_margin ? l.margin : l.L;
+    else
+      x = s.octree_by_status ? (l.certified ? 1 : 0) : l.depth;
+    if (!std::isfinite(x)) x = lip && !s.lipschitz_margin ? 1e300 : -1e300;
+    L.pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
+    L.side->InsertNextValue(l.side * 0.97);  // a small gap shows the cells
+    if (lip && (l.depth > 0 || !l.certified)) {
+      L.mark_pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
+      L.mark_side->InsertNextValue(l.side);
+      L.mark_failed->InsertNextValue(l.certified ? 0 : 1);
+    }
+    L.value->InsertNextValue(x);
+    if (std::abs(x) < 1e299) {
+      L.lo = std::min(L.lo, x);
+      L.hi = std::max(L.hi, x);
+    }
+    ++L.shown;
+  }
+  if (L.lo > L.hi) L.lo = L.hi = 0;
+  return L;
 }
 
 }  // namespace
 
+void Scene::Impl::hide_all() {
+  for (vtkProp* p : std::initializer_list<vtkProp*>{mesh_actor, context_mesh, rest_cage, def_cage, images,
+                                                    slices, volume, leaves, marks, bar})
+    p->VisibilityOff();
+  bar->SetNumberOfLabels(5);
+}
+
+void Scene::Impl::show_no_model(const SessionFrame& f) {
+  caption = f.status.empty() ? "no model: File > Open (a model folder or a scenario)" : f.status;
+  text->SetInput(caption.c_str());
+}
+
+// Polydata that change with the model only (mesh and cage connectivity, rest-space cage and mesh).
+void Scene::Impl::adopt_model(const SessionFrame& f) {
+  if (model_version == f.model_version) return;
+  const Model& model = *f.model;
+  model_version = f.model_version;
+  auto pd = wireframe(f.mesh_V, model.mesh.F);
+  mesh->SetPoints(pd->GetPoints());
+  mesh->SetPolys(pd->GetPolys());
+  rest_cage_pd = wireframe(model.cage.V, model.cage.F);
+  rest_mesh = wireframe(model.mesh.V, model.mesh.F);
+  def_cage_pd = wireframe(f.cage_V, model.cage.F);
+  static_cast<vtkPolyDataMapper*>(rest_cage->GetMapper())->SetInputData(rest_cage_pd);
+  static_cast<vtkPolyDataMapper*>(def_cage->GetMapper())->SetInputData(def_cage_pd);
+  volume_version = -2;
+}
+
+// Deformed mesh geometry and its field (always: the handles are picked on it), and the deformed cage.
+void Scene::Impl::update_mesh(const SessionFrame& f, const ViewSettings& s) {
+  vtkPoints* pts = mesh->GetPoints();
+  for (Eigen::Index i = 0; i < f.mesh_V.rows(); ++i)
+    pts->SetPoint(i, f.mesh_V(i, 0), f.mesh_V(i, 1), f.mesh_V(i, 2));
+  pts->Modified();
+  auto arr = Ptr<vtkDoubleArray>::New();
+  const VecXd& v = s.mesh_volume_ratio ? f.mesh_det : f.mesh_e_iso;
+  arr->SetName(s.mesh_volume_ratio ? "volume ratio (det J)" : "E_iso - 6");
+  arr->SetNumberOfValues(v.size());
+  for (Eigen::Index i = 0; i < v.size(); ++i) arr->SetValue(i, v(i));
+  mesh->GetPointData()->SetScalars(arr);
+  mesh->Modified();
+  vtkPoints* cp = def_cage_pd->GetPoints();
+  for (Eigen::Index i = 0; i < f.cage_V.rows(); ++i)
+    cp->SetPoint(i, f.cage_V(i, 0), f.cage_V(i, 1), f.cage_V(i, 2));
+  cp->Modified();
+  def_cage_pd->Modified();
+}
+
+// Handle images f(p): small black spheres, shown in the mesh view.
+void Scene::Impl::update_handle_images(const SessionFrame& f, const ViewSettings& s) {
+  const Model& model = *f.model;
+  const double diag = (model.cage.bbox_max - model.cage.bbox_min).norm();
+  auto pts = Ptr<vtkPoints>::New();
+  for (Eigen::Index i = 0; i < f.images.rows(); ++i)
+    pts->InsertNextPoint(f.images(i, 0), f.images(i, 1), f.images(i, 2));
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  images_mapper->SetInputData(pd);
+  image_sphere->SetRadius(0.008 * diag);
+  images->SetVisibility(s.view == View::kMesh && f.images.rows() > 0);
+}
+
+void Scene::Impl::show_bar(vtkScalarsToColors* colors, const char* title) {
+  bar->SetLookupTable(colors);
+  bar->SetTitle(title);
+  bar->VisibilityOn();
+}
+
+// Mesh view: the deformed mesh coloured by det J (log scale, symmetric around 1) or E_iso − 6.
+std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSettings& s) {
+  mesh_actor->VisibilityOn();
+  rest_cage->SetVisibility(s.rest_cage);
+  def_cage->SetVisibility(s.deformed_cage);
+  if (s.mesh_volume_ratio) {
+    double lo = 1, hi = 1;
+    for (Eigen::Index i = 0; i < f.mesh_det.size(); ++i)
+      if (f.mesh_det(i) > 0) {
+        lo = std::min(lo, f.mesh_det(i));
+        hi = std::max(hi, f.mesh_det(i));
+      }
+    const double m = std::max({hi, 1 / lo, 1.05});  // symmetric on a log scale around 1
+    diverging_lut(mesh_lut, 1 / m, m, true);
+  } else {
+    double hi = 0;
+    for (Eigen::Index i = 0; i < f.mesh_e_iso.size(); ++i)
+      if (std::isfinite(f.mesh_e_iso(i))) hi = std::max(hi, f.mesh_e_iso(i));
+    mesh_lut->SetScaleToLinear();
+    heat_lut(mesh_lut, std::max(hi, 0.05));
+  }
+  mesh_lut->Build();
+  mesh_mapper->SetScalarRange(mesh_lut->GetTableRange());
+  show_bar(mesh_lut, s.mesh_volume_ratio ? "det J" : "E_iso - 6");
+  return std::string("deformed mesh, ") + (s.mesh_volume_ratio ? "local volume ratio det J" : "E_iso - 6");
+}
+
+// σ3 view: slices (and in rest space optionally a volume rendering) of the field grid, over a faint mesh.
+std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSettings& s) {
+  context_mapper->SetInputData(s.sigma_deformed_space ? mesh.Get() : rest_mesh.Get());
+  context_mesh->VisibilityOn();
+  rest_cage->SetVisibility(!s.sigma_deformed_space && s.rest_cage);
+  def_cage->SetVisibility(s.sigma_deformed_space && s.deformed_cage);
+  std::string what =
+      std::string("sigma3 field, ") + (s.sigma_deformed_space ? "deformed space" : "rest space");
+  if (!f.field) return what + " (computing...)";
+  const auto [lo, hi] = sigma3_range(*f.field, s);
+  sigma3_colors(sigma_colors, lo, hi);
+  slices_mapper->SetInputData(sigma3_slices(f, s));
+  slices_mapper->SetScalarRange(lo, hi);
+  slices->VisibilityOn();
+  if (s.sigma_volume && !s.sigma_deformed_space) show_sigma3_volume(f, s, lo, hi);
+  show_bar(sigma_colors, "sigma3");
+  what += std::string(s.sigma_whole_cage ? " (whole cage interior; certified only inside the voxels)"
+                                         : " (inside the voxels)") +
+          ", min " + format_g(lo, 3) + ", max " + format_g(hi, 3);
+  if (f.field_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
+  return what;
+}
+
+// Volume rendering of σ3 in rest space; rebuilt when the field or the whole-cage choice changes.
+void Scene::Impl::show_sigma3_volume(const SessionFrame& f, const ViewSettings& s, double lo, double hi) {
+  const FieldGrid& g = *f.field;
+  const long volume_key = 2 * f.field_version + (s.sigma_whole_cage ? 1 : 0);
+  if (volume_version != volume_key) {
+    volume_version = volume_key;
+    volume_image = Ptr<vtkImageData>::New();
+    volume_image->SetDimensions(g.dims);
+    volume_image->SetOrigin(g.origin.x(), g.origin.y(), g.origin.z());
+    volume_image->SetSpacing(g.spacing, g.spacing, g.spacing);
+    auto v = Ptr<vtkFloatArray>::New();
+    v->SetName("sigma3");
+    v->SetNumberOfValues(g.points());
+    // Outside the cage: below the range, fully transparent.
+    const float outside = static_cast<float>(lo - 0.01 * (hi - lo + 1e-9));
+    for (long i = 0; i < g.points(); ++i)
+      v->SetValue(i, g.inside_cage[static_cast<size_t>(i)] &&
+                             (s.sigma_whole_cage || g.inside_sampled[static_cast<size_t>(i)]) &&
+                             std::isfinite(g.sigma3[static_cast<size_t>(i)])
+                         ? g.sigma3[static_cast<size_t>(i)]
+                         : outside);
+    volume_image->GetPointData()->SetScalars(v);
+    volume_mapper->SetInputData(volume_image);
+    auto opacity = Ptr<vtkPiecewiseFunction>::New();
+    opacity->AddPoint(outside, 0.0);
+    opacity->AddPoint(lo, 0.5);  // low σ3 (near-degenerate) stands out
+    opacity->AddPoint(lo + 0.5 * (hi - lo), 0.08);
+    opacity->AddPoint(hi, 0.02);
+    auto prop = Ptr<vtkVolumeProperty>::New();
+    prop->SetColor(sigma_colors);
+    prop->SetScalarOpacity(opacity);
+    prop->SetScalarOpacityUnitDistance(2 * g.spacing);
+    prop->SetInterpolationTypeToLinear();
+    volume->SetProperty(prop);
+  }
+  volume->VisibilityOn();
+}
+
+// Lipschitz / octree views: the certificate's leaves in rest space.
+std::string Scene::Impl::show_leaves_view(const SessionFrame& f, const ViewSettings& s) {
+  context_mapper->SetInputData(rest_mesh);
+  context_mesh->VisibilityOn();
+  rest_cage->SetVisibility(s.rest_cage);
+  const bool lip = s.view == View::kLipschitz;
+  std::string what =
+      lip ? (s.lipschitz_margin ? "leaf voxels, margin sigma3 - rL" : "leaf voxels, Lipschitz bound L")
+          : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
+  if (!f.leaves) return what + " (computing...)";
+  const Certificate& c = *f.leaves;
+  const LeafGlyphs L = leaf_glyphs(c, *f.model, s);
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(L.pts);
+  pd->GetPointData()->AddArray(L.side);
+  pd->GetPointData()->AddArray(L.value);
+  leaves_mapper->SetInputData(pd);
+  leaves_mapper->SelectColorArray("value");
+  const char* title = color_leaves(c, s, L.lo, L.hi);
+  leaves_mapper->SetScalarRange(leaves_lut->GetTableRange());
+  leaves->GetProperty()->SetEdgeVisibility(!lip);
+  leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
+  leaves->VisibilityOn();
+  if (lip && L.mark_pts->GetNumberOfPoints() > 0) {
+    auto mpd = Ptr<vtkPolyData>::New();
+    mpd->SetPoints(L.mark_pts);
+    mpd->GetPointData()->AddArray(L.mark_side);
+    mpd->GetPointData()->AddArray(L.mark_failed);
+    marks_mapper->SetInputData(mpd);
+    marks->VisibilityOn();
+  }
+  show_bar(leaves_lut, title);
+  what += ": " + std::to_string(L.shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
+          std::to_string(c.refined) + " voxels refined, " + std::to_string(L.failed) + " failed";
+  if (s.clip < 1) what += ", clipped";
+  if (f.leaves_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
+  return what;
+}
+
+// The leaves' colour table for the view: L (log scale), margin (diverging), status or depth (indexed).
+// Returns the colour bar's title.
+const char* Scene::Impl::color_leaves(const Certificate& c, const ViewSettings& s, double lo, double hi) {
+  const bool lip = s.view == View::kLipschitz;
+  leaves_lut->SetScaleToLinear();
+  leaves_lut->IndexedLookupOff();
+  leaves_lut->ResetAnnotations();
+  leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);
+  if (lip && !s.lipschitz_margin) {
+    // L spans decades: log scale.
+    lo = std::max(lo, 1e-12);
+    hi = std::max(hi, lo * 10);
+    leaves_lut->SetNumberOfTableValues(256);
+    leaves_lut->SetScaleToLog10();
+    leaves_lut->SetTableRange(lo, hi);
+    leaves_lut->SetHueRange(0.66, 0.0);
+    leaves_lut->SetSaturationRange(0.8, 0.8);
+    leaves_lut->SetValueRange(0.9, 0.9);
+    leaves_lut->ForceBuild();
+    return "L";
+  }
+  if (lip) {
+    const double m = std::max(std::abs(lo), std::abs(hi));
+    diverging_lut(leaves_lut, -m, m, false);
+    leaves_lut->Build();
+    return "sigma3 - rL";
+  }
+  if (s.octree_by_status) {
+    leaves_lut->SetNumberOfTableValues(2);
+    leaves_lut->SetTableRange(0, 1);
+    leaves_lut->SetTableValue(0, 0.85, 0.1, 0.1, 1);
+    leaves_lut->SetTableValue(1, 0.3, 0.75, 0.35, 1);
+    leaves_lut->ResetAnnotations();
+    leaves_lut->SetAnnotation(vtkVariant(0.0), "failed");
+    leaves_lut->SetAnnotation(vtkVariant(1.0), "certified");
+    leaves_lut->IndexedLookupOn();
+    return "status";
+  }
+  const int dmax = std::max(1, c.max_depth_used);
+  leaves_lut->SetNumberOfTableValues(dmax + 1);
+  leaves_lut->SetTableRange(0, dmax);
+  leaves_lut->ResetAnnotations();
+  for (int d = 0; d <= dmax; ++d) {
+    const double t = static_cast<double>(d) / dmax;
+    leaves_lut->SetTableValue(d, 0.85 - 0.6 * t, 0.85 - 0.75 * t, 0.95 - 0.35 * t, 1);
+    leaves_lut->SetAnnotation(vtkVariant(static_cast<double>(d)), "depth " + std::to_string(d));
+  }
+  leaves_lut->IndexedLookupOn();
+  return "depth";
+}
+
+void Scene::Impl::set_caption(const std::string& what, const SessionFrame& f) {
+  const std::string cert = f.certified ? "certified" : "NOT certified";
+  caption = what + "\n" + cert + ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) +
+            ", iteration " + std::to_string(f.history.size());
+  text->SetInput(caption.c_str());
+}
+
 void Scene::show(const SessionFrame& f, const ViewSettings& s) {
   Impl& I = *impl_;
-  for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
-                                                    I.images, I.slices, I.volume, I.leaves, I.marks, I.bar})
-    p->VisibilityOff();
-  I.bar->SetNumberOfLabels(5);
+  I.hide_all();
   if (!f.model || f.mesh_V.rows() == 0) {
-    I.caption = f.status.empty() ? "no model: File > Open (a model folder or a scenario)" : f.status;
-    I.text->SetInput(I.caption.c_str());
+    I.show_no_model(f);
     return;
   }
-  const Model& model = *f.model;
-  if (I.model_version != f.model_version) {
-    I.model_version = f.model_version;
-    auto pd = wireframe(f.mesh_V, model.mesh.F);
-    I.mesh->SetPoints(pd->GetPoints());
-    I.mesh->SetPolys(pd->GetPolys());
-    I.rest_cage_pd = wireframe(model.cage.V, model.cage.F);
-    I.rest_mesh = wireframe(model.mesh.V, model.mesh.F);
-    I.def_cage_pd = wireframe(f.cage_V, model.cage.F);
-    static_cast<vtkPolyDataMapper*>(I.rest_cage->GetMapper())->SetInputData(I.rest_cage_pd);
-    static_cast<vtkPolyDataMapper*>(I.def_cage->GetMapper())->SetInputData(I.def_cage_pd);
-    I.volume_version = -2;
-  }
-  const double diag = (model.cage.bbox_max - model.cage.bbox_min).norm();
-  // Mesh geometry and fields (always: the handles are picked on it).
-  {
-    vtkPoints* pts = I.mesh->GetPoints();
-    for (Eigen::Index i = 0; i < f.mesh_V.rows(); ++i)
-      pts->SetPoint(i, f.mesh_V(i, 0), f.mesh_V(i, 1), f.mesh_V(i, 2));
-    pts->Modified();
-    auto arr = Ptr<vtkDoubleArray>::New();
-    const VecXd& v = s.mesh_volume_ratio ? f.mesh_det : f.mesh_e_iso;
-    arr->SetName(s.mesh_volume_ratio ? "volume ratio (det J)" : "E_iso - 6");
-    arr->SetNumberOfValues(v.size());
-    for (Eigen::Index i = 0; i < v.size(); ++i) arr->SetValue(i, v(i));
-    I.mesh->GetPointData()->SetScalars(arr);
-    I.mesh->Modified();
-    vtkPoints* cp = I.def_cage_pd->GetPoints();
-    for (Eigen::Index i = 0; i < f.cage_V.rows(); ++i)
-      cp->SetPoint(i, f.cage_V(i, 0), f.cage_V(i, 1), f.cage_V(i, 2));
-    cp->Modified();
-    I.def_cage_pd->Modified();
-  }
-  // Handle images.
-  {
-    auto pts = Ptr<vtkPoints>::New();
-    for (Eigen::Index i = 0; i < f.images.rows(); ++i)
-      pts->InsertNextPoint(f.images(i, 0), f.images(i, 1), f.images(i, 2));
-    auto pd = Ptr<vtkPolyData>::New();
-    pd->SetPoints(pts);
-    I.images_mapper->SetInputData(pd);
-    I.image_sphere->SetRadius(0.008 * diag);
-    I.images->SetVisibility(s.view == View::kMesh && f.images.rows() > 0);
-  }
+  I.adopt_model(f);
+  I.update_mesh(f, s);
+  I.update_handle_images(f, s);
   std::string what;
-  const std::string cert = f.certified ? "certified" : "NOT certified";
-  if (s.view == View::kMesh) {
-    I.mesh_actor->VisibilityOn();
-    I.rest_cage->SetVisibility(s.rest_cage);
-    I.def_cage->SetVisibility(s.deformed_cage);
-    if (s.mesh_volume_ratio) {
-      double lo = 1, hi = 1;
-      for (Eigen::Index i = 0; i < f.mesh_det.size(); ++i)
-        if (f.mesh_det(i) > 0) {
-          lo = std::min(lo, f.mesh_det(i));
-          hi = std::max(hi, f.mesh_det(i));
-        }
-      const double m = std::max({hi, 1 / lo, 1.05});  // symmetric on a log scale around 1
-      diverging_lut(I.mesh_lut, 1 / m, m, true);
-      I.bar->SetTitle("det J");
-    } else {
-      double hi = 0;
-      for (Eigen::Index i = 0; i < f.mesh_e_iso.size(); ++i)
-        if (std::isfinite(f.mesh_e_iso(i))) hi = std::max(hi, f.mesh_e_iso(i));
-      I.mesh_lut->SetScaleToLinear();
-      heat_lut(I.mesh_lut, std::max(hi, 0.05));
-      I.bar->SetTitle("E_iso - 6");
-    }
-    I.mesh_lut->Build();
-    I.mesh_mapper->SetScalarRange(I.mesh_lut->GetTableRange());
-    I.bar->SetLookupTable(I.mesh_lut);
-    I.bar->VisibilityOn();
-    what = std::string("deformed mesh, ") + (s.mesh_volume_ratio ? "local volume ratio det J" : "E_iso - 6");
-  } else if (s.view == View::kSigma3) {
-    I.context_mapper->SetInputData(s.sigma_deformed_space ? I.mesh.Get() : I.rest_mesh.Get());
-    I.context_mesh->VisibilityOn();
-    I.rest_cage->SetVisibility(!s.sigma_deformed_space && s.rest_cage);
-    I.def_cage->SetVisibility(s.sigma_deformed_space && s.deformed_cage);
-    what = std::string("sigma3 field, ") + (s.sigma_deformed_space ? "deformed space" : "rest space");
-    if (!f.field) {
-      what += " (computing...)";
-    } else {
-      const FieldGrid& g = *f.field;
-      double lo = 1e300, hi = -1e300;
-      for (size_t i = 0; i < g.sigma3.size(); ++i)
-        if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i]) && std::isfinite(g.sigma3[i])) {
-          lo = std::min<double>(lo, g.sigma3[i]);
-          hi = std::max<double>(hi, g.sigma3[i]);
-        }
-      if (lo > hi) lo = hi = 0;
-      sigma3_colors(I.sigma_colors, lo, hi);
-      // Slices: append the chosen planes into one polydata.
-      auto all_pts = Ptr<vtkPoints>::New();
-      auto all_sig = Ptr<vtkFloatArray>::New();
-      all_sig->SetName("sigma3");
-      auto all_quads = Ptr<vtkCellArray>::New();
-      for (int a = 0; a < 3; ++a) {
-        if (!s.slice[a]) continue;
-        const int k =
-            std::clamp(static_cast<int>(std::lround(s.slice_pos[a] * (g.dims[a] - 1))), 0, g.dims[a] - 1);
-        auto pd = slice_polydata(g, s.sigma_deformed_space ? f.field_deformed.get() : nullptr, a, k,
-                                 s.sigma_whole_cage);
-        const vtkIdType off = all_pts->GetNumberOfPoints();
-        for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); ++i) {
-          all_pts->InsertNextPoint(pd->GetPoint(i));
-          all_sig->InsertNextValue(
-              static_cast<vtkFloatArray*>(pd->GetPointData()->GetScalars())->GetValue(i));
-        }
-        vtkCellArray* q = pd->GetPolys();
-        q->InitTraversal();
-        vtkIdType n;
-        const vtkIdType* ids;
-        while (q->GetNextCell(n, ids)) {
-          vtkIdType shifted[4];
-          for (int e = 0; e < 4; ++e) shifted[e] = ids[e] + off;
-          all_quads->InsertNextCell(4, shifted);
-        }
-      }
-      auto slices = Ptr<vtkPolyData>::New();
-      slices->SetPoints(all_pts);
-      slices->SetPolys(all_quads);
-      slices->GetPointData()->SetScalars(all_sig);
-      I.slices_mapper->SetInputData(slices);
-      I.slices_mapper->SetScalarRange(lo, hi);
-      I.slices->VisibilityOn();
-      if (s.sigma_volume && !s.sigma_deformed_space) {
-        const long volume_key = 2 * f.field_version + (s.sigma_whole_cage ? 1 : 0);
-        if (I.volume_version != volume_key) {
-          I.volume_version = volume_key;
-          I.volume_image = Ptr<vtkImageData>::New();
-          I.volume_image->SetDimensions(g.dims);
-          I.volume_image->SetOrigin(g.origin.x(), g.origin.y(), g.origin.z());
-          I.volume_image->SetSpacing(g.spacing, g.spacing, g.spacing);
-          auto v = Ptr<vtkFloatArray>::New();
-          v->SetName("sigma3");
-          v->SetNumberOfValues(g.points());
-          // Outside the cage: below the range, fully transparent.
-          const float outside = static_cast<float>(lo - 0.01 * (hi - lo + 1e-9));
-          for (long i = 0; i < g.points(); ++i)
-            v->SetValue(i, g.inside_cage[static_cast<size_t>(i)] &&
-                                   (s.sigma_whole_cage || g.inside_sampled[static_cast<size_t>(i)]) &&
-                                   std::isfinite(g.sigma3[static_cast<size_t>(i)])
-                               ? g.sigma3[static_cast<size_t>(i)]
-                               : outside);
-          I.volume_image->GetPointData()->SetScalars(v);
-          I.volume_mapper->SetInputData(I.volume_image);
-          auto opacity = Ptr<vtkPiecewiseFunction>::New();
-          opacity->AddPoint(outside, 0.0);
-          opacity->AddPoint(lo, 0.5);  // low σ3 (near-degenerate) stands out
-          opacity->AddPoint(lo + 0.5 * (hi - lo), 0.08);
-          opacity->AddPoint(hi, 0.02);
-          auto prop = Ptr<vtkVolumeProperty>::New();
-          prop->SetColor(I.sigma_colors);
-          prop->SetScalarOpacity(opacity);
-          prop->SetScalarOpacityUnitDistance(2 * g.spacing);
-          prop->SetInterpolationTypeToLinear();
-          I.volume->SetProperty(prop);
-        }
-        I.volume->VisibilityOn();
-      }
-      I.bar->SetLookupTable(I.sigma_colors);
-      I.bar->SetTitle("sigma3");
-      I.bar->VisibilityOn();
-      what += std::string(s.sigma_whole_cage ? " (whole cage interior; certified only inside the voxels)"
-                                             : " (inside the voxels)") +
-              ", min " + fmt(lo) + ", max " + fmt(hi);
-      if (f.field_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
-    }
-  } else {  // Lipschitz / octree: leaves in rest space
-    I.context_mapper->SetInputData(I.rest_mesh);
-    I.context_mesh->VisibilityOn();
-    I.rest_cage->SetVisibility(s.rest_cage);
-    const bool lip = s.view == View::kLipschitz;
-    what = lip ? (s.lipschitz_margin ? "leaf voxels, margin sigma3 - rL" : "leaf voxels, Lipschitz bound L")
-               : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
-    if (!f.leaves) {
-      what += " (computing...)";
-    } else {
-      const Certificate& c = *f.leaves;
-      // Clip along the longest axis of the cage's box so the inside shows.
-      const Vec3 ext = model.cage.bbox_max - model.cage.bbox_min;
-      int axis = 0;
-      for (int a = 1; a < 3; ++a)
-        if (ext(a) > ext(axis)) axis = a;
-      const double cut = model.cage.bbox_min(axis) + s.clip * ext(axis);
-      auto pts = Ptr<vtkPoints>::New();
-      auto side = Ptr<vtkDoubleArray>::New();
-      side->SetName("side");
-      auto val = Ptr<vtkDoubleArray>::New();
-      val->SetName("value");
-      auto mark_pts = Ptr<vtkPoints>::New();
-      auto mark_side = Ptr<vtkDoubleArray>::New();
-      mark_side->SetName("side");
-      auto mark_failed = Ptr<vtkDoubleArray>::New();
-      mark_failed->SetName("failed");
-      long shown = 0, refined = 0, failed = 0;
-      double lo = 1e300, hi = -1e300;
-      for (const CertLeaf& l : c.leaves) {
-        if (l.depth > 0) ++refined;
-        if (!l.certified) ++failed;
-        if (l.center(axis) > cut || l.depth < s.min_depth) continue;
-        if (lip && s.only_refined_or_failed && l.depth == 0 && l.certified) continue;
-        double x;
-        if (lip)
-          x = s.lipschitz_margin ? l.margin : l.L;
-        else
-          x = s.octree_by_status ? (l.certified ? 1 : 0) : l.depth;
-        if (!std::isfinite(x)) x = lip && !s.lipschitz_margin ? 1e300 : -1e300;
-        pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
-        side->InsertNextValue(l.side * 0.97);  // a small gap shows the cells
-        if (lip && (l.depth > 0 || !l.certified)) {
-          mark_pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
-          mark_side->InsertNextValue(l.side);
-          mark_failed->InsertNextValue(l.certified ? 0 : 1);
-        }
-        val->InsertNextValue(x);
-        if (std::abs(x) < 1e299) {
-          lo = std::min(lo, x);
-          hi = std::max(hi, x);
-        }
-        ++shown;
-      }
-      if (lo > hi) lo = hi = 0;
-      auto pd = Ptr<vtkPolyData>::New();
-      pd->SetPoints(pts);
-      pd->GetPointData()->AddArray(side);
-      pd->GetPointData()->AddArray(val);
-      I.leaves_mapper->SetInputData(pd);
-      I.leaves_mapper->SelectColorArray("value");
-      I.leaves_lut->SetScaleToLinear();
-      I.leaves_lut->IndexedLookupOff();
-      I.leaves_lut->ResetAnnotations();
-      I.leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);
-      if (lip && !s.lipschitz_margin) {
-        // L spans decades: log scale.
-        lo = std::max(lo, 1e-12);
-        hi = std::max(hi, lo * 10);
-        I.leaves_lut->SetNumberOfTableValues(256);
-        I.leaves_lut->SetScaleToLog10();
-        I.leaves_lut->SetTableRange(lo, hi);
-        I.leaves_lut->SetHueRange(0.66, 0.0);
-        I.leaves_lut->SetSaturationRange(0.8, 0.8);
-        I.leaves_lut->SetValueRange(0.9, 0.9);
-        I.leaves_lut->ForceBuild();
-        I.bar->SetTitle("L");
-      } else if (lip) {
-        const double m = std::max(std::abs(lo), std::abs(hi));
-        diverging_lut(I.leaves_lut, -m, m, false);
-        I.leaves_lut->Build();
-        I.bar->SetTitle("sigma3 - rL");
-      } else if (s.octree_by_status) {
-        I.leaves_lut->SetNumberOfTableValues(2);
-        I.leaves_lut->SetTableRange(0, 1);
-        I.leaves_lut->SetTableValue(0, 0.85, 0.1, 0.1, 1);
-        I.leaves_lut->SetTableValue(1, 0.3, 0.75, 0.35, 1);
-        I.leaves_lut->ResetAnnotations();
-        I.leaves_lut->SetAnnotation(vtkVariant(0.0), "failed");
-        I.leaves_lut->SetAnnotation(vtkVariant(1.0), "certified");
-        I.leaves_lut->IndexedLookupOn();
-        I.bar->SetTitle("status");
-      } else {
-        const int dmax = std::max(1, c.max_depth_used);
-        I.leaves_lut->SetNumberOfTableValues(dmax + 1);
-        I.leaves_lut->SetTableRange(0, dmax);
-        I.leaves_lut->ResetAnnotations();
-        for (int d = 0; d <= dmax; ++d) {
-          const double t = static_cast<double>(d) / dmax;
-          I.leaves_lut->SetTableValue(d, 0.85 - 0.6 * t, 0.85 - 0.75 * t, 0.95 - 0.35 * t, 1);
-          I.leaves_lut->SetAnnotation(vtkVariant(static_cast<double>(d)), "depth " + std::to_string(d));
-        }
-        I.leaves_lut->IndexedLookupOn();
-        I.bar->SetTitle("depth");
-      }
-      I.leaves_mapper->SetScalarRange(I.leaves_lut->GetTableRange());
-      I.leaves->GetProperty()->SetEdgeVisibility(!lip);
-      I.leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
-      I.leaves->VisibilityOn();
-      if (lip && mark_pts->GetNumberOfPoints() > 0) {
-        auto mpd = Ptr<vtkPolyData>::New();
-        mpd->SetPoints(mark_pts);
-        mpd->GetPointData()->AddArray(mark_side);
-        mpd->GetPointData()->AddArray(mark_failed);
-        I.marks_mapper->SetInputData(mpd);
-        I.marks->VisibilityOn();
-      }
-      I.bar->SetLookupTable(I.leaves_lut);
-      I.bar->VisibilityOn();
-      what += ": " + std::to_string(shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
-              std::to_string(c.refined) + " voxels refined, " + std::to_string(failed) + " failed";
-      if (s.clip < 1) what += ", clipped";
-      if (f.leaves_version != f.map_version)
-        what += " (of an earlier iterate; updates when the solver rests)";
-      (void)refined;
-    }
-  }
-  I.caption = what + "\n" + cert + ", min sigma3 lower bound " + fmt(f.min_lower_bound, 4) + ", iteration " +
-              std::to_string(f.history.size());
-  I.text->SetInput(I.caption.c_str());
+  if (s.view == View::kMesh)
+    what = I.show_mesh_view(f, s);
+  else if (s.view == View::kSigma3)
+    what = I.show_sigma3_view(f, s);
+  else
+    what = I.show_leaves_view(f, s);
+  I.set_caption(what, f);
 }
 
 }  // namespace lidef::studio
