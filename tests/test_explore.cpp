@@ -18,11 +18,17 @@
 #include <filesystem>
 #include <random>
 
+#include "lidef/explorer/ball_certificate.h"
+#include "lidef/explorer/boundary_injectivity.h"
+#include "lidef/explorer/counterexample.h"
+#include "lidef/explorer/explorer_example.h"
 #include "lidef/explorer/harmonic_polynomials.h"
+#include "lidef/explorer/laplacian_experiment.h"
+#include "lidef/explorer/random_search.h"
+#include "lidef/explorer/sigma_minima.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/procedural_models.h"
-#include "lidef/explorer/sigma_explorer.h"
 #include "lidef/signed_svd.h"
 #include "lidef/singular_value_derivatives.h"
 #include "test_support.h"
@@ -340,6 +346,53 @@ TEST(ExploreCounterexample, BoundaryCheckDetectsASelfIntersectingImage) {
   const BoundaryEmbedding be = check_boundary_embedding(m, Ball(), 3);
   EXPECT_FALSE(be.embedded);
   EXPECT_GT(be.intersecting_pairs, 0);
+}
+
+TEST(ExploreCounterexample, VerdictNeedsEveryCheck) {
+  // Check results as the checks report them; the verdict holds only with all five, each failing one named.
+  Sigma3Minimum m;
+  m.sigma3 = 0.6;
+  m.strict = true;
+  BallCertificate li, ba;
+  li.certified = ba.certified = true;
+  li.min_sigma3_center = 0.5;
+  ba.sphere_only = true;
+  ba.threshold = 0.6;
+  BoundaryInjectivity bi;
+  bi.certified = true;
+  BoundaryEmbedding be;
+  be.embedded = true;
+  CounterexampleChecks c{&m, &li, &ba, &bi, &be};
+  EXPECT_TRUE(counterexample_verdict(c).verified);
+  EXPECT_TRUE(counterexample_verdict(c).reasons.empty());
+  EXPECT_DOUBLE_EQ(boundary_injectivity_threshold(li, &m), 0.25);
+  EXPECT_DOUBLE_EQ(boundary_injectivity_threshold(li, nullptr), 0.25);
+  auto fails_once = [&](const CounterexampleChecks& k) {
+    const CounterexampleVerdict v = counterexample_verdict(k);
+    return !v.verified && v.reasons.size() == 1;
+  };
+  m.strict = false;
+  EXPECT_TRUE(fails_once(c));
+  m.strict = true;
+  m.sigma3 = -0.1;  // not locally injective at x*
+  EXPECT_FALSE(counterexample_verdict(c).verified);
+  m.sigma3 = 0.6;
+  ba.threshold = 0.5;  // the sphere certified above less than σ3(x*)
+  EXPECT_TRUE(fails_once(c));
+  ba.threshold = 0.6;
+  li.sphere_only = true;  // σ3 > 0 on the sphere only is not local injectivity
+  EXPECT_TRUE(fails_once(c));
+  li.sphere_only = false;
+  bi.certified = false;
+  EXPECT_TRUE(fails_once(c));
+  bi.certified = true;
+  be.embedded = false;
+  EXPECT_TRUE(fails_once(c));
+  be.embedded = true;
+  // A check that was not run fails the verdict (cage maps have no sphere certificates).
+  EXPECT_TRUE(fails_once({&m, &li, &ba, nullptr, &be}));
+  EXPECT_EQ(counterexample_verdict({&m, &li, nullptr, nullptr, &be}).reasons.size(), 2u);
+  EXPECT_TRUE(counterexample_verdict(c).verified);
 }
 
 TEST(ExploreSearch, DeterministicWithFixedSeedAndThreadCount) {

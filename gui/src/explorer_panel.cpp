@@ -41,7 +41,9 @@
 #include <vector>
 
 #include "lidef/errors.h"
-#include "lidef/explorer/sigma_explorer.h"
+#include "lidef/explorer/ball_fields.h"
+#include "lidef/explorer/explorer_example.h"
+#include "lidef/explorer/sigma_minima.h"
 #include "lidef/signed_svd.h"
 #include "studio_common.h"
 

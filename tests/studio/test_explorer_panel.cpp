@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "explorer_panel.h"
-#include "lidef/explorer/sigma_explorer.h"
+#include "lidef/explorer/explorer_example.h"
 #include "test_support.h"
 
 namespace {

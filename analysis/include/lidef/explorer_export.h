@@ -2,7 +2,7 @@
 #pragma once
 #include <string>
 
-#include "lidef/explorer/sigma_explorer.h"
+#include "lidef/explorer/ball_fields.h"
 
 namespace lidef {
 

@@ -13,7 +13,7 @@
 namespace lidef {
 
 // Largest supported degree (the fourth derivatives of a degree ≤ 4 map are constant, which keeps the
-// certificate's Lipschitz bound of σ3 exact; see sigma_explorer.h).
+// certificate's Lipschitz bound of σ3 exact; see ball_certificate.h).
 constexpr int kMaxHarmonicDegree = 4;
 // Monomials x^a y^b z^c with a+b+c ≤ 4.
 constexpr int kNumMonomials = 35;
