@@ -31,6 +31,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "lidef/cage.h"
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
@@ -122,18 +123,11 @@ double evaluate_all(const HarmonicBasis& B, const MatX3d& P, int order) {
 }
 
 std::string fmt(double v, int prec) {
-  std::ostringstream s;
-  s.setf(std::ios::fixed);
-  s.precision(prec);
-  s << v;
-  return s.str();
+  return bench::fixed(v, prec);
 }
 
 std::string fmt_sci(double v) {
-  std::ostringstream s;
-  s.precision(3);
-  s << v;
-  return s.str();
+  return bench::sci(v, 3);
 }
 
 // The optimization/target flags green_coordinates.cpp was compiled with, read from the build's

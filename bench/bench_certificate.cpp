@@ -53,6 +53,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "bench_util.h"
 #include "lidef/cage.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
@@ -126,18 +127,11 @@ std::string cpu_pressure() {
 }
 
 std::string fmt(double v, int prec) {
-  std::ostringstream s;
-  s.setf(std::ios::fixed);
-  s.precision(prec);
-  s << v;
-  return s.str();
+  return bench::fixed(v, prec);
 }
 
 std::string fmt_sci(double v, int prec = 3) {
-  std::ostringstream s;
-  s.precision(prec);
-  s << v;
-  return s.str();
+  return bench::sci(v, prec);
 }
 
 // Whether the header declares a float-storage allowance (the lead's float storage of the reduced matrices).

@@ -31,6 +31,7 @@
 #include "lidef/compare/compare.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
+#include "lidef/number_format.h"
 #include "lidef/scenario.h"
 
 extern "C" void openblas_set_num_threads(int);
@@ -46,10 +47,7 @@ std::vector<std::string> split(const std::string& s) {
   return out;
 }
 std::string g(double x, int p = 3) {
-  if (std::isnan(x)) return "—";
-  char b[40];
-  std::snprintf(b, sizeof b, "%.*g", p, x);
-  return b;
+  return std::isnan(x) ? "—" : lidef::format_g(x, p);
 }
 }  // namespace
 

@@ -124,19 +124,9 @@ double minimum(const std::vector<double>& v) {
   return v.empty() ? std::nan("") : *std::min_element(v.begin(), v.end());
 }
 
+using bench::sci;
 std::string fmt(double v, int prec) {
-  if (!std::isfinite(v)) return std::isnan(v) ? "n/a" : (v > 0 ? "inf" : "-inf");
-  std::ostringstream s;
-  s.setf(std::ios::fixed);
-  s.precision(prec);
-  s << v;
-  return s.str();
-}
-std::string sci(double v, int prec = 3) {
-  if (!std::isfinite(v)) return std::isnan(v) ? "n/a" : (v > 0 ? "inf" : "-inf");
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.*g", prec, v);
-  return buf;
+  return bench::fixed(v, prec);
 }
 
 std::string first_line(const std::string& path) {

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <QApplication>
+#include <clocale>
 #include <QSurfaceFormat>
 #include <QTimer>
 #include <chrono>
@@ -175,6 +176,7 @@ int main(int argc, char** argv) {
   setenv("QT_QPA_PLATFORM", "xcb", 1);
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
+  std::setlocale(LC_NUMERIC, "C");  // as lidef-studio does (gui/src/main.cpp): printf keeps its '.'
   std::vector<Config> configs = {{"default (300 DOF/coord, 30k voxels)", 300, 30000, View::kMesh},
                                  {"200 DOF/coord, 20k voxels", 200, 20000, View::kMesh},
                                  {"interactive preset (100 DOF/coord, 10k voxels)", 100, 10000, View::kMesh},

@@ -1,9 +1,22 @@
 // Helpers shared by the benchmark programs: a description of the machine for the headers of their reports.
 #pragma once
+#include <cmath>
 #include <fstream>
 #include <string>
 
+#include "lidef/number_format.h"
+
 namespace lidef::bench {
+
+// Table cells: "%.<prec>f" / "%.<prec>g" (lidef/number_format.h), "n/a" for NaN and "inf" for infinities.
+inline std::string fixed(double v, int prec) {
+  if (!std::isfinite(v)) return std::isnan(v) ? "n/a" : (v > 0 ? "inf" : "-inf");
+  return format_fixed(v, prec);
+}
+inline std::string sci(double v, int prec = 3) {
+  if (!std::isfinite(v)) return std::isnan(v) ? "n/a" : (v > 0 ? "inf" : "-inf");
+  return format_g(v, prec);
+}
 
 // "model name" of the first CPU in /proc/cpuinfo.
 inline std::string cpu_model() {

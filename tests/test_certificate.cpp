@@ -18,7 +18,9 @@ using namespace lidef;
 
 namespace {
 
-std::mt19937 rng_for(unsigned s) { return std::mt19937(s); }
+std::mt19937 rng_for(unsigned s) {
+  return std::mt19937(s);
+}
 
 Vec3 random_unit(std::mt19937& rng) {
   std::normal_distribution<double> N01;
@@ -92,14 +94,16 @@ TEST(CertificateBounds, VoxelBoundsHoldOnSampledPointsOfRandomBalls) {
       // Points in the ball, half of them on its boundary sphere where the maxima tend to sit.
       const Vec3 q = p + random_unit(rng) * r * (k % 2 ? 1.0 : std::cbrt(U(rng)));
       ASSERT_LE(alpha_beta_norm2(u, w, q), f1 * f1 * (1 + 1e-12));
-      ASSERT_LE(grad_alpha_norm2_closed_form(u, w, q) + grad_beta_norm2_closed_form(u, w, q), f3 * f3 * (1 + 1e-12));
+      ASSERT_LE(grad_alpha_norm2_closed_form(u, w, q) + grad_beta_norm2_closed_form(u, w, q),
+                f3 * f3 * (1 + 1e-12));
     }
   }
   EXPECT_GT(finite, 100);
 }
 
 TEST(CertificateBounds, DifferentialRepresentationEqualsMinusBasisHessian) {
-  // (53) with the MATH-NOTES sign: H = −Σ_t Σ_k (A_t ∘ α_k + A_t[d̂_k]× ∘ β_k); so ‖H‖ is what (15)-(21) bound.
+  // (53) with the MATH-NOTES sign: H = −Σ_t Σ_k (A_t ∘ α_k + A_t[d̂_k]× ∘ β_k); so ‖H‖ is what (15)-(21)
+  // bound.
   const Cage cage(lidef::test::icosphere(1, 0.2, 3));
   const HarmonicBasis B(cage);
   auto rng = rng_for(5);
@@ -304,7 +308,8 @@ TEST_P(SharedModelBounds, ThirdOrderValidAndTighterThanFirstOrder) {
     y = smooth_map(cage, sub, amp, 21);
     double smin = 1e300;
     for (int i = 0; i < samp.size(); i += 5)
-      smin = std::min(smin, signed_singular_values(cert.basis().map_jet(y, samp.centers.row(i).transpose(), 1).J)(2));
+      smin = std::min(
+          smin, signed_singular_values(cert.basis().map_jet(y, samp.centers.row(i).transpose(), 1).J)(2));
     if (smin < 0.7) break;
   }
   CertifyParams p;
@@ -320,8 +325,8 @@ TEST_P(SharedModelBounds, ThirdOrderValidAndTighterThanFirstOrder) {
     sum3 += c3.leaves[i].L;
     worst = std::max(worst, c3.leaves[i].L / c1.leaves[i].L);
   }
-  std::cout << name << ": mean L first/third = " << sum1 / sum3 << ", largest third/first on a voxel = " << worst
-            << "\n";
+  std::cout << name << ": mean L first/third = " << sum1 / sum3
+            << ", largest third/first on a voxel = " << worst << "\n";
   RecordProperty("mean_L_ratio_first_over_third", std::to_string(sum1 / sum3));
   EXPECT_LT(sum3, sum1);
   // Validity of (21): dense sampling finds no violation of σ3(p) ≥ σ3(c) − |p−c| L in any voxel.

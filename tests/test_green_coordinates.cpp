@@ -28,9 +28,13 @@ Quadrature quadrature(const Cage& cage, const Vec3& p, int n) {
   const double s15 = std::sqrt(15.0);
   const double a1 = (6 - s15) / 21, b1 = (9 + 2 * s15) / 21, w1 = (155 - s15) / 1200;
   const double a2 = (6 + s15) / 21, b2 = (9 - 2 * s15) / 21, w2 = (155 + s15) / 1200;
-  const std::vector<std::array<double, 4>> rule = {
-      {1. / 3, 1. / 3, 1. / 3, 9. / 40}, {a1, a1, b1, w1}, {a1, b1, a1, w1}, {b1, a1, a1, w1},
-      {a2, a2, b2, w2},                   {a2, b2, a2, w2}, {b2, a2, a2, w2}};
+  const std::vector<std::array<double, 4>> rule = {{1. / 3, 1. / 3, 1. / 3, 9. / 40},
+                                                   {a1, a1, b1, w1},
+                                                   {a1, b1, a1, w1},
+                                                   {b1, a1, a1, w1},
+                                                   {a2, a2, b2, w2},
+                                                   {a2, b2, a2, w2},
+                                                   {b2, a2, a2, w2}};
   const double k4pi = 1.0 / (4 * M_PI);
   for (int t = 0; t < cage.num_faces(); ++t) {
     const Vec3 X[3] = {cage.V.row(cage.F(t, 0)), cage.V.row(cage.F(t, 1)), cage.V.row(cage.F(t, 2))};
@@ -78,7 +82,9 @@ Eval eval(const HarmonicBasis& B, const Vec3& p) {
   return e;
 }
 
-Cage test_cage() { return Cage(icosphere(1, 0.2, 3)); }
+Cage test_cage() {
+  return Cage(icosphere(1, 0.2, 3));
+}
 
 }  // namespace
 
@@ -118,7 +124,8 @@ TEST(GreenCoordinates, GradientsAndHessiansMatchFiniteDifferences) {
       const Eval Ep = eval(B, p + hh * dp), Em = eval(B, p - hh * dp);
       const MatX3d dgrad = (Ep.grad - Em.grad) / (2 * hh);  // column c: ∂²/∂p_c∂p_b
       const int idx[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
-      for (int c = 0; c < 3; ++c) herr = std::max(herr, (dgrad.col(c) - e.hess.col(idx[b][c])).cwiseAbs().maxCoeff());
+      for (int c = 0; c < 3; ++c)
+        herr = std::max(herr, (dgrad.col(c) - e.hess.col(idx[b][c])).cwiseAbs().maxCoeff());
     }
     EXPECT_LT(gerr, 1e-7 * gmax) << "gradient at " << p.transpose();
     EXPECT_LT(herr, 1e-6 * hmax) << "Hessian at " << p.transpose();
@@ -184,7 +191,8 @@ TEST(GreenCoordinates, BatchedMatricesAgreeWithPointwise) {
     const double tv = 1e-14 * e.val.cwiseAbs().maxCoeff(), tg = 1e-14 * e.grad.cwiseAbs().maxCoeff(),
                  th = 1e-14 * e.hess.cwiseAbs().maxCoeff();
     EXPECT_LE((D.row(i).transpose() - e.val).cwiseAbs().maxCoeff(), tv);
-    for (int b = 0; b < 3; ++b) EXPECT_LE((G.row(3 * i + b).transpose() - e.grad.col(b)).cwiseAbs().maxCoeff(), tg);
+    for (int b = 0; b < 3; ++b)
+      EXPECT_LE((G.row(3 * i + b).transpose() - e.grad.col(b)).cwiseAbs().maxCoeff(), tg);
     for (int k = 0; k < kSym; ++k)
       EXPECT_LE((Hm.row(kSym * i + k).transpose() - e.hess.col(k)).cwiseAbs().maxCoeff(), th);
     const MapJet jet = B.map_jet(y, P.row(i));
@@ -214,12 +222,14 @@ TEST(GreenCoordinates, EdgeAlphaBetaAreGradientsOfSolidAngleAndEdgeLog) {
       const EdgeAlphaBeta ab = edge_alpha_beta(X[(k + 2) % 3], X[(k + 1) % 3], p);
       sum_alpha += ab.alpha;
       Vec3 fd;
-      for (int b = 0; b < 3; ++b) fd(b) = (C(k, p + h * Vec3::Unit(b)) - C(k, p - h * Vec3::Unit(b))) / (2 * h);
+      for (int b = 0; b < 3; ++b)
+        fd(b) = (C(k, p + h * Vec3::Unit(b)) - C(k, p - h * Vec3::Unit(b))) / (2 * h);
       EXPECT_LT((fd - ab.beta).norm(), 1e-6 * (1 + ab.beta.norm()));
       EXPECT_NEAR(ab.alpha.dot(ab.beta), 0.0, 1e-12 * (1 + ab.alpha.norm() * ab.beta.norm()));
     }
     Vec3 fd;
-    for (int b = 0; b < 3; ++b) fd(b) = (omega(p + h * Vec3::Unit(b)) - omega(p - h * Vec3::Unit(b))) / (2 * h);
+    for (int b = 0; b < 3; ++b)
+      fd(b) = (omega(p + h * Vec3::Unit(b)) - omega(p - h * Vec3::Unit(b))) / (2 * h);
     EXPECT_LT((fd + sum_alpha).norm(), 1e-6 * (1 + sum_alpha.norm()));
   }
 }
@@ -244,7 +254,8 @@ TEST(GreenCoordinates, DifferentialJetEqualsBasisJet) {
   // Affine maps: J = A and H = 0 exactly up to rounding.
   Mat3 A;
   for (int k = 0; k < 9; ++k) A(k / 3, k % 3) = N01(rng);
-  const MapJet c = B.differential_jet(B.face_matrices(cage.affine_coefficients(A, Vec3(1, 2, 3))), P.row(0), 2);
+  const MapJet c =
+      B.differential_jet(B.face_matrices(cage.affine_coefficients(A, Vec3(1, 2, 3))), P.row(0), 2);
   EXPECT_LT((c.J - A).norm(), 1e-12 * A.norm());
   EXPECT_LT(c.hessian_norm(), 1e-12 * A.norm());
 }

@@ -10,11 +10,11 @@
 #include <random>
 
 #include "lidef/cage.h"
+#include "lidef/compare/pwl_tet.h"
+#include "lidef/compare/tet_mesh.h"
 #include "lidef/errors.h"
 #include "lidef/procedural_models.h"
-#include "lidef/compare/pwl_tet.h"
 #include "lidef/symmetric_dirichlet.h"
-#include "lidef/compare/tet_mesh.h"
 #include "test_support.h"
 
 using namespace lidef;
@@ -278,8 +278,8 @@ TEST(PwlTet, TetgenRejectsSelfIntersectingCage) {
 }
 
 TEST(PwlTet, TetgenCrashBecomesAnError) {
-  // TetGen 1.5 aborts (failed assertion `oriB != 0.0`) when refining the published horse tet mesh; it runs in a
-  // child process, so this is a NumericalError for the caller, not the end of the program.
+  // TetGen 1.5 aborts (failed assertion `oriB != 0.0`) when refining the published horse tet mesh; it runs in
+  // a child process, so this is a NumericalError for the caller, not the end of the program.
   LIDEF_REQUIRE_SHARED();
   const std::string dir = lidef::test::shared_model("horse");
   const TetMesh horse = read_tet_mesh(dir + "/tet.node", dir + "/tet.ele");

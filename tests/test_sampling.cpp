@@ -25,13 +25,15 @@ const char* const kModels[] = {"bar", "horse", "spot", "animal"};
 // Axis-aligned box [lo, hi], 12 triangles, CCW seen from outside; vertex indices offset by `base`.
 void append_box(std::vector<Vec3>& V, std::vector<Eigen::Vector3i>& F, const Vec3& lo, const Vec3& hi) {
   const int b = static_cast<int>(V.size());
-  for (int i = 0; i < 8; ++i) V.emplace_back(i & 1 ? hi(0) : lo(0), i & 2 ? hi(1) : lo(1), i & 4 ? hi(2) : lo(2));
+  for (int i = 0; i < 8; ++i)
+    V.emplace_back(i & 1 ? hi(0) : lo(0), i & 2 ? hi(1) : lo(1), i & 4 ? hi(2) : lo(2));
   const int f[12][3] = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
                         {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
   for (const auto& t : f) F.emplace_back(b + t[0], b + t[1], b + t[2]);
 }
 
-TriMesh make_mesh(const std::vector<Vec3>& V, const std::vector<Eigen::Vector3i>& F, const std::string& name) {
+TriMesh make_mesh(const std::vector<Vec3>& V, const std::vector<Eigen::Vector3i>& F,
+                  const std::string& name) {
   TriMesh m;
   m.V.resize(V.size(), 3);
   for (size_t i = 0; i < V.size(); ++i) m.V.row(i) = V[i];
@@ -59,7 +61,8 @@ double box_surface_distance(const Vec3& p, const Vec3& lo, const Vec3& hi, bool*
 
 // Grid cells (i,j,k) of side h anchored at `origin` whose centers pass `keep`, in any order.
 template <class Keep>
-std::set<std::tuple<int, int, int>> expected_cells(const Vec3& origin, const Vec3& extent, double h, Keep keep) {
+std::set<std::tuple<int, int, int>> expected_cells(const Vec3& origin, const Vec3& extent, double h,
+                                                   Keep keep) {
   std::set<std::tuple<int, int, int>> out;
   const int nx = static_cast<int>(std::ceil(extent(0) / h)), ny = static_cast<int>(std::ceil(extent(1) / h)),
             nz = static_cast<int>(std::ceil(extent(2) / h));
@@ -116,8 +119,10 @@ TEST(Sampling, BoxMatchesAnalyticCellSet) {
       EXPECT_DOUBLE_EQ(s.side, h);
       EXPECT_NEAR(s.radius(), 0.5 * std::sqrt(3.0) * h, 1e-15);
       for (int r = 0; r < s.size(); ++r)
-        ASSERT_LT((s.centers.row(r).transpose() - (lo + (s.grid_index.row(r).cast<double>().transpose() +
-                                                        Vec3::Constant(0.5)) * h)).norm(), 1e-12);
+        ASSERT_LT((s.centers.row(r).transpose() -
+                   (lo + (s.grid_index.row(r).cast<double>().transpose() + Vec3::Constant(0.5)) * h))
+                      .norm(),
+                  1e-12);
       expect_valid_centers(cage, s);
     }
   }
@@ -138,12 +143,13 @@ TEST(Sampling, WindingNumberTwoRegionStaysEmpty) {
   const VoxelSampling s = sample_voxels(cage, p);
   const double R = p.safety * 0.5 * std::sqrt(3.0) * p.voxel_side;
   int in_overlap_candidates = 0;
-  const auto truth = expected_cells(cage.bbox_min, cage.bbox_max - cage.bbox_min, p.voxel_side, [&](const Vec3& c) {
-    bool ina, inb;
-    const double da = box_surface_distance(c, a0, a1, &ina), db = box_surface_distance(c, b0, b1, &inb);
-    if (ina && inb && std::min(da, db) >= R) ++in_overlap_candidates;
-    return (ina != inb) && std::min(da, db) >= R;
-  });
+  const auto truth =
+      expected_cells(cage.bbox_min, cage.bbox_max - cage.bbox_min, p.voxel_side, [&](const Vec3& c) {
+        bool ina, inb;
+        const double da = box_surface_distance(c, a0, a1, &ina), db = box_surface_distance(c, b0, b1, &inb);
+        if (ina && inb && std::min(da, db) >= R) ++in_overlap_candidates;
+        return (ina != inb) && std::min(da, db) >= R;
+      });
   ASSERT_GT(in_overlap_candidates, 100);  // the overlap is large enough to be sampled if it were allowed
   EXPECT_EQ(cells_of(s), truth);
   expect_valid_centers(cage, s);
@@ -315,7 +321,8 @@ double read_voxel_side(const std::string& model_json) {
 
 ModelData load_model(const std::string& name) {
   const std::string dir = test::shared_model(name);
-  return {Cage(read_mesh(dir + "/cage.obj")), read_mesh(dir + "/mesh.obj"), read_voxel_side(dir + "/model.json")};
+  return {Cage(read_mesh(dir + "/cage.obj")), read_mesh(dir + "/mesh.obj"),
+          read_voxel_side(dir + "/model.json")};
 }
 
 TEST(Sampling, SharedModelsDefaultSampling) {
@@ -339,11 +346,13 @@ TEST(Sampling, SharedModelsDefaultSampling) {
     EXPECT_EQ(s.hessian_subset, s2.hessian_subset);
 
     const double cov = mesh_coverage(s, m.mesh.V);
-    const VoxelSampling pub = load_published_samples(test::shared_model(name) + "/samples.xyz", m.published_side);
+    const VoxelSampling pub =
+        load_published_samples(test::shared_model(name) + "/samples.xyz", m.published_side);
     const double pub_cov = mesh_coverage(pub, m.mesh.V);
-    std::printf("[sampling] %-6s ours: %5d voxels, h = %.5f, %d search evals, %.3f s, mesh coverage %.1f%% | "
-                "published: %5d voxels, h = %.5f, coverage %.1f%%\n",
-                name, s.size(), s.side, s.search_iterations, secs, 100 * cov, pub.size(), pub.side, 100 * pub_cov);
+    std::printf(
+        "[sampling] %-6s ours: %5d voxels, h = %.5f, %d search evals, %.3f s, mesh coverage %.1f%% | "
+        "published: %5d voxels, h = %.5f, coverage %.1f%%\n",
+        name, s.size(), s.side, s.search_iterations, secs, 100 * cov, pub.size(), pub.side, 100 * pub_cov);
     RecordProperty(std::string(name) + "_coverage_ours", std::to_string(cov));
     RecordProperty(std::string(name) + "_coverage_published", std::to_string(pub_cov));
     RecordProperty(std::string(name) + "_seconds", std::to_string(secs));
@@ -359,7 +368,8 @@ TEST(Sampling, PublishedSamplesCoverage) {
     const char* name = kModels[k];
     SCOPED_TRACE(name);
     const ModelData m = load_model(name);
-    const VoxelSampling pub = load_published_samples(test::shared_model(name) + "/samples.xyz", m.published_side);
+    const VoxelSampling pub =
+        load_published_samples(test::shared_model(name) + "/samples.xyz", m.published_side);
     EXPECT_EQ(pub.grid_index.rows(), pub.size());  // on one grid of that spacing
     EXPECT_NEAR(mesh_coverage(pub, m.mesh.V), expected[k], 0.02);
     // Their clearance from the cage (in units of r), to compare with our safety factor.
@@ -371,8 +381,9 @@ TEST(Sampling, PublishedSamplesCoverage) {
       min_clear = std::min(min_clear, m.cage.distance(p) / pub.radius());
       outside += std::abs(m.cage.winding_number(p) - 1.0) >= 1e-6;
     }
-    std::printf("[sampling] %-6s published samples: min center-to-cage distance = %.2f r, %d not at winding 1\n",
-                name, min_clear, outside);
+    std::printf(
+        "[sampling] %-6s published samples: min center-to-cage distance = %.2f r, %d not at winding 1\n",
+        name, min_clear, outside);
     EXPECT_EQ(outside, 0);
   }
 }
@@ -396,7 +407,8 @@ TEST(Sampling, AnimalPocketIsNeverSampled) {
     is_pocket[c] = std::abs(cage.winding_number(p) - 2.0) < 1e-3;
   }
   for (int c = 0; c < nx * ny * nz; ++c)
-    if (is_pocket[c]) pocket.push_back(lo + Vec3(0.002 * (c % nx), 0.001 * ((c / nx) % ny), 0.002 * (c / (nx * ny))));
+    if (is_pocket[c])
+      pocket.push_back(lo + Vec3(0.002 * (c % nx), 0.001 * ((c / nx) % ny), 0.002 * (c / (nx * ny))));
   std::printf("[sampling] animal pocket: %zu probe points with winding number 2\n", pocket.size());
   ASSERT_GE(pocket.size(), 5u) << "pocket not found: test precondition";
   for (int target : {30000, 120000}) {

@@ -37,7 +37,8 @@ TriMesh torus_mesh(int nu, int nv, double R, double r) {
   for (int i = 0; i < nu; ++i)
     for (int j = 0; j < nv; ++j) {
       const double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
-      m.V.row(i * nv + j) << (R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u), r * std::sin(v);
+      m.V.row(i * nv + j) << (R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u),
+          r * std::sin(v);
     }
   m.F.resize(2 * nu * nv, 3);
   int f = 0;
@@ -91,7 +92,7 @@ Mat3 printed_lemma_5_1(const Cage& cage, const MatX3d& y, int t) {
 
 TEST(Smoothness, EdgeCountFollowsEulerForAnyGenus) {
   const Cage box(box_mesh(1, 1, 1)), torus(torus_mesh(12, 8, 1.0, 0.35));
-  EXPECT_EQ(box.num_edges(), box.num_vertices() + box.num_faces() - 2);  // genus 0
+  EXPECT_EQ(box.num_edges(), box.num_vertices() + box.num_faces() - 2);    // genus 0
   EXPECT_EQ(torus.num_edges(), torus.num_vertices() + torus.num_faces());  // genus 1: χ = 0
   const auto K = smoothness_matrix(torus);
   EXPECT_EQ(K.rows(), 3 * torus.num_edges());
@@ -106,7 +107,8 @@ TEST(Smoothness, FaceMatrixOfAffineCoefficientsIsTheAffineMatrix) {
       const Vec3 b = random_matrix(rng).col(0);
       const MatX3d y = cage.affine_coefficients(A, b);
       double worst = 0;
-      for (int t = 0; t < cage.num_faces(); ++t) worst = std::max(worst, (face_affine_matrix(cage, y, t) - A).norm());
+      for (int t = 0; t < cage.num_faces(); ++t)
+        worst = std::max(worst, (face_affine_matrix(cage, y, t) - A).norm());
       EXPECT_LT(worst, 1e-12 * A.norm()) << cage.source;
     }
   }
@@ -121,7 +123,8 @@ TEST(Smoothness, FaceMatrixSatisfiesLemmaConditionsForArbitraryCoefficients) {
     double worst = 0, worst_printed = 0;
     for (int t = 0; t < cage.num_faces(); ++t) {
       const Mat3 At = face_affine_matrix(cage, y, t);
-      worst = std::max(worst, (At * cage.N.row(t).transpose() - y.row(cage.num_vertices() + t).transpose()).norm());
+      worst = std::max(worst,
+                       (At * cage.N.row(t).transpose() - y.row(cage.num_vertices() + t).transpose()).norm());
       for (int k = 0; k < 3; ++k) {
         const int i = cage.F(t, k), j = cage.F(t, (k + 1) % 3);
         const Vec3 dx = cage.V.row(j) - cage.V.row(i);
@@ -214,7 +217,8 @@ TEST(Smoothness, DeltaNormsUnderAffineComposition) {
     const Mat3 R = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
     MatX3d yr = y * R.transpose();
     yr.topRows(nv).rowwise() += Eigen::RowVector3d(0.3, -1.0, 2.0);
-    EXPECT_LT((edge_delta_norms(cage, K, yr) - d0).cwiseAbs().maxCoeff(), 1e-12 * d0.maxCoeff()) << cage.source;
+    EXPECT_LT((edge_delta_norms(cage, K, yr) - d0).cwiseAbs().maxCoeff(), 1e-12 * d0.maxCoeff())
+        << cage.source;
 
     // Adding an affine map's coefficients leaves every δ unchanged (K y_affine = 0).
     const MatX3d ya = y + cage.affine_coefficients(random_matrix(rng), Vec3(1, 2, 3));

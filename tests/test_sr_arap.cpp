@@ -5,8 +5,8 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "lidef/procedural_models.h"
 #include "lidef/compare/sr_arap.h"
+#include "lidef/procedural_models.h"
 #include "lidef/scenario.h"
 #include "test_support.h"
 

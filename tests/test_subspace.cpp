@@ -65,7 +65,9 @@ TriMesh grid_box_mesh(int n, double sx, double sy, double sz) {
 }
 
 // Residual of projecting the columns of Y (n by k) onto span(B) (orthonormal columns), relative to ‖Y‖.
-double projection_residual(const MatXd& B, const MatXd& Y) { return (Y - B * (B.transpose() * Y)).norm() / Y.norm(); }
+double projection_residual(const MatXd& B, const MatXd& Y) {
+  return (Y - B * (B.transpose() * Y)).norm() / Y.norm();
+}
 
 // All affine coefficient columns: 12 maps (A = e_i e_jᵀ, b = 0 and A = 0, b = e_i) give the whole space.
 MatXd affine_columns(const Cage& cage) {
@@ -74,7 +76,10 @@ MatXd affine_columns(const Cage& cage) {
   for (int k = 0; k < 12; ++k) {
     Mat3 A = Mat3::Zero();
     Vec3 b = Vec3::Zero();
-    if (k < 9) A(k / 3, k % 3) = 1; else b(k - 9) = 1;
+    if (k < 9)
+      A(k / 3, k % 3) = 1;
+    else
+      b(k - 9) = 1;
     const MatX3d y = cage.affine_coefficients(A, b);
     for (int j = 0; j < 3; ++j) Y.col(c++) = y.col(j);
   }
@@ -87,7 +92,9 @@ void check_subspace(const Cage& cage, const SpectralSubspace& sub, int s) {
   ASSERT_EQ(sub.basis.cols(), std::min(s, n));
   ASSERT_EQ(sub.eigenvalues.size(), sub.basis.cols());
   // Orthonormal columns.
-  EXPECT_LT((sub.basis.transpose() * sub.basis - MatXd::Identity(sub.size(), sub.size())).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT(
+      (sub.basis.transpose() * sub.basis - MatXd::Identity(sub.size(), sub.size())).cwiseAbs().maxCoeff(),
+      1e-12);
   // The identity and every affine map lie in the span.
   EXPECT_LT(projection_residual(sub.basis, cage.identity_coefficients()), 1e-10);
   EXPECT_LT(projection_residual(sub.basis, affine_columns(cage)), 1e-10);
@@ -150,8 +157,8 @@ TEST(Subspace, SharedModelsContainAffineMaps) {
   for (const char* name : {"bar", "horse", "spot", "animal"}) {
     const Cage cage(read_mesh(test::shared_model(name) + "/cage.obj"));
     const SpectralSubspace sub = compute_subspace(cage, 300);
-    std::printf("[subspace] %-6s n = %4d  s = %3d  solver = %-6s  %.3f s  lambda_5 = %.3e  lambda_s = %.3e\n", name,
-                cage.num_coeffs(), sub.size(), sub.solver.c_str(), sub.seconds, sub.eigenvalues(4),
+    std::printf("[subspace] %-6s n = %4d  s = %3d  solver = %-6s  %.3f s  lambda_5 = %.3e  lambda_s = %.3e\n",
+                name, cage.num_coeffs(), sub.size(), sub.solver.c_str(), sub.seconds, sub.eigenvalues(4),
                 sub.eigenvalues(sub.size() - 1));
     SCOPED_TRACE(name);
     check_subspace(cage, sub, 300);
@@ -163,13 +170,14 @@ TEST(Subspace, SharedModelsContainAffineMaps) {
 // docs/sampling-and-subspace.md).
 TEST(Subspace, AnimalDenseVersusSparse) {
   LIDEF_REQUIRE_SHARED();
-  if (!std::getenv("LIDEF_SLOW_TESTS")) GTEST_SKIP() << "set LIDEF_SLOW_TESTS=1 to time the dense solver on animal";
+  if (!std::getenv("LIDEF_SLOW_TESTS"))
+    GTEST_SKIP() << "set LIDEF_SLOW_TESTS=1 to time the dense solver on animal";
   for (const char* name : {"bar", "animal"}) {
     const Cage cage(read_mesh(test::shared_model(name) + "/cage.obj"));
     const SpectralSubspace sp = compute_subspace(cage, 300, SubspaceSolver::Sparse);
     const SpectralSubspace d = compute_subspace(cage, 300, SubspaceSolver::Dense);
-    std::printf("[subspace] %-6s n = %4d s = 300: dense %.3f s, sparse (%s) %.3f s\n", name, cage.num_coeffs(),
-                d.seconds, sp.solver.c_str(), sp.seconds);
+    std::printf("[subspace] %-6s n = %4d s = 300: dense %.3f s, sparse (%s) %.3f s\n", name,
+                cage.num_coeffs(), d.seconds, sp.solver.c_str(), sp.seconds);
     RecordProperty(std::string(name) + "_dense_seconds", std::to_string(d.seconds));
     RecordProperty(std::string(name) + "_sparse_seconds", std::to_string(sp.seconds));
     const double top = d.eigenvalues.maxCoeff();

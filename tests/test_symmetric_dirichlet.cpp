@@ -1,6 +1,6 @@
-// Symmetric Dirichlet energy, gradient and (projected) Hessian against independent truths: the singular values
-// of Eigen's SVD, ‖J‖² + ‖J⁻¹‖², central finite differences of the energy and of the gradient (with the
-// column-major vec index a + 3b written out explicitly), Eigen's numerical eigen-decomposition of the
+// Symmetric Dirichlet energy, gradient and (projected) Hessian against independent truths: the singular
+// values of Eigen's SVD, ‖J‖² + ‖J⁻¹‖², central finite differences of the energy and of the gradient (with
+// the column-major vec index a + 3b written out explicitly), Eigen's numerical eigen-decomposition of the
 // unprojected Hessian, and the closed-form Hessian at the identity.
 #include <gtest/gtest.h>
 
@@ -58,11 +58,11 @@ std::vector<Mat3> positive_jacobians() {
     out.push_back(with_sigma(rng, s[0], s[1], s[2]));
   }
   for (double s3 : {1e-1, 1e-2, 1e-3}) out.push_back(with_sigma(rng, 1.7, 0.9, s3));
-  out.push_back(with_sigma(rng, 1.3, 1.3 + 1e-9, 0.7));     // near-repeated σ1 ≈ σ2
-  out.push_back(with_sigma(rng, 1.2, 0.8, 0.8 - 1e-10));    // near-repeated σ2 ≈ σ3
-  out.push_back(with_sigma(rng, 2.0, 2.0, 0.5));            // exactly repeated (up to rounding of R Σ Rᵀ)
-  out.push_back(with_sigma(rng, 0.6, 0.6, 0.6));            // compressed similarity: all twists negative
-  out.push_back(with_sigma(rng, 5.0, 1.0, 0.2));            // strong anisotropy
+  out.push_back(with_sigma(rng, 1.3, 1.3 + 1e-9, 0.7));   // near-repeated σ1 ≈ σ2
+  out.push_back(with_sigma(rng, 1.2, 0.8, 0.8 - 1e-10));  // near-repeated σ2 ≈ σ3
+  out.push_back(with_sigma(rng, 2.0, 2.0, 0.5));          // exactly repeated (up to rounding of R Σ Rᵀ)
+  out.push_back(with_sigma(rng, 0.6, 0.6, 0.6));          // compressed similarity: all twists negative
+  out.push_back(with_sigma(rng, 5.0, 1.0, 0.2));          // strong anisotropy
   out.push_back(Vec3(2, 2, 0.5).asDiagonal().toDenseMatrix());
   std::normal_distribution<double> N01;
   for (int k = 0; k < 6; ++k) {
@@ -74,7 +74,9 @@ std::vector<Mat3> positive_jacobians() {
   return out;
 }
 
-double smallest_sv(const Mat3& J) { return Eigen::JacobiSVD<Mat3>(J).singularValues()(2); }
+double smallest_sv(const Mat3& J) {
+  return Eigen::JacobiSVD<Mat3>(J).singularValues()(2);
+}
 
 // Central differences of the energy, step h = t·σ3 (the energy varies on the scale of the smallest σ).
 Mat3 fd_gradient(const Mat3& J) {
@@ -112,9 +114,13 @@ Mat9 numeric_psd(const Mat9& H) {
   return es.eigenvectors() * es.eigenvalues().cwiseMax(0.0).asDiagonal() * es.eigenvectors().transpose();
 }
 
-double rel(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) { return (a - b).norm() / b.norm(); }
+double rel(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  return (a - b).norm() / b.norm();
+}
 
-bool all_finite(const Eigen::MatrixXd& M) { return M.allFinite(); }
+bool all_finite(const Eigen::MatrixXd& M) {
+  return M.allFinite();
+}
 
 }  // namespace
 
@@ -133,7 +139,7 @@ TEST(SymmetricDirichlet, EnergyMatchesSingularValuesAndInverse) {
     EXPECT_NEAR(E, Es, 1e-13 * kappa * E);
     EXPECT_NEAR(E, Eu, 1e-13 * kappa * E);
     EXPECT_NEAR(E, Ef, 1e-13 * kappa * E);  // J⁻¹ rounding grows with κ (FMA contraction may differ)
-    EXPECT_GE(E, 6.0 - 1e-12);  // Σ σ² + σ⁻² ≥ 6, equality only at rotations
+    EXPECT_GE(E, 6.0 - 1e-12);              // Σ σ² + σ⁻² ≥ 6, equality only at rotations
   }
 }
 

@@ -7,13 +7,13 @@
 #include <iostream>
 
 #include "lidef/certificate_verification.h"
+#include "lidef/compare/vhm.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"
 #include "lidef/sampling.h"
 #include "lidef/scenario.h"
 #include "lidef/signed_svd.h"
-#include "lidef/compare/vhm.h"
 #include "test_support.h"
 
 using namespace lidef;

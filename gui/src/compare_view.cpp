@@ -24,6 +24,7 @@
 #include <sstream>
 
 #include "lidef/errors.h"
+#include "lidef/number_format.h"
 #include "studio_common.h"
 
 namespace lidef::studio {
@@ -66,13 +67,6 @@ double number(const std::string& s) {
   } catch (...) {
     return std::nan("");
   }
-}
-
-std::string g(double x, int prec) {
-  std::ostringstream s;
-  s.precision(prec);
-  s << x;
-  return s.str();
 }
 
 }  // namespace
@@ -168,8 +162,9 @@ std::string build_compare_scene(vtkRenderer* ren, const std::vector<CompareEntry
     if (!meshes[k]) {
       label += e.status == "failed" ? "failed" : "no mesh";
     } else {
-      label += g(e.time_s, 3) + " s";
-      if (std::isfinite(e.time_ratio) && e.method != "lidef") label += " (" + g(e.time_ratio, 3) + "x lidef)";
+      label += format_g(e.time_s, 3) + " s";
+      if (std::isfinite(e.time_ratio) && e.method != "lidef")
+        label += " (" + format_g(e.time_ratio, 3) + "x lidef)";
       label += e.certified == "1"   ? "\ncertified"
                : e.certified == "0" ? "\nNOT certified"
                                     : "\nno certificate";

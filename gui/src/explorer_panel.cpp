@@ -44,6 +44,7 @@
 #include "lidef/explorer/ball_fields.h"
 #include "lidef/explorer/explorer_example.h"
 #include "lidef/explorer/sigma_minima.h"
+#include "lidef/number_format.h"
 #include "lidef/signed_svd.h"
 #include "studio_common.h"
 
@@ -78,22 +79,6 @@ void parallel_for(long n, const F& f) {
       for (long i = t; i < n; i += threads) f(i);
     });
   for (std::thread& th : pool) th.join();
-}
-
-std::string fmt(double x, int prec = 3) {
-  std::ostringstream s;
-  s.precision(prec);
-  s << x;
-  return s.str();
-}
-
-// σ3 values in the caption and labels: three decimals.
-std::string fixed3(double x) {
-  std::ostringstream s;
-  s.setf(std::ios::fixed);
-  s.precision(3);
-  s << x;
-  return s.str();
 }
 
 std::string fmt_point(const Vec3& p) {
@@ -554,9 +539,10 @@ void ExplorerPanel::finished(std::shared_ptr<Result> r) {
     const bool new_map = !I.shown || I.shown->request.example_id != r->request.example_id;
     I.shown = r;
     draw(*r, new_map);
-    status_->setText(QString::fromStdString(
-        std::filesystem::path(r->request.path).filename().string() + ": minima, boundary and colour range " +
-        fmt(1000 * r->analysis->seconds, 3) + " ms, slices " + fmt(1000 * r->slices->seconds, 3) + " ms"));
+    status_->setText(QString::fromStdString(std::filesystem::path(r->request.path).filename().string() +
+                                            ": minima, boundary and colour range " +
+                                            format_g(1000 * r->analysis->seconds, 3) + " ms, slices " +
+                                            format_g(1000 * r->slices->seconds, 3) + " ms"));
     emit example_shown();
   }
   kick();
@@ -582,7 +568,7 @@ void ExplorerPanel::set_slice_offset(double t) {
     const QSignalBlocker block(offset_slider_);
     offset_slider_->setValue(static_cast<int>(std::lround(100 * t)));
   }
-  offset_label_->setText(QString::fromStdString("t = " + fmt(t, 2)));
+  offset_label_->setText(QString::fromStdString("t = " + format_g(t, 2)));
   impl_->want.offset = t;
   kick();
 }
@@ -711,26 +697,26 @@ void ExplorerPanel::draw(const Result& r, bool reset_camera) {
     if (!on) continue;
     const Sigma3Minimum& m = a.minima[static_cast<size_t>(i)];
     l->SetPosition(m.position.x(), m.position.y(), m.position.z());
-    l->SetInput(("min " + fixed3(m.sigma3) + (m.strict ? "" : " (not strict)")).c_str());
+    l->SetInput(("min " + format_fixed(m.sigma3, 3) + (m.strict ? "" : " (not strict)")).c_str());
   }
   vtkBillboardTextActor3D* bl = I.labels.back();
   bl->SetVisibility(I.show_minima && boundary);
   bl->SetPosition(a.boundary_where.x(), a.boundary_where.y(), a.boundary_where.z());
-  bl->SetInput(("boundary min " + fixed3(a.boundary_min)).c_str());
+  bl->SetInput(("boundary min " + format_fixed(a.boundary_min, 3)).c_str());
 
   // Caption (the file's note, often long, is the label's tooltip).
   std::string c = std::filesystem::path(r.request.path).filename().string() + ": " + ex.map->description() +
-                  " on the ball of center " + fmt_point(ball.center) + " and radius " + fmt(ball.radius, 4) +
-                  "\n";
+                  " on the ball of center " + fmt_point(ball.center) + " and radius " +
+                  format_g(ball.radius, 4) + "\n";
   const long strict =
       std::count_if(a.minima.begin(), a.minima.end(), [](const Sigma3Minimum& m) { return m.strict; });
-  const std::string bmin = fixed3(a.boundary_min);
+  const std::string bmin = format_fixed(a.boundary_min, 3);
   const std::string boundary_text = "min σ3 on the boundary sphere " + bmin + " (2,562 samples)";
   if (a.minima.empty()) {
     c += "no interior local minimum of σ3 located (24 descents); " + boundary_text;
   } else {
     const Sigma3Minimum& m = a.minima[0];
-    const std::string imin = fixed3(m.sigma3);
+    const std::string imin = format_fixed(m.sigma3, 3);
     c += std::to_string(a.minima.size()) + " interior minim" + (a.minima.size() == 1 ? "um" : "a") +
          " of σ3 (" + std::to_string(strict) + " strict), lowest " + imin + " at " + fmt_point(m.position) +
          "; " + boundary_text + "\n";
