@@ -154,6 +154,10 @@ TEST(Certificate, IdentityCertifiesAtDepthZero) {
     EXPECT_EQ(c.max_depth_used, 0);
     EXPECT_EQ(c.num_leaves, s.sampling.size());
     EXPECT_NEAR(c.min_sigma3_center, 1.0, 1e-5);  // basis derivatives are stored as float
+    // σ3 = 1 everywhere for the identity: the reported lower bound must not exceed it, although σ3 computed
+    // at the centers may round above 1 (the rounding allowance τ is part of the bound).
+    EXPECT_LE(c.min_lower_bound, 1.0);
+    EXPECT_EQ(c.min_lower_bound, c.min_margin);
   }
 }
 
@@ -197,6 +201,8 @@ TEST(Certificate, CertifiedMapsHaveNoNonPositiveSigma3UnderDenseSampling) {
         EXPECT_EQ(v.nonpositive_in_certified, 0);
         EXPECT_GT(v.min_sigma3, 0);
         EXPECT_GE(c.min_lower_bound, 0);
+        // What is called a lower bound is one: never above a sampled value of σ3 in the covered region.
+        EXPECT_LE(c.min_lower_bound, v.min_sigma3);
       } else {
         ++refused;
         EXPECT_FALSE(c.failing.empty());

@@ -677,3 +677,26 @@ TEST(CheckCli, HelpAndBadArguments) {
 }
 
 }  // namespace
+
+// Moving a model far from the origin changes none of the checks (issue 19: the signed volume was summed in
+// absolute coordinates and the beam moved by 1e6 came out "inverted").
+TEST(ModelCheck, FarFromTheOriginTheCheckAndVolumeAreUnchanged) {
+  const std::string src = test::project_data() + "/models/beam";
+  const ValidationReport original = check_model_dir(src);
+  ASSERT_TRUE(original.usable());
+  for (const double shift : {1e3, 1e6, 1e8}) {
+    SCOPED_TRACE(shift);
+    TempDir dir;
+    for (const char* f : {"cage", "mesh"}) {
+      TriMesh m = read_mesh(src + "/" + f + ".obj");
+      m.V.rowwise() += Eigen::RowVector3d(shift, shift, shift);
+      std::ofstream out(dir / (std::string(f) + ".obj"));
+      write_obj(out, m.V, m.F);
+    }
+    const ValidationReport r = check_model_dir(dir.str());
+    EXPECT_TRUE(r.usable()) << (r.errors.empty() ? "" : r.errors.front().str());
+    // Coordinates near 1e8 hold ~1e-8 absolute rounding; relative to the beam's size (~2) that is 1e-8.
+    EXPECT_NEAR(r.cage_volume, original.cage_volume, 1e-6 * original.cage_volume);
+    EXPECT_EQ(r.cage_faces, original.cage_faces);
+  }
+}

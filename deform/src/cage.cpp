@@ -13,7 +13,6 @@ Cage::Cage(const TriMesh& mesh) : V(mesh.V), F(mesh.F), source(mesh.source) {
   if (nv < 4 || nf < 4) throw InputError(source, "cage needs at least 4 vertices and 4 faces");
   N.resize(nf, 3);
   area.resize(nf);
-  volume = 0;
   for (int t = 0; t < nf; ++t) {
     for (int k = 0; k < 3; ++k)
       if (F(t, k) < 0 || F(t, k) >= nv)
@@ -24,8 +23,8 @@ Cage::Cage(const TriMesh& mesh) : V(mesh.V), F(mesh.F), source(mesh.source) {
     if (!(len > 0)) throw InputError(source, "face " + std::to_string(t + 1) + " is degenerate (zero area)");
     N.row(t) = n2 / len;
     area(t) = 0.5 * len;
-    volume += a.dot(b.cross(c)) / 6.0;
   }
+  volume = signed_volume(V, F);
   // Directed edge (a,b) -> (face, local index of the opposite vertex).
   std::map<std::pair<int, int>, std::pair<int, int>> directed;
   for (int t = 0; t < nf; ++t)
@@ -59,7 +58,9 @@ double Cage::winding_number(const Vec3& p) const {
   return w;
 }
 
-MatX3d Cage::identity_coefficients() const { return affine_coefficients(Mat3::Identity(), Vec3::Zero()); }
+MatX3d Cage::identity_coefficients() const {
+  return affine_coefficients(Mat3::Identity(), Vec3::Zero());
+}
 
 MatX3d Cage::affine_coefficients(const Mat3& A, const Vec3& b) const {
   MatX3d y(num_coeffs(), 3);

@@ -39,9 +39,10 @@ MatX3d read_coefficients(const std::string& path, const Cage& cage) {
     rows.push_back(v);
   }
   if (static_cast<int>(rows.size()) != cage.num_coeffs())
-    throw InputError(path, "has " + std::to_string(rows.size()) + " rows, expected #V+#F = " +
-                               std::to_string(cage.num_vertices()) + "+" + std::to_string(cage.num_faces()) +
-                               " = " + std::to_string(cage.num_coeffs()) + " (vertex rows first, then face rows)");
+    throw InputError(path, "has " + std::to_string(rows.size()) +
+                               " rows, expected #V+#F = " + std::to_string(cage.num_vertices()) + "+" +
+                               std::to_string(cage.num_faces()) + " = " + std::to_string(cage.num_coeffs()) +
+                               " (vertex rows first, then face rows)");
   MatX3d y(rows.size(), 3);
   for (size_t i = 0; i < rows.size(); ++i) y.row(i) = rows[i];
   return y;

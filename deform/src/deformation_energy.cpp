@@ -173,12 +173,15 @@ MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_s
   return products(blocks, all_samples, double_precision);
 }
 
-MatXd DeformationEnergy::distortion_pair_blocks_from(const std::vector<Mat9>& blocks, bool double_precision) const {
-  if (blocks.size() != subset_.size()) throw Error("distortion_pair_blocks_from: one block per subset sample needed");
+MatXd DeformationEnergy::distortion_pair_blocks_from(const std::vector<Mat9>& blocks,
+                                                     bool double_precision) const {
+  if (blocks.size() != subset_.size())
+    throw Error("distortion_pair_blocks_from: one block per subset sample needed");
   return products(blocks, false, double_precision);
 }
 
-MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const {
+MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samples,
+                                  bool double_precision) const {
   const int s = reduced_size();
   const int m = static_cast<int>(blocks.size());
   // The six (a ≤ a') blocks: W = [diag_k(H̃_k^{aa'}) G_k]_{(a,a')} side by side (3m by 6s), then one product

@@ -32,6 +32,18 @@ TriangleClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, con
   return {a + ab * v + ac * w, {1 - v - w, v, w}};
 }
 
+double signed_volume(const MatX3d& V, const MatX3i& F) {
+  if (V.rows() == 0) return 0;
+  const Vec3 o = 0.5 * (V.colwise().minCoeff() + V.colwise().maxCoeff()).transpose();
+  double volume = 0;
+  for (Eigen::Index t = 0; t < F.rows(); ++t) {
+    const Vec3 a = V.row(F(t, 0)).transpose() - o, b = V.row(F(t, 1)).transpose() - o,
+               c = V.row(F(t, 2)).transpose() - o;
+    volume += a.dot(b.cross(c));
+  }
+  return volume / 6.0;
+}
+
 double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   return (closest_point_on_triangle(p, a, b, c).point - p).squaredNorm();
 }

@@ -28,8 +28,8 @@ inline Mat3 cross_matrix(const Vec3& d) {
 }
 
 // Per-face quantities at a point shared by the basis and the differential representation: l_k = x_k − p, the
-// solid angle ω_t, and per edge (opposite vertex k, (u, k, w) in cage order so d_k = x_w − x_u) C_k, l_u × l_w
-// and, when asked, α_k and β_k.
+// solid angle ω_t, and per edge (opposite vertex k, (u, k, w) in cage order so d_k = x_w − x_u) C_k, l_u ×
+// l_w and, when asked, α_k and β_k.
 }  // namespace
 
 struct HarmonicBasis::FaceAtPoint {
@@ -78,7 +78,8 @@ void HarmonicBasis::face_at_point(int t, const Vec3& p, bool with_alpha_beta, Fa
   const double* L = o.L;
   // Signed solid angle / 4π, positive on the inner side (van Oosterom & Strackee).
   o.triple = l[0].dot(l[1].cross(l[2]));
-  const double den = L[0] * L[1] * L[2] + l[0].dot(l[1]) * L[2] + l[1].dot(l[2]) * L[0] + l[2].dot(l[0]) * L[1];
+  const double den =
+      L[0] * L[1] * L[2] + l[0].dot(l[1]) * L[2] + l[1].dot(l[2]) * L[0] + l[2].dot(l[0]) * L[1];
   o.omega = std::atan2(o.triple, den) * (2.0 * kInv4Pi);
   for (int k = 0; k < 3; ++k) {
     const int u = (k + 2) % 3, w = (k + 1) % 3;
@@ -139,7 +140,8 @@ void HarmonicBasis::evaluate(const Vec3& p, int order, double* value, double* gr
     if (want_hess) {
       // J(P_t) = Σ_k (n × d̂_k) β_kᵀ + n α_kᵀ  (rows: components of P, columns: ∂/∂p).
       Mat3 JP = Mat3::Zero();
-      for (int k = 0; k < 3; ++k) JP.noalias() += fc.n_x_dhat[k] * beta[k].transpose() + fc.n * alpha[k].transpose();
+      for (int k = 0; k < 3; ++k)
+        JP.noalias() += fc.n_x_dhat[k] * beta[k].transpose() + fc.n * alpha[k].transpose();
       add_sym(hess + kSym * ft, JP, -1.0);
       // ∇φ_v ∋ (1/2s) P × d_k = −(1/2s) [d_k]× P  ⇒  Hessian contribution −(1/2s) [d_k]× J(P).
       for (int k = 0; k < 3; ++k) add_sym(hess + kSym * fc.vid[k], cross_matrix(fc.d[k]) * JP, -inv2s);
@@ -207,7 +209,8 @@ MapJet HarmonicBasis::differential_jet(const FaceMatrices& fm, const Vec3& p, in
       sJ += std::abs(fp.C[k]) * ad1;
       if (order >= 2) {
         for (int a = 0; a < 3; ++a)
-          jet.H[a].noalias() -= A.row(a).transpose() * fp.alpha[k].transpose() + AD.row(a).transpose() * fp.beta[k].transpose();
+          jet.H[a].noalias() -=
+              A.row(a).transpose() * fp.alpha[k].transpose() + AD.row(a).transpose() * fp.beta[k].transpose();
         sH += a1 * fp.alpha[k].cwiseAbs().sum() + ad1 * fp.beta[k].cwiseAbs().sum();
       }
     }
@@ -221,7 +224,8 @@ MatXd HarmonicBasis::value_matrix(const MatX3d& P) const {
   const int n = size();
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> D(P.rows(), n);
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index i = 0; i < P.rows(); ++i) evaluate(P.row(i).transpose(), 0, D.row(i).data(), nullptr, nullptr);
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    evaluate(P.row(i).transpose(), 0, D.row(i).data(), nullptr, nullptr);
   return D;
 }
 

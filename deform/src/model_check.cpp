@@ -221,7 +221,6 @@ bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckToleranc
     r.cage_volume = 0;
     for (int t = 0; t < nf; ++t) {
       const Vec3 a = V.row(F(t, 0)), b = V.row(F(t, 1)), c = V.row(F(t, 2));
-      r.cage_volume += a.dot(b.cross(c)) / 6.0;
       double area;
       if (F(t, 0) == F(t, 1) || F(t, 1) == F(t, 2) || F(t, 0) == F(t, 2))
         degenerate.add(face_name(t), line_of(fl, t), "degenerate face: it uses a vertex twice");
@@ -236,6 +235,7 @@ bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckToleranc
         duplicate.add(face_name(t), line_of(fl, t),
                       "duplicate of " + face_name(it->second) + " (same vertices)");
     }
+    r.cage_volume = signed_volume(V, F);
   }
 
   // Unused vertices would add coefficient rows whose basis function is zero.

@@ -536,7 +536,9 @@ struct OctreeCertifier::Run {
     auto emit = [&](const CertLeaf& l) {
       ++leaves;
       cert.min_margin = std::min(cert.min_margin, l.margin);
-      cert.min_lower_bound = std::min(cert.min_lower_bound, l.sigma3 - 0.5 * std::sqrt(3.0) * l.side * l.L);
+      // σ3 − r L − τ: the rounding allowance τ belongs to the bound (σ3 and L are computed in floating
+      // point), so this is a lower bound of the true σ3 on the leaf; a leaf left unevaluated counts as −∞.
+      cert.min_lower_bound = std::min(cert.min_lower_bound, l.margin);
       if (!l.certified) {
         all_ok = false;
         if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);

@@ -205,18 +205,51 @@ void DeformationSolver::set_handles(const MatX3d& sources, const MatX3d& targets
   if (sources.rows() == 0) throw InputError(where, "no handles: at least one handle is needed");
   if (sources.rows() != targets.rows()) throw InputError(where, "as many targets as sources are needed");
   check_finite(sources, where, "source");
-  check_finite(targets, where, "target");
   for (Eigen::Index i = 0; i < sources.rows(); ++i) {
     const std::string why = handle_source_problem(cage_, sources.row(i).transpose());
     if (!why.empty()) throw InputError(where, "handle " + std::to_string(i + 1) + ": source " + why);
+  }
+  const MatX3d previous = sources_;
+  sources_ = sources;
+  try {
+    check_targets(targets, where);
+  } catch (...) {
+    sources_ = previous;
+    throw;
   }
   const MatXd D = basis_.value_matrix(sources) * subspace_.basis;
   energy_->set_handles(D, targets);
 }
 
+// Targets that no map can meet sensibly are refused with a reason instead of being run: a target so far away
+// that the handle energy overflows, and two handles at one source pulled to different places.
+void DeformationSolver::check_targets(const MatX3d& targets, const std::string& where) const {
+  check_finite(targets, where, "target");
+  const Vec3 center = 0.5 * (cage_.bbox_min + cage_.bbox_max);
+  const double diag = (cage_.bbox_max - cage_.bbox_min).norm();
+  // 1e6 cage diagonals: far beyond any deformation the certificate could follow, far below overflow of the
+  // squared distances in E_P2P (1e300 squared is not a double).
+  constexpr double kMaxDiagonals = 1e6;
+  for (Eigen::Index i = 0; i < targets.rows(); ++i) {
+    const double d = (targets.row(i).transpose() - center).norm();
+    if (!(d <= kMaxDiagonals * diag))
+      throw InputError(where, "handle " + std::to_string(i + 1) + ": target is " + format_g(d / diag, 3) +
+                                  " cage diagonals from the cage (at most " + format_g(kMaxDiagonals, 1) +
+                                  ")");
+  }
+  // One source, two targets: the handle energy could only average them, which nobody asked for.
+  const double same = 1e-12 * diag;
+  for (Eigen::Index i = 0; i < sources_.rows(); ++i)
+    for (Eigen::Index j = i + 1; j < sources_.rows(); ++j)
+      if ((sources_.row(i) - sources_.row(j)).norm() <= same &&
+          (targets.row(i) - targets.row(j)).norm() > same)
+        throw InputError(where, "handles " + std::to_string(i + 1) + " and " + std::to_string(j + 1) +
+                                    " have the same source but different targets");
+}
+
 void DeformationSolver::set_targets(const MatX3d& targets, const std::string& where) {
   if (targets.rows() != energy_->num_handles()) throw InputError(where, "one target per handle is needed");
-  check_finite(targets, where, "target");
+  check_targets(targets, where);
   energy_->set_targets(targets);
 }
 

@@ -17,7 +17,9 @@
 
 namespace lidef {
 
-double VoxelSampling::radius() const { return 0.5 * std::sqrt(3.0) * side; }
+double VoxelSampling::radius() const {
+  return 0.5 * std::sqrt(3.0) * side;
+}
 
 namespace {
 
@@ -87,7 +89,9 @@ class FaceGrid {
   std::vector<int> start_, faces_;
 };
 
-inline double cross2(double ax, double ay, double bx, double by) { return ax * by - ay * bx; }
+inline double cross2(double ax, double ay, double bx, double by) {
+  return ax * by - ay * bx;
+}
 
 inline double seg_dist2_2d(double px, double py, double ax, double ay, double bx, double by) {
   const double dx = bx - ax, dy = by - ay, dd = dx * dx + dy * dy;
@@ -107,7 +111,8 @@ inline double seg_dist2_2d(double px, double py, double ax, double ay, double bx
 // Clearance test: FaceGrid, run only on cells that are inside.
 class GridScan {
  public:
-  GridScan(const Cage& cage, double h, double safety) : cage_(cage), h_(h), R_(safety * 0.5 * std::sqrt(3.0) * h) {
+  GridScan(const Cage& cage, double h, double safety)
+      : cage_(cage), h_(h), R_(safety * 0.5 * std::sqrt(3.0) * h) {
     origin_ = cage.bbox_min;
     const Vec3 ext = cage.bbox_max - cage.bbox_min;
     double d[3], total = 1;
@@ -131,7 +136,8 @@ class GridScan {
       int l[2], u[2];
       for (int a = 0; a < 2; ++a) {
         l[a] = std::max(0, static_cast<int>(std::ceil((lo[a] - tol_ - origin_(a + 1)) / h - 0.5)));
-        u[a] = std::min(dims_[a + 1] - 1, static_cast<int>(std::floor((hi[a] + tol_ - origin_(a + 1)) / h - 0.5)));
+        u[a] = std::min(dims_[a + 1] - 1,
+                        static_cast<int>(std::floor((hi[a] + tol_ - origin_(a + 1)) / h - 0.5)));
       }
       for (int k = l[1]; k <= u[1]; ++k)
         for (int j = l[0]; j <= u[0]; ++j) pairs.emplace_back(static_cast<long>(k) * dims_[1] + j, t);
@@ -156,9 +162,11 @@ class GridScan {
     bool ambiguous = false;
     for (int s = start_[line]; s < start_[line + 1] && !ambiguous; ++s) {
       const int t = faces_[s];
-      const Vec3 a = cage_.V.row(cage_.F(t, 0)), b = cage_.V.row(cage_.F(t, 1)), c = cage_.V.row(cage_.F(t, 2));
+      const Vec3 a = cage_.V.row(cage_.F(t, 0)), b = cage_.V.row(cage_.F(t, 1)),
+                 c = cage_.V.row(cage_.F(t, 2));
       const double tol2 = tol_ * tol_;
-      if (seg_dist2_2d(yc, zc, a(1), a(2), b(1), b(2)) < tol2 || seg_dist2_2d(yc, zc, b(1), b(2), c(1), c(2)) < tol2 ||
+      if (seg_dist2_2d(yc, zc, a(1), a(2), b(1), b(2)) < tol2 ||
+          seg_dist2_2d(yc, zc, b(1), b(2), c(1), c(2)) < tol2 ||
           seg_dist2_2d(yc, zc, c(1), c(2), a(1), a(2)) < tol2) {
         ambiguous = true;
         break;
@@ -286,8 +294,10 @@ VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& p) {
       // Closest count wins, but an empty sampling only when nothing else was seen.
       if (best_n <= 0 || (n > 0 && std::abs(n - T) < std::abs(best_n - T))) best_n = n, best_h = h;
       if (std::abs(n - T) <= p.count_tolerance * T) break;
-      if (n > T) lo = std::max(lo, h);
-      else hi = std::min(hi, h);
+      if (n > T)
+        lo = std::max(lo, h);
+      else
+        hi = std::min(hi, h);
       double next = n > 0 ? h * std::cbrt(n / T) : 0.5 * h;
       if (lo > 0 && std::isfinite(hi) && !(next > lo && next < hi)) next = std::sqrt(lo * hi);
       if (std::isfinite(hi) && lo > 0 && hi / lo < 1 + 1e-12) break;
@@ -311,8 +321,7 @@ std::vector<int> select_hessian_subset(const VoxelSampling& s, double fraction) 
   std::iota(order.begin(), order.end(), 0);
   if (s.grid_index.rows() == n) {
     std::vector<std::uint64_t> code(n);
-    for (int i = 0; i < n; ++i)
-      code[i] = morton3(s.grid_index(i, 0), s.grid_index(i, 1), s.grid_index(i, 2));
+    for (int i = 0; i < n; ++i) code[i] = morton3(s.grid_index(i, 0), s.grid_index(i, 1), s.grid_index(i, 2));
     std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return code[a] < code[b]; });
   }
   // Stratum k = ranks [⌊k n/m⌋, ⌊(k+1) n/m⌋) along the curve (a compact lump of cells); one pick per stratum
@@ -337,9 +346,10 @@ VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
   // p's bucket or one of the 26 around it.
   const Vec3 o = s.centers.colwise().minCoeff().transpose();
   constexpr long kOff = 1 << 20;
-  auto key = [&](long x, long y, long z) { return (static_cast<std::uint64_t>(z + kOff) << 42) |
-                                                  (static_cast<std::uint64_t>(y + kOff) << 21) |
-                                                  static_cast<std::uint64_t>(x + kOff); };
+  auto key = [&](long x, long y, long z) {
+    return (static_cast<std::uint64_t>(z + kOff) << 42) | (static_cast<std::uint64_t>(y + kOff) << 21) |
+           static_cast<std::uint64_t>(x + kOff);
+  };
   auto cell = [&](const Vec3& p, int a) { return static_cast<long>(std::floor((p(a) - o(a)) / h)); };
   std::unordered_map<std::uint64_t, std::vector<int>> buckets;
   for (int i = 0; i < s.size(); ++i) {

@@ -1,5 +1,3 @@
-#include "lidef/number_format.h"
-#include "lidef/atomic_file.h"
 #include "lidef/scenario.h"
 
 #include <unistd.h>
@@ -16,8 +14,10 @@
 #include <type_traits>
 #include <variant>
 
+#include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
 
 namespace lidef {
 

@@ -44,8 +44,8 @@ void check_y(const Cage& cage, const MatX3d& y, const char* what) {
 Mat3 face_affine_matrix(const Cage& cage, const MatX3d& y, int t) {
   check_y(cage, y, "face_affine_matrix");
   if (t < 0 || t >= cage.num_faces())
-    throw InputError(cage.source, "face_affine_matrix: face index " + std::to_string(t) + " out of range [0," +
-                                      std::to_string(cage.num_faces()) + ")");
+    throw InputError(cage.source, "face_affine_matrix: face index " + std::to_string(t) +
+                                      " out of range [0," + std::to_string(cage.num_faces()) + ")");
   const FaceStencil s = face_stencil(cage, t);
   Mat3 A = Mat3::Zero();
   for (int k = 0; k < 4; ++k) A += y.row(s.rows[k]).transpose() * s.c[k].transpose();
@@ -76,9 +76,9 @@ VecXd edge_delta_norms(const Cage& cage, const Eigen::SparseMatrix<double>& K, c
   check_y(cage, y, "edge_delta_norms");
   if (K.rows() != 3 * cage.num_edges() || K.cols() != cage.num_coeffs())
     throw InputError(cage.source, "edge_delta_norms: K is " + std::to_string(K.rows()) + " by " +
-                                      std::to_string(K.cols()) + ", expected 3#E = " +
-                                      std::to_string(3 * cage.num_edges()) + " by #V+#F = " +
-                                      std::to_string(cage.num_coeffs()));
+                                      std::to_string(K.cols()) +
+                                      ", expected 3#E = " + std::to_string(3 * cage.num_edges()) +
+                                      " by #V+#F = " + std::to_string(cage.num_coeffs()));
   const MatX3d Ky = K * y;
   VecXd out(cage.num_edges());
   for (int e = 0; e < cage.num_edges(); ++e) out(e) = Ky.middleRows<3>(3 * e).norm();

@@ -1,11 +1,11 @@
 #include "lidef/subspace.h"
 
+#include <Spectra/SymEigsSolver.h>
 #include <unistd.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>
-#include <Spectra/SymEigsSolver.h>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "lidef/atomic_file.h"
-#include "lidef/hash.h"
 #include "lidef/errors.h"
+#include "lidef/hash.h"
 #include "lidef/smoothness.h"
 
 namespace lidef {
@@ -37,7 +37,8 @@ void orthonormalize_against(MatXd& X, const MatXd& Q, const char* what) {
       for (int i = 0; i < j; ++i) X.col(j) -= X.col(i).dot(X.col(j)) * X.col(i);
     }
     const double nrm = X.col(j).norm();
-    if (!(nrm > 1e-8)) throw NumericalError(std::string(what) + ": column " + std::to_string(j) + " is dependent");
+    if (!(nrm > 1e-8))
+      throw NumericalError(std::string(what) + ": column " + std::to_string(j) + " is dependent");
     X.col(j) /= nrm;
   }
 }
@@ -142,7 +143,6 @@ void complement_sparse(const SpMat& M, const MatXd& Q, int m, MatXd& vecs, VecXd
   for (int i = 0; i < m; ++i) vals(i) = sigma + 1.0 / nu(i);
 }
 
-
 constexpr char kMagic[8] = {'L', 'I', 'D', 'E', 'F', 'S', 'U', 'B'};
 constexpr std::uint32_t kVersion = 1;
 constexpr std::uint32_t kByteOrder = 0x01020304;
@@ -166,7 +166,8 @@ int clamp_s(const Cage& cage, int s) {
   return std::min(s, cage.num_coeffs());
 }
 
-// Reads a cache file; returns false (never throws) when it is missing, truncated, corrupt or for another cage.
+// Reads a cache file; returns false (never throws) when it is missing, truncated, corrupt or for another
+// cage.
 bool read_cache(const std::string& path, std::int64_t n, std::int64_t s, std::uint64_t cage_hash,
                 SpectralSubspace& out) {
   std::ifstream in(path, std::ios::binary);
@@ -176,8 +177,8 @@ bool read_cache(const std::string& path, std::int64_t n, std::int64_t s, std::ui
   if (buf.size() != sizeof(CacheHeader) + payload) return false;
   CacheHeader h;
   std::memcpy(&h, buf.data(), sizeof h);
-  if (std::memcmp(h.magic, kMagic, 8) != 0 || h.version != kVersion || h.byte_order != kByteOrder || h.n != n ||
-      h.s != s || h.cage_hash != cage_hash)
+  if (std::memcmp(h.magic, kMagic, 8) != 0 || h.version != kVersion || h.byte_order != kByteOrder ||
+      h.n != n || h.s != s || h.cage_hash != cage_hash)
     return false;
   const char* p = buf.data() + sizeof h;
   if (fnv1a64(p, payload) != h.payload_hash) return false;

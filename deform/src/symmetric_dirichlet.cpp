@@ -15,7 +15,8 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // q = vec(U M Vᵀ) (column-major) for M = (e_i e_jᵀ + s e_j e_iᵀ)/√2, i.e. (u_i v_jᵀ + s u_j v_iᵀ)/√2.
 Vec9 lifted_pair(const SignedSvd& d, int i, int j, double s) {
-  const Mat3 M = (d.U.col(i) * d.V.col(j).transpose() + s * d.U.col(j) * d.V.col(i).transpose()) * std::sqrt(0.5);
+  const Mat3 M =
+      (d.U.col(i) * d.V.col(j).transpose() + s * d.U.col(j) * d.V.col(i).transpose()) * std::sqrt(0.5);
   return Eigen::Map<const Vec9>(M.data());
 }
 
@@ -67,8 +68,12 @@ Mat3 sd_gradient(const Mat3& J) {
   return 2.0 * J - 2.0 * JinvT * Jinv * JinvT;
 }
 
-Mat9 sd_hessian(const Mat3& J) { return hessian_from_eigensystem(J, false); }
+Mat9 sd_hessian(const Mat3& J) {
+  return hessian_from_eigensystem(J, false);
+}
 
-Mat9 sd_hessian_psd(const Mat3& J) { return hessian_from_eigensystem(J, true); }
+Mat9 sd_hessian_psd(const Mat3& J) {
+  return hessian_from_eigensystem(J, true);
+}
 
 }  // namespace lidef

@@ -1,6 +1,6 @@
 // Writing outputs without ever leaving a half-written file: write to a temporary file beside the target, then
-// rename it over the target (atomic on POSIX within one file system). A process killed at any moment leaves the
-// previous file or the new one, never a mixture; a left-over temporary is never read (its name differs).
+// rename it over the target (atomic on POSIX within one file system). A process killed at any moment leaves
+// the previous file or the new one, never a mixture; a left-over temporary is never read (its name differs).
 // The one implementation for the core, the CLI, the OpenCL kernel cache and the studio.
 #pragma once
 #include <functional>
@@ -22,8 +22,8 @@ void commit_temp_file(const std::string& tmp, const std::string& path);
 // (InputError(path, ...) for a stream failure).
 void write_file_atomic(const std::string& path, const std::function<void(std::ostream&)>& writer);
 
-// The same for writers that take a file name (VTK's, PNG's): `write(tmp)` must create the temporary `tmp` (named
-// with `ext`) or throw; a missing temporary afterwards counts as a failed write.
+// The same for writers that take a file name (VTK's, PNG's): `write(tmp)` must create the temporary `tmp`
+// (named with `ext`) or throw; a missing temporary afterwards counts as a failed write.
 void write_file_atomic_via_path(const std::string& path, const std::string& ext,
                                 const std::function<void(const std::string& tmp)>& write);
 

@@ -34,6 +34,12 @@ struct TriangleClosestPoint {
 };
 TriangleClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
+// Signed volume enclosed by a closed triangle mesh (V: #V by 3, F: #F by 3 valid indices), positive when the
+// faces are oriented outward. The tetrahedra are summed from a local origin (the bounding-box center), so
+// that the rounding error scales with the model's size and not with its distance from the coordinate origin
+// (a cage moved by 1e6 keeps its volume to ~1e-10 relative instead of losing its sign).
+double signed_volume(const MatX3d& V, const MatX3i& F);
+
 // Squared distance from p to the closed triangle (a,b,c).
 double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 

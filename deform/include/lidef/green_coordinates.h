@@ -20,7 +20,9 @@ struct MapJet {
   Mat3 J = Mat3::Zero();
   std::array<Mat3, 3> H{Mat3::Zero(), Mat3::Zero(), Mat3::Zero()};
   // Full Frobenius norm of the 3x3x3 Hessian tensor (all 27 entries; MATH-NOTES).
-  double hessian_norm() const { return std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm()); }
+  double hessian_norm() const {
+    return std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
+  }
 };
 
 // Per-edge functions of the differential representation (paper Thm. 5.2, App. A (42)) for one
@@ -62,12 +64,13 @@ class HarmonicBasis {
 
   // --- The differential representation (paper (49) and (53) with the MATH-NOTES signs):
   //   J(p) = Σ_t ω_t A_t − Σ_t Σ_k C_k A_t [d̂_k]×,   H(p) = −Σ_t Σ_k (A_t ∘ α_k + A_t [d̂_k]× ∘ β_k),
-  // with A_t the linear part of face t's affine map (Lemma 5.1). Per point it costs one pass over the faces and
-  // no per-coefficient work, so it is the fast way to evaluate one map at many new points (octree children).
+  // with A_t the linear part of face t's affine map (Lemma 5.1). Per point it costs one pass over the faces
+  // and no per-coefficient work, so it is the fast way to evaluate one map at many new points (octree
+  // children).
   struct FaceMatrices {
-    std::vector<Mat3> A;                   // #F: A_t
-    std::vector<std::array<Mat3, 3>> AD;   // #F: A_t [d̂_k]× for the edge opposite vertex k
-    std::vector<double> A_abs;             // #F: Σ of |terms| forming A_t (its rounding scale; large under translations)
+    std::vector<Mat3> A;                  // #F: A_t
+    std::vector<std::array<Mat3, 3>> AD;  // #F: A_t [d̂_k]× for the edge opposite vertex k
+    std::vector<double> A_abs;  // #F: Σ of |terms| forming A_t (its rounding scale; large under translations)
   };
   FaceMatrices face_matrices(const MatX3d& y) const;  // y: #V+#F by 3
   // J (order ≥ 1) and H (order 2) at p; `scale_J`/`scale_H` (optional) receive the sums of the magnitudes of

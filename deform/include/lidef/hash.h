@@ -1,5 +1,5 @@
-// FNV-1a 64: the one content hash of lidef (cache keys, the cage and coefficient hashes of certificate.json, the
-// OpenCL kernel cache). Not cryptographic: it detects accidental change, not forgery.
+// FNV-1a 64: the one content hash of lidef (cache keys, the cage and coefficient hashes of certificate.json,
+// the OpenCL kernel cache). Not cryptographic: it detects accidental change, not forgery.
 #pragma once
 #include <cstddef>
 #include <cstdint>

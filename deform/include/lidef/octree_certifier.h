@@ -55,9 +55,12 @@ struct Certificate {
   long num_leaves = 0;  // leaf voxels (= voxels + 7 × refined when complete)
   long refined = 0;     // voxels subdivided
   int max_depth_used = 0;
-  double min_sigma3_center = 0;   // over all evaluated centers
-  double min_margin = 0;          // over leaves: σ3 − r L − τ
-  double min_lower_bound = 0;     // over leaves: σ3 − r L, a lower bound of σ3 on the covered region
+  double min_sigma3_center = 0;  // over all evaluated centers
+  double min_margin = 0;         // over leaves: σ3 − r L − τ
+  // A lower bound of the true σ3 on the covered region: the smallest σ3 − r L − τ over the leaves (the
+  // rounding allowance τ included; −∞ when a leaf was left unevaluated). It equals min_margin; the name says
+  // what it is.
+  double min_lower_bound = 0;
   std::vector<CertLeaf> leaves;   // when keep_leaves (in base-voxel order, children depth-first)
   std::vector<CertLeaf> failing;  // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;

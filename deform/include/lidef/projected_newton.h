@@ -146,6 +146,7 @@ class DeformationSolver {
 
  private:
   void update_weights(IterationRecord& rec);
+  void check_targets(const MatX3d& targets, const std::string& where) const;
   const Cage& cage_;
   DeformParams params_;
   SpectralSubspace subspace_;
@@ -156,6 +157,7 @@ class DeformationSolver {
   std::shared_ptr<const ComputeBackend> backend_;
   std::unique_ptr<EnergyKernels> kernels_;  // holds the Jacobians of y_ (and of the direction) at the samples
   MatS3 y_;                                 // current reduced coefficients
+  MatX3d sources_;                          // #h by 3 handle sources (set_handles)
   Certificate cert_;
   EnergyWeights weights_;
   int weight_resets_ = 0;

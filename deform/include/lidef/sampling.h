@@ -25,7 +25,8 @@ struct SamplingParams {
   // Center-to-cage distance ≥ safety · r. Must be > 1 (at 1 the ball touches the cage and the third-order
   // bound is infinite); 1.5 leaves every ball r/2 clear of the cage while losing only a thin layer.
   double safety = 1.5;
-  // |H| = round(hessian_fraction · |I|) (paper: 5%), spread evenly over the volume (see select_hessian_subset).
+  // |H| = round(hessian_fraction · |I|) (paper: 5%), spread evenly over the volume (see
+  // select_hessian_subset).
   double hessian_fraction = 0.05;
   int max_search_iterations = 40;
 };
@@ -36,10 +37,10 @@ struct VoxelSampling {
   double radius() const;            // (√3/2) h, center-to-corner: the radius condition (6) uses
   std::vector<int> hessian_subset;  // ascending indices into centers (the set H)
   Vec3 origin = Vec3::Zero();       // grid origin: center of cell (i,j,k) = origin + ((i,j,k) + 0.5) h
-  MatX3i grid_index;                // #I by 3 cell indices (i,j,k); empty when the centers are not on one grid
-  double safety = 0;                // clearance factor the centers satisfy (0 = unknown, e.g. published samples)
-  int search_iterations = 0;        // voxel-side evaluations the count search used
-  bool target_met = true;           // false if the search ended without reaching the count tolerance
+  MatX3i grid_index;          // #I by 3 cell indices (i,j,k); empty when the centers are not on one grid
+  double safety = 0;          // clearance factor the centers satisfy (0 = unknown, e.g. published samples)
+  int search_iterations = 0;  // voxel-side evaluations the count search used
+  bool target_met = true;     // false if the search ended without reaching the count tolerance
   int size() const { return static_cast<int>(centers.rows()); }
 };
 

@@ -6,8 +6,8 @@
 namespace lidef {
 
 struct SignedSvd {
-  Mat3 U, V;  // rotations (det = +1)
-  Vec3 sigma; // σ1 ≥ σ2 ≥ |σ3|
+  Mat3 U, V;   // rotations (det = +1)
+  Vec3 sigma;  // σ1 ≥ σ2 ≥ |σ3|
 };
 
 SignedSvd signed_svd(const Mat3& J);

@@ -3,9 +3,9 @@
 // of KᵀK is exactly the per-column affine space, so the identity and every affine map lie in span Ξ_s.
 //
 // Construction (both solvers): the 4 null directions are built exactly — an orthonormalised basis Q of
-// {[v_x; n_x], [v_y; n_y], [v_z; n_z], [1; 0]} — and the remaining s − 4 columns are the smallest eigenvectors
-// of KᵀK restricted to Q's orthogonal complement. Columns are ordered by ascending eigenvalue, each column's
-// sign is fixed (largest-magnitude entry positive), so the basis is reproducible.
+// {[v_x; n_x], [v_y; n_y], [v_z; n_z], [1; 0]} — and the remaining s − 4 columns are the smallest
+// eigenvectors of KᵀK restricted to Q's orthogonal complement. Columns are ordered by ascending eigenvalue,
+// each column's sign is fixed (largest-magnitude entry positive), so the basis is reproducible.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -25,8 +25,8 @@ enum class SubspaceSolver {
 constexpr int kDenseSubspaceLimit = 1000;
 
 struct SpectralSubspace {
-  MatXd basis;        // #V+#F by s, orthonormal columns, ascending eigenvalue
-  VecXd eigenvalues;  // s, ascending, >= 0 (the first 4 are the affine null space, ~1e-25)
+  MatXd basis;                  // #V+#F by s, orthonormal columns, ascending eigenvalue
+  VecXd eigenvalues;            // s, ascending, >= 0 (the first 4 are the affine null space, ~1e-25)
   std::uint64_t cage_hash = 0;  // subspace_cage_hash(cage) of the cage it was computed for
   std::string solver;           // "dense", "sparse", or "cache" when loaded from disk
   double seconds = 0;           // wall time of the computation (or of the load)
@@ -35,7 +35,8 @@ struct SpectralSubspace {
 
 // Computes the subspace. s is clamped to #V+#F; s < 4 (cannot hold the affine maps) throws InputError.
 // Throws NumericalError if the eigen-solver does not converge.
-SpectralSubspace compute_subspace(const Cage& cage, int s = 300, SubspaceSolver solver = SubspaceSolver::Auto);
+SpectralSubspace compute_subspace(const Cage& cage, int s = 300,
+                                  SubspaceSolver solver = SubspaceSolver::Auto);
 
 // FNV-1a 64 of the cage's exact vertex bytes (#V by 3 doubles, row-major) and face bytes (#F by 3 int32).
 std::uint64_t subspace_cage_hash(const Cage& cage);

@@ -16,15 +16,15 @@
 //   Every 9-vector and 9x9 matrix here uses it: d²E = vec(dJ)ᵀ H vec(dJ).
 //
 // Hessian eigensystem (Smith, De Goes, Kim 2019, "Analytic Eigensystems for Isotropic Distortion Energies",
-// ACM TOG 38(1); Stomakhin et al. 2012; paper App. G (63), whose Q Λ Qᵀ is exactly this decomposition). For an
-// isotropic E(σ), H = ∂²E/∂vec(J)² = Σ_k λ_k q_k q_kᵀ with 9 orthonormal eigenvectors q_k = vec(U M_k Vᵀ):
+// ACM TOG 38(1); Stomakhin et al. 2012; paper App. G (63), whose Q Λ Qᵀ is exactly this decomposition). For
+// an isotropic E(σ), H = ∂²E/∂vec(J)² = Σ_k λ_k q_k q_kᵀ with 9 orthonormal eigenvectors q_k = vec(U M_k Vᵀ):
 //   scaling (3): eigenpairs (μ, v) of the 3x3 matrix A_ij = ∂²E/∂σ_i∂σ_j, lifted as M = diag(v).
 //                For SD A is diagonal, A_ii = 2 + 6σ_i⁻⁴, so v = e_i and M = e_i e_iᵀ.
 //   per pair (i, j) ∈ {(0,1), (1,2), (0,2)}, M in the plane of e_i, e_j:
 //     twist  M = (e_i e_jᵀ − e_j e_iᵀ)/√2,  λ = (∂E/∂σ_i + ∂E/∂σ_j)/(σ_i + σ_j)
 //     flip   M = (e_i e_jᵀ + e_j e_iᵀ)/√2,  λ = (∂E/∂σ_i − ∂E/∂σ_j)/(σ_i − σ_j)
-//   (the eigenvalues of the 2x2 block Λ of (63): both factors of Λ share the eigenvectors (1, ∓1)). For SD the
-//   quotients simplify, with no division by σ_i ∓ σ_j and hence no special case for repeated σ:
+//   (the eigenvalues of the 2x2 block Λ of (63): both factors of Λ share the eigenvectors (1, ∓1)). For SD
+//   the quotients simplify, with no division by σ_i ∓ σ_j and hence no special case for repeated σ:
 //     λ_twist = 2 − 2 (σ_i² − σ_iσ_j + σ_j²)/(σ_i³σ_j³)    (negative when the pair is compressed: the only
 //                                                           source of indefiniteness; 0 at a rotation)
 //     λ_flip  = 2 + 2 (σ_i² + σ_iσ_j + σ_j²)/(σ_i³σ_j³)    (> 0 for σ > 0)
@@ -34,8 +34,8 @@
 // PSD projection: H⁺ = Σ_k max(λ_k, 0) q_k q_kᵀ, the Frobenius-closest PSD matrix (paper Sec. 7.1).
 //
 // Domain of the derivatives: det J > 0 (where E is finite). For det J ≤ 0 the gradient and both Hessians are
-// returned filled with quiet NaN: the solver must never evaluate them there (its line search keeps every sample
-// at det J > 0), and NaN makes a violation loud instead of silently wrong.
+// returned filled with quiet NaN: the solver must never evaluate them there (its line search keeps every
+// sample at det J > 0), and NaN makes a violation loud instead of silently wrong.
 #pragma once
 #include <Eigen/Core>
 
@@ -52,8 +52,8 @@ double sd_energy(const Mat3& J);
 // ∂E/∂J, same layout as J. NaN-filled when det J ≤ 0.
 Mat3 sd_gradient(const Mat3& J);
 
-// ∂²E/∂vec(J)² (column-major vec), from the analytic eigensystem, without clamping. Symmetric. NaN-filled when
-// det J ≤ 0.
+// ∂²E/∂vec(J)² (column-major vec), from the analytic eigensystem, without clamping. Symmetric. NaN-filled
+// when det J ≤ 0.
 Mat9 sd_hessian(const Mat3& J);
 
 // PSD projection of sd_hessian: the same eigensystem with negative eigenvalues clamped to 0. NaN-filled when
