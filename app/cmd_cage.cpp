@@ -88,16 +88,16 @@ void add_cage_command(CLI::App& app, Action& action) {
   auto opt = std::make_shared<CageCommandOptions>();
   auto* sub = app.add_subcommand("cage", "Make a model folder from a mesh file: an automatic cage around it");
   sub->footer(
-      "Reads MESH (.obj, .off, .ply or .stl, ASCII or binary; polygons are fan-triangulated), wraps it with\n"
-      "CGAL's 3D alpha wrapping (alpha and offset are fractions of the bounding-box diagonal), simplifies "
-      "the\n"
-      "wrap by edge collapses to about --faces triangles without ever coming closer than --clearance to the\n"
-      "mesh, and keeps the cage only when lidef's model checks pass (closed, manifold, outward, no\n"
-      "self-intersection, every mesh vertex strictly inside). A failed check retries with 1.5 x the offset "
-      "and\n"
-      "1.5 x the faces (at most 2000). Writes MODEL_DIR/cage.obj, mesh.obj (the input's vertices unchanged) "
-      "and\n"
-      "model.json, all or nothing. Deterministic: the same mesh and options give the same cage.obj.\n"
+      "Reads MESH (.obj, .off, .ply or .stl, ASCII or binary; polygons fan-triangulated), wraps it with\n"
+      "CGAL's 3D alpha wrapping (alpha and offset are fractions of the bounding-box diagonal), simplifies\n"
+      "the wrap by edge collapses to about --faces triangles, refusing every collapse that would bring the\n"
+      "cage closer than --clearance to the mesh, and keeps the cage only when lidef's model checks pass\n"
+      "(closed, manifold, outward, no self-intersection, every mesh vertex strictly inside). A failed check\n"
+      "retries with 1.5 x the offset and 1.5 x the faces (at most 2000).\n"
+      "Writes MODEL_DIR/cage.obj, mesh.obj (the input's vertices unchanged) and model.json, all or nothing\n"
+      "(also on Ctrl-C). Deterministic: the same mesh and options give the same cage.obj.\n"
+      "A mesh file also works wherever a model folder is expected (lidef deform's scenario \"model\",\n"
+      "lidef certify): its cage is made once with the default options and cached.\n"
       "Exit 0: written; 2: error (nothing written). See docs/cages.md.");
   sub->add_option("MESH", opt->mesh, "Input mesh file")->required();
   sub->add_option("--out", opt->out, "Model folder to write (created if missing)")
