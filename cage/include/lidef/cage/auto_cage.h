@@ -55,6 +55,9 @@ struct CageAttempt {
   int target_faces = 0;
   int wrap_faces = 0;  // triangles of the alpha wrap
   int cage_faces = 0;  // after simplification
+  // Cage triangles the clearance test cannot prove to be >= clearance from the mesh: wrap faces that no
+  // collapse touched (the wrap is only at the offset at its vertices; its faces may chord in closer).
+  int faces_within_clearance = 0;
   double seconds_wrap = 0, seconds_simplify = 0, seconds_check = 0;
   std::string failure;  // empty when the cage passed every check
 };
