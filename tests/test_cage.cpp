@@ -452,6 +452,21 @@ TEST_F(Cage, PullScenarioOnAMeshFileDeformsCertified) {
   EXPECT_NE(out.find("reused cached cage"), std::string::npos) << out;
 }
 
+// `lidef certify MESH`: the mesh file's cached cage (LIDEF_CACHE_DIR) with the identity map is certified.
+TEST_F(Cage, CertifyAcceptsAMeshFile) {
+  write_text(tmp / "t.stl", stl_ascii(torus(Vec3::Zero(), 1, 0.35, 24, 12)));
+  std::string out;
+  const std::string cmd = "LIDEF_CACHE_DIR=" + quote(tmp / "cache") + " " + quote(lidef::test::cli()) +
+                          " certify " + quote(tmp / "t.stl") +
+                          " --coeffs identity --voxels 2000 --grid 0 --out " + quote(tmp / "cert");
+  ASSERT_EQ(lidef::test::run_command(cmd, &out), 0) << out;
+  EXPECT_NE(out.find("making a cage"), std::string::npos) << out;
+  EXPECT_NE(out.find("CERTIFIED"), std::string::npos) << out;
+  ASSERT_EQ(lidef::test::run_command(cmd, &out), 0) << out;
+  EXPECT_NE(out.find("reused cached cage"), std::string::npos) << out;
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp / "cache/cages"), fs::directory_iterator()), 1);
+}
+
 // Real meshes from Debian's libcgal-demo.
 TEST_F(Cage, ElephantFromCgalData) {
   LIDEF_REQUIRE_CGAL_DATA();
