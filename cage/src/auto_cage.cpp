@@ -220,6 +220,11 @@ CageResult make_cage(const TriMesh& mesh, const CageOptions& options, const Cage
     a.seconds_check = seconds_since(t_check);
     a.failure = first_problem(v);
     if (a.failure.empty() && !(v.min_distance > 0)) a.failure = "a mesh vertex lies on the cage";
+    // Wrap faces that no collapse touched may chord in closer than the clearance: retry with a larger offset
+    // while attempts remain; the last attempt is accepted with the count recorded (the model checks passed).
+    const bool checks_failed = !a.failure.empty();
+    if (!checks_failed && a.faces_within_clearance > 0 && attempt < options.max_retries)
+      a.failure = count_str(a.faces_within_clearance) + " cage faces closer than the clearance to the mesh";
     report.attempts.push_back(a);
     if (a.failure.empty()) {
       say("checks passed in " + format_g(a.seconds_check, 3) + " s: cage " + count_str(v.cage_vertices) +
@@ -233,7 +238,7 @@ CageResult make_cage(const TriMesh& mesh, const CageOptions& options, const Cage
     }
     say("checks failed: " + a.failure);
     offset *= 1.5;
-    faces = std::min(kMaxFaces, faces * 3 / 2);
+    if (checks_failed) faces = std::min(kMaxFaces, faces * 3 / 2);  // a finer cage for a failed model check
     if (offset >= 1) break;
   }
   std::string why;

@@ -43,7 +43,10 @@ struct CageOptions {
   // offset keeps the wrap's flat faces from cutting in much closer than the offset (measured: >= clearance on
   // every mesh of docs/cages.md); a larger alpha is faster but its faces chord in towards the mesh.
   double alpha = 0.02;
-  int max_retries = 4;  // attempts after the first, each with 1.5 x the offset and 1.5 x the faces
+  // Attempts after the first: a failed model check retries with 1.5 x the offset and 1.5 x the faces; cage
+  // faces closer than the clearance (uncollapsed wrap faces) with 1.5 x the offset (the last attempt is then
+  // accepted as it is, recorded in CageAttempt::faces_within_clearance).
+  int max_retries = 4;
 };
 
 // Throws InputError("--faces" / "--clearance" / ...) when an option is out of range.
