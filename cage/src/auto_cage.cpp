@@ -10,7 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
+#include <vector>
 
 #include "auto_cage_cgal.h"
 #include "lidef/atomic_file.h"
@@ -45,13 +45,16 @@ bool supported_format(const std::string& ext) {
   return std::find(std::begin(kFormats), std::end(kFormats), ext) != std::end(kFormats);
 }
 
-std::string file_bytes(const std::string& path) {
+// fnv1a64 of the file's bytes, read in blocks (mesh files can be large).
+std::uint64_t file_hash(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, "cannot open the file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
+  std::uint64_t h = kFnv1a64Offset;
+  std::vector<char> block(1 << 16);
+  while (in.read(block.data(), static_cast<std::streamsize>(block.size())) || in.gcount() > 0)
+    h = fnv1a64(block.data(), static_cast<std::size_t>(in.gcount()), h);
   if (in.bad()) throw InputError(path, "cannot read the file");
-  return ss.str();
+  return h;
 }
 
 double diagonal_of(const MatX3d& V) {
@@ -92,11 +95,10 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
   const std::string ext = lower_extension(path);
   if (!supported_format(ext))
     throw InputError(path, "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply or .stl)");
-  const std::string bytes = file_bytes(path);
-  if (bytes.empty()) throw InputError(path, "file is empty");
+  if (fs::file_size(path, ec) == 0 && !ec) throw InputError(path, "file is empty");
   MeshReadInfo inf;
   inf.format = ext;
-  inf.file_hash = fnv1a64(bytes);
+  inf.file_hash = file_hash(path);
 
   cage_cgal::PolygonSoup soup;
   if (!cage_cgal::read_polygon_soup(path, ext, soup))
@@ -323,7 +325,7 @@ std::string resolve_model_path(const std::string& path, const CageLog& log, cons
   std::string cache = cache_dir == "<default>" ? default_cache_dir() : cache_dir;
   if (cache.empty()) cache = (fs::temp_directory_path() / "lidef-cache").string();
   const CageOptions options;
-  std::uint64_t h = fnv1a64(file_bytes(path));
+  std::uint64_t h = file_hash(path);
   const std::string key_text =
       "faces=" + std::to_string(options.faces) + " clearance=" + format_double(options.clearance) +
       " offset=" + format_double(options.offset) + " alpha=" + format_double(options.alpha) +
