@@ -327,6 +327,23 @@ TEST_F(Cage, SeveralComponentsAndHoles) {
   cage_roundtrip(tmp / "holes.stl", tmp / "holes_stl");
 }
 
+// A large alpha makes the wrap's faces chord in closer than the clearance: the attempt is recorded as failed
+// and retried with a larger offset; the returned cage still passes every check.
+TEST_F(Cage, RetriesAreRecorded) {
+  write_text(tmp / "t.obj", obj_text(torus(Vec3::Zero(), 1, 0.35, 24, 12)));
+  CageOptions opt;
+  opt.alpha = 0.15;
+  const CageResult r = cage_roundtrip(tmp / "t.obj", tmp / "model", opt);
+  ASSERT_GE(r.report.attempts.size(), 2u);
+  EXPECT_NE(r.report.attempts[0].failure.find("closer than the clearance"), std::string::npos)
+      << r.report.attempts[0].failure;
+  EXPECT_GT(r.report.attempts[1].offset, r.report.attempts[0].offset);
+  EXPECT_TRUE(r.report.attempts.back().failure.empty());
+  const auto j = nlohmann::json::parse(read_text(tmp / "model/model.json"));
+  EXPECT_EQ(j["retries"], r.report.retries());
+  EXPECT_EQ(j["attempts"].size(), r.report.attempts.size());
+}
+
 TEST_F(Cage, ExtremeScales) {
   const Poly p = torus(Vec3(0.2, 0.1, 0), 1, 0.35, 24, 12);
   write_text(tmp / "big.obj", obj_text(scaled(p, 1e8, Vec3(3e8, -1e8, 2e8))));
@@ -393,6 +410,15 @@ TEST_F(Cage, CommandWritesAModelFolderOrNothing) {
   EXPECT_EQ(run_lidef("cage " + quote(tmp / "bad.stl") + " --out " + quote(tmp / "nothing"), &out), 2) << out;
   EXPECT_NE(out.find("bad.stl: file is empty"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(tmp / "nothing"));
+  write_text(tmp / "nan.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 nan 0\n3 0 1 2\n");
+  write_text(tmp / "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
+  write_text(tmp / "garbage.ply", std::string("ply\n\x01\x02\xff garbage", 16));
+  for (const char* bad : {"nan.off", "flat.obj", "garbage.ply"}) {
+    EXPECT_EQ(run_lidef("cage " + quote(tmp / bad) + " --out " + quote(tmp / "nothing"), &out), 2)
+        << bad << out;
+    EXPECT_NE(out.find(tmp / bad), std::string::npos) << out;
+    EXPECT_FALSE(fs::exists(tmp / "nothing")) << bad;
+  }
   EXPECT_EQ(
       run_lidef("cage " + quote(tmp / "t.ply") + " --out " + quote(tmp / "nothing") + " --faces 3", &out), 2);
   EXPECT_NE(out.find("--faces"), std::string::npos) << out;
