@@ -102,8 +102,8 @@ bool is_mesh_file(const std::string& path);
 // Where a mesh file stands for a model (`lidef deform`, `lidef certify`): for a folder returns `path`
 // unchanged; for a mesh file returns the model folder <cache_dir>/cages/<key> made by make_cage with default
 // options, making it first unless it exists (log: "reused cached cage ..."). key = hash of the file's bytes
-// and the options. cache_dir "" uses a temporary folder under the system temp dir (made once per call, then
-// reused by key too).
+// and the options. cache_dir "<default>" is default_cache_dir() (lidef/subspace.h); when that or cache_dir is
+// "", <system temp dir>/lidef-cache. An entry is written into a private folder and renamed into place.
 std::string resolve_model_path(const std::string& path, const CageLog& log = {},
                                const std::string& cache_dir = "<default>");
 
