@@ -10,6 +10,7 @@
 
 #include "commands.h"
 #include "lidef/atomic_file.h"
+#include "lidef/cage/auto_cage.h"
 #include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
@@ -56,7 +57,9 @@ void add_certify_command(CLI::App& app, Action& action) {
   auto opts = std::make_shared<Opts>();
   auto* sub =
       app.add_subcommand("certify", "Certify local injectivity of a cage map (Lipschitz bounds + octree)");
-  sub->add_option("MODEL_DIR", opts->model, "Model folder (cage.obj|off, mesh.obj|off)")->required();
+  sub->add_option("MODEL_DIR", opts->model,
+                  "Model folder (cage.obj|off, mesh.obj|off), or a mesh file (automatic cage)")
+      ->required();
   sub->add_option("--coeffs", opts->coeffs,
                   "Coefficient file: #V+#F rows 'x y z', vertex rows first; or the word 'identity'")
       ->required();
@@ -94,7 +97,9 @@ void add_certify_command(CLI::App& app, Action& action) {
 
       // --- Inputs.
       auto t0 = Clock::now();
-      const Model model = load_model(o.model);
+      // A mesh file as the model: its automatic cage, made once and cached (lidef/cage/auto_cage.h).
+      const Model model = load_model(resolve_model_path(
+          o.model, [](const std::string& m) { std::cerr << "lidef certify: " << m << "\n"; }));
       for (size_t k = 0; k < model.report.warnings.size() && k < 5; ++k)
         std::cerr << "lidef certify: warning: " << model.report.warnings[k].str() << "\n";
       if (model.report.warnings.size() > 5)

@@ -19,6 +19,7 @@
 
 #include "commands.h"
 #include "lidef/atomic_file.h"
+#include "lidef/cage/auto_cage.h"
 #include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/deform_params.h"
@@ -141,7 +142,10 @@ void add_deform_command(CLI::App& app, Action& action) {
         }
       }
       if (sc.params.threads > 0) omp_set_num_threads(sc.params.threads);
-      const Model model = load_model(sc.model_dir);
+      // A mesh file as the model: its automatic cage, made once and cached (lidef/cage/auto_cage.h).
+      const Model model = load_model(resolve_model_path(
+          sc.model_dir, [](const std::string& m) { std::cerr << "lidef deform: " << m << "\n"; },
+          o.cache_dir));
       for (size_t k = 0; k < model.report.warnings.size() && k < 5; ++k)
         std::cerr << "lidef deform: warning: " << model.report.warnings[k].str() << "\n";
       if (model.report.warnings.size() > 5)

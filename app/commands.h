@@ -17,6 +17,7 @@ enum ExitCode : int {
 // A sub-command sets `action` in its parse callback; main() runs it inside its try/catch.
 using Action = std::function<int()>;
 
+void add_cage_command(CLI::App& app, Action& action);
 void add_certify_command(CLI::App& app, Action& action);
 void add_check_command(CLI::App& app, Action& action);
 void add_deform_command(CLI::App& app, Action& action);

@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "lidef 0.1.0");
   Action action;
+  add_cage_command(app, action);
   add_certify_command(app, action);
   add_check_command(app, action);
   add_compare_placeholder(app);

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs every Debian package lidef needs. Idempotent: returns at once when all are present.
+# Installs every Debian package lidef needs (libcgal-demo: real meshes in its data.tar.gz, elephant, armadillo,
+# ..., which the automatic-cage tests extract at test time). Idempotent: returns at once when all are present.
 set -euo pipefail
 PKGS=(
   build-essential cmake ninja-build ccache pkg-config
@@ -7,6 +8,7 @@ PKGS=(
   libopenblas-dev
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd libclblast-dev
   libsuitesparse-dev libcgal-dev libtet1.5-dev
+  libcgal-demo
   libvtk9-dev libvtk9-qt-dev qtbase5-dev
   gnuplot-nox
   xvfb xauth

@@ -7,8 +7,9 @@
 //
 // `model` names a model folder. It resolves, in this order: <models_dir>/<model> when a models directory is
 // given; <model> itself when it is an absolute path; <scenario dir>/<model>; <scenario dir>/../models/<model>
-// (the layout of ../shared/data and of the project's data/). Unknown top-level keys are errors (a typo such
-// as "handels" must not silently run a scenario without handles).
+// (the layout of ../shared/data and of the project's data/). A mesh file (.obj/.off/.ply/.stl) found there is
+// accepted too: the CLI turns it into an automatic cage's model folder (lidef/cage/auto_cage.h). Unknown
+// top-level keys are errors (a typo such as "handels" must not silently run a scenario without handles).
 #pragma once
 #include <string>
 #include <vector>
@@ -23,7 +24,7 @@ struct Scenario {
   std::string name;  // "name", else the file's stem
   std::string description;
   std::string model;                      // as written in the file
-  std::string model_dir;                  // resolved folder (exists; not yet validated as a model)
+  std::string model_dir;                  // resolved folder or mesh file (exists; not yet validated)
   MatX3d sources;                         // #handles by 3
   MatX3d targets;                         // #handles by 3
   DeformParams params;                    // defaults overridden by "parameters"
