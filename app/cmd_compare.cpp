@@ -11,6 +11,7 @@
 
 #include "commands.h"
 #include "lidef/atomic_file.h"
+#include "lidef/cage/auto_cage.h"
 #include "lidef/compare/compare.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
@@ -102,7 +103,10 @@ void add_compare_options(CLI::App& app, Action& action) {
       o.c.use_model_tets = !o.no_model_tets;
       o.c.cache_dir = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
       if (sc.params.threads > 0) omp_set_num_threads(sc.params.threads);
-      const Model model = load_model(sc.model_dir);
+      // A mesh file as the model: its automatic cage, made once and cached (lidef/cage/auto_cage.h).
+      const Model model = load_model(resolve_model_path(
+          sc.model_dir, [](const std::string& m) { std::cerr << "lidef compare: " << m << "\n"; },
+          o.cache_dir));
       StagedOutputs out(o.out);  // checks --out before the long run
 
       auto progress = [&](const std::string& m, const std::string& line) {

@@ -590,7 +590,10 @@ TEST(ExploreCage, CageMapsThroughTheSameInterface) {
               !find_sigma3_minima(*cm, ex.ball, {4})[0].strict);
   const BallCertificate c = certify_cage_map_on_ball(*cm, ex.ball, 2);
   EXPECT_TRUE(c.certified) << c.reason;
-  EXPECT_NEAR(c.min_lower_bound, 1, 1e-6);
+  // The bound includes the rounding allowance (float storage of the basis derivatives, ~5e-6 here) and is
+  // never above the true σ3 = 1.
+  EXPECT_NEAR(c.min_lower_bound, 1, 1e-5);
+  EXPECT_LE(c.min_lower_bound, 1);
   // A reflection (σ3 = −1) is not certified; a domain ball that sticks out of the cage is refused.
   const Model m = load_model(model);
   const CageExplorerMap refl(m.cage, m.cage.affine_coefficients(Vec3(1, 1, -1).asDiagonal(), Vec3::Zero()),

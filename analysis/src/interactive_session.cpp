@@ -148,6 +148,7 @@ void InteractiveSession::post(Command c) {
 
 void InteractiveSession::open_scenario(const std::string& path, const std::string& models_dir) {
   Scenario sc = read_scenario(path, models_dir);
+  if (resolver_) sc.model_dir = resolver_(sc.model_dir);
   auto model = std::make_shared<const Model>(load_model(sc.model_dir));
   for (Eigen::Index i = 0; i < sc.sources.rows(); ++i) {
     const std::string why = handle_source_problem(model->cage, sc.sources.row(i).transpose());

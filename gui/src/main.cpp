@@ -28,9 +28,11 @@ int main(int argc, char** argv) {
   std::string scenario, model, compare, view = "mesh", screenshot, size = "1024x768";
   double timeout = 600;
   int multisamples = -1;
-  app.add_option("PATH", scenario, "A scenario/session JSON or a model folder to open");
+  app.add_option(
+      "PATH", scenario,
+      "A scenario/session JSON, a model folder, or a mesh file (.obj/.off/.ply/.stl: automatic cage)");
   app.add_option("--scenario", scenario, "Scenario or saved session JSON to open");
-  app.add_option("--model", model, "Model folder to open (no handles)");
+  app.add_option("--model", model, "Model folder or mesh file to open (no handles)");
   app.add_option(
       "--compare", compare,
       "A `lidef compare --out` folder: every method's mesh side by side (with --screenshot: that picture)");

@@ -32,6 +32,7 @@
 #include <QMenuBar>
 #include <QMessageBox>
 #include <QMimeData>
+#include <QProgressDialog>
 #include <QRadioButton>
 #include <QSlider>
 #include <QSpinBox>
@@ -39,16 +40,21 @@
 #include <QTimer>
 #include <QToolBar>
 #include <QVBoxLayout>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <thread>
 
 #include "compare_view.h"
 #include "explorer_panel.h"
 #include "lidef/atomic_file.h"
+#include "lidef/cage/auto_cage.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
@@ -113,6 +119,8 @@ StudioWindow::StudioWindow(QWidget* parent) : QMainWindow(parent) {
       },
       opencl_backend_factory(default_cache_dir()));
   session_->set_extras(extras_for(settings_));
+  // A scenario whose "model" is a mesh file opens its automatic cage, with the same progress dialog.
+  session_->set_model_resolver([this](const std::string& p) { return resolve_model(p); });
 }
 
 StudioWindow::~StudioWindow() {
@@ -156,6 +164,12 @@ void StudioWindow::build_ui() {
   QAction* open_model = file->addAction("Open &model folder...", this, [this] {
     const QString d = QFileDialog::getExistingDirectory(this, "Open model folder (cage.obj, mesh.obj)");
     if (!d.isEmpty()) open_path(d.toStdString());
+  });
+  file->addAction("Open m&esh (automatic cage)...", this, [this] {
+    const QString f =
+        QFileDialog::getOpenFileName(this, "Open a mesh: lidef makes its cage", {},
+                                     "Meshes (*.obj *.off *.ply *.stl *.OBJ *.OFF *.PLY *.STL)");
+    if (!f.isEmpty()) open_path(f.toStdString());
   });
   QAction* open_sc = file->addAction("&Open scenario or session...", this, [this] {
     const QString f = QFileDialog::getOpenFileName(this, "Open scenario", {}, "Scenario JSON (*.json)");
@@ -401,11 +415,49 @@ void StudioWindow::report_error(const std::string& title, const std::string& mes
   report_to_user(this, status_, error_sink_, title, message);
 }
 
+std::string StudioWindow::resolve_model(const std::string& path) {
+  if (!is_mesh_file(path)) return path;
+  // Making a cage takes seconds: a worker thread makes it while this (UI) thread shows its stages.
+  QProgressDialog progress(QString::fromStdString("Making a cage for " + path), QString(), 0, 0, this);
+  progress.setWindowTitle("Automatic cage");
+  progress.setWindowModality(Qt::WindowModal);
+  progress.setMinimumDuration(300);
+  std::mutex m;
+  std::string last_line, folder;
+  std::exception_ptr failure;
+  std::atomic<bool> done{false};
+  std::thread worker([&] {
+    try {
+      folder = resolve_model_path(path, [&](const std::string& line) {
+        std::lock_guard<std::mutex> lk(m);
+        last_line = line;
+      });
+    } catch (...) {
+      failure = std::current_exception();
+    }
+    done.store(true);
+  });
+  while (!done.load()) {
+    {
+      std::lock_guard<std::mutex> lk(m);
+      if (!last_line.empty()) progress.setLabelText(QString::fromStdString(last_line));
+      model_note_ = last_line;
+    }
+    QApplication::processEvents(QEventLoop::AllEvents, 30);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  worker.join();
+  if (failure) std::rethrow_exception(failure);
+  model_note_ = last_line;
+  return folder;
+}
+
 bool StudioWindow::open_path(const std::string& path) {
+  model_note_.clear();
   try {
     std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) {
-      session_->open_model(path, params_->params());
+    if (std::filesystem::is_directory(path, ec) || is_mesh_file(path)) {
+      session_->open_model(resolve_model(path), params_->params());
       scenario_name_ = std::filesystem::path(path).filename().string();
       pending_camera_.clear();
     } else {
@@ -434,7 +486,8 @@ bool StudioWindow::open_path(const std::string& path) {
   sync_widgets();
   session_->set_extras(extras_for(settings_));
   setWindowTitle(QString::fromStdString("lidef-studio — " + scenario_name_));
-  status_->setText(QString::fromStdString("opened " + path));
+  status_->setText(
+      QString::fromStdString("opened " + path + (model_note_.empty() ? "" : " (" + model_note_ + ")")));
   return true;
 }
 

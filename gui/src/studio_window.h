@@ -33,9 +33,13 @@ class StudioWindow : public QMainWindow {
   explicit StudioWindow(QWidget* parent = nullptr);
   ~StudioWindow() override;
 
-  // Opens a model folder or a scenario/session JSON (by what `path` is). Returns false after reporting the
-  // loader's message (error dialog, or the error sink); the current session is kept.
+  // Opens a model folder, a mesh file (.obj/.off/.ply/.stl: its automatic cage, made once and cached,
+  // docs/cages.md) or a scenario/session JSON (by what `path` is). Returns false after reporting the loader's
+  // message (error dialog, or the error sink); the current session is kept.
   bool open_path(const std::string& path);
+  // What the last opening said about the model (e.g. "reused cached cage ...", "cage: 498 faces ..."); empty
+  // for a model folder.
+  const std::string& model_note() const { return model_note_; }
   bool save_session(const std::string& path);
   // Opens the side-by-side picture of a `lidef compare --out` folder in its own window (compare_view.h).
   bool open_comparison(const std::string& dir);  // scenario JSON with a "studio" object (camera, views)
@@ -111,6 +115,10 @@ class StudioWindow : public QMainWindow {
   std::unique_ptr<Scene> scene_;
   ParamsPanel* params_ = nullptr;
   PlotsPanel* plots_ = nullptr;
+  // A mesh file's model folder (lidef/cage/auto_cage.h), made on a worker thread while a progress dialog
+  // shows its stages; a folder is returned unchanged. Throws what the cage maker throws.
+  std::string resolve_model(const std::string& path);
+  std::string model_note_;
   QLabel *badge_ = nullptr, *status_ = nullptr;
   std::vector<QWidget*> chrome_;  // docks and bars hidden in view-only mode
   QWidget* view_panel_ = nullptr;

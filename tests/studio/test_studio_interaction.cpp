@@ -13,6 +13,8 @@
 #include <QApplication>
 #include <QStatusBar>
 #include <chrono>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <thread>
@@ -206,6 +208,39 @@ TEST(StudioInteraction, SavedSessionReopensWithHandlesCameraAndView) {
   vtkCamera* cam2 = fx2.win.render_window()->GetRenderers()->GetFirstRenderer()->GetActiveCamera();
   EXPECT_LT((Vec3(cam2->GetPosition()) - pos).norm(), 1e-9);
   EXPECT_TRUE(fx2.errors.empty());
+}
+
+// A mesh file opens like a model folder: its automatic cage is made once (with a progress dialog) and reused
+// from the cache the next time; a scenario whose "model" is a mesh file opens the same way (issue 17).
+TEST(StudioInteraction, MeshFileOpensWithAnAutomaticCage) {
+  TempDir cache, dir;
+  ::setenv("LIDEF_CACHE_DIR", cache.str().c_str(), 1);
+  std::filesystem::copy_file(project_data() + "/models/ball/mesh.obj", dir / "ball.obj");
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  ASSERT_TRUE(win.open_path(dir / "ball.obj")) << (fx.errors.empty() ? "" : fx.errors.back());
+  ASSERT_TRUE(settled(win)) << "no frame";
+  EXPECT_TRUE(win.shown_frame()->certified);
+  EXPECT_EQ(win.shown_frame()->mesh_V.rows(), 2562);  // the file's vertices, unchanged
+  EXPECT_EQ(win.model_note().find("reused"), std::string::npos) << win.model_note();
+  EXPECT_FALSE(win.model_note().empty());
+  // Opened again: the cached cage.
+  ASSERT_TRUE(win.open_path(dir / "ball.obj"));
+  EXPECT_NE(win.model_note().find("reused cached cage"), std::string::npos) << win.model_note();
+  ASSERT_TRUE(settled(win));
+  // A scenario naming the mesh file: one handle at the center pulled a little.
+  {
+    std::ofstream out(dir / "pull.json");
+    out << R"({"model": ")" << (dir / "ball.obj") << R"(",
+  "handles": [{"source": [0, 0, 0], "target": [0.02, 0, 0]}],
+  "parameters": {"reduced_dof": 60, "samples": 4000}})";
+  }
+  ASSERT_TRUE(win.open_path(dir / "pull.json")) << (fx.errors.empty() ? "" : fx.errors.back());
+  ASSERT_TRUE(settled(win));
+  EXPECT_EQ(win.num_handles(), 1);
+  EXPECT_TRUE(win.shown_frame()->certified);
+  EXPECT_TRUE(fx.errors.empty()) << fx.errors.front();
+  ::unsetenv("LIDEF_CACHE_DIR");
 }
 
 }  // namespace

@@ -100,6 +100,10 @@ class InteractiveSession {
   // --- Loading. These read and check the files synchronously in the caller's thread and throw InputError
   // naming the file (the current session is then untouched); the solver's precomputation runs on the engine.
   // A scenario starts solving at once; a model starts with no handles at the identity.
+  // Turns a scenario's or the caller's model path into a model folder (the studio passes one that makes and
+  // caches an automatic cage for a mesh file, lidef/cage/auto_cage.h); identity by default.
+  using ModelResolver = std::function<std::string(const std::string& path)>;
+  void set_model_resolver(ModelResolver resolver) { resolver_ = std::move(resolver); }
   void open_scenario(const std::string& path, const std::string& models_dir = "");
   void open_model(const std::string& model_dir, const DeformParams& params = {});
 
@@ -141,6 +145,7 @@ class InteractiveSession {
   FrameCallback on_frame_;
   ErrorCallback on_error_;
   BackendFactory backends_;
+  ModelResolver resolver_;
   std::unique_ptr<Engine> engine_;  // touched by the engine thread only (after construction)
   mutable std::mutex mutex_;
   std::condition_variable wake_;
