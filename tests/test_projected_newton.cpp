@@ -339,6 +339,27 @@ TEST(ProjectedNewton, SetHandlesRejectsBadInput) {
   s->set_handles(src, tgt);
   m = message([&] { s->set_targets(nan); });
   EXPECT_NE(m.find("not a finite number"), std::string::npos) << m;
+  // A target at 1e300: finite, but its squared distance is not a double (issue 19: it used to run).
+  MatX3d far = tgt;
+  far(1, 0) = 1e300;
+  m = message([&] { s->set_handles(src, far, "far.json"); });
+  EXPECT_NE(m.find("handle 2"), std::string::npos) << m;
+  EXPECT_NE(m.find("cage diagonals"), std::string::npos) << m;
+  m = message([&] { s->set_targets(far); });
+  EXPECT_NE(m.find("cage diagonals"), std::string::npos) << m;
+  // One source with two different targets (issue 19: it used to run and average them).
+  MatX3d dup_src = src, dup_tgt = tgt;
+  dup_src.row(1) = dup_src.row(0);
+  dup_tgt.row(1) = dup_tgt.row(0) + Eigen::RowVector3d(0.1, 0, 0);
+  m = message([&] { s->set_handles(dup_src, dup_tgt, "dup.json"); });
+  EXPECT_NE(m.find("handles 1 and 2 have the same source but different targets"), std::string::npos) << m;
+  // The same source with the same target is only redundant: accepted.
+  dup_tgt.row(1) = dup_tgt.row(0);
+  EXPECT_NO_THROW(s->set_handles(dup_src, dup_tgt));
+  // ... and moving one of its targets away later is refused like the rest.
+  dup_tgt(1, 0) += 0.1;
+  m = message([&] { s->set_targets(dup_tgt); });
+  EXPECT_NE(m.find("same source but different targets"), std::string::npos) << m;
   // None of the refusals changed the map.
   EXPECT_TRUE(bitwise_equal(s->reduced_coefficients(), y0));
 }
