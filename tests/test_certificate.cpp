@@ -238,6 +238,39 @@ TEST(Certificate, FoldedMapIsNeverCertified) {
   FAIL() << "no folded map found";
 }
 
+// A rank-1 affine map f(p) = u (w·p): J = u wᵀ up to rounding, whose determinant is O(‖J‖ ‖ΔJ‖²) — far below
+// what double precision resolves — at every center. σ3 is reported 0 there, the map is not certified, and the
+// reason says the sign could not be resolved (not that the map folds).
+TEST(Certificate, UnresolvedSignIsNotCertifiedWithItsOwnReason) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 300);
+  const Mat3 A = Vec3(1.0, 2.0, -3.0) * Vec3(0.5, -1.5, 2.5).transpose();
+  const MatX3d y = s.cage.identity_coefficients() * A.transpose();  // y_v = A v, y_t = A n_t
+  OctreeCertifier cert(s.cage, s.sampling, nullptr, 0.0);           // centers evaluated in double
+  for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder}) {
+    CertifyParams p;
+    p.bound = b;
+    p.max_depth = 2;
+    const Certificate c = cert.certify(y, p);
+    EXPECT_FALSE(c.certified);
+    EXPECT_EQ(c.sign_unresolved_leaves, c.num_leaves);
+    EXPECT_EQ(c.reason, "could not prove sigma3 > 0 within rounding (" + std::to_string(c.num_leaves) +
+                            " leaves where det J's sign is not resolved in double precision)");
+    EXPECT_EQ(c.min_sigma3_center, 0.0);
+    for (const CertLeaf& l : c.leaves) {
+      EXPECT_TRUE(l.sign_unresolved);
+      EXPECT_EQ(l.sigma3, 0.0);
+      EXPECT_FALSE(l.certified);
+    }
+  }
+  // The folded map keeps its reason: a resolved det J < 0.
+  MatX3d yf = s.cage.identity_coefficients();
+  yf.col(0) *= -1;  // f(p) = (−x, y, z): det J = −1 everywhere
+  const Certificate c = cert.certify(yf);
+  EXPECT_FALSE(c.certified);
+  EXPECT_EQ(c.reason, "sigma3 <= 0 at a sampled center: the map is not locally injective there");
+  EXPECT_EQ(c.sign_unresolved_leaves, 0);
+}
+
 TEST(Certificate, ThirdOrderBoundIsTighterThanFirstOrder) {
   const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 2000);
   OctreeCertifier cert(s.cage, s.sampling);

@@ -7,6 +7,8 @@
 #include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
+#include <cmath>
+#include <iostream>
 #include <random>
 #include <sstream>
 #include <vector>
@@ -186,4 +188,198 @@ TEST(SignedSvd, ExtremeScales) {
   std::mt19937 rng(41);
   for (const double scale : {1e-80, 1e-20, 1e20, 1e80})
     for (const double s3 : {0.3, -0.3}) check_known(scale * Vec3(1.7, 0.9, s3), rng);
+}
+
+// ---------------------------------------------------------------- the error-bounded sign of det J
+
+namespace {
+
+// Exact arithmetic on doubles (Shewchuk's expansions): a·b = p + e exactly (fma), a + b = s + e exactly.
+void two_prod(double a, double b, double& p, double& e) {
+  p = a * b;
+  e = std::fma(a, b, -p);
+}
+void two_sum(double a, double b, double& s, double& e) {
+  s = a + b;
+  const double bb = s - a;
+  e = (a - (s - bb)) + (b - bb);
+}
+// Adds x to a nonoverlapping expansion kept in increasing magnitude order (GROW-EXPANSION).
+void grow(std::vector<double>& h, double x) {
+  double q = x;
+  for (double& hi : h) {
+    double s, e;
+    two_sum(q, hi, s, e);
+    hi = e;
+    q = s;
+  }
+  h.push_back(q);
+}
+
+// The exact det J as an expansion (no overflow or underflow for the magnitudes used here): the sign is the
+// sign of its largest nonzero component; `approx` its value to ~1e-15 relative.
+int exact_det_sign(const Mat3& J, double* approx = nullptr) {
+  std::vector<double> h;
+  const int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {1, 0, 2}, {2, 1, 0}};
+  for (int k = 0; k < 6; ++k) {
+    const double sgn = k < 3 ? 1.0 : -1.0;
+    double p, e;
+    two_prod(J(0, perm[k][0]), J(1, perm[k][1]), p, e);
+    for (double t : {p, e}) {
+      double q, f;
+      two_prod(t, J(2, perm[k][2]), q, f);
+      grow(h, sgn * q);
+      grow(h, sgn * f);
+    }
+  }
+  if (approx) {
+    double s = 0;
+    for (double x : h) s += x;  // increasing magnitude, nonoverlapping: accurate to ~u
+    *approx = s;
+  }
+  for (auto it = h.rbegin(); it != h.rend(); ++it)
+    if (*it != 0) return *it > 0 ? 1 : -1;
+  return 0;
+}
+
+// det_sign is never wrong; 0 only when the exact |det J| is within the bound (or det J = 0); σ3's sign from
+// signed_singular_values and signed_svd is the exact sign when resolved, and σ3 = 0 when not.
+int check_det_sign(const Mat3& J) {
+  SCOPED_TRACE(show(J));
+  double exact = 0;
+  const int truth = exact_det_sign(J, &exact);
+  const DetSign d = det_sign_bounded(J);
+  EXPECT_EQ(d.sign, det_sign(J));
+  EXPECT_EQ(d.det, J.determinant());  // the same evaluation as Eigen's
+  EXPECT_LE(std::abs(d.det - exact), d.bound * (1 + 1e-12)) << "the bound does not hold";
+  if (d.sign != 0) {
+    EXPECT_EQ(d.sign, truth) << "det_sign is wrong: exact det " << exact;
+    EXPECT_TRUE(d.resolved);
+  } else {
+    EXPECT_LE(std::abs(exact), d.bound * (1 + 1e-12)) << "left unresolved although |det| > bound";
+    if (d.resolved) {
+      EXPECT_EQ(truth, 0);
+    }
+  }
+  bool resolved = false;
+  const Vec3 s = signed_singular_values(J, &resolved);
+  EXPECT_EQ(resolved, d.resolved);
+  const double s3_svd = signed_svd(J).sigma(2);
+  if (d.sign == 0) {
+    EXPECT_EQ(s(2), 0.0);
+    EXPECT_EQ(s3_svd, 0.0);
+  } else {
+    if (s(2) != 0) {
+      EXPECT_EQ(s(2) < 0, truth < 0) << "sigma3 " << s(2);
+    }
+    if (s3_svd != 0) {
+      EXPECT_EQ(s3_svd < 0, truth < 0) << "sigma3 (signed_svd) " << s3_svd;
+    }
+  }
+  return d.sign;
+}
+
+// A few ulps in a random direction on every nonzero entry (zeros stay zero: an ulp of 0 is subnormal, and the
+// exact reference above assumes no underflow).
+Mat3 perturb_ulps(Mat3 J, std::mt19937& rng, int max_ulps) {
+  std::uniform_int_distribution<int> k(-max_ulps, max_ulps);
+  for (int q = 0; q < 9; ++q) {
+    const int n = k(rng);
+    double& x = J.data()[q];
+    if (x == 0) continue;
+    for (int i = 0; i < std::abs(n); ++i) x = std::nextafter(x, n > 0 ? HUGE_VAL : -HUGE_VAL);
+  }
+  return J;
+}
+
+Mat3 random_integer_matrix(std::mt19937& rng, int rank) {
+  std::uniform_int_distribution<int> I(-9, 9);
+  auto vec = [&] { return Vec3(I(rng), I(rng), I(rng)); };
+  const Vec3 a = vec(), b = vec(), c = vec();
+  if (rank == 1) return a * b.transpose();
+  if (rank == 2) return a * b.transpose() + c * vec().transpose();
+  return (Mat3() << a.transpose(), b.transpose(), c.transpose()).finished();
+}
+
+}  // namespace
+
+TEST(SignedSvd, DetSignOfExactlySingularIntegerMatrices) {
+  std::mt19937 rng(43);
+  int unresolved = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const int rank = 1 + trial % 2;
+    std::uniform_int_distribution<int> E(-60, 60);
+    const Mat3 J = std::ldexp(1.0, E(rng)) * random_integer_matrix(rng, rank);  // exact in binary
+    ASSERT_EQ(exact_det_sign(J), 0);
+    EXPECT_EQ(check_det_sign(J), 0) << "rank " << rank;  // det J = 0: no sign may be claimed
+    unresolved += !det_sign_bounded(J).resolved;
+  }
+  EXPECT_GT(unresolved, 1000);  // most are not structurally zero
+  // The matrices the header names: rank 2 and rank 1 without zero entries, unresolved; zero rows or
+  // columns: det J = 0 exactly, resolved.
+  const Mat3 rank2 = (Mat3() << 1, 2, 3, 4, 5, 6, 7, 8, 9).finished();
+  EXPECT_FALSE(det_sign_bounded(rank2).resolved);
+  EXPECT_EQ(signed_singular_values(rank2)(2), 0.0);
+  EXPECT_FALSE(det_sign_bounded(Vec3(1, 2, 3) * Vec3(-1, 1, 2).transpose()).resolved);
+  for (const Mat3& Z : {Mat3(Mat3::Zero()), Mat3((Mat3() << 1, 2, 3, 0, 0, 0, 7, 8, 9).finished()),
+                        Mat3((Mat3() << 1, 0, 3, 4, 0, 6, 7, 0, 9).finished())}) {
+    const DetSign d = det_sign_bounded(Z);
+    EXPECT_TRUE(d.resolved);
+    EXPECT_EQ(d.sign, 0);
+    EXPECT_EQ(signed_singular_values(Z)(2), 0.0);
+  }
+}
+
+TEST(SignedSvd, DetSignOfSingularMatricesPerturbedByUlps) {
+  std::mt19937 rng(47);
+  int resolved = 0, total = 0;
+  for (int trial = 0; trial < 6000; ++trial) {
+    const int rank = 1 + trial % 3;
+    std::uniform_int_distribution<int> E(-30, 30);
+    const Mat3 base = std::ldexp(1.0, E(rng)) * random_integer_matrix(rng, rank);
+    const Mat3 J = perturb_ulps(base, rng, 1 + trial % 4);
+    resolved += check_det_sign(J) != 0;
+    ++total;
+  }
+  std::cout << resolved << " of " << total << " perturbed matrices resolved\n";
+  EXPECT_GT(resolved, 0);
+}
+
+TEST(SignedSvd, DetSignOfRotatedNearlyDoublySingularMatrices) {
+  // U diag(s) Vᵀ with s3 = ±1e-17 s1 (and s2 small too): the rounded matrix's exact sign is whatever it is;
+  // det_sign must never contradict it.
+  std::mt19937 rng(53);
+  std::uniform_real_distribution<double> S(0.0, 1.0);
+  for (int trial = 0; trial < 4000; ++trial) {
+    const double s1 = std::ldexp(1.0 + S(rng), trial % 40 - 20);
+    const double s2 = s1 * (trial % 2 ? S(rng) : 1e-9 * S(rng));
+    const double s3 = (trial % 4 < 2 ? 1e-17 : -1e-17) * s1;
+    const Mat3 J = random_rotation(rng) * Vec3(s1, s2, s3).asDiagonal() * random_rotation(rng).transpose();
+    check_det_sign(J);
+  }
+}
+
+TEST(SignedSvd, DetSignResolvesWellConditionedMatrices) {
+  // σ3 > 1e-6 σ1 (either sign): |det J| = σ1 σ2 |σ3| ≥ 1e-12 σ1³ is far above the bound (≤ 2⁻⁵⁰ · 6 ‖J‖³).
+  std::mt19937 rng(59);
+  std::uniform_real_distribution<double> S(0.0, 1.0);
+  for (int trial = 0; trial < 20000; ++trial) {
+    const double s1 = std::ldexp(1.0 + S(rng), trial % 200 - 100);
+    const double s3 = s1 * std::pow(10.0, -6.0 * S(rng)) * (1 + 1e-3);
+    const double s2 = s3 + (s1 - s3) * S(rng);
+    const double sg = trial % 2 ? 1.0 : -1.0;
+    const Mat3 J =
+        random_rotation(rng) * Vec3(s1, s2, sg * s3).asDiagonal() * random_rotation(rng).transpose();
+    const int s = check_det_sign(J);
+    ASSERT_EQ(s, sg > 0 ? 1 : -1) << show(J);
+  }
+  // Random Gaussian matrices with σ3 > 1e-6 σ1.
+  std::normal_distribution<double> N01;
+  for (int trial = 0; trial < 20000; ++trial) {
+    Mat3 J;
+    for (int q = 0; q < 9; ++q) J.data()[q] = N01(rng);
+    const Vec3 sv = Eigen::JacobiSVD<Mat3>(J).singularValues();
+    if (!(sv(2) > 1e-6 * sv(0))) continue;
+    ASSERT_NE(check_det_sign(J), 0) << show(J);
+  }
 }

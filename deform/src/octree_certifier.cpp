@@ -196,7 +196,8 @@ struct OctreeCertifier::Run {
   // Base voxels.
   VecXd scaleJ, scaleH, hnorm, sigma3, T, delta;
   std::vector<Mat3> Jc;
-  std::vector<double> device_Y;  // coefficients for the backend's base stage (empty: CPU)
+  std::vector<char> sign_unresolved;  // per base voxel: det J's sign at the center not resolved
+  std::vector<double> device_Y;       // coefficients for the backend's base stage (empty: CPU)
   std::vector<CertLeaf> base;
   std::vector<long> failing_base;
   // Refinement.
@@ -314,9 +315,14 @@ struct OctreeCertifier::Run {
   void base_sigma3() {
     const auto t0 = Clock::now();
     sigma3.resize(N);
+    sign_unresolved.assign(N, 0);
     if (device_Y.empty()) {
 #pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i) sigma3(i) = signed_singular_values(Jc[i])(2);
+      for (long i = 0; i < N; ++i) {
+        bool resolved = true;
+        sigma3(i) = signed_singular_values(Jc[i], &resolved)(2);
+        sign_unresolved[i] = !resolved;
+      }
     }
     cert.ms_sigma = ms_since(t0);
   }
@@ -339,7 +345,7 @@ struct OctreeCertifier::Run {
         has = true;
       }
       const auto td = Clock::now();
-      im.kernels->base_stage(device_Y.data(), third, delta, sigma3, hnorm, T);
+      im.kernels->base_stage(device_Y.data(), third, delta, sigma3, hnorm, T, sign_unresolved);
       device_ms = ms_since(td);
       cert.ms_jacobian += device_ms;
     }
@@ -374,7 +380,8 @@ struct OctreeCertifier::Run {
                  L,
                  margin,
                  margin > 0,
-                 static_cast<int>(i)};
+                 static_cast<int>(i),
+                 sign_unresolved[i] != 0};
       if (!(margin > 0)) failing_base.push_back(i);
     }
     cert.ms_bound = ms_since(t0) - device_ms;
@@ -485,7 +492,9 @@ struct OctreeCertifier::Run {
       Mat3 J;
       NodeValues& v = vals[q];
       eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H);
-      v.sigma3 = signed_singular_values(J)(2);
+      bool resolved = true;
+      v.sigma3 = signed_singular_values(J, &resolved)(2);
+      v.sign_unresolved = !resolved;
       double own = 0;
       for (long e = 0; e < E; ++e)
         if (delta(e) != 0)
@@ -512,11 +521,12 @@ struct OctreeCertifier::Run {
       const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
       const int bi = static_cast<int>(failing_base[fi]);
       if (margin > 0) {
-        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, true, bi};
+        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, true, bi, v.sign_unresolved};
       } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
-        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, false, bi};
+        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, false, bi, v.sign_unresolved};
         st.ok = false;
-        // σ3 ≤ 0 at a center settles this voxel: refining its other nodes cannot change the verdict.
+        // σ3 ≤ 0 (or a sign not resolved, σ3 = 0) at a center settles this voxel: refining its other nodes
+        // cannot change the verdict.
         if (v.sigma3 <= 0) st.definite_fail = true;
         if (p.stop_on_failure) abort = true;
       } else {
@@ -541,6 +551,10 @@ struct OctreeCertifier::Run {
       cert.min_lower_bound = std::min(cert.min_lower_bound, l.margin);
       if (!l.certified) {
         all_ok = false;
+        if (l.sign_unresolved)
+          ++cert.sign_unresolved_leaves;
+        else if (l.sigma3 <= 0)
+          resolved_nonpositive = true;
         if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
       }
       if (p.keep_leaves) cert.leaves.push_back(l);
@@ -580,9 +594,14 @@ struct OctreeCertifier::Run {
     if (!cert.certified) cert.reason = failure_reason();
     return std::move(cert);
   }
+  // A resolved σ3 ≤ 0 at an evaluated center (every such center is a leaf): the map folds there.
+  bool resolved_nonpositive = false;
   std::string failure_reason() const {
-    if (cert.min_sigma3_center <= 0)
+    if (resolved_nonpositive)
       return "sigma3 <= 0 at a sampled center: the map is not locally injective there";
+    if (cert.sign_unresolved_leaves > 0)
+      return "could not prove sigma3 > 0 within rounding (" + std::to_string(cert.sign_unresolved_leaves) +
+             " leaves where det J's sign is not resolved in double precision)";
     if (budget_hit)
       return "refinement budget exhausted (" + std::to_string(p.max_children_per_voxel) + " per voxel, " +
              std::to_string(p.max_refined_voxels) + " in all)";

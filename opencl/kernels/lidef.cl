@@ -91,12 +91,37 @@ inline void signed_svd3(const double* J, double* U, double* S, double* V) {
   S[2] = Ac[2] * U[2] + Ac[5] * U[5] + Ac[8] * U[8];
 }
 
-// Signed σ3 as signed_singular_values(J)(2): the smallest singular value, negative when det J < 0.
-inline double signed_sigma3(const double* J) {
+// det_sign_bounded (signed_svd.cpp), same formula: +1 / −1 when |fl(det J)| exceeds the bound on its rounding
+// error 2⁻⁵⁰·Σ_j |J0j|(|J1a J2b| + |J1b J2a|) + 2⁻¹⁰⁷⁰·(Σ_j |J0j| + 2), else 0; *resolved is 1 for ±1 and
+// for det J = 0 exactly (every Leibniz product has a zero factor).
+inline int det_sign3(const double* m, int* resolved) {
+  const double det = det3(m);
+  double A[9];
+  for (int q = 0; q < 9; ++q) A[q] = fabs(m[q]);
+  const double P = A[0] * (A[4] * A[8] + A[5] * A[7]) + A[1] * (A[3] * A[8] + A[5] * A[6]) +
+                   A[2] * (A[3] * A[7] + A[4] * A[6]);
+  const double bound = 0x1p-50 * P + 0x1p-1070 * (A[0] + A[1] + A[2] + 2.0);
+  *resolved = 0;
+  if (!isfinite(det) || !isfinite(bound)) return 0;
+  if (fabs(det) > bound) {
+    *resolved = 1;
+    return det > 0 ? 1 : -1;
+  }
+  const int t0 = m[0] == 0 || ((m[4] == 0 || m[8] == 0) && (m[5] == 0 || m[7] == 0));
+  const int t1 = m[1] == 0 || ((m[3] == 0 || m[8] == 0) && (m[5] == 0 || m[6] == 0));
+  const int t2 = m[2] == 0 || ((m[3] == 0 || m[7] == 0) && (m[4] == 0 || m[6] == 0));
+  *resolved = t0 && t1 && t2;
+  return 0;
+}
+
+// Signed σ3 as signed_singular_values(J)(2): the smallest singular value, negative when det J < 0, and 0 when
+// the sign of det J is not resolved (*resolved = 0) or det J = 0 exactly.
+inline double signed_sigma3(const double* J, int* resolved) {
   double U[9], S[3], V[9];
   signed_svd3(J, U, S, V);
   const double s3 = fabs(S[2]);
-  return det3(J) < 0 ? -s3 : s3;
+  const int sg = det_sign3(J, resolved);
+  return sg == 0 ? 0.0 : (sg < 0 ? -s3 : s3);
 }
 
 // ---------------------------------------------------------------- symmetric Dirichlet (symmetric_dirichlet.cpp)
@@ -414,7 +439,7 @@ __kernel void certify_rows_blocks(__global const float* GH, long N, int m, __glo
 // σ3, and T = Σ_e δ_e F(i, e) (skipping δ_e = 0, whose factor may be +∞).
 __kernel void certify_finish(__global const double* JH, long N, int third, __global const float* Ft, int E,
                              __global const double* delta, __global double* sigma3, __global double* hnorm,
-                             __global double* T) {
+                             __global double* T, __global double* unresolved) {
   const long i = get_global_id(0);
   if (i >= N) return;
   double J[9];
@@ -428,7 +453,9 @@ __kernel void certify_finish(__global const double* JH, long N, int third, __glo
       hs += h0 * h0 + h3 * h3 + h5 * h5 + 2 * (h1 * h1 + h2 * h2 + h4 * h4);
     }
   hnorm[i] = sqrt(hs);
-  sigma3[i] = signed_sigma3(J);
+  int resolved = 1;
+  sigma3[i] = signed_sigma3(J, &resolved);
+  unresolved[i] = resolved ? 0.0 : 1.0;
   double t = 0;
   for (int e = 0; e < E; ++e) {
     const double d = delta[e];
@@ -552,9 +579,11 @@ __kernel void eval_nodes(__global const double* centers, __global const double* 
       own += de * edge_factor(u, w, p, rad, third);
     }
   }
-  out[5 * j] = signed_sigma3(J);
-  out[5 * j + 1] = hn;
-  out[5 * j + 2] = own;
-  out[5 * j + 3] = sJ;
-  out[5 * j + 4] = sH;
+  int resolved = 1;
+  out[6 * j] = signed_sigma3(J, &resolved);
+  out[6 * j + 1] = hn;
+  out[6 * j + 2] = own;
+  out[6 * j + 3] = sJ;
+  out[6 * j + 4] = sH;
+  out[6 * j + 5] = resolved ? 0.0 : 1.0;
 }

@@ -525,6 +525,7 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       s3_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       hn_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       T_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
+      unres_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       JH_ = make_buffer<double>(*d_, 27 * static_cast<size_t>(N_), "allocating certificate Jacobians");
     }
     guarded(d_->label, "creating kernels", [&] {
@@ -544,13 +545,14 @@ class OpenCLCertifierKernels final : public CertifierKernels {
                                              CL_MEM_READ_ONLY, t.data());
   }
 
-  void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& hnorm,
-                  VecXd& T) override {
+  void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& hnorm, VecXd& T,
+                  std::vector<char>& unresolved) override {
     if (m_ == 0) throw OpenCLError("OpenCL (" + d_->label + "): no stored derivatives for the base stage");
     std::lock_guard<std::mutex> lock(d_->mutex);
     sigma3.resize(N_);
     hnorm.resize(N_);
     T.resize(N_);
+    std::vector<double> unres(N_);
     guarded(d_->label, "certificate base stage", [&] {
       d_->queue.enqueueWriteBuffer(Y_, CL_FALSE, 0, 3 * m_ * sizeof(double), Y);
       d_->queue.enqueueWriteBuffer(delta_, CL_FALSE, 0, E_ * sizeof(double), delta.data());
@@ -571,13 +573,17 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       k_finish_.setArg(6, s3_);
       k_finish_.setArg(7, hn_);
       k_finish_.setArg(8, T_);
+      k_finish_.setArg(9, unres_);
       d_->queue.enqueueNDRangeKernel(k_finish_, cl::NullRange, cl::NDRange(round_up(N_, 64)),
                                      cl::NDRange(64));
       d_->queue.enqueueReadBuffer(s3_, CL_FALSE, 0, N_ * sizeof(double), sigma3.data());
       d_->queue.enqueueReadBuffer(hn_, CL_FALSE, 0, N_ * sizeof(double), hnorm.data());
-      d_->queue.enqueueReadBuffer(T_, CL_TRUE, 0, N_ * sizeof(double), T.data());
+      d_->queue.enqueueReadBuffer(T_, CL_FALSE, 0, N_ * sizeof(double), T.data());
+      d_->queue.enqueueReadBuffer(unres_, CL_TRUE, 0, N_ * sizeof(double), unres.data());
       return 0;
     });
+    unresolved.resize(N_);
+    for (long i = 0; i < N_; ++i) unresolved[i] = unres[i] != 0;
   }
 
   void evaluate_nodes(const std::vector<Mat3>& A, const std::vector<std::array<Mat3, 3>>& AD,
@@ -597,14 +603,14 @@ class OpenCLCertifierKernels final : public CertifierKernels {
         }
       F[36] = A_abs[f];
     }
-    std::vector<double> c(3 * count), res(5 * count);
+    std::vector<double> c(3 * count), res(6 * count);
     for (long j = 0; j < count; ++j)
       for (int q = 0; q < 3; ++q) c[3 * j + q] = centers(j, q);
     if (count > cap_) {
       cap_ = std::max<long>(count, 2 * cap_);
       centers_ = make_buffer<double>(*d_, 3 * cap_, "allocating octree nodes");
       radii_ = make_buffer<double>(*d_, cap_, "allocating octree nodes");
-      out_ = make_buffer<double>(*d_, 5 * cap_, "allocating octree nodes");
+      out_ = make_buffer<double>(*d_, 6 * cap_, "allocating octree nodes");
     }
     guarded(d_->label, "octree node evaluation", [&] {
       d_->queue.enqueueWriteBuffer(fm_, CL_FALSE, 0, fm.size() * sizeof(double), fm.data());
@@ -628,14 +634,16 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       return 0;
     });
     for (long j = 0; j < count; ++j)
-      out[j] = {res[5 * j], res[5 * j + 1], res[5 * j + 2], res[5 * j + 3], res[5 * j + 4]};
+      out[j] = {res[6 * j],     res[6 * j + 1], res[6 * j + 2],
+                res[6 * j + 3], res[6 * j + 4], res[6 * j + 5] != 0};
   }
 
  private:
   std::shared_ptr<Device> d_;
   long N_ = 0, m_ = 0, cap_ = 0;
   int nf_ = 0, E_ = 0;
-  cl::Buffer GHt_, JH_, faces_, edges_, delta_, fm_, Y_, s3_, hn_, T_, F1_, F3_, centers_, radii_, out_;
+  cl::Buffer GHt_, JH_, faces_, edges_, delta_, fm_, Y_, s3_, hn_, T_, unres_, F1_, F3_, centers_, radii_,
+      out_;
   cl::Kernel k_rows_, k_finish_, k_nodes_;
 };
 

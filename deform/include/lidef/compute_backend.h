@@ -52,8 +52,10 @@ struct CertifierData {
 
 // One octree node evaluated: signed σ3 and ‖H‖ at its center, its own bound Σ_e δ_e factor_e(center, radius)
 // and the rounding scales of the differential representation (HarmonicBasis::differential_jet).
+// sign_unresolved: det J's sign at the center is not resolved in double precision (σ3 is then 0).
 struct NodeValues {
   double sigma3 = 0, hnorm = 0, own_bound = 0, scale_J = 0, scale_H = 0;
+  bool sign_unresolved = false;
 };
 
 class CertifierKernels {
@@ -62,9 +64,10 @@ class CertifierKernels {
   // Edge factor matrix of one bound (N by #E, row-major, rounded up to float), given once per bound.
   virtual void set_factors(bool third, const float* factors, long edges) = 0;
   // Base voxels: σ3, ‖H‖ (stored Hessian rows) and T_i = Σ_e δ_e F(i, e) (δ_e = 0 skipped), for the stored
-  // derivatives times Y (m by 3, column-major). Outputs are N-vectors.
+  // derivatives times Y (m by 3, column-major). Outputs are N-vectors; `unresolved` (1: det J's sign at
+  // the center is not resolved in double precision, σ3 = 0 there) as well.
   virtual void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& hnorm,
-                          VecXd& T) = 0;
+                          VecXd& T, std::vector<char>& unresolved) = 0;
   // Octree nodes (centers #nodes by 3, radii #nodes) through the differential representation of the map
   // whose face matrices are `fm`.
   virtual void evaluate_nodes(const std::vector<Mat3>& A, const std::vector<std::array<Mat3, 3>>& AD,

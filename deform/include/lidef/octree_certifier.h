@@ -8,7 +8,8 @@
 // (sums over undirected edges; the paper's ½ Σ over directed edges counts each edge twice), and τ is a
 // floating-point allowance (see Tolerance below). Failing voxels are split into 8 children, each with its
 // own exact σ3 and ‖H‖ at its center and the smaller of the parent's and its own third-order bound.
-// Depth exhausted, or σ3 ≤ 0 at any center, means NOT certified.
+// Depth exhausted, σ3 ≤ 0 at any center, or a center where the sign of det J is not resolved in double
+// precision (signed_svd.h) means NOT certified.
 #pragma once
 #include <memory>
 #include <string>
@@ -43,7 +44,8 @@ struct CertLeaf {
   double L = 0;       // Lipschitz constant of σ3 on the voxel's ball
   double margin = 0;  // σ3 − r L − τ (> 0: certified)
   bool certified = false;
-  int base = 0;  // index of the base voxel it refines
+  int base = 0;                  // index of the base voxel it refines
+  bool sign_unresolved = false;  // det J's sign at the center not resolved in double precision (σ3 = 0)
 };
 
 struct Certificate {
@@ -61,6 +63,9 @@ struct Certificate {
   // rounding allowance τ included; −∞ when a leaf was left unevaluated). It equals min_margin; the name says
   // what it is.
   double min_lower_bound = 0;
+  // Leaves whose center has a det J of unresolved sign (signed_svd.h): σ3 is reported as 0 there and the
+  // leaf is not certified, but the map is not shown to fold (reason: "could not prove sigma3 > 0 ...").
+  long sign_unresolved_leaves = 0;
   std::vector<CertLeaf> leaves;   // when keep_leaves (in base-voxel order, children depth-first)
   std::vector<CertLeaf> failing;  // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
