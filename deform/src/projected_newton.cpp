@@ -231,7 +231,8 @@ void DeformationSolver::check_targets(const MatX3d& targets, const std::string& 
   // squared distances in E_P2P (1e300 squared is not a double).
   constexpr double kMaxDiagonals = 1e6;
   for (Eigen::Index i = 0; i < targets.rows(); ++i) {
-    const double d = (targets.row(i).transpose() - center).norm();
+    // stableNorm: a target at 1e300 would make the plain norm overflow to inf in the message.
+    const double d = (targets.row(i).transpose() - center).stableNorm();
     if (!(d <= kMaxDiagonals * diag))
       throw InputError(where, "handle " + std::to_string(i + 1) + ": target is " + format_g(d / diag, 3) +
                                   " cage diagonals from the cage (at most " + format_g(kMaxDiagonals, 1) +
