@@ -51,7 +51,8 @@ int make_cage_command(const CageCommandOptions& o) {
     std::error_code ec;
     if (fs::exists(o.out, ec)) {
       if (!fs::is_directory(o.out, ec)) throw InputError(o.out, "exists and is not a folder");
-      if (!fs::is_empty(o.out, ec) && !o.force)
+      // A folder holding only what a killed run left behind (a staging folder) counts as empty.
+      if (!holds_only_leftovers(o.out) && !o.force)
         throw InputError(o.out,
                          "the folder exists and is not empty (use --force to replace its model files)");
     }

@@ -16,6 +16,20 @@
 
 namespace lidef::cli {
 
+// Whether `name` (a folder entry) is what a killed run may leave behind: a staging folder
+// (".lidef-staging-XXXXXX") or an atomic write's temporary ("NAME.tmp.PID.N"). No reader opens these names.
+inline bool is_write_leftover(const std::string& name) {
+  return name.rfind(".lidef-staging-", 0) == 0 || name.find(".tmp.") != std::string::npos;
+}
+
+// Whether the folder `dir` holds nothing but the leftovers of killed runs (is_write_leftover).
+inline bool holds_only_leftovers(const std::string& dir) {
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec))
+    if (!is_write_leftover(e.path().filename().string())) return false;
+  return !ec;
+}
+
 class StagedOutputs {
  public:
   explicit StagedOutputs(const std::string& dir) : dir_(dir) {

@@ -1,0 +1,288 @@
+// Killed runs leave no partial file a later run would trust (issue 19, "Reliability"): `lidef deform` killed
+// (SIGKILL) at several moments while it writes into a folder that holds a previous result, the subspace cache
+// killed while it is first filled or corrupted by hand, and `lidef cage --out` killed mid-run.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "test_cli_outputs.h"
+#include "test_support.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using lidef::test::dir_entries;
+using lidef::test::read_text;
+using lidef::test::run_lidef_cli;
+using lidef::test::shell_quote;
+using lidef::test::TempDir;
+using lidef::test::write_text;
+using Files = std::map<std::string, std::string>;
+
+// What a killed run may leave behind under a name no reader opens (app/staged_outputs.h,
+// lidef/atomic_file.h).
+bool is_leftover(const std::string& name) {
+  return name.rfind(".lidef-staging-", 0) == 0 || name.find(".tmp.") != std::string::npos;
+}
+
+// The files of `dir` at final names (not leftovers), name -> bytes.
+Files final_files(const std::string& dir) {
+  Files f;
+  for (const std::string& n : dir_entries(dir))
+    if (!is_leftover(n)) f[n] = read_text((fs::path(dir) / n).string());
+  return f;
+}
+std::vector<std::string> leftovers(const std::string& dir) {
+  std::vector<std::string> l;
+  for (const std::string& n : dir_entries(dir))
+    if (is_leftover(n)) l.push_back(n);
+  return l;
+}
+
+// Starts `lidef ARGS` (output to /dev/null). Once `when()` holds (polled every millisecond) it waits `after`
+// seconds and sends SIGKILL, unless the process ended before; `when` that never holds lets it finish.
+// Returns true when it was killed, false when it had exited by itself.
+bool run_and_kill(const std::vector<std::string>& args, const std::function<bool()>& when, double after = 0) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int null = ::open("/dev/null", O_WRONLY);
+    ::dup2(null, 1);
+    ::dup2(null, 2);
+    std::vector<char*> argv;
+    const std::string cli = lidef::test::cli();
+    argv.push_back(const_cast<char*>(cli.c_str()));
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    ::execv(cli.c_str(), argv.data());
+    ::_exit(127);
+  }
+  EXPECT_GT(pid, 0);
+  using Clock = std::chrono::steady_clock;
+  const auto give_up = Clock::now() + std::chrono::seconds(60);
+  std::optional<Clock::time_point> kill_at;
+  int status = 0;
+  while (!kill_at || Clock::now() < *kill_at) {
+    if (::waitpid(pid, &status, WNOHANG) == pid) return false;
+    if (!kill_at && when())
+      kill_at =
+          Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(after));
+    if (Clock::now() > give_up) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, &status, 0);
+  return WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
+}
+// `when` for run_and_kill: `seconds` after now.
+std::function<bool()> elapsed(double seconds) {
+  const auto end =
+      std::chrono::steady_clock::now() +
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(seconds));
+  return [end] { return std::chrono::steady_clock::now() >= end; };
+}
+// `when` for run_and_kill: a staging folder has appeared in `dir` (the run is writing its outputs).
+std::function<bool()> staging_in(const std::string& dir) {
+  return [dir] {
+    for (const std::string& n : dir_entries(dir))
+      if (n.rfind(".lidef-staging-", 0) == 0) return true;
+    return false;
+  };
+}
+// `when` for run_and_kill: `path` exists.
+std::function<bool()> exists(const std::string& path) {
+  return [path] { return fs::exists(path); };
+}
+
+std::string beam_bend() {
+  return lidef::test::project_data() + "/scenarios/beam_bend.json";
+}
+
+std::vector<std::string> deform_args(const std::string& out, const std::string& cache,
+                                     const std::vector<std::string>& extra = {}) {
+  std::vector<std::string> a = {"deform",    beam_bend(), "--out",         out, "--cache-dir", cache,
+                                "--samples", "4000",      "--reduced-dof", "60"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
+}
+std::string joined(const std::vector<std::string>& args) {
+  std::string s;
+  for (const std::string& a : args) s += shell_quote(a) + " ";
+  return s;
+}
+
+TEST(KillDuringWrite, DeformLeavesThePreviousOrTheNewResultNeverAMixture) {
+  TempDir tmp;
+  const std::string cache = tmp / "cache";
+  std::string output;
+  // The previous result (2 iterations: every file differs from the full run's).
+  const std::string previous = tmp / "previous";
+  ASSERT_EQ(run_lidef_cli(joined(deform_args(previous, cache, {"--max-iterations", "2"})), &output), 1)
+      << output;
+  const Files old = final_files(previous);
+  ASSERT_EQ(old.size(), 9u);
+  Files ref;  // the full run's result, from the first case (not killed)
+
+  struct Kill {
+    std::string label;
+    std::function<std::function<bool()>(const std::string& out)> when;
+    double after;
+  };
+  const std::vector<Kill> kills = {
+      {"not killed", [](const std::string&) { return [] { return false; }; }, 0},
+      {"after 0.2 s (preprocessing)", [](const std::string&) { return elapsed(0.2); }, 0},
+      {"after 0.5 s (solving)", [](const std::string&) { return elapsed(0.5); }, 0},
+      {"as soon as the staging folder appears", staging_in, 0},
+      {"5 ms after the staging folder appears", staging_in, 0.005},
+      {"20 ms after the staging folder appears", staging_in, 0.02},
+      {"60 ms after the staging folder appears", staging_in, 0.06},
+  };
+  std::string rerun_in;
+  int i = 0;
+  for (const Kill& k : kills) {
+    SCOPED_TRACE(k.label);
+    const std::string out = tmp / ("out_" + std::to_string(i++));
+    fs::copy(previous, out);
+    const bool killed = run_and_kill(deform_args(out, cache, {"--quiet"}), k.when(out), k.after);
+    const Files now = final_files(out);
+    if (ref.empty()) {
+      ASSERT_FALSE(killed);
+      ref = now;
+      for (const auto& [name, bytes] : old) ASSERT_NE(bytes, ref[name]) << name;
+    }
+    ASSERT_EQ(now.size(), old.size());
+    int same_as_old = 0;
+    for (const auto& [name, bytes] : now) {
+      ASSERT_TRUE(old.count(name)) << "unexpected file " << name;
+      same_as_old += bytes == old.at(name);
+    }
+    // All previous files intact, or the new complete set: never a mixture.
+    EXPECT_TRUE(same_as_old == 0 || same_as_old == static_cast<int>(old.size()))
+        << same_as_old << " files old";
+    if (same_as_old == 0) {  // the new set (summary.json holds timings; the map is deterministic)
+      EXPECT_EQ(now.at("coefficients.txt"), ref.at("coefficients.txt"));
+      EXPECT_EQ(now.at("certificate.json"), ref.at("certificate.json"));
+    }
+    if (!killed) {
+      EXPECT_EQ(same_as_old, 0) << "the run finished but its result is not there";
+    }
+    std::printf("  deform %s: %s, %zu leftover(s)\n", k.label.c_str(),
+                !killed            ? "had finished, new result"
+                : same_as_old == 0 ? "new result"
+                                   : "previous result intact",
+                leftovers(out).size());
+    if (rerun_in.empty() && !leftovers(out).empty()) rerun_in = out;
+  }
+  // A rerun into a folder with leftovers succeeds, writes the new result and leaves no leftover of its own.
+  if (rerun_in.empty()) rerun_in = tmp / "out_3";
+  const std::vector<std::string> before = leftovers(rerun_in);
+  ASSERT_EQ(run_lidef_cli(joined(deform_args(rerun_in, cache, {"--quiet"})), &output), 0) << output;
+  EXPECT_EQ(final_files(rerun_in).at("coefficients.txt"), ref.at("coefficients.txt"));
+  for (const std::string& l : leftovers(rerun_in))
+    EXPECT_NE(std::find(before.begin(), before.end(), l), before.end()) << "the rerun left " << l;
+}
+
+// The subspace line of a deform log says where the subspace came from: "(cache, ..." or "(dense, ...".
+bool subspace_from_cache(const std::string& log) {
+  const size_t p = log.find("subspace:");
+  EXPECT_NE(p, std::string::npos) << log;
+  return p != std::string::npos && log.substr(p, log.find('\n', p) - p).find("(cache,") != std::string::npos;
+}
+
+TEST(KillDuringWrite, SubspaceCacheIsValidOrRebuiltNeverTrustedWhenCorrupt) {
+  TempDir tmp;
+  std::string output;
+  const std::vector<std::string> one = {"--max-iterations", "1"};
+  // The reference cache file.
+  const std::string ref_cache = tmp / "ref_cache";
+  ASSERT_NE(run_lidef_cli(joined(deform_args(tmp / "o_ref", ref_cache, one)), &output), 2) << output;
+  const Files ref = final_files(ref_cache);
+  ASSERT_EQ(ref.size(), 1u);
+  const std::string name = ref.begin()->first, bytes = ref.begin()->second;
+
+  // Killed while the cache is first filled (empty --cache-dir), then rerun.
+  for (const double t : {0.05, 0.15, 0.4}) {
+    SCOPED_TRACE("killed after " + std::to_string(t) + " s");
+    const std::string cache = tmp / ("cache_" + std::to_string(static_cast<int>(t * 100)));
+    fs::create_directories(cache);
+    run_and_kill(deform_args(tmp / "o_killed", cache, one), elapsed(t));
+    const Files now = final_files(cache);
+    for (const auto& [n, b] : now) {
+      EXPECT_EQ(n, name);
+      EXPECT_EQ(b, bytes) << "a partial cache file at the final name";
+    }
+    ASSERT_NE(
+        run_lidef_cli(joined(deform_args(tmp / ("o_rerun" + cache.substr(cache.size() - 2)), cache, one)),
+                      &output),
+        2)
+        << output;
+    EXPECT_EQ(subspace_from_cache(output), !now.empty()) << output;
+    EXPECT_EQ(final_files(cache), ref);
+  }
+
+  // A corrupted cache file (written by hand) is detected and rebuilt, not trusted.
+  std::string flipped_payload = bytes, flipped_header = bytes;
+  flipped_payload[bytes.size() / 2] ^= 0x10;
+  flipped_header[20] ^= 0x01;
+  const std::vector<std::pair<std::string, std::string>> corrupt = {
+      {"truncated", bytes.substr(0, bytes.size() / 2)},
+      {"flipped_payload_byte", flipped_payload},
+      {"flipped_header_byte", flipped_header},
+  };
+  for (const auto& [what, text] : corrupt) {
+    SCOPED_TRACE(what);
+    const std::string cache = tmp / ("corrupt_" + what);
+    fs::create_directories(cache);
+    write_text(cache + "/" + name, text);
+    ASSERT_NE(run_lidef_cli(joined(deform_args(tmp / ("o_" + what), cache, one)), &output), 2) << output;
+    EXPECT_FALSE(subspace_from_cache(output)) << output;
+    EXPECT_EQ(final_files(cache), ref) << "not rebuilt";
+  }
+}
+
+TEST(KillDuringWrite, CageOutNeverLeavesAHalfModelFolder) {
+  TempDir tmp;
+  const std::string mesh = lidef::test::project_data() + "/models/ball/mesh.obj";
+  const std::vector<std::string> model = {"cage.obj", "mesh.obj", "model.json"};
+  for (const double t : {0.1, 0.5, 1.5, -1.0}) {
+    SCOPED_TRACE(t < 0 ? "killed when the folder appears" : "killed after " + std::to_string(t) + " s");
+    const std::string out = tmp / ("model_" + std::to_string(static_cast<int>(t * 10)));
+    run_and_kill({"cage", mesh, "--out", out, "--faces", "100", "--quiet"}, t < 0 ? exists(out) : elapsed(t));
+    // Nothing, or the complete model (with at most a staging folder left by a kill during the move).
+    std::vector<std::string> finals;
+    for (const std::string& n : dir_entries(out))
+      if (!is_leftover(n)) finals.push_back(n);
+    EXPECT_TRUE(finals.empty() || finals == model) << ::testing::PrintToString(dir_entries(out));
+    if (finals.empty() && !dir_entries(out).empty()) {
+      // A rerun into what the killed run left succeeds (no --force needed for leftovers alone).
+      std::string output;
+      EXPECT_EQ(run_lidef_cli(joined({"cage", mesh, "--out", out, "--faces", "100", "--quiet"}), &output), 0)
+          << output;
+      EXPECT_EQ(final_files(out).size(), model.size());
+    }
+  }
+  // The leftover of a kill between creating the staging folder and the move, made by hand: a rerun without
+  // --force is not refused because of it.
+  const std::string out = tmp / "staged_leftover";
+  fs::create_directories(out + "/.lidef-staging-AbC123");
+  write_text(out + "/.lidef-staging-AbC123/cage.obj", "v 0 0");
+  std::string output;
+  EXPECT_EQ(run_lidef_cli(joined({"cage", mesh, "--out", out, "--faces", "100", "--quiet"}), &output), 0)
+      << output;
+  EXPECT_EQ(final_files(out).size(), model.size());
+  std::string check;
+  EXPECT_EQ(run_lidef_cli("check " + shell_quote(out), &check), 0) << check;
+}
+
+}  // namespace
