@@ -36,8 +36,8 @@ constexpr int kListedUnproven = 5;  // leaves named on the console when some is 
 
 // `lidef verify --interval`: the rigorous re-proof of every certified leaf (interval_verification.h).
 // Writes interval.csv (deterministic) and interval.json (with the wall time), prints one summary line.
-int run_interval_verify(const CertificateReport& rep, const Cage& cage, const MatX3d& y,
-                        const std::string& out_dir) {
+ExitCode run_interval_verify(const CertificateReport& rep, const Cage& cage, const MatX3d& y,
+                             const std::string& out_dir) {
   const std::vector<CertLeaf>& leaves = rep.cert.leaves;
   const IntervalVerification v = verify_certificate_intervals(cage, y, leaves, rep.cert.bound);
   StagedOutputs out(out_dir);
@@ -75,6 +75,9 @@ int run_interval_verify(const CertificateReport& rep, const Cage& cage, const Ma
             << " leaves in all), worst slack " << format_g(v.worst_slack) << ", " << format_g(v.seconds, 3)
             << " s (" << format_g(leaves_per_s, 3) << " leaves/s); wrote " << out.final_path("")
             << "{interval.csv, interval.json}\n";
+  if (!rep.cert.certified)
+    std::cout << "  note: the certificate itself says 'not certified' (" << rep.cert.reason
+              << "); only its certified leaves were re-proved, which certifies nothing about the others\n";
   if (!ok) {
     int listed = 0;
     for (size_t q = 0; q < v.results.size() && listed < kListedUnproven; ++q) {
