@@ -12,7 +12,7 @@
 //     ‖H(c)‖ + r Σ_e ‖δ_e‖ Θ_e, whichever the certificate used), each factor's upper end;
 //   - the proven margin  lower(σ3) − upper(r)·upper(L).
 // A leaf is *proven* when that margin is > 0. Nothing here is a floating-point estimate called proven.
-// The ball's radius covers the decimal round trip of voxels.csv: r = (√3/2)(h + ½ulp(h)) + |½ulp(c)|₂.
+// The ball's radius covers the decimal round trip of voxels.csv: r = (√3/2)(h + ulp(h)) + ‖ulp(c)‖₂.
 #pragma once
 #include <array>
 #include <memory>
