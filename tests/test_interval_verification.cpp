@@ -194,7 +194,9 @@ TEST(IntervalVerification, CertifiedLeavesOfProceduralModelsAreProven) {
         const double s3 = signed_singular_values(basis.map_jet(y, l.center, 1).J)(2);
         EXPECT_LE(r.sigma3_lo, s3 + 1e-13 * (1 + std::abs(s3)));
         EXPECT_GE(r.sigma3_lo, s3 - 1e-11 * (1 + std::abs(s3)));
-        if (b == LipschitzBound::kThirdOrder) EXPECT_GE(r.L_hi, basis.map_jet(y, l.center, 2).hessian_norm());
+        if (b == LipschitzBound::kThirdOrder) {
+          EXPECT_GE(r.L_hi, basis.map_jet(y, l.center, 2).hessian_norm());
+        }
         EXPECT_LE(r.L_hi, l.L * (1 + 1e-6) + 1e-6);
         EXPECT_GE(r.radius_hi, 0.5 * std::sqrt(3.0) * l.side);
       }
