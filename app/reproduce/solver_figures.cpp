@@ -196,7 +196,7 @@ void run_fig7(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
          "set xlabel 'iteration'\nset ylabel 'energy E'\nset title 'energy against the subspace dimension'\n"
          "plot ";
     for (size_t k = 0; k < runs.size(); ++k)
-      f << (k ? ", " : "") << "'fig7_iterations.csv' using ($1 eq '" << runs[k].label
+      f << (k ? ", " : "") << "'fig7_iterations.csv' using (strcol(1) eq '" << runs[k].label
         << "' ? $2 : NaN):3 with linespoints lw 2 title '" << 3 * runs[k].params.reduced_dof << " DOF"
         << (runs[k].params.reduced_dof == full ? " (full)" : "") << "'";
     f << "\n";
@@ -262,7 +262,7 @@ void run_fig8(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
          "set xlabel 'iteration'\nset ylabel 'energy E'\nset title 'convergence against r_s = |H| / "
          "|I|'\nplot ";
     for (size_t k = 0; k < runs.size(); ++k)
-      f << (k ? ", " : "") << "'fig8_iterations.csv' using ($1 eq '" << runs[k].label
+      f << (k ? ", " : "") << "'fig8_iterations.csv' using (strcol(1) eq '" << runs[k].label
         << "' ? $2 : NaN):3 with linespoints lw 2 title 'r_s = " << format_g(100 * ratios[k]) << "%'";
     f << "\n";
   });
@@ -314,11 +314,13 @@ void run_fig9(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
          "set datafile separator ','\nset multiplot layout 1,2\nset grid\nset key top right\nset xlabel "
          "'iteration'\nset logscale y\n"
          "set ylabel 'max handle error'\nset title 'distance to the targets'\n"
-         "plot 'fig9.csv' using ($1 eq 'fixed' ? $2 : NaN):4 with linespoints lw 2 title 'fixed weights', "
-         "'' using ($1 eq 'dynamic' ? $2 : NaN):4 with linespoints lw 2 title 'dynamic weighting'\n"
+         "plot 'fig9.csv' using (strcol(1) eq 'fixed' ? $2 : NaN):4 with linespoints lw 2 title 'fixed "
+         "weights', "
+         "'' using (strcol(1) eq 'dynamic' ? $2 : NaN):4 with linespoints lw 2 title 'dynamic weighting'\n"
          "set ylabel 'certified lower bound of sigma_3'\nset title 'min over voxels of sigma_3 - r L'\n"
-         "plot 'fig9.csv' using ($1 eq 'fixed' ? $2 : NaN):5 with linespoints lw 2 title 'fixed weights', "
-         "'' using ($1 eq 'dynamic' ? $2 : NaN):5 with linespoints lw 2 title 'dynamic weighting'\n"
+         "plot 'fig9.csv' using (strcol(1) eq 'fixed' ? $2 : NaN):5 with linespoints lw 2 title 'fixed "
+         "weights', "
+         "'' using (strcol(1) eq 'dynamic' ? $2 : NaN):5 with linespoints lw 2 title 'dynamic weighting'\n"
          "unset multiplot\n";
   });
   res.files = {"fig9.csv"};
