@@ -66,21 +66,6 @@ void check_show_options(const ShowOptions& o) {
     throw InputError("--max-depth", "must be in 0..12 (got " + std::to_string(o.max_depth) + ")");
 }
 
-// Draws <name>.png from the script <name>.gp in the staging folder. Returns the PNG's status note: empty when
-// drawn, else why not (`hint` follows "gnuplot not found"); a failed run leaves no PNG.
-std::string render_png(StagedOutputs& out, const std::string& name, const std::string& hint) {
-  const std::string gnuplot = find_gnuplot();
-  if (gnuplot.empty()) return "gnuplot not found" + hint + ": " + name + ".png not drawn";
-  const std::string png = out.path(name + ".png");
-  std::string log;
-  if (!run_gnuplot(gnuplot, out.staging_dir(), name + ".gp", &log) || !fs::exists(png)) {
-    std::error_code ec;
-    fs::remove(png, ec);
-    return "gnuplot failed: " + name + ".png not drawn" + (log.empty() ? "" : ": " + log);
-  }
-  return "";
-}
-
 ojson vec_json(const Vec3& v) {
   return ojson::array({v.x(), v.y(), v.z()});
 }
@@ -194,7 +179,7 @@ std::string write_slice(StagedOutputs& out, const std::string& prefix, const Exp
     }
     s << "unset multiplot\n";
   });
-  return render_png(out, prefix + "slice", " (install gnuplot-nox or set LIDEF_GNUPLOT)");
+  return render_staged_png(out, prefix + "slice", " (install gnuplot-nox or set LIDEF_GNUPLOT)");
 }
 
 // The source ball and its image (Fig. 2, left and middle): the boundary sphere (icosphere, `subdivisions`)
@@ -248,7 +233,7 @@ std::string write_image_png(StagedOutputs& out, const std::string& prefix, const
       << "set title 'image f(ball)'\nsplot '" << prefix << "image_tri.dat' using 1:2:3:4 with pm3d\n"
       << "unset multiplot\n";
   });
-  return render_png(out, prefix + "image", "");
+  return render_staged_png(out, prefix + "image", "");
 }
 
 // --- explore show: one map through the checks of docs/explorer.md ("Why verified ..."), then its files.
@@ -975,7 +960,7 @@ std::string write_laplacian_plot(StagedOutputs& out, const std::vector<Laplacian
          "'#d62728' "
          "title 'Laplacian of sigma_3 > 0', x with lines lc rgb 'black' dt 2 title 'equal parts'\n";
   });
-  return render_png(out, "laplacian", "");
+  return render_staged_png(out, "laplacian", "");
 }
 
 void print_laplacian_summary(const LaplacianCommandOptions& o, const LaplacianStats& st,

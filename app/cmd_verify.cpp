@@ -228,25 +228,14 @@ void add_verify_command(CLI::App& app, Action& action) {
              "title 'sampled ground truth: max |sigma3(p) - sigma3(c)| / |p - c| over the leaf'\n";
       });
       std::string plot_note;
-      const std::string gnuplot = find_gnuplot();
       if (idx.empty()) {
         plot_note = "no leaf with a finite L: no plot";
-      } else if (gnuplot.empty()) {
-        plot_note =
-            "gnuplot not found (install gnuplot-nox or set LIDEF_GNUPLOT): verify_plot.png not drawn; "
-            "render it later with 'gnuplot verify_plot.gp' in " +
-            out_dir;
-        std::cerr << "lidef verify: warning: " << plot_note << "\n";
       } else {
-        const std::string png = out.path("verify_plot.png");
-        std::string log;
-        const bool ran = run_gnuplot(gnuplot, out.staging_dir(), "verify_plot.gp", &log);
-        if (!ran || !fs::exists(png)) {
-          std::error_code ec;
-          fs::remove(png, ec);
-          plot_note = "gnuplot failed (" + gnuplot + "): verify_plot.png not drawn";
-          std::cerr << "lidef verify: warning: " << plot_note << (log.empty() ? "" : ":\n" + log) << "\n";
-        }
+        plot_note = render_staged_png(out, "verify_plot",
+                                      " (install gnuplot-nox or set LIDEF_GNUPLOT); render it later with "
+                                      "'gnuplot verify_plot.gp' in " +
+                                          out_dir);
+        if (!plot_note.empty()) std::cerr << "lidef verify: warning: " << plot_note << "\n";
       }
       const bool have_png = fs::exists(fs::path(out.staging_dir()) / "verify_plot.png");
       out.commit(have_png ? std::vector<std::string>{} : std::vector<std::string>{"verify_plot.png"});

@@ -25,6 +25,7 @@ void add_devices_command(CLI::App& app, Action& action);
 void add_eval_command(CLI::App& app, Action& action);
 void add_explore_command(CLI::App& app, Action& action);
 void add_make_model_command(CLI::App& app, Action& action);
+void add_reproduce_command(CLI::App& app, Action& action);
 void add_verify_command(CLI::App& app, Action& action);
 // lidef-compare's options on its top-level app (compare_main.cpp).
 void add_compare_options(CLI::App& app, Action& action);

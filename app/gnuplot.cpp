@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <sstream>
 
+#include "staged_outputs.h"
+
 namespace lidef::cli {
 
 std::string shell_quote(const std::string& s) {
@@ -47,6 +49,20 @@ bool run_gnuplot(const std::string& gnuplot, const std::string& dir, const std::
   }
   if (log) *log = out;
   return rc == 0;
+}
+
+std::string render_staged_png(StagedOutputs& out, const std::string& name, const std::string& hint) {
+  namespace fs = std::filesystem;
+  const std::string gnuplot = find_gnuplot();
+  if (gnuplot.empty()) return "gnuplot not found" + hint + ": " + name + ".png not drawn";
+  const std::string png = out.path(name + ".png");
+  std::string log;
+  if (!run_gnuplot(gnuplot, out.staging_dir(), name + ".gp", &log) || !fs::exists(png)) {
+    std::error_code ec;
+    fs::remove(png, ec);
+    return "gnuplot failed (" + gnuplot + "): " + name + ".png not drawn" + (log.empty() ? "" : ": " + log);
+  }
+  return "";
 }
 
 }  // namespace lidef::cli

@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   add_eval_command(app, action);
   add_explore_command(app, action);
   add_make_model_command(app, action);
+  add_reproduce_command(app, action);
   add_verify_command(app, action);
   return run_cli(app, action, argc, argv, "lidef");
 }

@@ -401,6 +401,9 @@ const std::vector<std::string>& comparison_table_columns() {
                                              "min_sigma3",
                                              "min_sigma3_lower_bound",
                                              "crease_deg",
+                                             "local_volume_ratio_min",
+                                             "local_volume_ratio_max",
+                                             "local_volume_change_mean",
                                              "time_ratio_to_lidef",
                                              "detail",
                                              "error"};
@@ -421,6 +424,19 @@ std::string csv_quote(const std::string& s) {
   }
   return q + "\"";
 }
+// det J over the mesh vertices (the local volume ratio of Fig. 12): min, max and mean |det J − 1|; NaN for
+// the surface method, which has no det J.
+struct LocalVolume {
+  double min = std::numeric_limits<double>::quiet_NaN(), max = min, mean_change = min;
+};
+LocalVolume local_volume(const MethodResult& r) {
+  LocalVolume v;
+  if (!r.ok || r.det_j.size() == 0) return v;
+  v.min = r.det_j.minCoeff();
+  v.max = r.det_j.maxCoeff();
+  v.mean_change = (r.det_j.array() - 1.0).abs().mean();
+  return v;
+}
 std::string status_of(const MethodResult& r) {
   return !r.ok ? "failed" : r.converged ? "converged" : "stopped";
 }
@@ -432,6 +448,7 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
   for (size_t k = 0; k < cols.size(); ++k) s << (k ? "," : "") << cols[k];
   s << "\n";
   for (const MethodResult& r : rows) {
+    const LocalVolume lv = local_volume(r);
     s << r.method << ',' << status_of(r) << ',' << (r.ok ? std::to_string(r.dof) : "") << ','
       << num(r.seconds) << ',' << num(r.preprocess_seconds) << ','
       << (r.ok ? std::to_string(r.iterations) : "") << ',' << (r.ok ? (r.converged ? "1" : "0") : "") << ','
@@ -439,8 +456,9 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
       << num(r.volume_ratio) << ',' << (r.inverted >= 0 ? std::to_string(r.inverted) : "") << ','
       << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "") << ','
       << (r.certified >= 0 ? std::to_string(r.certified) : "") << ',' << num(r.min_sigma3) << ','
-      << num(r.min_sigma3_bound) << ',' << num(r.crease_deg) << ',' << num(r.time_ratio) << ','
-      << csv_quote(r.detail) << ',' << csv_quote(r.error) << "\n";
+      << num(r.min_sigma3_bound) << ',' << num(r.crease_deg) << ',' << num(lv.min) << ',' << num(lv.max)
+      << ',' << num(lv.mean_change) << ',' << num(r.time_ratio) << ',' << csv_quote(r.detail) << ','
+      << csv_quote(r.error) << "\n";
   }
   return s.str();
 }
