@@ -129,6 +129,7 @@ class DeformationSolver {
   EnergyWeights weights() const { return weights_; }
   VecXd handle_errors() const;      // #h
   MatX3d handle_positions() const;  // #h by 3
+  const MatX3d& handle_sources() const { return sources_; }  // #h by 3, as set_handles got them
   const std::vector<IterationRecord>& history() const { return history_; }
 
   const Cage& cage() const { return cage_; }
