@@ -162,58 +162,67 @@ const Beam& beam() {
   return b;
 }
 
-DeformParams fast_params() {
+// Small: ~2000 voxels, 40 reduced coefficients per coordinate (unit label); the slow tests use 4000 and 60.
+DeformParams small_params(bool slow) {
   DeformParams p;
-  p.samples = 4000;
-  p.reduced_dof = 60;
+  p.samples = slow ? 4000 : 2000;
+  p.reduced_dof = slow ? 60 : 40;
   p.max_iterations = 40;
   return p;
 }
 
-struct TwistRun {
+struct PathRun {
   std::unique_ptr<DeformationSolver> solver;
   SolveResult result;
   PathSolveReport report;
-  std::vector<IterationRecord> records;
-  std::vector<std::string> stages;
   int accepted = 0, fully_certified = 0;
 };
 
-// The beam twisted by `deg` (through `waypoint_degs`) with fast parameters; every accepted iterate certified
-// again in the callback by a full-space certifier (no reduction matrix: an independent check).
-std::unique_ptr<TwistRun> twist_run(double deg, const std::vector<double>& waypoint_degs, bool continuation) {
-  auto r = std::make_unique<TwistRun>();
-  DeformParams p = fast_params();
-  p.continuation = continuation;
+// solve_to_targets from the identity; every accepted iterate certified again in the callback by a full-space
+// certifier (no reduction matrix: an independent check).
+std::unique_ptr<PathRun> path_run(const DeformParams& p, const MatX3d& sources,
+                                  const std::vector<MatX3d>& waypoints, const MatX3d& targets,
+                                  const std::string& name) {
+  auto r = std::make_unique<PathRun>();
   r->solver = std::make_unique<DeformationSolver>(beam().model.cage, p, beam().cache.str());
   DeformationSolver& s = *r->solver;
-  const MatX3d src = beam_sources();
-  s.set_handles(src, twisted(src, deg), "twist");
-  std::vector<MatX3d> waypoints;
-  for (double w : waypoint_degs) waypoints.push_back(twisted(src, w));
+  s.set_handles(sources, targets, name);
   const OctreeCertifier full(beam().model.cage, s.sampling());
+  std::vector<std::string> stages;
   r->result = solve_to_targets(
-      s, waypoints, twisted(src, deg), {},
+      s, waypoints, targets, {},
       [&](const IterationRecord& rec) {
-        r->records.push_back(rec);
         if (rec.accepted) {
           ++r->accepted;
           if (full.certify(s.coefficients(), s.certify_params(false, false)).certified) ++r->fully_certified;
         }
         return true;
       },
-      nullptr, [&](const std::string& line) { r->stages.push_back(line); }, &r->report);
-  std::printf("twist %.0f (continuation %s): %s after %d iterations (%s), max handle error %.3e, %d stages\n",
-              deg, continuation ? "on" : "off", to_string(r->result.reason), r->result.iterations,
-              r->result.message.c_str(), s.handle_errors().maxCoeff(), r->report.stages);
-  for (const std::string& l : r->stages) std::printf("  %s\n", l.c_str());
+      nullptr, [&](const std::string& line) { stages.push_back(line); }, &r->report);
+  std::printf("%s: %s after %d iterations (%s), max handle error %.3e\n", name.c_str(),
+              to_string(r->result.reason), r->result.iterations, r->result.message.c_str(),
+              s.handle_errors().maxCoeff());
+  for (const std::string& l : stages) std::printf("  %s\n", l.c_str());
   return r;
+}
+
+std::unique_ptr<PathRun> twist180(bool slow) {
+  const MatX3d src = beam_sources();
+  return path_run(small_params(slow), src, {}, twisted(src, 180), "twist 180");
+}
+
+// The angle (degrees, in (-180, 180]) by which the map turns the point (x, 0.15, 0.15) about the x axis.
+double turn_at(const DeformationSolver& s, double x) {
+  MatX3d p(1, 3);
+  p << x, 0.15, 0.15;
+  const MatX3d q = s.basis().value_matrix(p) * s.coefficients();
+  return (std::atan2(q(0, 2), q(0, 1)) - std::atan2(0.15, 0.15)) * 180 / kPi;
 }
 
 }  // namespace
 
 TEST(Continuation, BeamTwist180IsReachedThroughStagesWithEveryIterateCertified) {
-  const auto run = twist_run(180, {}, true);
+  const auto run = twist180(false);
   const DeformationSolver& s = *run->solver;
   ASSERT_EQ(run->report.strategies.size(), 1u);
   EXPECT_EQ(run->report.strategies[0], "planned continuation");
@@ -224,30 +233,66 @@ TEST(Continuation, BeamTwist180IsReachedThroughStagesWithEveryIterateCertified) 
   EXPECT_TRUE(s.certificate().certified);
   EXPECT_GT(run->accepted, 0);
   EXPECT_EQ(run->fully_certified, run->accepted);
-  // The end face really turned: its corner (1, -0.2, -0.2) went to (1, 0.2, 0.2), which a linear pull could
-  // only reach by collapsing the beam; the map at the face center, halfway along the axis, is no fold.
-  const MatX3d h = s.handle_positions();
-  EXPECT_LT((h.row(5) - Eigen::RowVector3d(1, 0.2, 0.2)).norm(), 1e-3);
-  // Deterministic: the same run again gives the same coefficients bit for bit.
-  const auto again = twist_run(180, {}, true);
-  EXPECT_EQ(std::memcmp(s.reduced_coefficients().data(), again->solver->reduced_coefficients().data(),
-                        sizeof(double) * s.reduced_coefficients().size()),
+  // The end face really turned: its corner (1, -0.2, -0.2) went to (1, 0.2, 0.2), which a straight pull
+  // could only reach through the axis; halfway along the beam the section turned by about 90 degrees.
+  EXPECT_LT((s.handle_positions().row(5) - Eigen::RowVector3d(1, 0.2, 0.2)).norm(), 1e-3);
+  EXPECT_NEAR(std::abs(turn_at(s, 0.0)), 90, 15);
+}
+
+TEST(Continuation, WithoutContinuationTheDirectSolveIsUnchanged) {
+  // continuation = false is exactly DeformationSolver::solve: same iterations, same map bit for bit.
+  DeformParams p = small_params(false);
+  p.continuation = false;
+  p.max_iterations = 4;
+  const MatX3d src = beam_sources(), tgt = twisted(src, 60);
+  DeformationSolver a(beam().model.cage, p, beam().cache.str()), b(beam().model.cage, p, beam().cache.str());
+  a.set_handles(src, tgt);
+  b.set_handles(src, tgt);
+  PathSolveReport rep;
+  const SolveResult ra = solve_to_targets(a, {}, tgt, {}, {}, nullptr, {}, &rep);
+  const SolveResult rb = b.solve();
+  EXPECT_EQ(ra.iterations, rb.iterations);
+  EXPECT_EQ(rep.strategies, std::vector<std::string>{"direct"});
+  EXPECT_EQ(std::memcmp(a.reduced_coefficients().data(), b.reduced_coefficients().data(),
+                        sizeof(double) * a.reduced_coefficients().size()),
             0);
 }
 
-TEST(Continuation, AFullTurnFollowsItsWaypoints) {
-  const auto run = twist_run(360, {120, 240}, true);
+// Slow (label "slow"): ~1-2 min each on 2 busy cores.
+TEST(DeformSlow, ContinuationIsDeterministic) {
+  const auto a = twist180(true), b = twist180(true);
+  EXPECT_TRUE(a->result.converged());
+  EXPECT_EQ(a->result.iterations, b->result.iterations);
+  EXPECT_EQ(std::memcmp(a->solver->reduced_coefficients().data(), b->solver->reduced_coefficients().data(),
+                        sizeof(double) * a->solver->reduced_coefficients().size()),
+            0);
+}
+
+TEST(DeformSlow, ContinuationFullTurnFollowsItsWaypoints) {
+  const Scenario sc = read_scenario(lidef::test::project_data() + "/scenarios/beam_twist360.json");
+  const auto run = path_run(small_params(true), sc.sources, sc.waypoints, sc.targets, "twist 360");
   const DeformationSolver& s = *run->solver;
   EXPECT_EQ(run->report.segments, 3);
   EXPECT_TRUE(run->result.converged()) << run->result.message;
   EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance);
   EXPECT_EQ(run->fully_certified, run->accepted);
-  // Targets equal sources, yet the map is a full twist, not the identity: the middle of the beam's top edge
-  // (0, 0.2, 0.2)... is turned by about 180 degrees about the axis.
-  const HarmonicBasis& basis = s.basis();
-  MatX3d p(1, 3);
-  p << 0, 0.15, 0.15;
-  const MatX3d q = basis.value_matrix(p) * s.coefficients();
-  EXPECT_LT(q(0, 1), 0) << q;  // y changed sign: turned half a turn at mid length
-  EXPECT_LT(q(0, 2), 0) << q;
+  // A full turn, not the identity: the middle section turned by half a turn, a quarter of the way along the
+  // beam by a quarter turn (the identity would give 0 at both).
+  EXPECT_GT(std::abs(turn_at(s, 0.0)), 150);
+  EXPECT_NEAR(std::abs(turn_at(s, -0.5)), 90, 30);
+}
+
+TEST(DeformSlow, ContinuationPullThroughAFixedHandleEndsBlocked) {
+  // A handle pulled through a fixed one 0.1 away: no certified map was found; the run must say "blocked by
+  // the certificate" after trying the direct solve and the continuation, keep a certified map, and report
+  // handle errors against the user's targets (not an intermediate stage's).
+  const Scenario sc = read_scenario(lidef::test::project_data() + "/scenarios/beam_pull_through.json");
+  const auto run = path_run(small_params(true), sc.sources, sc.waypoints, sc.targets, "pull through");
+  const DeformationSolver& s = *run->solver;
+  EXPECT_EQ(run->result.reason, StopReason::kBlocked) << run->result.message;
+  EXPECT_EQ(run->report.strategies.size(), 2u);
+  EXPECT_NE(run->result.message.find("strategies: direct, continuation"), std::string::npos);
+  EXPECT_TRUE(s.certificate().certified);
+  EXPECT_EQ(run->fully_certified, run->accepted);
+  EXPECT_GT(s.handle_errors().maxCoeff(), 10 * s.params().handle_tolerance);
 }

@@ -28,10 +28,11 @@ struct Runner {
   const std::atomic<bool>* stop;
   const std::function<void(const std::string&)>& on_stage;
   PathSolveReport& report;
-  int used = 0;
+  int used = 0;        // iterations of all strategies
+  int phase_used = 0;  // iterations of the current strategy: each gets max_iterations
   double seconds = 0;
 
-  int budget() const { return std::max(0, solver.params().max_iterations - used); }
+  int budget() const { return std::max(0, solver.params().max_iterations - phase_used); }
   void say(const std::string& s) const {
     if (on_stage) on_stage(s);
   }
@@ -51,6 +52,7 @@ struct Runner {
     p.max_iterations = std::min(max_iterations, budget());
     solver.set_params(p);
     solver.set_targets(targets, "continuation targets");
+    solver.reset_weights();
     bool user_stopped = false;
     auto callback = [&](const IterationRecord& rec) {
       if (on_iteration && !on_iteration(rec)) {
@@ -70,6 +72,7 @@ struct Runner {
     p.max_iterations = saved;
     solver.set_params(p);
     used += r.iterations;
+    phase_used += r.iterations;
     seconds += r.seconds;
     if (r.reason == StopReason::kInterrupted && !user_stopped && !(stop && stop->load())) {
       r.reason = StopReason::kConverged;
@@ -109,6 +112,7 @@ struct Runner {
         const double err = max_error();
         if (err <= within) {
           s = s_next;
+          ds = std::min(2 * ds, 1.0 / planned[k]);  // back toward the planned step after a shortened one
           report.path_reached = s;
           say("stage " + std::to_string(report.stages) + ": reached " + format_fixed(100 * s / K, 1) +
               "% of the path (max handle error " + format_g(err, 3) + ")");
@@ -199,6 +203,7 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
                                   std::string(to_string(r.reason)) + ")");
       runner.say("the direct solve stopped short of the targets (" + r.message +
                  "): continuing through intermediate targets from there");
+      runner.phase_used = 0;
       const TargetPath rest({solver.handle_positions(), targets}, groups);
       std::vector<int> m = planned_stages(rest, params.continuation_angle);
       m[0] = std::max(m[0], 2);
@@ -213,6 +218,9 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
                format_fixed(report.max_angle_deg, 1) + " degrees");
     result = runner.staged(path, planned);
   }
+  // Whatever stage the run stopped in, the solver's targets (and so its reported handle errors) are the
+  // user's.
+  solver.set_targets(targets, "targets");
   if (report_out) *report_out = report;
   return result;
 }

@@ -12,8 +12,9 @@
 //   3. fallback    — a direct solve that stops with the handles not reached (blocked, no certified step,
 //                    converged short of them, iteration limit) is followed by stages from where it stopped.
 // A stage whose targets are not reached (max handle error above max(handle_tolerance, 10% of the stage's
-// largest handle move)) is retried with half the step along the path; below 1/64 of a planned stage the
-// path is given up and the result says "blocked by the certificate", with the strategies tried.
+// largest handle move)) is retried with half the step along the path (a reached one doubles it again, up to
+// the planned step); below 1/64 of a planned stage the path is given up and the result says "blocked by the
+// certificate", with the strategies tried.
 // `continuation = false` keeps strategy 1 only (waypoints are still visited, one full solve each).
 #pragma once
 #include <atomic>
@@ -39,8 +40,9 @@ struct PathSolveReport {
 // Solves from the solver's current map to `targets` (#h by 3) through `waypoints` (each #h by 3, in order).
 // `groups` (#h ids, or empty for group_handles of the sources with link distance 1/4 of the cage diagonal)
 // says which handles move as one rigid body. `on_iteration` and `stop` as in DeformationSolver::solve;
-// `on_stage` (optional) hears one line per stage. Iterations of all stages count against max_iterations.
-// Afterwards the solver's targets are `targets`.
+// `on_stage` (optional) hears one line per stage. Each strategy (the direct solve, then the continuation)
+// may use max_iterations iterations; every stage starts from the user's weights (reset_weights). Afterwards
+// the solver's targets are `targets`, whichever stage the run stopped in.
 SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d>& waypoints,
                              const MatX3d& targets, const std::vector<int>& groups,
                              const std::function<bool(const IterationRecord&)>& on_iteration = {},
