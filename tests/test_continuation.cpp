@@ -270,7 +270,9 @@ TEST(DeformSlow, ContinuationIsDeterministic) {
 
 TEST(DeformSlow, ContinuationFullTurnFollowsItsWaypoints) {
   const Scenario sc = read_scenario(lidef::test::project_data() + "/scenarios/beam_twist360.json");
-  const auto run = path_run(small_params(true), sc.sources, sc.waypoints, sc.targets, "twist 360");
+  DeformParams p = small_params(true);
+  p.max_iterations = 100;  // the final stage polishes a strongly twisted map: 34 iterations were not enough
+  const auto run = path_run(p, sc.sources, sc.waypoints, sc.targets, "twist 360");
   const DeformationSolver& s = *run->solver;
   EXPECT_EQ(run->report.segments, 3);
   EXPECT_TRUE(run->result.converged()) << run->result.message;

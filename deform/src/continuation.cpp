@@ -74,6 +74,8 @@ struct Runner {
     used += r.iterations;
     phase_used += r.iterations;
     seconds += r.seconds;
+    if (r.reason == StopReason::kMaxIterations)  // the solver names the stage's share; say the real limit
+      r.message = "iteration limit (" + std::to_string(saved) + " per strategy) reached";
     if (r.reason == StopReason::kInterrupted && !user_stopped && !(stop && stop->load())) {
       r.reason = StopReason::kConverged;
       r.message = "stage targets reached";
