@@ -22,6 +22,7 @@
 #include "lidef/cage/auto_cage.h"
 #include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
+#include "lidef/continuation.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_export.h"
@@ -192,7 +193,12 @@ void add_deform_command(CLI::App& app, Action& action) {
         if (interrupt_after > 0 && r.iteration == interrupt_after) std::raise(SIGINT);
         return !g_stop.load();
       };
-      const SolveResult res = solver.solve(on_iter, &g_stop);
+      auto on_stage = [&](const std::string& line) {
+        if (!o.quiet) std::cout << "  -- " << line << "\n" << std::flush;
+      };
+      PathSolveReport path_report;
+      const SolveResult res = solve_to_targets(solver, sc.waypoints, sc.targets, sc.groups, on_iter, &g_stop,
+                                               on_stage, &path_report);
       std::signal(SIGINT, SIG_DFL);
 
       // --- The written map is the solver's current (last certified) one; certify it again with leaves.
@@ -238,6 +244,12 @@ void add_deform_command(CLI::App& app, Action& action) {
       sj["model"] = sc.model;
       sj["converged"] = res.converged();
       sj["stop_reason"] = to_string(res.reason);
+      sj["continuation"] = {{"strategies", path_report.strategies},
+                            {"intermediate_stages", path_report.stages},
+                            {"shortened_stages", path_report.stage_retries},
+                            {"max_group_rotation_deg", path_report.max_angle_deg},
+                            {"path_segments", path_report.segments},
+                            {"path_reached", path_report.path_reached}};
       sj["message"] = res.message;
       sj["iterations"] = static_cast<int>(solver.history().size());
       sj["certified"] = cert.certified;

@@ -66,7 +66,10 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "max_halvings",
                                              "diagonal_shift",
                                              "hessian_precision",
-                                             "handle_tolerance",  // newton
+                                             "handle_tolerance",
+                                             "continuation",
+                                             "continuation_angle",
+                                             "continuation_stage_iterations",  // newton
                                              "max_depth",
                                              "bound",
                                              "max_refined",

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "lidef/continuation.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
 
@@ -74,6 +75,9 @@ struct InteractiveSession::Engine {
   Clock::time_point last_extras = Clock::now() - std::chrono::hours(1);
   int verify_samples = 0;  // > 0: a verification is pending
   Scenario scenario;       // what the engine runs (restored into scenario_ when a command fails)
+  // A loaded scenario's waypoints, for its first solve only: after any other target change or an interrupted
+  // solve they would send the handles back along a path they already left.
+  std::vector<MatX3d> waypoints;
 
   // --- Waiting for work.
   bool take_commands(std::vector<Command>& cmds);  // false: the session is closing
@@ -393,6 +397,7 @@ void InteractiveSession::Engine::apply_load(const Command& c) {
   handles_to_solver();
   want_iterate = c.iterate && sources.rows() > 0;
   scenario = c.scenario;
+  waypoints = c.scenario.waypoints;
   publish_state(SessionState::kResting, sources.rows() > 0 ? "loaded" : "loaded: no handles yet");
 }
 
@@ -402,6 +407,9 @@ void InteractiveSession::Engine::apply_handles(const Command& c) {
   targets = c.targets;
   scenario.sources = c.sources;
   scenario.targets = c.targets;
+  scenario.waypoints.clear();
+  scenario.groups.clear();
+  waypoints.clear();
   want_iterate = sources.rows() > 0;
 }
 
@@ -410,6 +418,8 @@ void InteractiveSession::Engine::apply_targets(const Command& c, bool superseded
   solver->set_targets(c.targets, "targets");
   targets = c.targets;
   scenario.targets = c.targets;
+  scenario.waypoints.clear();
+  waypoints.clear();
   want_iterate = sources.rows() > 0;
 }
 
@@ -522,7 +532,14 @@ bool InteractiveSession::Engine::iterate() {
   publish_state(SessionState::kIterating, "iterating");
   SolveResult res;
   try {
-    res = solver->solve([this](const IterationRecord& r) { return on_iteration(r); }, &session.interrupt_);
+    // The same path to the targets as `lidef deform` (continuation.h): a large turn of the handles — a
+    // loaded scenario's, or a jump of the targets — goes through rotation-aware stages; a small drag step is
+    // one direct solve as before.
+    const std::vector<MatX3d> path = std::move(waypoints);
+    waypoints.clear();
+    res = solve_to_targets(
+        *solver, path, targets, scenario.groups, [this](const IterationRecord& r) { return on_iteration(r); },
+        &session.interrupt_);
   } catch (const std::exception& e) {
     want_iterate = false;
     publish_state(SessionState::kResting, std::string("error: ") + e.what());

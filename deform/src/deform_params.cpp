@@ -55,6 +55,13 @@ std::vector<ParamInfo> make_table() {
        "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,
        "handle error (distance, model units) reported as \"reached\""},
+      {"continuation", "newton", &D::continuation, 0, 0,
+       "large rotations of the handles (and stalled solves) go through rotation-aware intermediate targets"},
+      // Above 0: a zero angle would ask for infinitely many stages.
+      {"continuation_angle", "newton", &D::continuation_angle, 1, 180,
+       "degrees: the largest rotation of a handle group per intermediate stage"},
+      {"continuation_stage_iterations", "newton", &D::continuation_stage_iterations, 1, 1000,
+       "Newton iterations at most per intermediate stage"},
       // --- Certificate
       {"max_depth", "certificate", &D::max_depth, 0, 20, "octree levels of the certificate"},
       {"bound", "certificate", &D::bound, 0, 0, "Lipschitz bound: \"first\" (17) or \"third\" (21) order"},

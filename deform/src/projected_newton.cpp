@@ -149,6 +149,11 @@ void DeformationSolver::set_params(const DeformParams& p) {
   }
 }
 
+void DeformationSolver::reset_weights() {
+  weights_ = {params_.lambda_p2p, params_.lambda_smooth};
+  weight_resets_ = 0;
+}
+
 void DeformationSolver::reset() {
   const MatX3d yid = cage_.identity_coefficients();
   y_ = subspace_.basis.transpose() *

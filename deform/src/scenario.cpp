@@ -121,23 +121,63 @@ std::string optional_string(const ordered_json& root, const char* key, const std
   return it->get<std::string>();
 }
 
+// A point [x, y, z] of finite numbers; `what` names it in messages ("source", "path[2]").
+Vec3 json_to_point(const ordered_json& v, const std::string& what, const std::string& where,
+                   const std::string& path) {
+  if (!v.is_array() || v.size() != 3)
+    throw InputError(
+        path, where + ": \"" + what + "\" must be an array of 3 numbers [x, y, z], got " + json_type(v));
+  Vec3 p;
+  for (int k = 0; k < 3; ++k) {
+    const ordered_json& c = v[k];
+    // null and strings such as "nan" are refused too: JSON has no NaN, so they are how one sneaks in.
+    p(k) = c.is_number() ? c.get<double>() : std::nan("");
+    if (!std::isfinite(p(k)))
+      throw InputError(path, where + ": " + what + "[" + std::to_string(k) + "] (" + "xyz"[k] +
+                                 ") is not a finite number (got " + json_type(c) + ")");
+  }
+  return p;
+}
+
 Vec3 handle_point(const ordered_json& h, const char* key, const std::string& where, const std::string& path) {
   const auto it = h.find(key);
   if (it == h.end())
     throw InputError(path, where + ": missing \"" + key + "\" (a handle is " + kHandleForm + ")");
-  if (!it->is_array() || it->size() != 3)
+  return json_to_point(*it, key, where, path);
+}
+
+// "path": waypoints visited in order before "target" (every handle the same number, or none has one);
+// "group": the rigid part the handle belongs to (every handle, or none). docs/solver.md, "Continuation".
+void read_handle_path_and_group(const ordered_json& h, Eigen::Index i, Eigen::Index n,
+                                const std::string& where, const std::string& path, Scenario& s) {
+  const auto wp = h.find("path");
+  const size_t count = wp == h.end() ? 0 : (wp->is_array() ? wp->size() : 0);
+  if (wp != h.end() && (!wp->is_array() || wp->empty()))
     throw InputError(
-        path, where + ": \"" + key + "\" must be an array of 3 numbers [x, y, z], got " + json_type(*it));
-  Vec3 p;
-  for (int k = 0; k < 3; ++k) {
-    const ordered_json& c = (*it)[k];
-    // null and strings such as "nan" are refused too: JSON has no NaN, so they are how one sneaks in.
-    p(k) = c.is_number() ? c.get<double>() : std::nan("");
-    if (!std::isfinite(p(k)))
-      throw InputError(path, where + ": " + key + "[" + std::to_string(k) + "] (" + "xyz"[k] +
-                                 ") is not a finite number (got " + json_type(c) + ")");
+        path,
+        where + ": \"path\" must be a non-empty array of waypoints [[x, y, z], ...], got " + json_type(*wp));
+  if (i == 0) {
+    s.waypoints.assign(count, MatX3d(n, 3));
+  } else if (count != s.waypoints.size()) {
+    throw InputError(path, where + ": \"path\" has " + std::to_string(count) +
+                               " waypoints but handle 1 has " + std::to_string(s.waypoints.size()) +
+                               " (every handle needs the same number; repeat a fixed handle's source)");
   }
-  return p;
+  for (size_t k = 0; k < count; ++k)
+    s.waypoints[k].row(i) =
+        json_to_point((*wp)[k], "path[" + std::to_string(k) + "]", where, path).transpose();
+  const auto g = h.find("group");
+  if (i == 0 && g != h.end()) s.groups.assign(static_cast<size_t>(n), 0);
+  if ((g != h.end()) != !s.groups.empty())
+    throw InputError(path, where +
+                               (g == h.end() ? ": has no \"group\" but handle 1 has one"
+                                             : ": has a \"group\" but handle 1 has none") +
+                               " (give every handle a group, or none)");
+  if (g != h.end()) {
+    if (!g->is_number_integer() || g->get<long>() < 0 || g->get<long>() > 1000000)
+      throw InputError(path, where + ": \"group\" must be an integer in 0..1000000, got " + g->dump());
+    s.groups[static_cast<size_t>(i)] = static_cast<int>(g->get<long>());
+  }
 }
 
 // Candidate folders for `model`, in the order of scenario.h.
@@ -236,11 +276,13 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
       throw InputError(path, where + " must be an object " + kHandleForm + ", got " + json_type(h));
     for (const auto& [key, value] : h.items()) {
       (void)value;
-      if (key != "source" && key != "target")
-        throw InputError(path, where + ": unknown key \"" + key + "\" (allowed: source, target)");
+      if (key != "source" && key != "target" && key != "path" && key != "group")
+        throw InputError(path,
+                         where + ": unknown key \"" + key + "\" (allowed: source, target, path, group)");
     }
     s.sources.row(i) = handle_point(h, "source", where, path).transpose();
     s.targets.row(i) = handle_point(h, "target", where, path).transpose();
+    read_handle_path_and_group(h, i, n, where, path, s);
   }
 
   const auto params = root.find("parameters");
@@ -274,6 +316,11 @@ void write_scenario(const std::string& path, const Scenario& s) {
                                std::to_string(s.targets.rows()) + " targets");
   if (!s.sources.allFinite() || !s.targets.allFinite())
     throw InputError(path, "handle coordinates must be finite numbers");
+  for (const MatX3d& w : s.waypoints)
+    if (w.rows() != s.sources.rows() || !w.allFinite())
+      throw InputError(path, "every waypoint needs one finite point per handle");
+  if (!s.groups.empty() && static_cast<Eigen::Index>(s.groups.size()) != s.sources.rows())
+    throw InputError(path, "one group per handle is needed");
   validate_params(s.params, path);
   // `model` as given keeps the file portable; a scenario built in memory with only the folder gets its path.
   const std::string model = !s.model.empty() ? s.model : s.model_dir;
@@ -285,9 +332,17 @@ void write_scenario(const std::string& path, const Scenario& s) {
   out += "  \"model\": " + json_string(model, path) + ",\n";
   if (!s.description.empty()) out += "  \"description\": " + json_string(s.description, path) + ",\n";
   out += "  \"handles\": [\n";
-  for (Eigen::Index i = 0; i < s.sources.rows(); ++i)
-    out += "    {\"source\": " + json_point(s.sources, i) + ", \"target\": " + json_point(s.targets, i) +
-           "}" + (i + 1 < s.sources.rows() ? ",\n" : "\n");
+  for (Eigen::Index i = 0; i < s.sources.rows(); ++i) {
+    out += "    {\"source\": " + json_point(s.sources, i);
+    if (!s.waypoints.empty()) {
+      out += ", \"path\": [";
+      for (size_t k = 0; k < s.waypoints.size(); ++k) out += (k ? ", " : "") + json_point(s.waypoints[k], i);
+      out += "]";
+    }
+    out += ", \"target\": " + json_point(s.targets, i);
+    if (!s.groups.empty()) out += ", \"group\": " + std::to_string(s.groups[static_cast<size_t>(i)]);
+    out += std::string("}") + (i + 1 < s.sources.rows() ? ",\n" : "\n");
+  }
   out += "  ]";
   const DeformParams defaults;
   std::vector<std::string> changed;

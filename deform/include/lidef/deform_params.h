@@ -39,6 +39,10 @@ struct DeformParams {
   double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
   HessianPrecision hessian_precision = HessianPrecision::kSingle;  // products of the reduced Hessian
   double handle_tolerance = 1e-3;  // handle error (distance, model units) reported as "reached"
+  // --- Continuation (target_path.h, continuation.h; docs/solver.md)
+  bool continuation = true;           // rotation-aware intermediate targets for large motions and stalls
+  double continuation_angle = 90;     // degrees: the largest rotation of a handle group per stage
+  int continuation_stage_iterations = 3;  // Newton iterations at most per intermediate stage
   // --- Certificate (line search and output)
   int max_depth = 6;
   LipschitzBound bound = LipschitzBound::kThirdOrder;  // first (17) or third (21) order

@@ -100,6 +100,9 @@ class DeformationSolver {
   void set_targets(const MatX3d& targets, const std::string& where = "targets");
   // Parameters that do not change the precomputation (weights, tolerances, certificate, weighting).
   void set_params(const DeformParams& params);
+  // Dynamic weighting starts again from the user's weights (and its reset count from 0); the map is kept.
+  // A new set of targets is a new problem: the continuation (continuation.h) calls it for every stage.
+  void reset_weights();
   const DeformParams& params() const { return params_; }
 
   // Back to the identity map (certified; throws NumericalError if even the identity is not).
@@ -127,8 +130,9 @@ class DeformationSolver {
   Certificate certify_current(bool keep_leaves = true) const;
   EnergyTerms energy() const;  // at the current map, current weights
   EnergyWeights weights() const { return weights_; }
-  VecXd handle_errors() const;      // #h
-  MatX3d handle_positions() const;  // #h by 3
+  VecXd handle_errors() const;                               // #h
+  MatX3d handle_positions() const;                           // #h by 3
+  const MatX3d& handle_sources() const { return sources_; }  // #h by 3, as set_handles got them
   const std::vector<IterationRecord>& history() const { return history_; }
 
   const Cage& cage() const { return cage_; }

@@ -2,6 +2,9 @@
 //
 //   {"name": "...", "model": "bar", "description": "...",
 //    "handles": [{"source": [x,y,z], "target": [x,y,z]}, ...],
+//               optional per handle: "path": [[x,y,z], ...] waypoints visited in order before the target
+//               (every handle the same number), "group": n (the rigid part it moves with; every handle or
+//               none) — docs/solver.md, "Continuation"
 //    "parameters": {"lambda_p2p": 1e5, ...},           // optional; keys from deform_params.h
 //    "studio": {"camera": {...}, ...}}                 // optional; lidef-studio's session settings
 //
@@ -27,6 +30,8 @@ struct Scenario {
   std::string model_dir;                  // resolved folder or mesh file (exists; not yet validated)
   MatX3d sources;                         // #handles by 3
   MatX3d targets;                         // #handles by 3
+  std::vector<MatX3d> waypoints;          // each #handles by 3, visited in order before the targets
+  std::vector<int> groups;                // #handles rigid-part ids, or empty (grouped by proximity)
   DeformParams params;                    // defaults overridden by "parameters"
   std::vector<std::string> params_given;  // names set by the file, in file order
   std::string studio;  // the "studio" object as JSON text ("" if none): camera and views of a saved studio

@@ -1,0 +1,230 @@
+#include "lidef/continuation.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "lidef/number_format.h"
+#include "lidef/target_path.h"
+
+namespace lidef {
+
+namespace {
+
+// Handles closer than this fraction of the cage diagonal move as one rigid body unless the scenario groups
+// them: the ends of a bar, a head, a leg are separate parts at this distance on the published models.
+constexpr double kGroupLink = 0.25;
+// A stage that misses its targets is retried with half the step, down to 1/64 of a planned stage.
+constexpr int kMaxStageHalvings = 6;
+// A stage counts as reached when its handles are within this fraction of its largest handle move (or within
+// handle_tolerance): the next stage starts close to where this one was meant to end.
+constexpr double kStageSlack = 0.1;
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Runs the solver against target sets while counting the iterations of all of them against max_iterations.
+struct Runner {
+  DeformationSolver& solver;
+  const std::function<bool(const IterationRecord&)>& on_iteration;
+  const std::atomic<bool>* stop;
+  const std::function<void(const std::string&)>& on_stage;
+  PathSolveReport& report;
+  int used = 0;        // iterations of all strategies
+  int phase_used = 0;  // iterations of the current strategy: each gets max_iterations
+  double seconds = 0;
+
+  int budget() const { return std::max(0, solver.params().max_iterations - phase_used); }
+  void say(const std::string& s) const {
+    if (on_stage) on_stage(s);
+  }
+  double max_error() const {
+    const VecXd e = solver.handle_errors();
+    return e.size() ? e.maxCoeff() : 0.0;
+  }
+  bool reached() const { return max_error() <= solver.params().handle_tolerance; }
+
+  // One solve against `targets` with at most `max_iterations` iterations (and what is left of the budget).
+  // With `done_within` >= 0 the solve ends after the first accepted iteration that brings every handle within
+  // that distance of its target (an intermediate stage needs the handles there, not a polished energy).
+  // `user_stopped` tells an early end of ours from the caller's callback or stop flag.
+  SolveResult run(const MatX3d& targets, int max_iterations, double done_within = -1) {
+    DeformParams p = solver.params();
+    const int saved = p.max_iterations;
+    p.max_iterations = std::min(max_iterations, budget());
+    solver.set_params(p);
+    solver.set_targets(targets, "continuation targets");
+    solver.reset_weights();
+    bool user_stopped = false;
+    auto callback = [&](const IterationRecord& rec) {
+      if (on_iteration && !on_iteration(rec)) {
+        user_stopped = true;
+        return false;
+      }
+      return !(done_within >= 0 && rec.accepted && rec.max_handle_error <= done_within);
+    };
+    SolveResult r;
+    try {
+      r = solver.solve(callback, stop);
+    } catch (...) {
+      p.max_iterations = saved;
+      solver.set_params(p);
+      throw;
+    }
+    p.max_iterations = saved;
+    solver.set_params(p);
+    used += r.iterations;
+    phase_used += r.iterations;
+    seconds += r.seconds;
+    if (r.reason == StopReason::kMaxIterations)  // the solver names the stage's share; say the real limit
+      r.message = "iteration limit (" + std::to_string(saved) + " per strategy) reached";
+    if (r.reason == StopReason::kInterrupted && !user_stopped && !(stop && stop->load())) {
+      r.reason = StopReason::kConverged;
+      r.message = "stage targets reached";
+    }
+    return r;
+  }
+
+  SolveResult finish(SolveResult r) const {
+    r.iterations = used;
+    r.seconds = seconds;
+    std::string tried;
+    for (const std::string& s : report.strategies) tried += (tried.empty() ? "" : ", ") + s;
+    if (report.stages > 0 || report.strategies.size() > 1)
+      r.message += " [strategies: " + tried + "; " + std::to_string(report.stages) +
+                   " intermediate stages, " + std::to_string(report.stage_retries) + " shortened]";
+    return r;
+  }
+
+  // Follows `path` stage by stage (planned[k] stages in segment k), then solves to its end.
+  SolveResult staged(const TargetPath& path, const std::vector<int>& planned) {
+    const int K = path.segments();
+    const int stage_iterations = solver.params().continuation_stage_iterations;
+    double s = 0;
+    for (int k = 0; k < K; ++k) {
+      double ds = 1.0 / planned[k];
+      const double min_ds = ds / (1 << kMaxStageHalvings);
+      while (s < k + 1) {
+        const double s_next = std::min<double>(k + 1, s + ds);
+        if (k == K - 1 && s_next >= K) break;  // the last stage is the final solve below
+        const MatX3d stage_targets = path.at(s_next);
+        const double move = (stage_targets - path.at(s)).rowwise().norm().maxCoeff();
+        const double within = std::max(solver.params().handle_tolerance, kStageSlack * move);
+        const SolveResult r = run(stage_targets, stage_iterations, within);
+        ++report.stages;
+        if (r.reason == StopReason::kInterrupted) return finish(r);
+        const double err = max_error();
+        if (err <= within) {
+          s = s_next;
+          ds = std::min(2 * ds, 1.0 / planned[k]);  // back toward the planned step after a shortened one
+          report.path_reached = s;
+          say("stage " + std::to_string(report.stages) + ": reached " + format_fixed(100 * s / K, 1) +
+              "% of the path (max handle error " + format_g(err, 3) + ")");
+        } else {
+          ds /= 2;
+          ++report.stage_retries;
+          say("stage " + std::to_string(report.stages) + ": targets at " + format_fixed(100 * s_next / K, 1) +
+              "% not reached (max handle error " + format_g(err, 3) + "), step halved");
+          if (ds < min_ds * (1 - 1e-12)) {
+            SolveResult b;
+            b.reason = StopReason::kBlocked;
+            b.message = "blocked by the certificate: the handles could not follow the path beyond " +
+                        format_fixed(100 * s / K, 1) + "% of it (stage steps down to 1/" +
+                        std::to_string(1 << kMaxStageHalvings) + " of a planned stage)";
+            return finish(b);
+          }
+        }
+        if (budget() == 0) {
+          SolveResult b;
+          b.reason = StopReason::kMaxIterations;
+          b.message = "iteration limit (" + std::to_string(solver.params().max_iterations) + ") reached at " +
+                      format_fixed(100 * s / K, 1) + "% of the path";
+          return finish(b);
+        }
+      }
+    }
+    say("final stage: the targets");
+    const SolveResult r = run(path.at(K), budget());
+    report.path_reached = reached() ? K : report.path_reached;
+    return finish(r);
+  }
+};
+
+std::vector<int> planned_stages(const TargetPath& path, double max_angle_deg) {
+  std::vector<int> m(path.segments());
+  const double step = max_angle_deg * kPi / 180;
+  for (int k = 0; k < path.segments(); ++k)
+    m[k] = std::max(1, static_cast<int>(std::ceil(path.max_angle(k) / step - 1e-9)));
+  return m;
+}
+
+}  // namespace
+
+SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d>& waypoints,
+                             const MatX3d& targets, const std::vector<int>& groups_in,
+                             const std::function<bool(const IterationRecord&)>& on_iteration,
+                             const std::atomic<bool>* stop,
+                             const std::function<void(const std::string&)>& on_stage,
+                             PathSolveReport* report_out) {
+  PathSolveReport report;
+  Runner runner{solver, on_iteration, stop, on_stage, report};
+  const DeformParams& params = solver.params();
+  const double diag = (solver.cage().bbox_max - solver.cage().bbox_min).norm();
+  const std::vector<int> groups =
+      groups_in.empty() ? group_handles(solver.handle_sources(), kGroupLink * diag) : groups_in;
+
+  std::vector<MatX3d> keyframes{solver.handle_positions()};
+  keyframes.insert(keyframes.end(), waypoints.begin(), waypoints.end());
+  keyframes.push_back(targets);
+  const TargetPath path(keyframes, groups);
+  report.segments = path.segments();
+  for (int k = 0; k < path.segments(); ++k)
+    report.max_angle_deg = std::max(report.max_angle_deg, path.max_angle(k) * 180 / kPi);
+  const std::vector<int> planned = planned_stages(path, params.continuation_angle);
+  const bool large = std::any_of(planned.begin(), planned.end(), [](int m) { return m > 1; });
+
+  SolveResult result;
+  if (!params.continuation) {
+    // Waypoints are the user's: visit each with a full solve, then the targets.
+    report.strategies.push_back(waypoints.empty() ? "direct" : "waypoints, one solve each");
+    for (const MatX3d& w : waypoints) {
+      const SolveResult r = runner.run(w, runner.budget());
+      if (r.reason == StopReason::kInterrupted) {
+        result = runner.finish(r);
+        break;
+      }
+    }
+    if (result.reason != StopReason::kInterrupted)
+      result = runner.finish(runner.run(targets, runner.budget()));
+  } else if (waypoints.empty() && !large) {
+    report.strategies.push_back("direct");
+    const SolveResult r = runner.run(targets, runner.budget());
+    if (r.reason == StopReason::kInterrupted || runner.reached() || runner.budget() == 0) {
+      report.path_reached = runner.reached() ? 1 : 0;
+      result = runner.finish(r);
+    } else {
+      report.strategies.push_back("continuation after the direct solve stopped short (" +
+                                  std::string(to_string(r.reason)) + ")");
+      runner.say("the direct solve stopped short of the targets (" + r.message +
+                 "): continuing through intermediate targets from there");
+      runner.phase_used = 0;
+      const TargetPath rest({solver.handle_positions(), targets}, groups);
+      std::vector<int> m = planned_stages(rest, params.continuation_angle);
+      m[0] = std::max(m[0], 2);
+      result = runner.staged(rest, m);
+    }
+  } else {
+    report.strategies.push_back("planned continuation");
+    int total = 0;
+    for (int m : planned) total += m;
+    runner.say("planned continuation: " + std::to_string(total) + " stages over " +
+               std::to_string(path.segments()) + " path segment(s), largest group rotation " +
+               format_fixed(report.max_angle_deg, 1) + " degrees");
+    result = runner.staged(path, planned);
+  }
+  // Whatever stage the run stopped in, the solver's targets (and so its reported handle errors) are the
+  // user's.
+  solver.set_targets(targets, "targets");
+  if (report_out) *report_out = report;
+  return result;
+}
+
+}  // namespace lidef
