@@ -54,7 +54,7 @@ std::vector<ParamInfo> make_table() {
       {"hessian_precision", "newton", &D::hessian_precision, 0, 0,
        "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,
-       "handle error (distance, model units) reported as \"reached\""},
+       "handle error reported as \"reached\", relative to the model size (half its cage's largest extent)"},
       // --- Certificate
       {"max_depth", "certificate", &D::max_depth, 0, 20, "octree levels of the certificate"},
       {"bound", "certificate", &D::bound, 0, 0, "Lipschitz bound: \"first\" (17) or \"third\" (21) order"},
