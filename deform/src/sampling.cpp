@@ -323,7 +323,18 @@ VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& p) {
   if (f.is_identity()) return sample_voxels_here(cage, p);
   SamplingParams np = p;
   np.voxel_side = p.voxel_side > 0 ? f.length_to_normalized(p.voxel_side) : 0;
-  return f.from_normalized(sample_voxels_here(f.normalized(cage), np));
+  VoxelSampling out = sample_voxels_here(f.normalized(cage), np);
+  // The cells were chosen in the frame; their centers are laid out again in model units exactly as the scan
+  // lays them out (origin = the cage's bbox minimum, center = origin + (ijk + ½) h), so that the documented
+  // grid relation holds to the bit and closed-cube tests at faces and corners (containing_voxel) behave as
+  // for an unnormalized sampling.
+  out.side = f.length_from_normalized(out.side);
+  out.origin = cage.bbox_min;
+  for (int i = 0; i < out.size(); ++i)
+    out.centers.row(i) =
+        (out.origin + (out.grid_index.row(i).cast<double>().transpose() + Vec3::Constant(0.5)) * out.side)
+            .transpose();
+  return out;
 }
 
 std::vector<int> select_hessian_subset(const VoxelSampling& s, double fraction) {
