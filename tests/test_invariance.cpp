@@ -162,8 +162,8 @@ TEST(Invariance, SameVoxelsAndIdentityCertificateForCopies) {
 // from the original's by rounding (copy_eps: 2.8e-8 for the 1e8 translation), and the Newton iterations
 // (single-precision Hessians, line-search decisions taken on energies) carry such differences along without
 // amplifying them much; measured (docs/benchmarks.md): 9.8e-8 on the 1e8 translation, 3.4e-9 on the 1e-6
-// scaling, 6e-16 on the 1e6 scaling. A normalization error (a wrong frame rule, a parameter in absolute units)
-// shows up as a different iteration count or differences of the size of the deformation (~0.1-1).
+// scaling, 6e-16 on the 1e6 scaling. A normalization error (a wrong frame rule, a parameter in absolute
+// units) shows up as a different iteration count or differences of the size of the deformation (~0.1-1).
 struct BendRun {
   int iterations = 0;
   StopReason reason = StopReason::kMaxIterations;
