@@ -17,6 +17,7 @@
 #include "lidef/green_coordinates.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
+#include "lidef/normalization.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/opencl_backend.h"
@@ -123,7 +124,8 @@ void add_certify_command(CLI::App& app, Action& action) {
         throw InputError(o.model, "no voxel of side " + format_g(sampling.side) +
                                       " fits inside the cage at safety " + format_g(sp.safety) +
                                       " (use a smaller --voxel-side or more --samples)");
-      OctreeCertifier certifier(model.cage, sampling);
+      // In the model's normalized frame, as lidef deform certifies (normalization.h).
+      NormalizedCertifier certifier(model.cage, sampling);
       std::string backend_msg;
       const auto backend = select_backend(dp, default_cache_dir(), &backend_msg);
       std::cerr << "lidef certify: " << backend_msg << "\n";
@@ -146,7 +148,8 @@ void add_certify_command(CLI::App& app, Action& action) {
       double ms_field = 0;
       if (o.grid > 0) {
         t0 = Clock::now();
-        field = write_field_vti(out.path("field.vti"), model.cage, certifier.basis(), y, sampling, o.grid);
+        field = write_field_vti(out.path("field.vti"), model.cage, HarmonicBasis(model.cage), y, sampling,
+                                o.grid);
         ms_field = ms_since(t0);
       }
       nlohmann::ordered_json tj;

@@ -212,10 +212,18 @@ void add_deform_command(CLI::App& app, Action& action) {
       CertificateReport report =
           make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir, "coefficients.txt", sp,
                                   solver.sampling(), solver.certify_params(false, true));
-      const MeshFields mf = mesh_fields(solver.basis(), y, model.mesh.V, {/*sigma3=*/true});
+      // Evaluated in the solver's normalized frame (a model far from the origin would otherwise lose the
+      // Jacobian's digits to the cancellation of large vertex coefficients), positions mapped back.
+      const Frame& frame = solver.frame();
+      MeshFields mf =
+          mesh_fields(solver.normalized_basis(), solver.subspace().basis * solver.reduced_coefficients(),
+                      frame.points_to_normalized(model.mesh.V), {/*sigma3=*/true});
+      mf.V = frame.points_from_normalized(mf.V);
       const double ms_final = ms_since(t0);
       const VecXd herr = solver.handle_errors();
       const double max_err = herr.size() ? herr.maxCoeff() : 0.0;
+      // handle_tolerance is relative to the model's size (deform_params.h).
+      const double tolerance = sc.params.handle_tolerance * frame.scale;
       const double vol_ratio = mesh_volume(mf.V, model.mesh.F) / mesh_volume(model.mesh.V, model.mesh.F);
 
       // --- Outputs, all or nothing.
@@ -257,8 +265,11 @@ void add_deform_command(CLI::App& app, Action& action) {
       sj["min_sigma3_sampled"] = cert.min_sigma3_center;
       sj["mesh_coverage"] = report.mesh_coverage;
       sj["max_handle_error"] = max_err;
-      sj["handles_reached"] = max_err <= sc.params.handle_tolerance;
+      sj["handles_reached"] = max_err <= tolerance;
       sj["handle_tolerance"] = sc.params.handle_tolerance;
+      sj["handle_tolerance_model_units"] = tolerance;
+      sj["frame"] = {{"center", {frame.center.x(), frame.center.y(), frame.center.z()}},
+                     {"scale", frame.scale}};
       sj["global_volume_ratio"] = vol_ratio;
       sj["energy"] = {{"total", et.total}, {"dis", et.dis}, {"p2p", et.p2p}, {"smooth", et.smooth}};
       sj["final_weights"] = {{"lambda_p2p", solver.weights().p2p},
@@ -282,8 +293,8 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << ") after " << solver.history().size() << " iterations, " << format_g(res.seconds, 3)
                 << " s\n"
                 << "  max handle error " << format_g(max_err, 3)
-                << (max_err <= sc.params.handle_tolerance ? " (reached)" : " (NOT reached)")
-                << ", global volume ratio " << format_g(vol_ratio, 5) << "\n"
+                << (max_err <= tolerance ? " (reached)" : " (NOT reached)") << ", global volume ratio "
+                << format_g(vol_ratio, 5) << "\n"
                 << "  CERTIFIED locally injective on the union of " << cert.voxels
                 << " voxels, min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4)
                 << ", mesh coverage " << format_g(100 * report.mesh_coverage, 3) << "%\n"

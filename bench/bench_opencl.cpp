@@ -250,7 +250,8 @@ int main(int argc, char** argv) {
     auto kc = cpu_backend()->energy_kernels(en);
     auto kg = ocl->energy_kernels(en);
     const MatS3 y = rc.y;
-    const MatS3 d = 0.01 * (rc.y - cpu->subspace().basis.transpose() * model.cage.identity_coefficients());
+    const MatS3 d =
+        0.01 * (rc.y - cpu->subspace().basis.transpose() * cpu->normalized_cage().identity_coefficients());
     for (auto* k : {kc.get(), kg.get()}) {
       k->set_current(y);
       k->set_direction(d);

@@ -229,7 +229,7 @@ TEST(Continuation, BeamTwist180IsReachedThroughStagesWithEveryIterateCertified) 
   EXPECT_NEAR(run->report.max_angle_deg, 180, 1e-6);
   EXPECT_GE(run->report.stages, 1);  // 180 / 90: one intermediate stage at least
   EXPECT_TRUE(run->result.converged()) << run->result.message;
-  EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance);
+  EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance * s.frame().scale);
   EXPECT_TRUE(s.certificate().certified);
   EXPECT_GT(run->accepted, 0);
   EXPECT_EQ(run->fully_certified, run->accepted);
@@ -277,7 +277,7 @@ TEST(DeformSlow, ContinuationFullTurnFollowsItsWaypoints) {
   // energy still decreasing after 100 iterations, handles within 1.5e-6 from the 6th on).
   EXPECT_TRUE(run->result.converged() || run->result.reason == StopReason::kMaxIterations)
       << run->result.message;
-  EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance);
+  EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance * s.frame().scale);
   EXPECT_EQ(run->fully_certified, run->accepted);
   // A full turn, not the identity: the middle section turned by half a turn, a quarter of the way along the
   // beam by a quarter turn (the identity would give 0 at both).
@@ -297,5 +297,5 @@ TEST(DeformSlow, ContinuationPullThroughAFixedHandleEndsBlocked) {
   EXPECT_NE(run->result.message.find("strategies: direct, continuation"), std::string::npos);
   EXPECT_TRUE(s.certificate().certified);
   EXPECT_EQ(run->fully_certified, run->accepted);
-  EXPECT_GT(s.handle_errors().maxCoeff(), 10 * s.params().handle_tolerance);
+  EXPECT_GT(s.handle_errors().maxCoeff(), 10 * s.params().handle_tolerance * s.frame().scale);
 }

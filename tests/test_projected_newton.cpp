@@ -127,7 +127,7 @@ TEST(ProjectedNewton, IdentityIsAFixedPoint) {
   auto s = make_solver();
   s->set_handles(beam().sources, beam().sources);
   const MatS3 y0 = s->reduced_coefficients();
-  const MatS3 yid = s->subspace().basis.transpose() * beam().model.cage.identity_coefficients();
+  const MatS3 yid = s->subspace().basis.transpose() * s->normalized_cage().identity_coefficients();
   EXPECT_LT((y0 - yid).cwiseAbs().maxCoeff(), 1e-14);
   const SolveResult r = s->solve();
   EXPECT_TRUE(r.converged()) << to_string(r.reason) << ": " << r.message;
@@ -279,7 +279,7 @@ TEST(ProjectedNewton, InterruptionEqualsIterationLimit) {
   EXPECT_EQ(rd.reason, StopReason::kInterrupted);
   EXPECT_EQ(rd.iterations, 0);
   EXPECT_TRUE(bitwise_equal(d->reduced_coefficients(), MatS3(d->subspace().basis.transpose() *
-                                                             beam().model.cage.identity_coefficients())));
+                                                             d->normalized_cage().identity_coefficients())));
 }
 
 TEST(ProjectedNewton, FreshSolversAreBitwiseDeterministic) {

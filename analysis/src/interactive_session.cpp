@@ -58,7 +58,8 @@ struct InteractiveSession::Engine {
   MatX3d sources, targets;
   std::shared_ptr<const ComputeBackend> backend;
   std::unique_ptr<DeformationSolver> solver;
-  // Mesh vertices in the reduced space: f(V) = Mv ỹ (#Vm by s), Jᵀ rows = Mg ỹ (3#Vm by s).
+  // Mesh vertices in the reduced space, in the solver's normalized frame: f(V) = frame.from_normalized(Mv ỹ)
+  // (#Vm by s), Jᵀ rows = Mg ỹ (3#Vm by s; Jacobians are frame-invariant).
   MatXd Mv, Mg;
   bool want_iterate = false;
   std::string status;
@@ -506,7 +507,8 @@ void InteractiveSession::Engine::build_solver(const std::shared_ptr<const Model>
   }
   MatXd v, g;
   status = "preprocessing: mesh vertices in the subspace";
-  reduced_mesh_matrices(built->basis(), built->subspace().basis, new_model->mesh.V, v, g);
+  reduced_mesh_matrices(built->normalized_basis(), built->subspace().basis,
+                        built->frame().points_to_normalized(new_model->mesh.V), v, g);
   // Committed only now: a failure above leaves the previous session as it was.
   solver = std::move(built);
   backend = new_backend;
@@ -675,7 +677,7 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
     const auto& yr = S.reduced_coefficients();
     f->coefficients = S.coefficients();
     f->cage_V = f->coefficients.topRows(model->cage.num_vertices());
-    MatX3d mesh_V = Mv * yr;
+    MatX3d mesh_V = S.frame().points_from_normalized(Mv * yr);
     MeshFields m = mesh_fields(std::move(mesh_V), Mg * yr);
     f->mesh_V = std::move(m.V);
     f->mesh_e_iso = std::move(m.e_iso);

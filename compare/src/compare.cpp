@@ -13,6 +13,7 @@
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
+#include "lidef/normalization.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/projected_newton.h"
@@ -255,7 +256,7 @@ void run_vhm(Shared& s, MethodResult& r) {
   const VoxelSampling& vs = s.get_sampling();
   r.min_sigma3 = min_sigma3_at(basis, solver.coefficients(), vs.centers);
   if (r.min_sigma3 > 0) {
-    OctreeCertifier certifier(s.model.cage, vs);
+    NormalizedCertifier certifier(s.model.cage, vs);  // in the frame lidef's own runs are certified in
     const Certificate cert =
         certifier.certify(solver.coefficients(), certify_params_of(s.sc.params, true, false));
     r.certified = cert.certified ? 1 : 0;

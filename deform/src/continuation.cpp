@@ -40,7 +40,9 @@ struct Runner {
     const VecXd e = solver.handle_errors();
     return e.size() ? e.maxCoeff() : 0.0;
   }
-  bool reached() const { return max_error() <= solver.params().handle_tolerance; }
+  // handle_tolerance is a fraction of the model size (deform_params.h); the errors are in model units.
+  double tolerance() const { return solver.params().handle_tolerance * solver.frame().scale; }
+  bool reached() const { return max_error() <= tolerance(); }
 
   // One solve against `targets` with at most `max_iterations` iterations (and what is left of the budget).
   // With `done_within` >= 0 the solve ends after the first accepted iteration that brings every handle within
@@ -107,7 +109,7 @@ struct Runner {
         if (k == K - 1 && s_next >= K) break;  // the last stage is the final solve below
         const MatX3d stage_targets = path.at(s_next);
         const double move = (stage_targets - path.at(s)).rowwise().norm().maxCoeff();
-        const double within = std::max(solver.params().handle_tolerance, kStageSlack * move);
+        const double within = std::max(tolerance(), kStageSlack * move);
         const SolveResult r = run(stage_targets, stage_iterations, within);
         ++report.stages;
         if (r.reason == StopReason::kInterrupted) return finish(r);

@@ -54,7 +54,7 @@ std::vector<ParamInfo> make_table() {
       {"hessian_precision", "newton", &D::hessian_precision, 0, 0,
        "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,
-       "handle error (distance, model units) reported as \"reached\""},
+       "handle error reported as \"reached\", relative to the model size (half its cage's largest extent)"},
       {"continuation", "newton", &D::continuation, 0, 0,
        "large rotations of the handles (and stalled solves) go through rotation-aware intermediate targets"},
       // Above 0: a zero angle would ask for infinitely many stages.

@@ -71,7 +71,13 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
                                      const std::string& cache_dir,
                                      const std::function<void(const std::string&)>& log,
                                      std::shared_ptr<const ComputeBackend> backend)
-    : cage_(cage), params_(params), basis_(cage), backend_(backend ? std::move(backend) : cpu_backend()) {
+    : cage_(cage),
+      frame_(Frame::of(cage)),
+      ncage_(frame_.normalized(cage)),
+      params_(params),
+      basis_(cage),
+      nbasis_(ncage_),
+      backend_(backend ? std::move(backend) : cpu_backend()) {
   validate_params(params_, "parameters");
   if (params_.threads > 0) omp_set_num_threads(params_.threads);
   const auto t_all = Clock::now();
@@ -80,12 +86,16 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   };
 
   auto t0 = Clock::now();
-  subspace_ = load_or_compute_subspace(cage_, params_.reduced_dof, cache_dir);
-  say("subspace: " + std::to_string(subspace_.size()) + " of " + std::to_string(cage_.num_coeffs()) +
+  // Keyed by the normalized cage's exact vertex bytes: a translated or scaled copy that normalizes to other
+  // bytes gets its own entry, one that normalizes to the same bytes (a power-of-two scaling) shares it, and
+  // rightly so, since the subspace is computed from those bytes alone.
+  subspace_ = load_or_compute_subspace(ncage_, params_.reduced_dof, cache_dir);
+  say("subspace: " + std::to_string(subspace_.size()) + " of " + std::to_string(ncage_.num_coeffs()) +
       " coefficients per coordinate (" + subspace_.solver + ", " + format_g(ms_since(t0), 4) + " ms)");
 
   t0 = Clock::now();
-  sampling_ = sample_voxels(cage_, sampling_params());
+  sampling_ = sample_voxels(cage_, sampling_params());  // laid out in frame_ (sampling.h)
+  nsampling_ = frame_.to_normalized(sampling_);
   if (sampling_.size() == 0)
     throw InputError(cage_.source, "no voxel of side " + format_g(sampling_.side, 4) +
                                        " fits inside the cage (use a smaller voxel_side or more samples)");
@@ -101,15 +111,15 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   constexpr int kRows = 2048;
   for (int b = 0; b < n; b += kRows) {
     const int e = std::min(n, b + kRows);
-    const MatXd Gc = basis_.gradient_matrix(sampling_.centers.middleRows(b, e - b));
+    const MatXd Gc = nbasis_.gradient_matrix(nsampling_.centers.middleRows(b, e - b));
     G.middleRows(3 * b, 3 * (e - b)).noalias() = Gc * subspace_.basis;
   }
-  energy_ = std::make_unique<DeformationEnergy>(std::move(G), sampling_.hessian_subset, subspace_.eigenvalues,
-                                                cage_.num_edges());
+  energy_ = std::make_unique<DeformationEnergy>(std::move(G), nsampling_.hessian_subset,
+                                                subspace_.eigenvalues, ncage_.num_edges());
   say("reduced basis gradients at the samples: " + format_g(ms_since(t0), 4) + " ms");
 
   t0 = Clock::now();
-  certifier_ = std::make_unique<OctreeCertifier>(cage_, sampling_, &subspace_.basis);
+  certifier_ = std::make_unique<OctreeCertifier>(ncage_, nsampling_, &subspace_.basis);
   say("certificate precomputation: " + format_g(ms_since(t0), 4) + " ms");
   t0 = Clock::now();
   kernels_ = backend_->energy_kernels(*energy_);
@@ -117,7 +127,7 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   if (!backend_->is_cpu())
     say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
 
-  bbox_diag2_ = (cage_.bbox_max - cage_.bbox_min).squaredNorm();
+  bbox_diag2_ = (ncage_.bbox_max - ncage_.bbox_min).squaredNorm();
   reset();
   preprocess_seconds_ = ms_since(t_all) / 1000;
 }
@@ -155,14 +165,14 @@ void DeformationSolver::reset_weights() {
 }
 
 void DeformationSolver::reset() {
-  const MatX3d yid = cage_.identity_coefficients();
+  const MatX3d yid = ncage_.identity_coefficients();
   y_ = subspace_.basis.transpose() *
        yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
   kernels_->set_current(y_);
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
   history_.clear();
-  cert_ = certifier_->certify_reduced(y_, certify_params(false, false));
+  cert_ = frame_.from_normalized(certifier_->certify_reduced(y_, certify_params(false, false)));
   if (!cert_.certified)
     throw NumericalError("the identity map is not certified on this sampling (" + cert_.reason +
                          "); the voxels are too close to the cage — raise 'safety' or use smaller voxels");
@@ -173,9 +183,10 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
     throw InputError(where, "has " + std::to_string(y.rows()) + " coefficient rows; this cage needs " +
                                 std::to_string(cage_.num_coeffs()) + " (#V+#F)");
   if (!y.allFinite()) throw InputError(where, "contains a non-finite coefficient");
-  const MatS3 yr = subspace_.basis.transpose() * y;
-  const double norm = y.norm();
-  const double residual = (subspace_.basis * yr - y).norm() / std::max(norm, 1e-300);
+  const MatX3d yn = frame_.coefficients_to_normalized(y, cage_.num_vertices());
+  const MatS3 yr = subspace_.basis.transpose() * yn;
+  const double norm = yn.norm();
+  const double residual = (subspace_.basis * yr - yn).norm() / std::max(norm, 1e-300);
   if (residual > 1e-9)
     throw InputError(where, "is not in the reduced subspace of this cage (" +
                                 std::to_string(subspace_.size()) +
@@ -188,7 +199,7 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
                                 c.reason + "); lidef deform only starts from certified maps");
   y_ = yr;
   kernels_->set_current(y_);
-  cert_ = c;
+  cert_ = frame_.from_normalized(c);
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
   history_.clear();
@@ -222,8 +233,8 @@ void DeformationSolver::set_handles(const MatX3d& sources, const MatX3d& targets
     sources_ = previous;
     throw;
   }
-  const MatXd D = basis_.value_matrix(sources) * subspace_.basis;
-  energy_->set_handles(D, targets);
+  const MatXd D = nbasis_.value_matrix(frame_.points_to_normalized(sources)) * subspace_.basis;
+  energy_->set_handles(D, frame_.points_to_normalized(targets));
 }
 
 // Targets that no map can meet sensibly are refused with a reason instead of being run: a target so far away
@@ -256,25 +267,25 @@ void DeformationSolver::check_targets(const MatX3d& targets, const std::string& 
 void DeformationSolver::set_targets(const MatX3d& targets, const std::string& where) {
   if (targets.rows() != energy_->num_handles()) throw InputError(where, "one target per handle is needed");
   check_targets(targets, where);
-  energy_->set_targets(targets);
+  energy_->set_targets(frame_.points_to_normalized(targets));
 }
 
 MatX3d DeformationSolver::coefficients() const {
-  return subspace_.basis * y_;
+  return frame_.coefficients_from_normalized(subspace_.basis * y_, cage_.num_vertices());
 }
 
 Certificate DeformationSolver::certify_current(bool keep_leaves) const {
-  return certifier_->certify_reduced(y_, certify_params(false, keep_leaves));
+  return frame_.from_normalized(certifier_->certify_reduced(y_, certify_params(false, keep_leaves)));
 }
 
 EnergyTerms DeformationSolver::energy() const {
   return energy_->terms(kernels_->distortion_sum(0), y_, weights_);
 }
 VecXd DeformationSolver::handle_errors() const {
-  return energy_->handle_errors(y_);
+  return frame_.length_from_normalized(1) * energy_->handle_errors(y_);
 }
 MatX3d DeformationSolver::handle_positions() const {
-  return energy_->handle_positions(y_);
+  return frame_.points_from_normalized(energy_->handle_positions(y_));
 }
 
 IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
@@ -372,7 +383,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       rec.terms = et;
       y_ = yt;
       kernels_->accept(t);
-      cert_ = std::move(c);
+      cert_ = frame_.from_normalized(std::move(c));
       break;
     }
     rec.ms_line_search += ms_since(t0);
@@ -387,7 +398,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   rec.min_sigma3 = cert_.min_sigma3_center;
   rec.min_lower_bound = cert_.min_lower_bound;
   rec.refined = cert_.refined;
-  const VecXd herr = energy_->handle_errors(y_);
+  const VecXd herr = handle_errors();
   rec.max_handle_error = herr.size() ? herr.maxCoeff() : 0.0;
   const std::string retries = rec.weight_action;
   if (rec.accepted && params_.dynamic_weighting) update_weights(rec);

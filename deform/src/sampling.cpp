@@ -14,6 +14,7 @@
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
 #include "lidef/mesh_io.h"
+#include "lidef/normalization.h"
 
 namespace lidef {
 
@@ -261,9 +262,8 @@ std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
   return spread(x) | spread(y) << 1 | spread(z) << 2;
 }
 
-}  // namespace
-
-VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& p) {
+// sample_voxels on a cage already in its normalized frame (or any cage: the grid is aligned to its bbox).
+VoxelSampling sample_voxels_here(const Cage& cage, const SamplingParams& p) {
   if (!(p.safety > 1.0))
     throw InputError(cage.source, "sampling: safety factor must be > 1 (got " + std::to_string(p.safety) +
                                       "): a voxel ball touching the cage has no finite third-order bound");
@@ -309,6 +309,31 @@ VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& p) {
   }
   out.safety = p.safety;
   out.hessian_subset = select_hessian_subset(out, p.hessian_fraction);
+  return out;
+}
+
+}  // namespace
+
+// The grid is laid out and the voxel side searched in the cage's normalized frame (normalization.h), so a
+// translated or scaled copy of a model gets the same voxels up to the transform: the search starts from
+// cbrt(volume / samples), and the inside and clearance tests decide cells near the cage by comparisons that
+// would otherwise see the ULPs of the model's position and units.
+VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& p) {
+  const Frame f = Frame::of(cage);
+  if (f.is_identity()) return sample_voxels_here(cage, p);
+  SamplingParams np = p;
+  np.voxel_side = p.voxel_side > 0 ? f.length_to_normalized(p.voxel_side) : 0;
+  VoxelSampling out = sample_voxels_here(f.normalized(cage), np);
+  // The cells were chosen in the frame; their centers are laid out again in model units exactly as the scan
+  // lays them out (origin = the cage's bbox minimum, center = origin + (ijk + ½) h), so that the documented
+  // grid relation holds to the bit and closed-cube tests at faces and corners (containing_voxel) behave as
+  // for an unnormalized sampling.
+  out.side = f.length_from_normalized(out.side);
+  out.origin = cage.bbox_min;
+  for (int i = 0; i < out.size(); ++i)
+    out.centers.row(i) =
+        (out.origin + (out.grid_index.row(i).cast<double>().transpose() + Vec3::Constant(0.5)) * out.side)
+            .transpose();
   return out;
 }
 

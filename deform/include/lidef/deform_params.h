@@ -38,7 +38,9 @@ struct DeformParams {
   int max_halvings = 40;           // line-search halvings before "no certified step"
   double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
   HessianPrecision hessian_precision = HessianPrecision::kSingle;  // products of the reduced Hessian
-  double handle_tolerance = 1e-3;  // handle error (distance, model units) reported as "reached"
+  // Handle error reported as "reached", as a fraction of the model size (Frame::scale, normalization.h: half
+  // the largest extent of the cage's bounding box), so that it means the same for a scaled model.
+  double handle_tolerance = 1e-3;
   // --- Continuation (target_path.h, continuation.h; docs/solver.md)
   bool continuation = true;           // rotation-aware intermediate targets for large motions and stalls
   double continuation_angle = 90;     // degrees: the largest rotation of a handle group per stage

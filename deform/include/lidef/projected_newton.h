@@ -14,6 +14,13 @@
 // weights they are reset to the defaults and the iteration goes on (at most max_weight_resets times), so the
 // final map minimises the energy with the user's weights whenever it can.
 //
+// Units (normalization.h): the solver works in the cage's normalized frame — its subspace, sampling, basis,
+// energy, certifier and reduced coefficients are those of the normalized cage — and speaks model units at its
+// interface: handles, coefficients(), set_initial_map(), handle_errors()/handle_positions(), sampling(),
+// basis(), certificate() and certify_current() are in the units of the cage it was given. E_P2P is the sum
+// of squared handle errors measured in the normalized frame (model distance / frame().scale), so λ1 and the
+// energies recorded per iteration do not depend on the model's units.
+//
 // Usage: DeformationSolver precomputes once per cage (subspace, sampling, reduced gradient matrix,
 // certifier); set_handles() / set_targets() and solve() or step() many times (the studio calls step() while a
 // handle is dragged, starting from the last solution).
@@ -29,6 +36,7 @@
 #include "lidef/deform_params.h"
 #include "lidef/deformation_energy.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/normalization.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
@@ -122,23 +130,32 @@ class DeformationSolver {
   // One Newton iteration (the studio's unit of work).
   IterationRecord step(const std::atomic<bool>* stop = nullptr);
 
-  // The current (last certified) map.
+  // The current (last certified) map. Reduced coefficients ỹ are in the normalized frame: Ξ ỹ are the
+  // normalized cage's coefficients (frame().coefficients_from_normalized maps them to coefficients()).
   const MatS3& reduced_coefficients() const { return y_; }
-  MatX3d coefficients() const;                              // #V+#F by 3, y = Ξ ỹ
-  const Certificate& certificate() const { return cert_; }  // of the current map (keep_leaves = false)
-  // A full certificate of the current map with leaves (for reports).
+  MatX3d coefficients() const;  // #V+#F by 3, model units
+  // Of the current map (keep_leaves = false), model units (leaf centers, sides, L).
+  const Certificate& certificate() const { return cert_; }
+  // A full certificate of the current map with leaves (for reports), model units.
   Certificate certify_current(bool keep_leaves = true) const;
-  EnergyTerms energy() const;  // at the current map, current weights
+  EnergyTerms energy() const;  // at the current map, current weights (E_P2P on normalized distances)
   EnergyWeights weights() const { return weights_; }
-  VecXd handle_errors() const;                               // #h
-  MatX3d handle_positions() const;                           // #h by 3
-  const MatX3d& handle_sources() const { return sources_; }  // #h by 3, as set_handles got them
+  VecXd handle_errors() const;                               // #h, model units
+  MatX3d handle_positions() const;                           // #h by 3, model units
+  const MatX3d& handle_sources() const { return sources_; }  // #h by 3, model units, as set_handles got them
   const std::vector<IterationRecord>& history() const { return history_; }
 
-  const Cage& cage() const { return cage_; }
-  const SpectralSubspace& subspace() const { return subspace_; }
-  const VoxelSampling& sampling() const { return sampling_; }
+  const Cage& cage() const { return cage_; }  // as given (model units)
+  const Frame& frame() const { return frame_; }
+  const Cage& normalized_cage() const { return ncage_; }
+  const SpectralSubspace& subspace() const { return subspace_; }  // of the normalized cage
+  const VoxelSampling& sampling() const { return sampling_; }     // model units
+  const VoxelSampling& normalized_sampling() const { return nsampling_; }
+  // Basis of the cage as given: for model-unit points with coefficients() (reports, comparisons).
   const HarmonicBasis& basis() const { return basis_; }
+  // Basis of the normalized cage: for frame().points_to_normalized(P) with normalized coefficients (exact
+  // at any model position; reduced_coefficients() through subspace()).
+  const HarmonicBasis& normalized_basis() const { return nbasis_; }
   const OctreeCertifier& certifier() const { return *certifier_; }
   const DeformationEnergy& energy_function() const { return *energy_; }
   const ComputeBackend& backend() const { return *backend_; }
@@ -151,18 +168,22 @@ class DeformationSolver {
  private:
   void update_weights(IterationRecord& rec);
   void check_targets(const MatX3d& targets, const std::string& where) const;
-  const Cage& cage_;
+  const Cage& cage_;  // as given
+  Frame frame_;
+  Cage ncage_;  // cage_ in frame_: everything below is computed on it
   DeformParams params_;
   SpectralSubspace subspace_;
-  VoxelSampling sampling_;
-  HarmonicBasis basis_;
+  VoxelSampling sampling_;   // model units (sample_voxels(cage_))
+  VoxelSampling nsampling_;  // the same voxels in frame_
+  HarmonicBasis basis_;      // of cage_
+  HarmonicBasis nbasis_;     // of ncage_
   std::unique_ptr<OctreeCertifier> certifier_;
   std::unique_ptr<DeformationEnergy> energy_;
   std::shared_ptr<const ComputeBackend> backend_;
   std::unique_ptr<EnergyKernels> kernels_;  // holds the Jacobians of y_ (and of the direction) at the samples
   MatS3 y_;                                 // current reduced coefficients
-  MatX3d sources_;                          // #h by 3 handle sources (set_handles)
-  Certificate cert_;
+  MatX3d sources_;                          // #h by 3 handle sources (set_handles), model units
+  Certificate cert_;                        // model units
   EnergyWeights weights_;
   int weight_resets_ = 0;
   double bbox_diag2_ = 1;

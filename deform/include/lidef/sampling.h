@@ -45,6 +45,9 @@ struct VoxelSampling {
 };
 
 // Samples the interior of `cage` on a regular grid aligned with the cage's bounding-box minimum.
+// The grid is laid out and the side searched in the cage's normalized frame (normalization.h) and returned in
+// model units (params.voxel_side is in model units too), so a translated or scaled copy of a model gets the
+// same voxels up to the transform.
 // Deterministic: the same cage and parameters give bit-identical output, whatever the thread count.
 // When the count search cannot reach the tolerance (tiny targets), returns the closest count found with
 // target_met = false. Throws InputError on bad parameters or a cage with non-positive volume.
