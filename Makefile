@@ -1,13 +1,16 @@
 # Two commands do everything on a fresh Debian 12 machine:
 #   make demo   install what is missing, build, run the main job on the project's default model
 #   make test   install what is missing, build, run the whole test suite
+# CI (.ci/run) adds:
+#   make check-sanitize  the unit tests built with ASan + UBSan in build-asan/ (gcc), failing on any report
+#   make fuzz            every reader's libFuzzer target (clang) for FUZZ_SECONDS each, failing on any finding
 BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 LIDEF = $(BUILD)/app/lidef
 DEMO_OUT ?= out/demo
 
-.PHONY: all deps configure build demo test bench clean format
+.PHONY: all deps configure build demo test bench clean format check-sanitize fuzz
 
 all: build
 
@@ -25,6 +28,32 @@ demo: build
 
 test: build
 	@cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 1500
+
+# ASan + UBSan build of the unit tests (README, "Sanitizers and fuzzing"). Its own build folder and flags, so the
+# normal build keeps its objects; ccache keeps both (base_dir makes worktrees share entries). -O1: ASan's usual
+# level; -g1: line tables, enough for symbolized reports and cheaper to compile than -g. Eigen's bounds
+# assertions stay on (no NDEBUG). The studio and the benchmarks are not built: the
+# studio's own tests need the X server and VTK's OpenGL stack under ASan; nothing in them is a reader.
+ASAN_BUILD ?= build-asan
+SANITIZE_FLAGS = -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+check-sanitize: deps
+	@cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Sanitize \
+	  -DCMAKE_CXX_FLAGS_SANITIZE="-O1 -g1 $(SANITIZE_FLAGS)" -DCMAKE_C_FLAGS_SANITIZE="-O1 -g1 $(SANITIZE_FLAGS)" \
+	  -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" \
+	  -DLIDEF_BUILD_STUDIO=OFF -DLIDEF_BUILD_BENCH=OFF $(CMAKE_FLAGS) > /dev/null
+	@cmake --build $(ASAN_BUILD) -j $(JOBS)
+	@bash scripts/check-sanitize.sh $(ASAN_BUILD) $(JOBS)
+
+# libFuzzer targets of fuzz/ (clang, ASan + UBSan), each run FUZZ_SECONDS, JOBS at a time; only the libraries
+# the readers need are built (target `fuzzers`). Findings: build-fuzz/fuzz-artifacts/ (fuzz/README.md).
+FUZZ_BUILD ?= build-fuzz
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	@cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_C_COMPILER=clang \
+	  -DCMAKE_CXX_COMPILER=clang++ -DLIDEF_FUZZ=ON -DLIDEF_BUILD_TESTS=OFF -DLIDEF_BUILD_STUDIO=OFF \
+	  -DLIDEF_BUILD_BENCH=OFF $(CMAKE_FLAGS) > /dev/null
+	@cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzzers
+	@bash scripts/fuzz.sh $(FUZZ_BUILD) $(FUZZ_SECONDS) $(JOBS)
 
 bench: build
 	@bash scripts/bench.sh $(BUILD)

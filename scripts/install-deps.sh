@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Installs every Debian package lidef needs (libcgal-demo: real meshes in its data.tar.gz, elephant, armadillo,
-# ..., which the automatic-cage tests extract at test time). Idempotent: returns at once when all are present.
+# ..., which the automatic-cage tests extract at test time). clang, libclang-rt-14-dev (libFuzzer, clang's
+# ASan/UBSan runtimes) and libomp-dev (OpenMP for clang) are for `make fuzz` only. Idempotent: returns at once
+# when all are present.
 set -euo pipefail
 PKGS=(
   build-essential cmake ninja-build ccache pkg-config
+  clang libclang-rt-14-dev libomp-dev
   libeigen3-dev libspectra-dev nlohmann-json3-dev libcli11-dev libgtest-dev
   libopenblas-dev
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd libclblast-dev

@@ -563,6 +563,16 @@ TEST_F(CertificateFiles, RoundTripIsExactIncludingNonFiniteValues) {
   EXPECT_THROW(read_certificate_json(tmp / "bad.json"), InputError);
   write_text(tmp / "bad.json", json.substr(0, json.size() / 2));
   EXPECT_THROW(read_certificate_json(tmp / "bad.json"), InputError);
+  // Found by fuzzing (fuzz/regressions/certificate_json/): a number beyond the double range is nlohmann's
+  // out_of_range, not its parse_error; it escaped as a JSON library exception instead of an InputError.
+  write_text(tmp / "bad.json", "{\"format\": \"lidef-certificate\", \"version\": 1e999}");
+  try {
+    read_certificate_json(tmp / "bad.json");
+    ADD_FAILURE() << "no exception";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), tmp / "bad.json");
+    EXPECT_NE(std::string(e.what()).find("1e999"), std::string::npos) << e.what();
+  }
 }
 
 // The published models: the identity certifies on each (animal has cage self-intersections: a warning, and

@@ -118,6 +118,9 @@ std::vector<BadModel> bad_models() {
   static const std::string mesh_nan = tet_mesh("v 0 NaN 0");
   static const std::string off_short = "OFF\n8 12 0\n-1 -1 -1\n1 -1 -1\n";
   static const std::string off_header = "PLY\n8 12 0\n";
+  // Found by fuzzing (fuzz/regressions/mesh_off/): the reader reserved the header's counts, so this 27-byte
+  // file asked for ~100 GB and failed with std::bad_alloc instead of an InputError.
+  static const std::string off_huge = "OFF\n2000000000 2000000000\n";
   return {
       {"empty_cage", "", tet.c_str(), "file is empty", "cage.obj"},
       {"missing_cage", nullptr, tet.c_str(), "no cage.obj or cage.off", ""},
@@ -147,6 +150,8 @@ std::vector<BadModel> bad_models() {
       {"off_truncated", off_short.c_str(), tet.c_str(), "file ends after 2 of 8 vertices", "cage.off",
        "cage.off"},
       {"off_bad_header", off_header.c_str(), tet.c_str(), "missing OFF header", "cage.off", "cage.off"},
+      {"off_huge_counts", off_huge.c_str(), tet.c_str(), "file ends after 0 of 2000000000 vertices",
+       "cage.off", "cage.off"},
   };
 }
 

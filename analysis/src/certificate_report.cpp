@@ -273,7 +273,7 @@ CertificateReport read_certificate_json(const std::string& path) {
   nlohmann::json root;
   try {
     root = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range 406 for a number such as 1e999
     throw InputError(path, std::string("not valid JSON: ") + e.what());
   }
   const Reader rd{path, root};
