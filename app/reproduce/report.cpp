@@ -15,6 +15,7 @@
 
 #include "../gnuplot.h"
 #include "lidef/atomic_file.h"
+#include "lidef/csv.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
 #include "reproduce.h"
@@ -190,40 +191,13 @@ int run_program(const std::vector<std::string>& argv, const std::string& log_pat
 std::vector<std::map<std::string, std::string>> read_csv(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw InputError(path, "cannot read");
-  auto split = [](const std::string& line) {
-    std::vector<std::string> cells;
-    std::string cur;
-    bool quoted = false;
-    for (size_t i = 0; i < line.size(); ++i) {
-      const char c = line[i];
-      if (quoted) {
-        if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
-          cur += '"';
-          ++i;
-        } else if (c == '"') {
-          quoted = false;
-        } else {
-          cur += c;
-        }
-      } else if (c == '"') {
-        quoted = true;
-      } else if (c == ',') {
-        cells.push_back(cur);
-        cur.clear();
-      } else {
-        cur += c;
-      }
-    }
-    cells.push_back(cur);
-    return cells;
-  };
   std::string line;
   if (!std::getline(in, line)) throw InputError(path, "is empty (no header)");
-  const std::vector<std::string> header = split(line);
+  const std::vector<std::string> header = split_csv_line(line);
   std::vector<std::map<std::string, std::string>> rows;
   while (std::getline(in, line)) {
     if (line.empty()) continue;
-    const std::vector<std::string> cells = split(line);
+    const std::vector<std::string> cells = split_csv_line(line);
     if (cells.size() != header.size())
       throw InputError(path, "row " + std::to_string(rows.size() + 2) + " has " +
                                  std::to_string(cells.size()) + " cells, the header " +

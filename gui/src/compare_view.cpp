@@ -23,6 +23,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "lidef/csv.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
 #include "studio_common.h"
@@ -30,35 +31,6 @@
 namespace lidef::studio {
 
 namespace {
-
-// One CSV line; quoted fields may hold commas and doubled quotes (comparison_table_csv quotes detail/error).
-std::vector<std::string> split_csv(const std::string& line) {
-  std::vector<std::string> out;
-  std::string cur;
-  bool quoted = false;
-  for (size_t i = 0; i < line.size(); ++i) {
-    const char c = line[i];
-    if (quoted) {
-      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
-        cur += '"';
-        ++i;
-      } else if (c == '"') {
-        quoted = false;
-      } else {
-        cur += c;
-      }
-    } else if (c == '"') {
-      quoted = true;
-    } else if (c == ',') {
-      out.push_back(cur);
-      cur.clear();
-    } else {
-      cur += c;
-    }
-  }
-  out.push_back(cur);
-  return out;
-}
 
 double number(const std::string& s) {
   if (s.empty()) return std::nan("");
@@ -81,7 +53,7 @@ std::vector<CompareEntry> read_compare_dir(const std::string& dir) {
   if (!in) throw InputError(path, "cannot read (is this the --out folder of lidef compare?)");
   std::string line;
   if (!std::getline(in, line)) throw InputError(path, "empty file");
-  const auto header = split_csv(line);
+  const auto header = split_csv_line(line);
   auto col = [&](const char* name) {
     const auto it = std::find(header.begin(), header.end(), name);
     if (it == header.end()) throw InputError(path, std::string("no column \"") + name + "\"", 1);
@@ -95,7 +67,7 @@ std::vector<CompareEntry> read_compare_dir(const std::string& dir) {
   while (std::getline(in, line)) {
     ++n;
     if (line.empty()) continue;
-    const auto f = split_csv(line);
+    const auto f = split_csv_line(line);
     if (f.size() != header.size())
       throw InputError(
           path, std::to_string(f.size()) + " fields, the header has " + std::to_string(header.size()), n);
