@@ -28,6 +28,11 @@ run_one() {
   local work=$BUILD/fuzz-work/$t
   mkdir -p "$work"
   local dirs=("$work" "$SRC/fuzz/corpus/$t")
+  # The published cages (../shared/data, read there, never copied into the repo) seed the OBJ reader too.
+  local shared=${LIDEF_SHARED_DATA:-$SRC/../shared/data}
+  if [ "$t" = mesh_obj ] && [ -d "$shared/models" ]; then
+    for m in "$shared"/models/*/cage.obj; do cp "$m" "$work/$(basename "$(dirname "$m")")_cage.obj"; done
+  fi
   [ -d "$SRC/fuzz/regressions/$t" ] && dirs+=("$SRC/fuzz/regressions/$t")
   local log=$BUILD/fuzz-work/$t.log
   if "$BUILD/fuzz/lidef_fuzz_$t" -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
