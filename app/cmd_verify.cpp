@@ -135,7 +135,7 @@ void add_verify_command(CLI::App& app, Action& action) {
       "\n"
       "--interval: a rigorous re-proof instead of sampling (docs/certificate.md, 'Interval re-proof'). For\n"
       "every certified leaf, J and the Hessian at its center (closed-form Green-coordinate derivatives), a\n"
-      "lower bound of sigma3, the certificate's Lipschitz constant L (first or third order, as certified) "
+      "lower bound of sigma3, the certificate's Lipschitz constant L (first order, third order or combined, as certified) "
       "and\n"
       "the margin sigma3 - r L are enclosed in intervals with outward rounding (log/atan widened by 4 "
       "ulps);\n"

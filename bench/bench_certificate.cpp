@@ -11,7 +11,10 @@
 //   by
 //             bisection so that min σ3 over the base centers is --sigma-target (default 0.45): certified,
 //             with some refinement.
-// Each (map, bound, threads) is run 2 times untimed (warm-up), then --reps times (default 10); the per-stage
+// Bounds: first, third and combined (docs/certificate.md Step 3b). The deformed map (the only one that refines)
+// is also certified with the previous per-face refinement (CertifyParams::per_edge_refinement = false) next to
+// the per-edge one (edge_jet.h), in the same run; "µs per child" = refine ms / (8 × subdivided nodes).
+// Each (map, bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default 10); the per-stage
 // times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported as median and
 // minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends on it).
 //
@@ -203,6 +206,7 @@ struct Stages {
 
 struct Row {
   std::string model, map, bound;
+  std::string refine = "per-edge";  // refinement path: per-edge (edge_jet.h) or per-face (the previous code)
   int threads = 1;
   RunResult r;
   Stages st;
@@ -481,18 +485,36 @@ int main(int argc, char** argv) {
         fail(name + ": " + validation);
     }
 
-    // Timed runs.
+    elem_f["combined"] = elem_f["third"];  // both factor matrices, each of the same element type
+    // Timed runs: every bound on both maps with the per-edge refinement; on the deformed map (the only one
+    // that refines) also the previous per-face refinement, side by side in the same run.
+    struct Config {
+      std::string map;
+      const MatX3dCol* yr;
+      LipschitzBound bound;
+      bool per_edge;
+    };
+    std::vector<Config> configs;
     for (const auto& [mapname, yr] : {std::pair<std::string, const MatX3dCol*>{"identity", &yr_id},
                                       std::pair<std::string, const MatX3dCol*>{"deformed", &yr_def}})
-      for (const LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder})
+      for (const LipschitzBound b :
+           {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
+        if (mapname == "deformed") configs.push_back({mapname, yr, b, false});
+        configs.push_back({mapname, yr, b, true});
+      }
+    for (const Config& cfg : configs)
         for (const int th : thread_counts) {
+          const std::string& mapname = cfg.map;
+          const MatX3dCol* yr = cfg.yr;
           omp_set_num_threads(th);
           CertifyParams p = timed;
-          p.bound = b;
+          p.bound = cfg.bound;
+          p.per_edge_refinement = cfg.per_edge;
           Row row;
           row.model = name;
           row.map = mapname;
-          row.bound = to_string(b);
+          row.bound = to_string(cfg.bound);
+          row.refine = cfg.per_edge ? "per-edge" : "per-face";
           row.threads = th;
           for (int k = 0; k < opt.warmup; ++k) row.r = summarize(cert.certify_reduced(*yr, p));
           for (int k = 0; k < opt.reps; ++k) {
@@ -512,19 +534,19 @@ int main(int argc, char** argv) {
             notes.push_back(name + ", " + row.bound + " bound: the deformed map is NOT certified");
           if (mapname == "deformed" && row.r.refined == 0)
             notes.push_back(name + ", " + row.bound + " bound: the deformed map needed no refinement");
-          row.bytes = 9.0 * N * s * elem_gh + double(N) * E * elem_f[row.bound];
+          row.bytes = 9.0 * N * s * elem_gh + (row.bound == "combined" ? 2.0 : 1.0) * N * E * elem_f[row.bound];
           row.flops = 2.0 * 9 * N * s * 3;
           rows.push_back(row);
-          std::cerr << "  " << mapname << ", " << row.bound << ", " << th
+          std::cerr << "  " << mapname << ", " << row.bound << ", " << row.refine << ", " << th
                     << " thread(s): " << fmt(median(row.st.tot), 1) << " ms\n";
         }
 
     // Bandwidth reference: read the same bytes (same element types) once, per thread count.
     std::map<std::pair<std::string, int>, StreamTiming> stream;
-    for (const char* b : {"first", "third"})
+    for (const char* b : {"first", "third", "combined"})
       for (const int th : thread_counts) {
-        stream[{b, th}] =
-            time_read_dispatch(elem_gh, size_t(9) * N * s, elem_f[b], size_t(N) * E, opt.reps, th);
+        const size_t factors = size_t(N) * E * (std::string(b) == "combined" ? 2 : 1);
+        stream[{b, th}] = time_read_dispatch(elem_gh, size_t(9) * N * s, elem_f[b], factors, opt.reps, th);
         std::cerr << "  read pass (" << b << " factors), " << th
                   << " thread(s): " << fmt(stream[{b, th}].median_ms, 1) << " ms\n";
       }
@@ -567,26 +589,32 @@ int main(int argc, char** argv) {
   std::cout << "\n- load average at end (/proc/loadavg): " << loadavg()
             << "; CPU pressure (/proc/pressure/cpu): " << cpu_pressure() << "\n\n";
   std::cout
-      << "| model | map | bound | threads | verdict | min σ3 | refined | leaves | total ms (median / min) | "
-         "jacobian ms | sigma ms | bound ms | refine ms | wall ms | CPU ms | MB read | GB/s (jac+bound) | "
+      << "| model | map | bound | refinement | threads | verdict | min σ3 | refined | leaves | total ms (median / "
+         "min) | jacobian ms | sigma ms | bound ms | refine ms | µs per child | wall ms | CPU ms | MB read | GB/s (jac+bound) | "
          "GFlop/s (jac) | read-pass ms | read-pass GB/s |\n";
-  std::cout << "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|-"
-               "--:|\n";
+  std::cout << "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|-"
+               "--:|---:|\n";
   for (const Row& r : rows) {
     const double jb = median(r.st.jac) + median(r.st.bnd);
-    std::cout << "| " << r.model << " | " << r.map << " | " << r.bound << " | " << r.threads << " | "
+    // Each subdivided node has 8 children, all evaluated unless a budget runs out (then fewer: an upper bound).
+    const double us_child = r.r.refined > 0 ? 1000.0 * median(r.st.ref) / (8.0 * r.r.refined) : 0.0;
+    std::cout << "| " << r.model << " | " << r.map << " | " << r.bound << " | " << r.refine << " | " << r.threads
+              << " | "
               << (r.r.certified ? "certified" : "NOT certified") << " | " << fmt(r.r.min_sigma3, 4) << " | "
               << r.r.refined << " | " << r.r.leaves << " | " << fmt(median(r.st.tot), 1) << " / "
               << fmt(minimum(r.st.tot), 1) << " | " << fmt(median(r.st.jac), 1) << " | "
               << fmt(median(r.st.sig), 1) << " | " << fmt(median(r.st.bnd), 1) << " | "
-              << fmt(median(r.st.ref), 1) << " | " << fmt(median(r.st.wall), 1) << " | "
+              << fmt(median(r.st.ref), 1) << " | " << (r.r.refined > 0 ? fmt(us_child, 1) : "-") << " | "
+              << fmt(median(r.st.wall), 1) << " | "
               << fmt(median(r.st.cpu), 1) << " | " << fmt(r.bytes / 1e6, 0) << " | "
               << fmt(r.bytes / (jb * 1e6), 2) << " | " << fmt(r.flops / (median(r.st.jac) * 1e6), 2) << " | "
               << fmt(r.stream_ms, 1) << " | " << fmt(r.stream_gbs, 2) << " |\n";
   }
   std::cout
       << "\nStage columns: medians of Certificate::ms_jacobian / ms_sigma / ms_bound / ms_refine; total = "
-         "ms_total (median / min); wall = wall clock around certify_reduced (includes y = Xi yr); CPU = "
+         "ms_total (median / min); µs per child = refine ms / (8 x refined), with refined = nodes subdivided "
+         "(each evaluates 8 children), at the given thread count; refinement = per-edge (edge_jet.h) or "
+         "per-face (the previous HarmonicBasis::differential_jet path), same map and run; wall = wall clock around certify_reduced (includes y = Xi yr); CPU = "
          "process CPU time of the call (all threads). MB read = 9|I|s + |I|#E entries at the stored "
          "element sizes; GB/s = MB read / (jacobian + bound ms); GFlop/s = 2 * 9|I| * s * 3 / jacobian ms; "
          "read-pass ms / GB/s = the same bytes read once by a plain OpenMP reduction (median over the same "

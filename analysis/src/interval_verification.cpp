@@ -8,6 +8,8 @@
 #include <cstring>
 #include <limits>
 
+#include <Eigen/Eigenvalues>
+
 #include "lidef/errors.h"
 #include "lidef/signed_svd.h"
 
@@ -165,6 +167,32 @@ double frobenius_hi(It begin, It end) {
   I s = pt(0);
   for (It it = begin; it != end; ++it) s += sq(*it);
   return hi(isqrt(s));
+}
+
+// Upper bound of the operator norm of the Hessian tensor v ↦ Σ_k v_k H_k (H_k)_ab = H[a][b][k], as a map into
+// (R³ˣ³, ‖·‖_F): sqrt(λmax(G)), G_kl = Σ_ab H[a][b][k] H[a][b][l] (docs/certificate.md, Step 3b). A candidate μ
+// slightly above the floating-point λmax of G's midpoint is proven ≥ λmax of every G in the enclosure by
+// Sylvester's criterion on μI − G (all leading principal minors > 0 in interval arithmetic); when that fails,
+// the Frobenius norm (sqrt(trace G)) is returned.
+double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
+  IM3 G = zero_m3();
+  for (int k = 0; k < 3; ++k)
+    for (int l = 0; l < 3; ++l)
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) G[k][l] += H[a][b][k] * H[a][b][l];
+  Mat3 mid;
+  for (int k = 0; k < 3; ++k)
+    for (int l = 0; l < 3; ++l) mid(k, l) = 0.5 * (lo(G[k][l]) + hi(G[k][l]));
+  if (!mid.allFinite()) return frobenius;
+  const double lmax = Eigen::SelfAdjointEigenSolver<Mat3>(mid, Eigen::EigenvaluesOnly).eigenvalues()(2);
+  const double tr = std::max(0.0, mid.trace());
+  const I mu = pt(std::max(lmax, 0.0) * (1 + 1e-9) + 1e-9 * tr + 1e-300);
+  const I m00 = mu - G[0][0], m11 = mu - G[1][1], m22 = mu - G[2][2];
+  const I d2 = m00 * m11 - sq(G[0][1]);
+  const I d3 = m00 * (m11 * m22 - sq(G[1][2])) - G[0][1] * (G[0][1] * m22 - G[1][2] * G[0][2]) +
+               G[0][2] * (G[0][1] * G[1][2] - m11 * G[0][2]);
+  if (!(lo(m00) > 0 && lo(d2) > 0 && lo(d3) > 0)) return frobenius;
+  return std::min(frobenius, hi(isqrt(mu)));
 }
 
 double sigma3_lower_bound_i(const IM3& J) {
@@ -432,16 +460,17 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
   const double r = hi(isqrt(pt(3)) / pt(2) * h + shift);
   res.radius_hi = r;
 
-  const bool third = im.bound == LipschitzBound::kThirdOrder;
+  const bool third = im.bound != LipschitzBound::kFirstOrder;  // ‖H(c)‖ and Σ δ Θ (third, combined)
+  const bool combined = im.bound == LipschitzBound::kCombined;
   IM3 J;
   std::array<IM3, 3> H;
   im.jet(c, J, H, third);
   res.sigma3_lo = sigma3_lower_bound_i(J);
 
-  I sum = pt(0);
+  I sum = pt(0), sum1 = pt(0);  // Σ δ Θ (third, combined) or Σ δ Γ (first); Σ δ Γ (combined)
   for (const Impl::Edge& e : im.edges) {
-    const double f = im.edge_factor_hi(e, c, r, third);
-    sum += pt(e.delta_hi) * pt(f);
+    sum += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, third));
+    if (combined) sum1 += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, false));
   }
   I L = sum;
   if (third) {
@@ -449,7 +478,13 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b)
         for (int k = 0; k < 3; ++k) hs[9 * a + 3 * b + k] = pt(abs_hi(H[a][b][k]));
-    L = pt(frobenius_hi(hs.begin(), hs.end())) + pt(r) * sum;
+    const double frob = frobenius_hi(hs.begin(), hs.end());
+    L = pt(frob) + pt(r) * sum;
+    // Combined: min(first order, Taylor form ‖H(c)‖_op + ½ r Σ δ Θ); both are upper bounds, so is the min.
+    if (combined) {
+      const I taylor = pt(hessian_operator_norm_hi(H, frob)) + pt(r) * sum / pt(2);
+      L = pt(std::min(hi(sum1), hi(taylor)));
+    }
   }
   res.L_hi = std::isnan(hi(L)) ? kInf : hi(L);
   const I margin = pt(res.sigma3_lo) - pt(r) * pt(res.L_hi);

@@ -1,5 +1,6 @@
 #include "lidef/lipschitz_bound.h"
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <limits>
 
@@ -27,7 +28,7 @@ double first_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, doub
   const double h = edge_sum_lower_bound(u, w, p, r);
   if (!(h > d) || (u - p).norm() <= r || (w - p).norm() <= r) return kInf;
   // |α| ≤ m / (2π(m²−d²)),  |β| ≤ 2d / (2π(m²−d²)), both decreasing in m.
-  return std::sqrt(h * h + 4 * d * d) / (2 * M_PI * (h * h - d * d));
+  return first_order_factor(h, d);
 }
 
 double third_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r) {
@@ -35,11 +36,21 @@ double third_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, doub
   const double h = edge_sum_lower_bound(u, w, p, r);
   const double a = (u - p).norm() - r, b = (w - p).norm() - r;  // lower bounds of |l_u|, |l_w| on the ball
   if (!(h > d) || !(a > 0) || !(b > 0)) return kInf;
-  const double md2 = (h * h - d * d) * (h * h - d * d);
-  const double nn = (a * b) * (a * b);
-  const double b66 = (1.0 + h * h * d * d / nn) / (M_PI * M_PI * md2);
-  const double b67 = 3.0 * h * h * d * d / (2.0 * M_PI * M_PI * md2 * nn);
-  return std::sqrt(b66 + b67);
+  return third_order_factor(h, d, a, b);
+}
+
+// sup_{|v|=1} ‖Σ_k v_k H_k‖_F² = sup vᵀ G v = λmax(G), G_kl = Σ_ab H[a](b,k) H[a](b,l) = Σ_a (H[a]ᵀ H[a])_kl.
+// The symmetric eigensolver is backward stable (the computed eigenvalues are exact for G + ΔG with
+// ‖ΔG‖₂ ≤ c·u·‖G‖₂, c a small constant for n = 3), and ‖G‖₂ ≤ trace G = ‖H‖_F², so adding 10⁻¹²·trace G
+// (≈ 4500 u) makes it an upper bound. λmax ≤ trace G also caps it at the Frobenius norm.
+double hessian_operator_norm(const std::array<Mat3, 3>& H) {
+  Mat3 G = Mat3::Zero();
+  for (int a = 0; a < 3; ++a) G.noalias() += H[a].transpose() * H[a];
+  const double tr = G.trace();
+  if (!std::isfinite(tr)) return kInf;
+  if (tr == 0) return 0;
+  const double lmax = Eigen::SelfAdjointEigenSolver<Mat3>(G, Eigen::EigenvaluesOnly).eigenvalues()(2);
+  return std::sqrt(std::min(tr, std::max(lmax, 0.0) + 1e-12 * tr));
 }
 
 double alpha_beta_norm2(const Vec3& u, const Vec3& w, const Vec3& q) {
@@ -68,13 +79,22 @@ double grad_beta_norm2_closed_form(const Vec3& u, const Vec3& w, const Vec3& q) 
 }
 
 const char* to_string(LipschitzBound b) {
-  return b == LipschitzBound::kFirstOrder ? "first" : "third";
+  switch (b) {
+    case LipschitzBound::kFirstOrder:
+      return "first";
+    case LipschitzBound::kThirdOrder:
+      return "third";
+    case LipschitzBound::kCombined:
+      return "combined";
+  }
+  return "third";
 }
 
 LipschitzBound lipschitz_bound_from_string(const std::string& s) {
   if (s == "first") return LipschitzBound::kFirstOrder;
   if (s == "third") return LipschitzBound::kThirdOrder;
-  throw InputError("", "unknown bound '" + s + "' (expected 'first' or 'third')");
+  if (s == "combined") return LipschitzBound::kCombined;
+  throw InputError("", "unknown bound '" + s + "' (expected 'first', 'third' or 'combined')");
 }
 
 }  // namespace lidef

@@ -6,6 +6,7 @@
 #include <limits>
 #include <mutex>
 
+#include "lidef/edge_jet.h"
 #include "lidef/errors.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/signed_svd.h"
@@ -57,6 +58,7 @@ struct OctreeCertifier::Impl {
   // Backend kernels (nullptr: the CPU code below) and which factor matrices they hold.
   std::unique_ptr<CertifierKernels> kernels;
   mutable bool kernels_first = false, kernels_third = false;
+  std::unique_ptr<EdgeJet> edge_jet;  // per-edge evaluation of octree children (edge_jet.h)
 };
 
 OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
@@ -67,6 +69,7 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
   if (sampling.size() == 0) throw InputError("", "no voxels to certify");
   Impl& im = *impl_;
   im.reduction = reduction;
+  im.edge_jet = std::make_unique<EdgeJet>(cage);
   for (const CageEdge& e : cage.edges) {
     im.eu.push_back(cage.V.row(e.v0));
     im.ew.push_back(cage.V.row(e.v1));
@@ -167,7 +170,8 @@ struct OctreeCertifier::Run {
     Vec3 c;
     double side;
     int depth;
-    double bound;     // third: Σ δ Θ over the node's ball; first: L over the node's ball
+    double bound;     // third, combined: Σ δ Θ over the node's ball; first: L over the node's ball
+    double bound_first;  // combined: Σ δ Γ over the node's ball (first-order L)
     long fi;          // index into failing_base
     int first_child;  // index of the first of its 8 children in `tree` (−1: a leaf)
     CertLeaf leaf;
@@ -189,12 +193,14 @@ struct OctreeCertifier::Run {
   const CertifyParams& p;
   const long N, E;
   const double side, r;
-  const bool third;
+  const bool third;     // ‖H(c)‖ and Σ δ Θ needed (third and combined)
+  const bool combined;  // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
   // Base voxels.
   VecXd scaleJ, scaleH, hnorm, sigma3, T, delta;
+  VecXd hop, T1;  // combined: operator-norm bound of H(c) and the first-order Σ δ Γ
   std::vector<Mat3> Jc;
   std::vector<char> sign_unresolved;  // per base voxel: det J's sign at the center not resolved
   std::vector<double> device_Y;       // coefficients for the backend's base stage (empty: CPU)
@@ -218,7 +224,8 @@ struct OctreeCertifier::Run {
         E(o.cage_.num_edges()),
         side(o.sampling_.side),
         r(o.sampling_.radius()),
-        third(params.bound == LipschitzBound::kThirdOrder),
+        third(params.bound != LipschitzBound::kFirstOrder),
+        combined(params.bound == LipschitzBound::kCombined),
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
         fm(o.basis_.face_matrices(y_)) {
     cert.bound = p.bound;
@@ -228,12 +235,19 @@ struct OctreeCertifier::Run {
 
   // Exact J, ‖H‖ and rounding scales at any point, from the full coefficients through the differential
   // representation (one pass over the faces per point; see HarmonicBasis::differential_jet).
-  void eval_point(const Vec3& c, Mat3& J, double& hn, double& sJ, double& sH) const {
+  void eval_point(const Vec3& c, Mat3& J, double& hn, double& sJ, double& sH, double* hn_op = nullptr) const {
     const MapJet jet = oc.basis_.differential_jet(fm, c, third ? 2 : 1, &sJ, &sH);
     J = jet.J;
     hn = third ? jet.hessian_norm() : 0.0;
+    if (hn_op) *hn_op = combined ? hessian_operator_norm(jet.H) : 0.0;
   }
-  double lipschitz(double hn, double t, double rad) const { return third ? hn + rad * t : t; }
+  // The L of condition (6), so that the loss over the leaf is rad·L (docs/certificate.md, Steps 1-3b):
+  //   first: t1;  third: ‖H(c)‖_F + rad·t3;  combined: min(t1, ‖H(c)‖_op + ½ rad·t3) — the Taylor form
+  //   |σ3(q) − σ3(c)| ≤ |q−c| ‖H(c)‖_op + ½ |q−c|² t3 ≤ rad (‖H(c)‖_op + ½ rad t3) for |q − c| ≤ rad.
+  double lipschitz(double hn, double hn_op, double t1, double t3, double rad) const {
+    if (combined) return std::min(t1, hn_op + 0.5 * rad * t3);
+    return third ? hn + rad * t3 : t1;
+  }
   // Allowance for rounding: kRoundingRel covers the double-precision evaluation and summation (relative to
   // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
   // within 2⁻²⁴ of the exact one, so Σ|ΔJ_ab| ≤ 2⁻²⁴·3·cmax·Σ|G| and ‖ΔH‖_F ≤ 2⁻²⁴·6·cmax·Σ|H|, and by
@@ -249,6 +263,7 @@ struct OctreeCertifier::Run {
     scaleJ.resize(N);
     scaleH.resize(N);
     hnorm.resize(N);
+    hop.setZero(N);
     Jc.resize(N);
     if (use_stored) {
       std::vector<double> Ycols = coefficient_columns();
@@ -258,14 +273,14 @@ struct OctreeCertifier::Run {
         scaleJ(i) = im.scale_J(i) * cmax;
         scaleH(i) = im.scale_H(i) * cmax;
       }
-      if (im.kernels)
+      if (im.kernels && !combined)
         device_Y = std::move(Ycols);  // the backend's base stage also forms T (stage 3)
       else
         stored_derivatives(Ycols);
     } else {
 #pragma omp parallel for schedule(dynamic, 64)
       for (long i = 0; i < N; ++i)
-        eval_point(oc.sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i));
+        eval_point(oc.sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), &hop(i));
     }
     cert.ms_jacobian = ms_since(t0);
   }
@@ -308,6 +323,12 @@ struct OctreeCertifier::Run {
       for (int a = 0; a < 3; ++a)
         for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
       hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
+      if (combined) {
+        std::array<Mat3, 3> H;
+        for (int a = 0; a < 3; ++a)
+          H[a] << H6[a][0], H6[a][1], H6[a][2], H6[a][1], H6[a][3], H6[a][4], H6[a][2], H6[a][4], H6[a][5];
+        hop(i) = hessian_operator_norm(H);
+      }
     }
   }
 
@@ -332,8 +353,7 @@ struct OctreeCertifier::Run {
   void base_bounds() {
     const auto t0 = Clock::now();
     delta = oc.delta_norms(fm);
-    const auto& factors = factor_matrix();
-    const std::vector<char>& row_finite = third ? im.third_finite : im.first_finite;
+    const auto& factors = factor_matrix(third);
     T.resize(N);
     double device_ms = 0;
     const bool on_device = !device_Y.empty();
@@ -349,28 +369,14 @@ struct OctreeCertifier::Run {
       device_ms = ms_since(td);
       cert.ms_jacobian += device_ms;
     }
-    // An edge whose factor is +∞ (the voxel's ball may touch it) makes L infinite unless δ_e = 0 exactly
-    // (then H does not depend on it). Rows without an infinite factor take a branch-free, vectorized dot
-    // product.
-    const double* dl = delta.data();
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < (on_device ? 0 : N); ++i) {
-      double s = 0;
-      const float* f = factors.row(i).data();
-      if (row_finite[i]) {
-#pragma omp simd reduction(+ : s)
-        for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
-      } else {
-        for (long e = 0; e < E; ++e)
-          if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
-      }
-      T(i) = s;
-    }
+    if (!on_device) factor_sums(factors, third ? im.third_finite : im.first_finite, T);
+    if (combined) factor_sums(factor_matrix(false), im.first_finite, T1);
+    const VecXd& Tf = combined ? T1 : T;  // first-order sums (first, combined)
     cert.min_sigma3_center = sigma3.minCoeff();
     const double base_storage = use_stored ? kFloatStorageRel : 0.0;
     base.resize(N);
     for (long i = 0; i < N; ++i) {
-      const double L = lipschitz(hnorm(i), T(i), r);
+      const double L = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
       const double lb = sigma3(i) - r * L;
       const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage);
       base[i] = {oc.sampling_.centers.row(i).transpose(),
@@ -386,8 +392,30 @@ struct OctreeCertifier::Run {
     }
     cert.ms_bound = ms_since(t0) - device_ms;
   }
-  // The factor matrix of the chosen bound, built on first use (it depends only on the cage and the voxels).
-  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix() const {
+  // T_i = Σ_e δ_e F(i, e) for every base voxel. An edge whose factor is +∞ (the voxel's ball may touch it)
+  // makes L infinite unless δ_e = 0 exactly (then H does not depend on it). Rows without an infinite factor
+  // take a branch-free, vectorized dot product.
+  void factor_sums(const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factors,
+                   const std::vector<char>& row_finite, VecXd& out) const {
+    out.resize(N);
+    const double* dl = delta.data();
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      double s = 0;
+      const float* f = factors.row(i).data();
+      if (row_finite[i]) {
+#pragma omp simd reduction(+ : s)
+        for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
+      } else {
+        for (long e = 0; e < E; ++e)
+          if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
+      }
+      out(i) = s;
+    }
+  }
+  // The factor matrix of one bound (third order, or first order), built on first use (it depends only on the
+  // cage and the voxels).
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix(bool third_kind) const {
     auto build = [&](auto& mat, std::vector<char>& finite,
                      double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
       mat.resize(N, E);
@@ -399,7 +427,7 @@ struct OctreeCertifier::Run {
           if (!std::isfinite(mat(i, e))) finite[i] = 0;
         }
     };
-    if (third) {
+    if (third_kind) {
       std::call_once(im.third_once, [&] { build(im.third, im.third_finite, &third_order_edge_factor); });
       return im.third;
     }
@@ -424,7 +452,7 @@ struct OctreeCertifier::Run {
         if (p.stop_on_failure) abort = true;
         continue;
       }
-      vs[fi].first_child = add_children(base[i].center, side, 0, T(i), fi);
+      vs[fi].first_child = add_children(base[i].center, side, 0, T(i), combined ? T1(i) : 0.0, fi);
     }
     std::vector<int> batch;
     std::vector<NodeValues> vals;
@@ -440,11 +468,11 @@ struct OctreeCertifier::Run {
     }
     cert.ms_refine = ms_since(t0);
   }
-  int add_children(const Vec3& c, double sd, int depth, double bound, long fi) {
+  int add_children(const Vec3& c, double sd, int depth, double bound, double bound_first, long fi) {
     const int first = static_cast<int>(tree.size());
     for (int k = 0; k < 8; ++k) {
       const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
-      tree.push_back({c + sd * off, sd / 2, depth + 1, bound, fi, -1, {}});
+      tree.push_back({c + sd * off, sd / 2, depth + 1, bound, bound_first, fi, -1, {}});
       frontier.push_back(first + k);
     }
     return first;
@@ -475,7 +503,7 @@ struct OctreeCertifier::Run {
   void evaluate_batch(const std::vector<int>& batch, std::vector<NodeValues>& vals) const {
     const long nb = static_cast<long>(batch.size());
     vals.assign(nb, {});
-    if (im.kernels && nb > 0) {
+    if (im.kernels && !combined && nb > 0) {
       MatX3d bc(nb, 3);
       VecXd brad(nb);
       for (long q = 0; q < nb; ++q) {
@@ -485,13 +513,19 @@ struct OctreeCertifier::Run {
       im.kernels->evaluate_nodes(fm.A, fm.AD, fm.A_abs, delta, third, bc, brad, vals);
       return;
     }
+    if (p.per_edge_refinement) {
+      if (!edge_data) edge_data = std::make_unique<EdgeJet::MapData>(im.edge_jet->prepare(fm));
+#pragma omp parallel for schedule(dynamic, 4)
+      for (long q = 0; q < nb; ++q) evaluate_node_per_edge(tree[batch[q]], vals[q]);
+      return;
+    }
 #pragma omp parallel for schedule(dynamic, 4)
     for (long q = 0; q < nb; ++q) {
       const Node& nd = tree[batch[q]];
       const double rad = 0.5 * std::sqrt(3.0) * nd.side;
       Mat3 J;
       NodeValues& v = vals[q];
-      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H);
+      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H, &v.hnorm_op);
       bool resolved = true;
       v.sigma3 = signed_singular_values(J, &resolved)(2);
       v.sign_unresolved = !resolved;
@@ -501,8 +535,30 @@ struct OctreeCertifier::Run {
           own += delta(e) * (third ? third_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad)
                                    : first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad));
       v.own_bound = own;
+      if (combined) {
+        double own1 = 0;
+        for (long e = 0; e < E; ++e)
+          if (delta(e) != 0) own1 += delta(e) * first_order_edge_factor(im.eu[e], im.ew[e], nd.c, rad);
+        v.own_first = own1;
+      }
     }
   }
+  // One node through the per-edge representation (edge_jet.h): J, H and both factor sums in one pass.
+  void evaluate_node_per_edge(const Node& nd, NodeValues& v) const {
+    const double rad = 0.5 * std::sqrt(3.0) * nd.side;
+    EdgeJet::Values ev;
+    im.edge_jet->evaluate(*edge_data, nd.c, rad, third, !third || combined, third, ev);
+    v.scale_J = ev.scale_J;
+    v.scale_H = ev.scale_H;
+    bool resolved = true;
+    v.sigma3 = signed_singular_values(ev.J, &resolved)(2);
+    v.sign_unresolved = !resolved;
+    if (third) v.hnorm = std::sqrt(ev.H[0].squaredNorm() + ev.H[1].squaredNorm() + ev.H[2].squaredNorm());
+    if (combined) v.hnorm_op = hessian_operator_norm(ev.H);
+    v.own_bound = third ? ev.T_third : ev.T_first;
+    v.own_first = ev.T_first;
+  }
+  mutable std::unique_ptr<EdgeJet::MapData> edge_data;  // built on the first refinement batch
   // Condition (6) at each node of the batch, in order: a certified leaf, a failed leaf, or 8 children.
   void decide_batch(const std::vector<int>& batch, const std::vector<NodeValues>& vals) {
     for (size_t q = 0; q < batch.size(); ++q) {
@@ -517,7 +573,8 @@ struct OctreeCertifier::Run {
       st.min_sigma = std::min(st.min_sigma, v.sigma3);
       const double rad = 0.5 * std::sqrt(3.0) * sd;
       const double bnd = std::min(tree[id].bound, v.own_bound);
-      const double L = lipschitz(v.hnorm, bnd, rad);
+      const double bnd1 = combined ? std::min(tree[id].bound_first, v.own_first) : bnd;
+      const double L = lipschitz(v.hnorm, v.hnorm_op, bnd1, bnd, rad);
       const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
       const int bi = static_cast<int>(failing_base[fi]);
       if (margin > 0) {
@@ -531,7 +588,7 @@ struct OctreeCertifier::Run {
         if (p.stop_on_failure) abort = true;
       } else {
         ++st.refined;
-        const int first = add_children(c, sd, depth, bnd, fi);
+        const int first = add_children(c, sd, depth, bnd, bnd1, fi);
         tree[id].first_child = first;
       }
     }

@@ -55,6 +55,7 @@ struct CertifierData {
 // sign_unresolved: det J's sign at the center is not resolved in double precision (σ3 is then 0).
 struct NodeValues {
   double sigma3 = 0, hnorm = 0, own_bound = 0, scale_J = 0, scale_H = 0;
+  double hnorm_op = 0, own_first = 0;  // bound "combined" only (CPU): ‖H‖_op bound and Σ_e δ_e Γ_e
   bool sign_unresolved = false;
 };
 

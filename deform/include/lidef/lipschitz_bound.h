@@ -8,16 +8,43 @@
 // Both use that m/(m²−d²) and 1/(m²−d²) decrease in m > d, so the worst case is the smallest m.
 // A ball that touches the edge (h ≤ d, or |p−u| ≤ r, or |p−w| ≤ r) gets +∞: never certifiable.
 #pragma once
+#include <array>
+#include <cmath>
 #include <string>
 
 #include "lidef/types.h"
 
 namespace lidef {
 
-// Which bound the certificate uses: first order (17) or third order (21) (octree_certifier.h).
-enum class LipschitzBound { kFirstOrder, kThirdOrder };
-const char* to_string(LipschitzBound b);                           // "first" / "third"
+// Which bound the certificate uses (octree_certifier.h, docs/certificate.md Steps 1-3 and 3b):
+//   first     (17): loss r·Σ δ Γ
+//   third     (21): loss r·(‖H(c)‖_F + r Σ δ Θ)
+//   combined  (Step 3b): per leaf the smaller of the first-order loss and the Taylor form
+//                        r ‖H(c)‖_op + ½ r² Σ δ Θ (Weyl + second-order Taylor of J, operator norm of H(c)).
+enum class LipschitzBound { kFirstOrder, kThirdOrder, kCombined };
+const char* to_string(LipschitzBound b);                           // "first" / "third" / "combined"
 LipschitzBound lipschitz_bound_from_string(const std::string& s);  // throws InputError
+
+// The per-edge factors as functions of the ball-dependent lower bounds, shared by the per-voxel factors below
+// and the per-edge evaluation of octree children (edge_jet.h): h = lower bound of m over the ball (> d),
+// a, b = lower bounds of |q−u|, |q−w| over the ball (> 0). Callers check h > d (and a, b > 0) first.
+inline double first_order_factor(double h, double d) {
+  return std::sqrt(h * h + 4 * d * d) / (2 * M_PI * (h * h - d * d));
+}
+inline double third_order_factor(double h, double d, double a, double b) {
+  const double md2 = (h * h - d * d) * (h * h - d * d);
+  const double nn = (a * b) * (a * b);
+  const double b66 = (1.0 + h * h * d * d / nn) / (M_PI * M_PI * md2);
+  const double b67 = 3.0 * h * h * d * d / (2.0 * M_PI * M_PI * md2 * nn);
+  return std::sqrt(b66 + b67);
+}
+
+// An upper bound of the operator norm of the Hessian tensor as a map R³ → (R³ˣ³, ‖·‖_F), v ↦ Σ_k v_k H_k
+// with (H_k)_ab = ∂J_ab/∂p_k = H[a](b, k): sqrt of the largest eigenvalue of the Gram matrix
+// G_kl = ⟨H_k, H_l⟩_F, plus a rounding allowance, and never above the 27-entry Frobenius norm. It bounds the
+// ‖·‖₂ version as well (‖M‖₂ ≤ ‖M‖_F). H[a] = ∂²f_a/∂p∂p (MapJet's layout).
+double hessian_operator_norm(const std::array<Mat3, 3>& H);
+
 
 // Lower bound of |q−u| + |q−w| over q in the ball B(p, r): the larger of
 // (|p−u| − r) + (|p−w| − r)  and  2 sqrt(ρ² + d²/4), ρ = max(0, dist(p, line uw) − r).

@@ -32,6 +32,9 @@ struct CertifyParams {
       4096;                      // budget per base voxel (a full depth-4 subtree); exhausted = not certified
   bool stop_on_failure = false;  // return as soon as the verdict is "not certified" (line search)
   bool keep_leaves = true;       // fill Certificate::leaves (reports); the verdict never depends on it
+  // CPU refinement through the per-edge representation (edge_jet.h: one pass per child for J, H and the
+  // bound); false: the previous per-face evaluation (benchmarks compare the two in one run).
+  bool per_edge_refinement = true;
   int max_failing_reported = 20;
 };
 

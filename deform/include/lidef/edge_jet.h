@@ -1,0 +1,63 @@
+// J, H and the per-ball Lipschitz factor sums of one map at new points (octree children), from the
+// differential representation regrouped by undirected cage edge (docs/certificate.md, Step 4b):
+//   J(p) = Σ_t ω_t A_t − Σ_e C_e δ_e [d̂_e]×,   H(p) = −Σ_e (δ_e ∘ α_e + (δ_e [d̂_e]×) ∘ β_e),
+// δ_e = Σ_{t ∋ e} s_t A_t with s_t = ±1 the orientation of e in face t relative to e = (v0 → v1). The two
+// faces of an edge share C_e, α_e (up to sign) and β_e, so one point costs #V norms, #F solid angles and #E
+// edge terms (one log each) instead of 3#F half-edge terms (HarmonicBasis::differential_jet); the same
+// per-edge distances give the factors of both Lipschitz bounds over the ball B(p, r) (lipschitz_bound.h) in
+// the same pass.
+#pragma once
+#include <array>
+#include <vector>
+
+#include "lidef/cage.h"
+#include "lidef/green_coordinates.h"
+#include "lidef/types.h"
+
+namespace lidef {
+
+class EdgeJet {
+ public:
+  explicit EdgeJet(const Cage& cage);
+
+  // Everything that depends on the map: per face A_t, per edge δ_e, δ_e[d̂_e]×, ‖δ_e‖_F and rounding scales.
+  struct MapData {
+    struct Edge {
+      Mat3 delta, delta_x;  // δ_e and δ_e [d̂_e]× (oriented v0 → v1)
+      double norm = 0;      // ‖A_{f0} − A_{f1}‖_F (the factor weight of both bounds)
+      double scale_a = 0;  // Σ over its 2 faces of max(‖A_t‖₁, A_abs_t)    (rounding scale of α terms)
+      double scale_ad = 0;  // Σ over its 2 faces of max(‖A_t[d̂]×‖₁, 2 A_abs_t) (rounding scale of C, β terms)
+      int v0 = 0, v1 = 0;
+      double d = 0;  // edge length
+    };
+    std::vector<Mat3> A;          // #F
+    std::vector<double> scale_A;  // #F: max(‖A_t‖₁, A_abs_t)
+    std::vector<Edge> edges;      // only the edges with δ_e ≠ 0: the others contribute nothing
+  };
+  MapData prepare(const HarmonicBasis::FaceMatrices& fm) const;
+
+  struct Values {
+    Mat3 J = Mat3::Zero();
+    std::array<Mat3, 3> H{Mat3::Zero(), Mat3::Zero(), Mat3::Zero()};
+    double scale_J = 0, scale_H = 0;  // as HarmonicBasis::differential_jet's scale_J / scale_H
+    double T_first = 0;  // Σ_e ‖δ_e‖ Γ_e(B(p, r))   (first order, +∞ when the ball nears an edge)
+    double T_third = 0;  // Σ_e ‖δ_e‖ Θ_e(B(p, r))   (third order, idem)
+  };
+  // J always; H (and scale_H) when `hessian`; T_first / T_third when asked (left 0 otherwise).
+  void evaluate(const MapData& md, const Vec3& p, double r, bool hessian, bool want_first, bool want_third,
+                Values& out) const;
+
+ private:
+  std::vector<Vec3> x_;                    // #V vertex positions
+  std::vector<std::array<int, 3>> faces_;  // #F
+  struct EdgeConst {
+    int v0, v1, f0, f1;
+    int s0, s1;  // orientation of (v0 → v1) in f0 / f1 as HarmonicBasis's half-edge (u → w): ±1
+    int k0, k1;  // local index of the opposite vertex in f0 / f1
+    Vec3 dhat;
+    double d;
+  };
+  std::vector<EdgeConst> edges_;
+};
+
+}  // namespace lidef

@@ -1,0 +1,200 @@
+// The combined Lipschitz bound (docs/certificate.md, Step 3b) and the per-edge evaluation of octree children
+// (edge_jet.h) against independent truths: the per-face differential representation and the basis, sampled
+// maxima of |σ3(q) − σ3(c)| on random balls (also balls reaching the cage's clearance), sampled directions of
+// the Hessian tensor, and whole certificates under dense sampling.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "lidef/certificate_verification.h"
+#include "lidef/edge_jet.h"
+#include "lidef/lipschitz_bound.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/sampling.h"
+#include "lidef/signed_svd.h"
+#include "test_cages.h"
+
+using namespace lidef;
+
+namespace {
+
+Vec3 random_unit(std::mt19937& rng) {
+  std::normal_distribution<double> N01;
+  return Vec3(N01(rng), N01(rng), N01(rng)).normalized();
+}
+
+// A map with a bent, non-affine Jacobian: identity plus random perturbations of every coefficient.
+MatX3d perturbed_map(const Cage& cage, double amp, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  for (int i = 0; i < y.rows(); ++i) y.row(i) += amp * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
+  return y;
+}
+
+}  // namespace
+
+TEST(EdgeJet, MatchesPerFaceRepresentationAndPerEdgeFactors) {
+  const Cage cage(lidef::test::icosphere(1, 0.2, 3));
+  const HarmonicBasis B(cage);
+  const EdgeJet ej(cage);
+  const MatX3d y = perturbed_map(cage, 0.2, 5);
+  const auto fm = B.face_matrices(y);
+  const EdgeJet::MapData md = ej.prepare(fm);
+  VecXd delta(cage.num_edges());
+  for (int e = 0; e < cage.num_edges(); ++e)
+    delta(e) = (fm.A[cage.edges[e].f0] - fm.A[cage.edges[e].f1]).norm();
+  const MatX3d P = lidef::test::interior_points(cage, 20, 0.05);
+  for (int i = 0; i < P.rows(); ++i) {
+    const Vec3 p = P.row(i);
+    const double r = 0.5 * cage.distance(p);
+    double sJ = 0, sH = 0;
+    const MapJet ref = B.differential_jet(fm, p, 2, &sJ, &sH);
+    const MapJet basis = B.map_jet(y, p, 2);
+    EdgeJet::Values v;
+    ej.evaluate(md, p, r, true, true, true, v);
+    EXPECT_LT((v.J - ref.J).norm(), 1e-12 * sJ);
+    EXPECT_LT((v.J - basis.J).norm(), 1e-9 * basis.J.norm());
+    double dH = 0;
+    for (int a = 0; a < 3; ++a) dH += (v.H[a] - ref.H[a]).squaredNorm();
+    EXPECT_LT(std::sqrt(dH), 1e-12 * sH);
+    EXPECT_NEAR(v.scale_J, sJ, 1e-9 * sJ);
+    EXPECT_NEAR(v.scale_H, sH, 1e-9 * sH);
+    double t1 = 0, t3 = 0;
+    for (int e = 0; e < cage.num_edges(); ++e) {
+      const Vec3 u = cage.V.row(cage.edges[e].v0), w = cage.V.row(cage.edges[e].v1);
+      t1 += delta(e) * first_order_edge_factor(u, w, p, r);
+      t3 += delta(e) * third_order_edge_factor(u, w, p, r);
+    }
+    EXPECT_NEAR(v.T_first, t1, 1e-12 * t1);
+    EXPECT_NEAR(v.T_third, t3, 1e-12 * t3);
+  }
+}
+
+TEST(CombinedBound, HessianOperatorNormBoundsEverySampledDirection) {
+  std::mt19937 rng(8);
+  std::normal_distribution<double> N01;
+  for (int trial = 0; trial < 200; ++trial) {
+    std::array<Mat3, 3> H;
+    for (int a = 0; a < 3; ++a) {
+      const Mat3 M = Mat3::Random() * std::pow(10.0, N01(rng));
+      H[a] = M + M.transpose();  // Hessians are symmetric
+    }
+    if (trial % 5 == 0) H[1] = 1e-8 * H[0];  // nearly rank-deficient Gram matrices
+    const double op = hessian_operator_norm(H);
+    const double frob = std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
+    EXPECT_LE(op, frob);
+    double best = 0;
+    for (int k = 0; k < 2000; ++k) {
+      const Vec3 v = random_unit(rng);
+      Mat3 M;  // Σ_k v_k H_k with (H_k)_ab = H[a](b, k)
+      for (int a = 0; a < 3; ++a) M.row(a) = (H[a] * v).transpose();
+      best = std::max(best, M.norm());
+      ASSERT_LE(M.norm(), op * (1 + 1e-14));
+    }
+    EXPECT_GT(best, 0.99 * op);  // and it is tight: the sampled supremum comes within 1%
+  }
+}
+
+// For balls around random interior points, with radius from the distance to the cage over a safety factor
+// (1.0: the ball touches the cage, as the clearance allows at the limit), the Taylor form and the first-order
+// bound hold at sampled points: |σ3(q) − σ3(c)| ≤ |q−c| ‖H(c)‖_op + ½|q−c|² T3 and ≤ |q−c| T1.
+TEST(CombinedBound, HoldsOnSampledPointsOfRandomBallsUpToTheClearance) {
+  const Cage cage(lidef::test::icosphere(1, 0.2, 3));
+  const HarmonicBasis B(cage);
+  const EdgeJet ej(cage);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> U(0, 1);
+  int balls = 0, tight_taylor = 0;
+  double worst = 0;
+  for (double amp : {0.02, 0.1, 0.3}) {
+    const MatX3d y = perturbed_map(cage, amp, 10 + static_cast<unsigned>(100 * amp));
+    const EdgeJet::MapData md = ej.prepare(B.face_matrices(y));
+    const MatX3d P = lidef::test::interior_points(cage, 25, 0.02, 11);
+    for (int i = 0; i < P.rows(); ++i)
+      for (double safety : {1.0, 1.5, 3.0}) {
+        const Vec3 c = P.row(i);
+        const double r = cage.distance(c) / safety * (1 - 1e-9);
+        EdgeJet::Values v;
+        ej.evaluate(md, c, r, true, true, true, v);
+        if (!std::isfinite(v.T_third) || !std::isfinite(v.T_first)) continue;
+        ++balls;
+        const double s0 = signed_singular_values(B.map_jet(y, c, 1).J)(2);
+        const double hop = hessian_operator_norm(v.H);
+        for (int k = 0; k < 300; ++k) {
+          const double s = r * (k % 2 ? 1.0 : std::cbrt(U(rng)));
+          const Vec3 q = c + s * random_unit(rng);
+          const double diff = std::abs(signed_singular_values(B.map_jet(y, q, 1).J)(2) - s0);
+          const double taylor = s * hop + 0.5 * s * s * v.T_third;
+          ASSERT_LE(diff, taylor * (1 + 1e-9) + 1e-12) << "Taylor form";
+          ASSERT_LE(diff, s * v.T_first * (1 + 1e-9) + 1e-12) << "first order";
+          worst = std::max(worst, diff / std::min(taylor, s * v.T_first));
+          if (taylor < s * v.T_first) ++tight_taylor;
+        }
+      }
+  }
+  std::cout << balls << " balls; largest sampled |Δσ3| / bound = " << worst << "\n";
+  EXPECT_GT(balls, 150);
+  EXPECT_GT(tight_taylor, 0);  // both terms of the minimum decide somewhere
+}
+
+TEST(CombinedBound, CertificatesAreNoWeakerThanEitherBoundAndHoldUnderDenseSampling) {
+  const Cage cage(lidef::test::icosphere(2, 0.15, 8));
+  SamplingParams sp;
+  sp.target_count = 1500;
+  sp.count_tolerance = 0.1;
+  const VoxelSampling samp = sample_voxels(cage, sp);
+  const OctreeCertifier cert(cage, samp);
+  int certified = 0;
+  for (double amp : {0.005, 0.02}) {
+    const MatX3d y = perturbed_map(cage, amp, 20);
+    CertifyParams p;
+    p.max_depth = 0;
+    p.bound = LipschitzBound::kFirstOrder;
+    const Certificate c1 = cert.certify(y, p);
+    p.bound = LipschitzBound::kThirdOrder;
+    const Certificate c3 = cert.certify(y, p);
+    p.bound = LipschitzBound::kCombined;
+    const Certificate cc = cert.certify(y, p);
+    ASSERT_EQ(cc.leaves.size(), c1.leaves.size());
+    for (size_t i = 0; i < cc.leaves.size(); ++i)
+      ASSERT_LE(cc.leaves[i].L, std::min(c1.leaves[i].L, c3.leaves[i].L) * (1 + 1e-12));
+    p.max_depth = 2;
+    const Certificate full = cert.certify(y, p);
+    const VerificationResult v = verify_certificate(cert.basis(), y, full.leaves, 4, 3);
+    EXPECT_EQ(v.violations, 0);
+    if (full.certified) {
+      ++certified;
+      EXPECT_EQ(v.nonpositive_in_certified, 0);
+      EXPECT_LE(full.min_lower_bound, v.min_sigma3);
+    }
+  }
+  EXPECT_GT(certified, 0);
+}
+
+// The per-edge refinement and the previous per-face one take the same decisions (J and H agree to rounding,
+// the bound sums are the same functions).
+TEST(EdgeJet, RefinementAgreesWithPerFaceEvaluation) {
+  const Cage cage(lidef::test::icosphere(2, 0.15, 8));
+  SamplingParams sp;
+  sp.target_count = 800;
+  sp.count_tolerance = 0.1;
+  const OctreeCertifier cert(cage, sample_voxels(cage, sp));
+  const MatX3d y = perturbed_map(cage, 0.012, 21);
+  for (LipschitzBound b :
+       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
+    CertifyParams p;
+    p.bound = b;
+    p.max_depth = 3;
+    const Certificate a = cert.certify(y, p);
+    p.per_edge_refinement = false;
+    const Certificate o = cert.certify(y, p);
+    EXPECT_GT(a.refined, 0) << to_string(b);
+    EXPECT_EQ(a.certified, o.certified);
+    ASSERT_EQ(a.leaves.size(), o.leaves.size()) << to_string(b);
+    for (size_t i = 0; i < a.leaves.size(); ++i) {
+      EXPECT_NEAR(a.leaves[i].sigma3, o.leaves[i].sigma3, 1e-12);
+      EXPECT_NEAR(a.leaves[i].L, o.leaves[i].L, 1e-10 * o.leaves[i].L);
+    }
+  }
+}
