@@ -11,12 +11,13 @@
 //   by
 //             bisection so that min σ3 over the base centers is --sigma-target (default 0.45): certified,
 //             with some refinement.
-// Bounds: first, third and combined (docs/certificate.md Step 3b). The deformed map (the only one that refines)
-// is also certified with the previous per-face refinement (CertifyParams::per_edge_refinement = false) next to
-// the per-edge one (edge_jet.h), in the same run; "µs per child" = refine ms / (8 × subdivided nodes).
-// Each (map, bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default 10); the per-stage
-// times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported as median and
-// minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends on it).
+// Bounds: first, third and combined (docs/certificate.md Step 3b). The deformed map (the only one that
+// refines) is also certified with the previous per-face refinement (CertifyParams::per_edge_refinement =
+// false) next to the per-edge one (edge_jet.h), in the same run; "µs per child" = refine ms / (8 × subdivided
+// nodes). Each (map, bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default
+// 10); the per-stage times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported
+// as median and minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends
+// on it).
 //
 // Memory traffic: one certification streams the precomputed reduced matrices (3|I| by s gradient rows and
 // 6|I| by s Hessian rows) and the |I| by #E bound-factor matrix of the bound used. Their element size is not
@@ -503,43 +504,43 @@ int main(int argc, char** argv) {
         configs.push_back({mapname, yr, b, true});
       }
     for (const Config& cfg : configs)
-        for (const int th : thread_counts) {
-          const std::string& mapname = cfg.map;
-          const MatX3dCol* yr = cfg.yr;
-          omp_set_num_threads(th);
-          CertifyParams p = timed;
-          p.bound = cfg.bound;
-          p.per_edge_refinement = cfg.per_edge;
-          Row row;
-          row.model = name;
-          row.map = mapname;
-          row.bound = to_string(cfg.bound);
-          row.refine = cfg.per_edge ? "per-edge" : "per-face";
-          row.threads = th;
-          for (int k = 0; k < opt.warmup; ++k) row.r = summarize(cert.certify_reduced(*yr, p));
-          for (int k = 0; k < opt.reps; ++k) {
-            const double c0 = cpu_ms();
-            const auto t1 = Clock::now();
-            const Certificate c = cert.certify_reduced(*yr, p);
-            row.st.wall.push_back(ms_since(t1));
-            row.st.cpu.push_back(cpu_ms() - c0);
-            if (!(summarize(c) == row.r)) fail(name + ": certificate changed between repetitions");
-            row.st.jac.push_back(c.ms_jacobian);
-            row.st.sig.push_back(c.ms_sigma);
-            row.st.bnd.push_back(c.ms_bound);
-            row.st.ref.push_back(c.ms_refine);
-            row.st.tot.push_back(c.ms_total);
-          }
-          if (mapname == "deformed" && !row.r.certified)
-            notes.push_back(name + ", " + row.bound + " bound: the deformed map is NOT certified");
-          if (mapname == "deformed" && row.r.refined == 0)
-            notes.push_back(name + ", " + row.bound + " bound: the deformed map needed no refinement");
-          row.bytes = 9.0 * N * s * elem_gh + (row.bound == "combined" ? 2.0 : 1.0) * N * E * elem_f[row.bound];
-          row.flops = 2.0 * 9 * N * s * 3;
-          rows.push_back(row);
-          std::cerr << "  " << mapname << ", " << row.bound << ", " << row.refine << ", " << th
-                    << " thread(s): " << fmt(median(row.st.tot), 1) << " ms\n";
+      for (const int th : thread_counts) {
+        const std::string& mapname = cfg.map;
+        const MatX3dCol* yr = cfg.yr;
+        omp_set_num_threads(th);
+        CertifyParams p = timed;
+        p.bound = cfg.bound;
+        p.per_edge_refinement = cfg.per_edge;
+        Row row;
+        row.model = name;
+        row.map = mapname;
+        row.bound = to_string(cfg.bound);
+        row.refine = cfg.per_edge ? "per-edge" : "per-face";
+        row.threads = th;
+        for (int k = 0; k < opt.warmup; ++k) row.r = summarize(cert.certify_reduced(*yr, p));
+        for (int k = 0; k < opt.reps; ++k) {
+          const double c0 = cpu_ms();
+          const auto t1 = Clock::now();
+          const Certificate c = cert.certify_reduced(*yr, p);
+          row.st.wall.push_back(ms_since(t1));
+          row.st.cpu.push_back(cpu_ms() - c0);
+          if (!(summarize(c) == row.r)) fail(name + ": certificate changed between repetitions");
+          row.st.jac.push_back(c.ms_jacobian);
+          row.st.sig.push_back(c.ms_sigma);
+          row.st.bnd.push_back(c.ms_bound);
+          row.st.ref.push_back(c.ms_refine);
+          row.st.tot.push_back(c.ms_total);
         }
+        if (mapname == "deformed" && !row.r.certified)
+          notes.push_back(name + ", " + row.bound + " bound: the deformed map is NOT certified");
+        if (mapname == "deformed" && row.r.refined == 0)
+          notes.push_back(name + ", " + row.bound + " bound: the deformed map needed no refinement");
+        row.bytes = 9.0 * N * s * elem_gh + (row.bound == "combined" ? 2.0 : 1.0) * N * E * elem_f[row.bound];
+        row.flops = 2.0 * 9 * N * s * 3;
+        rows.push_back(row);
+        std::cerr << "  " << mapname << ", " << row.bound << ", " << row.refine << ", " << th
+                  << " thread(s): " << fmt(median(row.st.tot), 1) << " ms\n";
+      }
 
     // Bandwidth reference: read the same bytes (same element types) once, per thread count.
     std::map<std::pair<std::string, int>, StreamTiming> stream;
@@ -588,24 +589,26 @@ int main(int argc, char** argv) {
 
   std::cout << "\n- load average at end (/proc/loadavg): " << loadavg()
             << "; CPU pressure (/proc/pressure/cpu): " << cpu_pressure() << "\n\n";
+  std::cout << "| model | map | bound | refinement | threads | verdict | min σ3 | refined | leaves | total "
+               "ms (median / "
+               "min) | jacobian ms | sigma ms | bound ms | refine ms | µs per child | wall ms | CPU ms | MB "
+               "read | GB/s (jac+bound) | "
+               "GFlop/s (jac) | read-pass ms | read-pass GB/s |\n";
   std::cout
-      << "| model | map | bound | refinement | threads | verdict | min σ3 | refined | leaves | total ms (median / "
-         "min) | jacobian ms | sigma ms | bound ms | refine ms | µs per child | wall ms | CPU ms | MB read | GB/s (jac+bound) | "
-         "GFlop/s (jac) | read-pass ms | read-pass GB/s |\n";
-  std::cout << "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|-"
-               "--:|---:|\n";
+      << "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|-"
+         "--:|---:|\n";
   for (const Row& r : rows) {
     const double jb = median(r.st.jac) + median(r.st.bnd);
-    // Each subdivided node has 8 children, all evaluated unless a budget runs out (then fewer: an upper bound).
+    // Each subdivided node has 8 children, all evaluated unless a budget runs out (then fewer: an upper
+    // bound).
     const double us_child = r.r.refined > 0 ? 1000.0 * median(r.st.ref) / (8.0 * r.r.refined) : 0.0;
-    std::cout << "| " << r.model << " | " << r.map << " | " << r.bound << " | " << r.refine << " | " << r.threads
-              << " | "
-              << (r.r.certified ? "certified" : "NOT certified") << " | " << fmt(r.r.min_sigma3, 4) << " | "
-              << r.r.refined << " | " << r.r.leaves << " | " << fmt(median(r.st.tot), 1) << " / "
-              << fmt(minimum(r.st.tot), 1) << " | " << fmt(median(r.st.jac), 1) << " | "
-              << fmt(median(r.st.sig), 1) << " | " << fmt(median(r.st.bnd), 1) << " | "
-              << fmt(median(r.st.ref), 1) << " | " << (r.r.refined > 0 ? fmt(us_child, 1) : "-") << " | "
-              << fmt(median(r.st.wall), 1) << " | "
+    std::cout << "| " << r.model << " | " << r.map << " | " << r.bound << " | " << r.refine << " | "
+              << r.threads << " | " << (r.r.certified ? "certified" : "NOT certified") << " | "
+              << fmt(r.r.min_sigma3, 4) << " | " << r.r.refined << " | " << r.r.leaves << " | "
+              << fmt(median(r.st.tot), 1) << " / " << fmt(minimum(r.st.tot), 1) << " | "
+              << fmt(median(r.st.jac), 1) << " | " << fmt(median(r.st.sig), 1) << " | "
+              << fmt(median(r.st.bnd), 1) << " | " << fmt(median(r.st.ref), 1) << " | "
+              << (r.r.refined > 0 ? fmt(us_child, 1) : "-") << " | " << fmt(median(r.st.wall), 1) << " | "
               << fmt(median(r.st.cpu), 1) << " | " << fmt(r.bytes / 1e6, 0) << " | "
               << fmt(r.bytes / (jb * 1e6), 2) << " | " << fmt(r.flops / (median(r.st.jac) * 1e6), 2) << " | "
               << fmt(r.stream_ms, 1) << " | " << fmt(r.stream_gbs, 2) << " |\n";
@@ -614,7 +617,8 @@ int main(int argc, char** argv) {
       << "\nStage columns: medians of Certificate::ms_jacobian / ms_sigma / ms_bound / ms_refine; total = "
          "ms_total (median / min); µs per child = refine ms / (8 x refined), with refined = nodes subdivided "
          "(each evaluates 8 children), at the given thread count; refinement = per-edge (edge_jet.h) or "
-         "per-face (the previous HarmonicBasis::differential_jet path), same map and run; wall = wall clock around certify_reduced (includes y = Xi yr); CPU = "
+         "per-face (the previous HarmonicBasis::differential_jet path), same map and run; wall = wall clock "
+         "around certify_reduced (includes y = Xi yr); CPU = "
          "process CPU time of the call (all threads). MB read = 9|I|s + |I|#E entries at the stored "
          "element sizes; GB/s = MB read / (jacobian + bound ms); GFlop/s = 2 * 9|I| * s * 3 / jacobian ms; "
          "read-pass ms / GB/s = the same bytes read once by a plain OpenMP reduction (median over the same "

@@ -185,7 +185,7 @@ TEST(Certificate, CertifiedMapsHaveNoNonPositiveSigma3UnderDenseSampling) {
   for (double amp : {0.05, 0.45, 0.9, 1.3}) maps.push_back(smooth_map(s.cage, s.sub, amp, 11));
   for (size_t mi = 0; mi < maps.size(); ++mi)
     for (LipschitzBound b :
-       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
+         {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
       // The weak first-order bound refines strongly bent maps into very many leaves: check it on the
       // milder maps only, to keep the dense verification affordable.
       if (b == LipschitzBound::kFirstOrder && mi + 2 >= maps.size()) continue;
@@ -226,7 +226,7 @@ TEST(Certificate, FoldedMapIsNeverCertified) {
     if (!fold) continue;
     std::cout << "fold at amplitude " << amp << "\n";
     for (LipschitzBound b :
-       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
+         {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
       CertifyParams p;
       p.bound = b;
       p.max_depth = 3;  // the verdict cannot depend on depth here; deeper only costs time

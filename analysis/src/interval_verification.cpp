@@ -1,5 +1,6 @@
 #include "lidef/interval_verification.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <boost/numeric/interval.hpp>
 #include <chrono>
@@ -7,8 +8,6 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
-
-#include <Eigen/Eigenvalues>
 
 #include "lidef/errors.h"
 #include "lidef/signed_svd.h"
@@ -170,8 +169,8 @@ double frobenius_hi(It begin, It end) {
 }
 
 // Upper bound of the operator norm of the Hessian tensor v ↦ Σ_k v_k H_k (H_k)_ab = H[a][b][k], as a map into
-// (R³ˣ³, ‖·‖_F): sqrt(λmax(G)), G_kl = Σ_ab H[a][b][k] H[a][b][l] (docs/certificate.md, Step 3b). A candidate μ
-// slightly above the floating-point λmax of G's midpoint is proven ≥ λmax of every G in the enclosure by
+// (R³ˣ³, ‖·‖_F): sqrt(λmax(G)), G_kl = Σ_ab H[a][b][k] H[a][b][l] (docs/certificate.md, Step 3b). A candidate
+// μ slightly above the floating-point λmax of G's midpoint is proven ≥ λmax of every G in the enclosure by
 // Sylvester's criterion on μI − G (all leading principal minors > 0 in interval arithmetic); when that fails,
 // the Frobenius norm (sqrt(trace G)) is returned.
 double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {

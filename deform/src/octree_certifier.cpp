@@ -170,7 +170,7 @@ struct OctreeCertifier::Run {
     Vec3 c;
     double side;
     int depth;
-    double bound;     // third, combined: Σ δ Θ over the node's ball; first: L over the node's ball
+    double bound;        // third, combined: Σ δ Θ over the node's ball; first: L over the node's ball
     double bound_first;  // combined: Σ δ Γ over the node's ball (first-order L)
     long fi;          // index into failing_base
     int first_child;  // index of the first of its 8 children in `tree` (−1: a leaf)
@@ -193,8 +193,8 @@ struct OctreeCertifier::Run {
   const CertifyParams& p;
   const long N, E;
   const double side, r;
-  const bool third;     // ‖H(c)‖ and Σ δ Θ needed (third and combined)
-  const bool combined;  // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
+  const bool third;       // ‖H(c)‖ and Σ δ Θ needed (third and combined)
+  const bool combined;    // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
@@ -415,7 +415,8 @@ struct OctreeCertifier::Run {
   }
   // The factor matrix of one bound (third order, or first order), built on first use (it depends only on the
   // cage and the voxels).
-  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix(bool third_kind) const {
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix(
+      bool third_kind) const {
     auto build = [&](auto& mat, std::vector<char>& finite,
                      double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
       mat.resize(N, E);

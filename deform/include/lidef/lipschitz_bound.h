@@ -45,7 +45,6 @@ inline double third_order_factor(double h, double d, double a, double b) {
 // ‖·‖₂ version as well (‖M‖₂ ≤ ‖M‖_F). H[a] = ∂²f_a/∂p∂p (MapJet's layout).
 double hessian_operator_norm(const std::array<Mat3, 3>& H);
 
-
 // Lower bound of |q−u| + |q−w| over q in the ball B(p, r): the larger of
 // (|p−u| − r) + (|p−w| − r)  and  2 sqrt(ρ² + d²/4), ρ = max(0, dist(p, line uw) − r).
 double edge_sum_lower_bound(const Vec3& u, const Vec3& w, const Vec3& p, double r);
