@@ -18,6 +18,7 @@
 #include "lidef/green_coordinates.h"
 #include "lidef/hash.h"
 #include "lidef/interval_verification.h"
+#include "lidef/lipschitz_bound.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
@@ -174,7 +175,8 @@ TEST(IntervalVerification, CertifiedLeavesOfProceduralModelsAreProven) {
   const HarmonicBasis basis(model.cage);
   long refined = 0;
   for (const MatX3d& y : {model.cage.identity_coefficients(), mild_bend(model.cage, 0.15)}) {
-    for (LipschitzBound b : {LipschitzBound::kThirdOrder, LipschitzBound::kFirstOrder}) {
+    for (LipschitzBound b :
+         {LipschitzBound::kThirdOrder, LipschitzBound::kFirstOrder, LipschitzBound::kCombined}) {
       CertifyParams cp;
       cp.bound = b;
       const Certificate cert = certify_map(model.cage, samp, y, cp);
@@ -196,6 +198,10 @@ TEST(IntervalVerification, CertifiedLeavesOfProceduralModelsAreProven) {
         EXPECT_GE(r.sigma3_lo, s3 - 1e-11 * (1 + std::abs(s3)));
         if (b == LipschitzBound::kThirdOrder) {
           EXPECT_GE(r.L_hi, basis.map_jet(y, l.center, 2).hessian_norm());
+        }
+        // Both terms of the combined L are ≥ ‖H(c)‖_op (first order: max over the ball of ‖H‖_F).
+        if (b == LipschitzBound::kCombined) {
+          EXPECT_GE(r.L_hi, hessian_operator_norm(basis.map_jet(y, l.center, 2).H) * (1 - 1e-12));
         }
         EXPECT_LE(r.L_hi, l.L * (1 + 1e-6) + 1e-6);
         EXPECT_GE(r.radius_hi, 0.5 * std::sqrt(3.0) * l.side);

@@ -185,13 +185,17 @@ double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
   if (!mid.allFinite()) return frobenius;
   const double lmax = Eigen::SelfAdjointEigenSolver<Mat3>(mid, Eigen::EigenvaluesOnly).eigenvalues()(2);
   const double tr = std::max(0.0, mid.trace());
-  const I mu = pt(std::max(lmax, 0.0) * (1 + 1e-9) + 1e-9 * tr + 1e-300);
-  const I m00 = mu - G[0][0], m11 = mu - G[1][1], m22 = mu - G[2][2];
-  const I d2 = m00 * m11 - sq(G[0][1]);
-  const I d3 = m00 * (m11 * m22 - sq(G[1][2])) - G[0][1] * (G[0][1] * m22 - G[1][2] * G[0][2]) +
-               G[0][2] * (G[0][1] * G[1][2] - m11 * G[0][2]);
-  if (!(lo(m00) > 0 && lo(d2) > 0 && lo(d3) > 0)) return frobenius;
-  return std::min(frobenius, hi(isqrt(mu)));
+  // Candidates from tight to generous: the first one proven is used.
+  for (const double slack : {1e-12, 1e-9, 1e-6, 1e-3}) {
+    const I mu = pt(std::max(lmax, 0.0) + slack * tr + 1e-300);
+    // M = μI − G (symmetric, off-diagonal entries −G_kl): leading principal minors.
+    const I m00 = mu - G[0][0], m11 = mu - G[1][1], m22 = mu - G[2][2];
+    const I d2 = m00 * m11 - sq(G[0][1]);
+    const I d3 = m00 * (m11 * m22 - sq(G[1][2])) - G[0][1] * (G[0][1] * m22 + G[1][2] * G[0][2]) -
+                 G[0][2] * (G[0][1] * G[1][2] + m11 * G[0][2]);
+    if (lo(m00) > 0 && lo(d2) > 0 && lo(d3) > 0) return std::min(frobenius, hi(isqrt(mu)));
+  }
+  return frobenius;
 }
 
 double sigma3_lower_bound_i(const IM3& J) {
