@@ -113,9 +113,12 @@ void EdgeJet::evaluate(const MapData& md, const Vec3& p, double r, bool hessian,
     if (hessian) {
       const Vec3 alpha = (m * kInv2Pi / (mdd * Lu * Lw)) * luxlw;
       const Vec3 beta = (d * kInv2Pi / mdd) * (lu / Lu + lw / Lw);
+      // H[a](b, c) −= δ(a, b) α(c) + (δ[d̂]×)(a, b) β(c), written out so that it stays in registers.
       for (int a = 0; a < 3; ++a)
-        H[a].noalias() -=
-            e.delta.row(a).transpose() * alpha.transpose() + e.delta_x.row(a).transpose() * beta.transpose();
+        for (int b = 0; b < 3; ++b) {
+          const double da = e.delta(a, b), dx = e.delta_x(a, b);
+          for (int c = 0; c < 3; ++c) H[a](b, c) -= da * alpha(c) + dx * beta(c);
+        }
       sH += e.scale_a * alpha.cwiseAbs().sum() + e.scale_ad * beta.cwiseAbs().sum();
     }
     if (want_first || want_third) {

@@ -31,12 +31,13 @@ LipschitzBound lipschitz_bound_from_string(const std::string& s);  // throws Inp
 inline double first_order_factor(double h, double d) {
   return std::sqrt(h * h + 4 * d * d) / (2 * M_PI * (h * h - d * d));
 }
+// (66) + (67) = (1 + h²d²/n²)/(π²(h²−d²)²) + 3h²d²/(2π²n²(h²−d²)²)
+//             = (n² + 2.5 h²d²)/(π² n² (h²−d²)²),  n = ab.
 inline double third_order_factor(double h, double d, double a, double b) {
-  const double md2 = (h * h - d * d) * (h * h - d * d);
+  const double md = h * h - d * d;
   const double nn = (a * b) * (a * b);
-  const double b66 = (1.0 + h * h * d * d / nn) / (M_PI * M_PI * md2);
-  const double b67 = 3.0 * h * h * d * d / (2.0 * M_PI * M_PI * md2 * nn);
-  return std::sqrt(b66 + b67);
+  const double h2d2 = h * h * d * d;
+  return std::sqrt((nn + 2.5 * h2d2) / (M_PI * M_PI * nn * md * md));
 }
 
 // An upper bound of the operator norm of the Hessian tensor as a map R³ → (R³ˣ³, ‖·‖_F), v ↦ Σ_k v_k H_k
