@@ -5,6 +5,7 @@
 //   first order  (17): L = Σ_e ‖δ_A^e‖_F Γ_e,  Γ_e = max_ball sqrt(|α_e|²+|β_e|²)
 //   third order  (21): L = ‖H(c)‖ + r Σ_e ‖δ_A^e‖_F Θ_e,  Θ_e = max_ball sqrt(‖∇α_e‖²+‖∇β_e‖²)
 //   ((20),(66),(67))
+//   combined (Step 3b): L = min(first order, ‖H(c)‖_op + ½ r Σ_e ‖δ_A^e‖_F Θ_e)
 // (sums over undirected edges; the paper's ½ Σ over directed edges counts each edge twice), and τ is a
 // floating-point allowance (see Tolerance below). Failing voxels are split into 8 children, each with its
 // own exact σ3 and ‖H‖ at its center and the smaller of the parent's and its own third-order bound.
