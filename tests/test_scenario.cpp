@@ -73,7 +73,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "max_depth",
                                              "bound",
                                              "max_refined",
-                                             "line_search_max_refined",  // certificate
+                                             "line_search_max_refined",
+                                             "bound_tolerance",  // certificate
                                              "dynamic_weighting",
                                              "e0",
                                              "kappa1",
