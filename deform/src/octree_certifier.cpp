@@ -648,8 +648,7 @@ struct OctreeCertifier::Run {
           const NodeValues& v = vals[8 * si + k];
           const double rad = 0.5 * std::sqrt(3.0) * nd.side;
           const double L = lipschitz(v.hnorm, v.own_bound, rad);
-          const double margin =
-              v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+          const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
           kids[k] = {nd.c, nd.side, nd.depth, v.sigma3, L, margin, margin > 0, l.base, v.sign_unresolved};
           worst = std::min(worst, margin);
           c.min_sigma3_center = std::min(c.min_sigma3_center, v.sigma3);

@@ -20,7 +20,7 @@ const char* to_string(Field f);  // "e_iso", "det_j", "sigma3", "lipschitz", "ma
 struct ColorRange {
   enum class Mode { kAuto, kPercentile, kManual };
   Mode mode = Mode::kAuto;
-  double percentile = 99;  // kPercentile: the range spans the [100 − p, p] percentiles of the shown values
+  double percentile = 99;   // kPercentile: the range spans the [100 − p, p] percentiles of the shown values
   double min = 0, max = 1;  // kManual
 };
 const char* to_string(ColorRange::Mode m);  // "auto", "percentile", "manual"

@@ -50,8 +50,8 @@ int main(int argc, char** argv) {
   app.add_option("--timeout", timeout, "Seconds to wait for the solver in --screenshot mode")
       ->capture_default_str();
   app.footer(
-      "Mouse: click on the mesh adds a handle (Ctrl+click picks values); drag a cyan target sphere; right-click\n"
-      "on it deletes it. Keys: F1 or H in the window lists them all. Docs: docs/studio.md.");
+      "Mouse: click on the mesh adds a handle (Ctrl+click picks values); drag a cyan target sphere;\n"
+      "right-click on it deletes it. Keys: F1 or H in the window lists them all. Docs: docs/studio.md.");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,10 +1,10 @@
 // Two plots drawn with QPainter (QtCharts is not a dependency):
-//  top    — the solver history, as in Fig. 9 of Liao et al. 2021: energy E per iteration on a log axis (left);
+//  top    — the solver history, as in Fig. 9 of Liao et al. 2021: energy E per iteration, log axis (left);
 //           on a linear axis (right) the certified lower bound of sigma3 over the voxels (min over leaves of
-//           sigma3 - r L - tau) beside the smallest sampled sigma3 (voxel and node centers), so the gap between
-//           them shows how tight the bound is (with the bound_tolerance parameter the certifier refines until
-//           the gap is within that fraction); the title gives the last iteration's numbers and the number of
-//           refined voxels; hollow markers for iterations whose step was not accepted;
+//           sigma3 - r L - tau) beside the smallest sampled sigma3 (voxel and node centers): their gap shows
+//           how tight the bound is (with bound_tolerance the certifier refines until the gap is within that
+//           fraction); the title gives the last iteration's numbers and refined voxels; hollow markers for
+//           iterations whose step was not accepted;
 //  bottom — a certificate against its ground truth, as in Fig. 5: per leaf voxel, sorted by the certificate's
 //           Lipschitz bound L, L as a line and the sampled max |sigma3(p) - sigma3(c)| / |p - c| as points
 //           (log axis); the title gives the number of leaves and of bound violations (red unless 0).

@@ -247,7 +247,7 @@ struct Scene::Impl {
   Ptr<vtkScalarBarActor> bar = Ptr<vtkScalarBarActor>::New();
   Ptr<vtkTextActor> text = Ptr<vtkTextActor>::New();
   std::pair<double, double> range{0, 0};  // of the colour bar shown last
-  bool bar_in_strip = false;               // the bar has its own renderer (a strip right of the model)
+  bool bar_in_strip = false;              // the bar has its own renderer (a strip right of the model)
   long model_version = -1;
   std::string caption;
 

@@ -4,13 +4,13 @@
 #include <vtkCallbackCommand.h>
 #include <vtkCamera.h>
 #include <vtkCellPicker.h>
-#include <vtkPropPicker.h>
 #include <vtkCommand.h>
 #include <vtkGenericOpenGLRenderWindow.h>
 #include <vtkHandleWidget.h>
 #include <vtkInteractorStyleTrackballCamera.h>
 #include <vtkObjectFactory.h>
 #include <vtkPNGWriter.h>
+#include <vtkPropPicker.h>
 #include <vtkProperty.h>
 #include <vtkRenderWindowInteractor.h>
 #include <vtkRenderer.h>
@@ -22,20 +22,17 @@
 #include <QButtonGroup>
 #include <QCheckBox>
 #include <QClipboard>
-#include <QComboBox>
-#include <QDoubleSpinBox>
-#include <QGuiApplication>
-#include <QScreen>
-#include <QScrollArea>
-#include <QSettings>
 #include <QCloseEvent>
+#include <QComboBox>
 #include <QDockWidget>
+#include <QDoubleSpinBox>
 #include <QDragEnterEvent>
 #include <QDropEvent>
 #include <QFileDialog>
 #include <QFileInfo>
 #include <QFormLayout>
 #include <QGroupBox>
+#include <QGuiApplication>
 #include <QLabel>
 #include <QMenuBar>
 #include <QMessageBox>
@@ -43,6 +40,9 @@
 #include <QProgressDialog>
 #include <QPushButton>
 #include <QRadioButton>
+#include <QScreen>
+#include <QScrollArea>
+#include <QSettings>
 #include <QSlider>
 #include <QSpinBox>
 #include <QStatusBar>
@@ -64,15 +64,15 @@
 #include "compare_view.h"
 #include "explorer_panel.h"
 #include "lidef/atomic_file.h"
+#include "lidef/cage/auto_cage.h"
 #include "lidef/coefficients.h"
+#include "lidef/errors.h"
 #include "lidef/mesh_export.h"
 #include "lidef/mesh_fields.h"
-#include "lidef/vtk_export.h"
-#include "lidef/cage/auto_cage.h"
-#include "lidef/errors.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/subspace.h"
+#include "lidef/vtk_export.h"
 #include "params_panel.h"
 #include "plots_panel.h"
 #include "studio_common.h"
@@ -85,7 +85,8 @@ namespace lidef::studio {
 class StudioStyle : public vtkInteractorStyleTrackballCamera {
  public:
   static StudioStyle* New();
-  vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera) std::function<void(int, int, bool)> on_click;  // x, y, Ctrl held
+  vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera)
+      std::function<void(int, int, bool)> on_click;  // x, y, Ctrl held
   std::function<bool(int, int)> on_right_press;  // true = consumed
   void OnLeftButtonDown() override {
     this->Interactor->GetEventPosition(press_);
@@ -841,7 +842,8 @@ bool StudioWindow::export_current(const std::string& dir) {
     if (!f || !f->model || f->coefficients.rows() == 0) throw InputError(dir, "no map to export yet");
     std::filesystem::create_directories(dir);
     const std::filesystem::path d(dir);
-    // The files lidef deform writes for a map, with its writers (coefficients.h, mesh_export.h, vtk_export.h).
+    // The files lidef deform writes for a map, with its writers (coefficients.h, mesh_export.h,
+    // vtk_export.h).
     write_file_atomic((d / "coefficients.txt").string(),
                       [&](std::ostream& s) { write_coefficients(s, f->coefficients); });
     const MeshFields mf =

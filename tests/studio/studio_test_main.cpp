@@ -4,9 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <QApplication>
-#include <clocale>
 #include <QSettings>
 #include <QSurfaceFormat>
+#include <clocale>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>

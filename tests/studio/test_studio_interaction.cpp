@@ -6,14 +6,13 @@
 #include <gtest/gtest.h>
 #include <vtkCamera.h>
 #include <vtkCommand.h>
+#include <vtkImageData.h>
+#include <vtkNew.h>
+#include <vtkPNGReader.h>
 #include <vtkRenderWindow.h>
 #include <vtkRenderWindowInteractor.h>
 #include <vtkRenderer.h>
 #include <vtkRendererCollection.h>
-
-#include <vtkImageData.h>
-#include <vtkNew.h>
-#include <vtkPNGReader.h>
 
 #include <QAction>
 #include <QApplication>
@@ -21,12 +20,12 @@
 #include <QDockWidget>
 #include <QMessageBox>
 #include <QStatusBar>
-#include <sstream>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <thread>
 
 #include "lidef/scenario.h"
@@ -253,7 +252,6 @@ TEST(StudioInteraction, MeshFileOpensWithAnAutomaticCage) {
   ::unsetenv("LIDEF_CACHE_DIR");
 }
 
-
 // ---------------------------------------------------------------- issue 18: inspect, camera, colour, layout
 
 // The beam with two handles, the second pulled up: a bent map with some E_iso − 6 spread.
@@ -390,8 +388,8 @@ std::vector<std::vector<double>> read_eval_csv(const std::string& path) {
 }
 
 // Picking: the values at a picked point are what `lidef eval` gives there for the exported map (and the
-// export writes what the CLI writes). Mesh view by Ctrl+click through the interactor; Lipschitz view by click,
-// with the leaf that holds the point.
+// export writes what the CLI writes). Mesh view by Ctrl+click through the interactor; Lipschitz view by
+// click, with the leaf that holds the point.
 TEST(StudioInteraction, PickedValuesEqualLidefEval) {
   Fixture fx;
   StudioWindow& win = fx.win;
@@ -456,7 +454,8 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
   EXPECT_LE(off.maxCoeff(), 0.5 * on_leaf.leaf.side * (1 + 1e-6)) << "the point is not in its leaf";
   bool found = false;
   for (const CertLeaf& l : g->leaves->leaves)
-    found = found || (l.center == on_leaf.leaf.center && l.L == on_leaf.leaf.L && l.margin == on_leaf.leaf.margin);
+    found = found ||
+            (l.center == on_leaf.leaf.center && l.L == on_leaf.leaf.L && l.margin == on_leaf.leaf.margin);
   EXPECT_TRUE(found) << "the picked leaf is not one of the certificate's";
 
   // Export the map as the CLI writes it, and evaluate both points with lidef eval.
@@ -467,7 +466,8 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
   {
     std::ofstream pts(dir / "p.xyz");
     pts.precision(17);
-    for (const auto* v : {&on_mesh, &on_leaf}) pts << v->rest.x() << " " << v->rest.y() << " " << v->rest.z() << "\n";
+    for (const auto* v : {&on_mesh, &on_leaf})
+      pts << v->rest.x() << " " << v->rest.y() << " " << v->rest.z() << "\n";
   }
   std::string log;
   ASSERT_EQ(run_command(cli() + " eval " + project_data() + "/models/beam --coeffs " +
@@ -502,7 +502,8 @@ TEST(StudioInteraction, LayoutDominantViewDocksSavedAndCheatSheet) {
   win.show();
   pump_until([] { return false; }, 0.5);
   // The 3D view takes most of the window's width at the first-run size.
-  EXPECT_GT(win.view_widget()->width(), 0.6 * win.width()) << win.view_widget()->width() << " of " << win.width();
+  EXPECT_GT(win.view_widget()->width(), 0.6 * win.width())
+      << win.view_widget()->width() << " of " << win.width();
   EXPECT_GT(win.width(), 1000);
   auto* plots = win.findChild<QDockWidget*>("Plots");
   ASSERT_NE(plots, nullptr);
