@@ -2,6 +2,8 @@
 #   make demo   install what is missing, build, run the main job on the project's default model
 #   make test   install what is missing, build, run the whole test suite
 # CI (.ci/run) adds:
+#   make check-sanitize-ci  the readers built with ASan + UBSan (gcc): corpus, kept findings, deterministic mutants
+# By hand (README, "Sanitizers and fuzzing"):
 #   make check-sanitize  the unit tests built with ASan + UBSan in build-asan/ (gcc), failing on any report
 #   make fuzz            every reader's libFuzzer target (clang) for FUZZ_SECONDS each, failing on any finding
 BUILD ?= build
@@ -10,7 +12,7 @@ CMAKE_FLAGS ?=
 LIDEF = $(BUILD)/app/lidef
 DEMO_OUT ?= out/demo
 
-.PHONY: all deps configure build demo test bench clean format check-sanitize fuzz
+.PHONY: all deps configure build demo test bench clean format check-sanitize check-sanitize-ci fuzz
 
 all: build
 
@@ -43,6 +45,20 @@ check-sanitize: deps
 	  -DLIDEF_BUILD_STUDIO=OFF -DLIDEF_BUILD_BENCH=OFF $(CMAKE_FLAGS) > /dev/null
 	@cmake --build $(ASAN_BUILD) -j $(JOBS)
 	@bash scripts/check-sanitize.sh $(ASAN_BUILD) $(JOBS)
+
+# What CI runs (.ci/run): the same ASan + UBSan flags on the readers only — the fuzz targets' replays of the seed
+# corpus and every kept finding, then LIDEF_REPLAY_MUTANTS deterministic mutants per target
+# (fuzz/replay_main.cpp). Only lidef_core, lidef_cage and the replay programs are compiled, which keeps the
+# cold build within CI's budget (README, "Sanitizers and fuzzing").
+ASAN_CI_BUILD ?= build-asan-ci
+CI_MUTANTS ?= 20000
+check-sanitize-ci: deps
+	@cmake -S . -B $(ASAN_CI_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Sanitize \
+	  -DCMAKE_CXX_FLAGS_SANITIZE="-O1 -g1 $(SANITIZE_FLAGS)" -DCMAKE_C_FLAGS_SANITIZE="-O1 -g1 $(SANITIZE_FLAGS)" \
+	  -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" \
+	  -DLIDEF_BUILD_STUDIO=OFF -DLIDEF_BUILD_BENCH=OFF -DLIDEF_REPLAY_MUTANTS=$(CI_MUTANTS) $(CMAKE_FLAGS) > /dev/null
+	@cmake --build $(ASAN_CI_BUILD) -j $(JOBS) --target fuzz_replays
+	@SANITIZE_SELECT='^Fuzz[.]Replay[.]' bash scripts/check-sanitize.sh $(ASAN_CI_BUILD) $(JOBS)
 
 # libFuzzer targets of fuzz/ (clang, ASan + UBSan), each run FUZZ_SECONDS, JOBS at a time; only the libraries
 # the readers need are built (target `fuzzers`). Findings: build-fuzz/fuzz-artifacts/ (fuzz/README.md).

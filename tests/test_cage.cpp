@@ -281,7 +281,7 @@ TEST_F(Cage, BadInputsNameTheFile) {
       {"empty.obj", "", "file is empty"},
       {"empty.stl", "", "file is empty"},
       {"garbage.ply", garbage, "cannot read"},
-      {"garbage.off", garbage, "cannot read"},
+      {"garbage.off", garbage, "binary data"},  // lidef's own OFF parser (auto_cage.cpp)
       {"garbage.stl", garbage, "cannot read"},
       {"garbage.obj", garbage, ""},  // CGAL's OBJ reader skips unknown lines; any error naming the file
       {"nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n", ""},

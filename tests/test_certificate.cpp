@@ -377,3 +377,41 @@ TEST_P(SharedModelBounds, ThirdOrderValidAndTighterThanFirstOrder) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Certificate, SharedModelBounds, ::testing::Values("bar", "horse", "spot", "animal"));
+
+// bound_tolerance (docs/certificate.md, "Tight lower bound"): the bound reaches the tolerance, stays a lower
+// bound of densely sampled σ3, does not change the verdict, and the run is deterministic.
+TEST(Certificate, TightLowerBoundReachesToleranceAndStaysBelowSampledSigma3) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 600);
+  OctreeCertifier cert(s.cage, s.sampling);
+  int tightened = 0;
+  for (double amp : {0.0, 0.45}) {
+    const MatX3d y = smooth_map(s.cage, s.sub, amp, 11);
+    CertifyParams p;
+    p.max_depth = 4;
+    const Certificate plain = cert.certify(y, p);
+    p.bound_tolerance = 0.2;
+    const Certificate tight = cert.certify(y, p), again = cert.certify(y, p);
+    p.keep_leaves = false;
+    const Certificate no_leaves = cert.certify(y, p);
+    ASSERT_TRUE(plain.certified) << "amplitude " << amp << ": the family must be certifiable";
+    EXPECT_EQ(tight.certified, plain.certified);
+    EXPECT_TRUE(tight.bound_tolerance_met) << "amplitude " << amp;
+    EXPECT_FALSE(plain.bound_tolerance_met);
+    EXPECT_GE(tight.min_lower_bound, 0.8 * tight.min_sigma3_center);
+    EXPECT_GE(tight.min_lower_bound, plain.min_lower_bound);
+    EXPECT_LE(tight.min_sigma3_center, plain.min_sigma3_center);
+    EXPECT_EQ(tight.num_leaves, static_cast<long>(tight.leaves.size()));
+    const VerificationResult v = verify_certificate(cert.basis(), y, tight.leaves, 8, 3);
+    EXPECT_EQ(v.violations, 0);
+    EXPECT_LE(tight.min_lower_bound, v.min_sigma3) << "a lower bound above a sampled sigma3";
+    EXPECT_EQ(again.min_lower_bound, tight.min_lower_bound);
+    EXPECT_EQ(again.num_leaves, tight.num_leaves);
+    EXPECT_EQ(no_leaves.min_lower_bound, tight.min_lower_bound);
+    EXPECT_TRUE(no_leaves.leaves.empty());
+    std::cout << "amplitude " << amp << ": plain bound " << plain.min_lower_bound << " (" << plain.refined
+              << " refined), tight " << tight.min_lower_bound << " (" << tight.refined
+              << " refined), min sampled sigma3 " << tight.min_sigma3_center << "\n";
+    if (tight.min_lower_bound > plain.min_lower_bound) ++tightened;
+  }
+  EXPECT_GE(tightened, 1) << "no map needed tightening: the test shows nothing";
+}

@@ -37,8 +37,8 @@ std::string input_error(F&& f) {
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
   // Counted by hand in deform_params.h: 5 sampling + 2 energy + 11 newton (3 of them continuation) +
-  // 4 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 39;
+  // 5 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
+  const int kFields = 40;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -73,7 +73,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "max_depth",
                                              "bound",
                                              "max_refined",
-                                             "line_search_max_refined",  // certificate
+                                             "line_search_max_refined",
+                                             "bound_tolerance",  // certificate
                                              "dynamic_weighting",
                                              "e0",
                                              "kappa1",

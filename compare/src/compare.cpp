@@ -10,6 +10,7 @@
 #include <optional>
 #include <sstream>
 
+#include "lidef/continuation.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
@@ -95,15 +96,21 @@ void run_lidef(Shared& s, MethodResult& r) {
   if (!s.sampling) s.sampling = solver.sampling();  // the same parameters give the same voxels
   std::ostringstream log;
   log << "iteration,energy,step,certified,min_lower_bound,max_handle_error,ms\n";
-  const SolveResult res = solver.solve([&](const IterationRecord& it) {
-    log << it.iteration << ',' << format_double(it.terms.total) << ',' << format_double(it.step) << ','
-        << (it.certified ? 1 : 0) << ',' << format_double(it.min_lower_bound) << ','
-        << format_double(it.max_handle_error) << ',' << format_g(it.ms_total, 6) << "\n";
-    s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + format_g(it.terms.total, 7) + "  step " +
-                        format_g(it.step, 3) + "  handle err " + format_g(it.max_handle_error, 3) + "  " +
-                        format_g(it.ms_total, 4) + " ms");
-    return true;
-  });
+  // The same path to the targets as `lidef deform` (continuation.h): the direct solve, and the continuation
+  // when the scenario has waypoints, rotates a handle group far, or the direct solve stops short.
+  PathSolveReport path;
+  const SolveResult res = solve_to_targets(
+      solver, s.sc.waypoints, s.sc.targets, s.sc.groups,
+      [&](const IterationRecord& it) {
+        log << it.iteration << ',' << format_double(it.terms.total) << ',' << format_double(it.step) << ','
+            << (it.certified ? 1 : 0) << ',' << format_double(it.min_lower_bound) << ','
+            << format_double(it.max_handle_error) << ',' << format_g(it.ms_total, 6) << "\n";
+        s.say(r.method, "it " + std::to_string(it.iteration) + "  E " + format_g(it.terms.total, 7) +
+                            "  step " + format_g(it.step, 3) + "  handle err " +
+                            format_g(it.max_handle_error, 3) + "  " + format_g(it.ms_total, 4) + " ms");
+        return true;
+      },
+      nullptr, [&](const std::string& line) { s.say(r.method, "-- " + line); }, &path);
   r.seconds = res.seconds;
   r.iterations = static_cast<int>(solver.history().size());
   r.converged = res.converged();
@@ -117,8 +124,12 @@ void run_lidef(Shared& s, MethodResult& r) {
   r.certified = cert.certified ? 1 : 0;
   r.min_sigma3 = cert.min_sigma3_center;
   r.min_sigma3_bound = cert.certified ? cert.min_lower_bound : kNaN;
+  std::string strategies;
+  for (const std::string& t : path.strategies) strategies += (strategies.empty() ? "" : ", ") + t;
   r.detail = std::to_string(solver.sampling().size()) + " samples, " +
-             std::to_string(solver.subspace().size()) + " reduced coefficients per coordinate";
+             std::to_string(solver.subspace().size()) + " reduced coefficients per coordinate; " +
+             (strategies.empty() ? std::string("direct") : strategies) +
+             (path.stages ? " (" + std::to_string(path.stages) + " stages)" : "");
   r.log = log.str();
 }
 
@@ -347,6 +358,8 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
   Shared s{sc, model, opt, progress, nullptr, std::nullopt};
   std::vector<MethodResult> rows;
   const double rest_volume = mesh_volume(model.mesh.V, model.mesh.F);
+  // "Reached" means what `lidef deform` means: max handle error within handle_tolerance of the model's size.
+  const double handle_tolerance = sc.params.handle_tolerance * Frame::of(model.cage).scale;
   for (const std::string& m : order) {
     MethodResult r;
     r.method = m;
@@ -363,6 +376,7 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
       else
         run_pwl_tri(s, r);
       r.ok = true;
+      r.reached = r.max_handle_error <= handle_tolerance ? 1 : 0;
       r.volume_ratio = mesh_volume(r.V, model.mesh.F) / rest_volume;
       r.crease_deg = crease_measure(model.mesh, r.V);
       s.say(m, std::string(r.converged ? "converged" : "stopped") + " (" + r.stop + ") after " +
@@ -393,6 +407,7 @@ const std::vector<std::string>& comparison_table_columns() {
                                              "iterations",
                                              "converged",
                                              "max_handle_error",
+                                             "reached",
                                              "mean_e_iso_minus_6",
                                              "max_e_iso_minus_6",
                                              "global_volume_ratio",
@@ -453,7 +468,8 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
     s << r.method << ',' << status_of(r) << ',' << (r.ok ? std::to_string(r.dof) : "") << ','
       << num(r.seconds) << ',' << num(r.preprocess_seconds) << ','
       << (r.ok ? std::to_string(r.iterations) : "") << ',' << (r.ok ? (r.converged ? "1" : "0") : "") << ','
-      << num(r.max_handle_error) << ',' << num(r.mean_e_iso) << ',' << num(r.max_e_iso) << ','
+      << num(r.max_handle_error) << ',' << (r.ok ? std::to_string(r.reached) : "") << ','
+      << num(r.mean_e_iso) << ',' << num(r.max_e_iso) << ','
       << num(r.volume_ratio) << ',' << (r.inverted >= 0 ? std::to_string(r.inverted) : "") << ','
       << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "") << ','
       << (r.certified >= 0 ? std::to_string(r.certified) : "") << ',' << num(r.min_sigma3) << ','
@@ -470,19 +486,19 @@ std::string comparison_table_md(const std::vector<MethodResult>& rows, const Sce
     return std::isnan(x) ? std::string("—") : std::isinf(x) ? std::string("∞") : format_g(x, p);
   };
   s << "# " << sc.name << " — comparison (paper Table 1)\n\n"
-    << "| method | DOF | time (s) | time / lidef | iterations | status | max handle error | mean E_iso−6 | "
+    << "| method | DOF | time (s) | time / lidef | iterations | status | max handle error | reached | mean E_iso−6 | "
        "max E_iso−6 | global volume ratio | inverted tets | mesh vertices det J ≤ 0 | certified | min σ3 "
        "(samples) | crease (°) |\n"
-    << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const MethodResult& r : rows) {
     if (!r.ok) {
       s << "| " << r.method << " | — | — | — | — | FAILED: " << r.error
-        << " | — | — | — | — | — | — | — | — | — |\n";
+        << " | — | — | — | — | — | — | — | — | — | — |\n";
       continue;
     }
     s << "| " << r.method << " | " << r.dof << " | " << cell(r.seconds) << " | " << cell(r.time_ratio, 3)
       << " | " << r.iterations << " | " << status_of(r) << " | " << cell(r.max_handle_error) << " | "
-      << cell(r.mean_e_iso) << " | " << cell(r.max_e_iso) << " | " << cell(r.volume_ratio, 4) << " | "
+      << (r.reached ? "yes" : "no") << " | " << cell(r.mean_e_iso) << " | " << cell(r.max_e_iso) << " | " << cell(r.volume_ratio, 4) << " | "
       << (r.inverted >= 0 ? std::to_string(r.inverted) : "—") << " | "
       << (r.inverted_vertices >= 0 ? std::to_string(r.inverted_vertices) : "—") << " | "
       << (r.certified < 0 ? "—"

@@ -71,6 +71,9 @@ std::vector<ParamInfo> make_table() {
        "child voxels evaluated per certification of a result at most"},
       {"line_search_max_refined", "certificate", &D::line_search_max_refined, 0, 1e9,
        "the same budget for line-search trials (a trial needing more is rejected, the step halved)"},
+      {"bound_tolerance", "certificate", &D::bound_tolerance, 0, 0.99,
+       "above 0: refine a certified map until its lower bound of sigma3 is within this fraction of the "
+       "smallest sampled sigma3 (0.1 = 10%); never changes the verdict"},
       // --- Dynamic weighting
       {"dynamic_weighting", "weighting", &D::dynamic_weighting, 0, 0,
        "adapt lambda1 and lambda2 during the solve (Sec. 7.3; kappa1, kappa2 below)"},
@@ -405,6 +408,7 @@ CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure
   cp.max_refined_voxels = params.max_refined;
   cp.stop_on_failure = stop_on_failure;
   cp.keep_leaves = keep_leaves;
+  cp.bound_tolerance = params.bound_tolerance;
   return cp;
 }
 

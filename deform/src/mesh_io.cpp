@@ -233,7 +233,15 @@ bool is_off_header(std::string_view tok) {
   return tok.empty();
 }
 
-TriMesh read_off(const std::string& path, MeshLines* lines) {
+// An ASCII OFF file, faces of any size (`arity` 0) or only triangles (`arity` 3: a face of another size is an
+// error naming it). Vertex lines: 3 coordinates, then optional numbers (normals, colours, texture) that are
+// checked and ignored; face lines: n, n vertex indices, then optional colour numbers, likewise.
+struct OffData {
+  std::vector<Vec3> V;
+  std::vector<std::vector<std::size_t>> faces;
+  MeshLines lines;
+};
+OffData parse_off(const std::string& path, int arity) {
   const std::string text = read_text_file(path, ".off");
   LineReader rd(text);
   if (!rd.next()) throw InputError(path, "file is empty (only blank lines or comments)");
@@ -255,22 +263,20 @@ TriMesh read_off(const std::string& path, MeshLines* lines) {
   if (nv <= 0)
     throw InputError(path, "no vertices (vertex count is " + std::to_string(nv) + ")", counts_line);
   if (nf <= 0) throw InputError(path, "no faces (face count is " + std::to_string(nf) + ")", counts_line);
-  std::vector<Vec3> V;
-  std::vector<Eigen::Vector3i> F;
-  MeshLines ml;
+  OffData d;
   // The counts come from the file: reserve no more than its text can hold (a vertex line has at least 6
   // characters "0 0 0\n", a face line 8). Reserving the counts themselves let a 20-byte file
   // ("OFF\n99999999 99999\n") allocate gigabytes, or fail with std::bad_alloc (found by fuzzing,
   // fuzz/regressions/mesh_off/); an over-large count is then reported as the file ending early.
-  V.reserve(static_cast<size_t>(std::min<long>(nv, static_cast<long>(text.size() / 6))));
-  F.reserve(static_cast<size_t>(std::min<long>(nf, static_cast<long>(text.size() / 8))));
+  d.V.reserve(static_cast<size_t>(std::min<long>(nv, static_cast<long>(text.size() / 6))));
+  d.faces.reserve(static_cast<size_t>(std::min<long>(nf, static_cast<long>(text.size() / 8))));
   for (long i = 0; i < nv; ++i) {
     if (!rd.next())
       throw InputError(path,
                        "file ends after " + std::to_string(i) + " of " + std::to_string(nv) + " vertices",
                        rd.line());
-    V.push_back(parse_point(rd.tokens(), 0, i + 1, path, rd.line()));
-    ml.vertex.push_back(rd.line());
+    d.V.push_back(parse_point(rd.tokens(), 0, i + 1, path, rd.line()));
+    d.lines.vertex.push_back(rd.line());
   }
   for (long t = 0; t < nf; ++t) {
     if (!rd.next())
@@ -278,33 +284,53 @@ TriMesh read_off(const std::string& path, MeshLines* lines) {
                        rd.line());
     const auto& tok = rd.tokens();
     const long n = parse_int(tok[0], path, rd.line(), "face size");
-    if (n != 3) throw InputError(path, arity_message(n < 0 ? 0 : n, t + 1), rd.line());
-    if (tok.size() < 4)
+    if (arity > 0 && n != arity) throw InputError(path, arity_message(n < 0 ? 0 : n, t + 1), rd.line());
+    if (n < 0) throw InputError(path, "face " + std::to_string(t + 1) + ": negative size", rd.line());
+    if (static_cast<long>(tok.size()) - 1 < n)
       throw InputError(path,
-                       "face " + std::to_string(t + 1) + " lists " + std::to_string(tok.size() - 1) +
-                           " of its 3 vertex indices",
+                       "face " + std::to_string(t + 1) + " lists " + std::to_string(tok.size() - 1) + " of its " +
+                           std::to_string(n) + " vertex indices",
                        rd.line());
-    Eigen::Vector3i f;
-    for (int k = 0; k < 3; ++k) {
-      const long i = parse_int(tok[k + 1], path, rd.line(), "vertex index");
+    std::vector<std::size_t> f(static_cast<size_t>(n));
+    for (long k = 0; k < n; ++k) {
+      const long i = parse_int(tok[static_cast<size_t>(k) + 1], path, rd.line(), "vertex index");
       if (i < 0 || i >= nv)
         throw InputError(path,
                          "face " + std::to_string(t + 1) + ": vertex index " + std::to_string(i) +
                              " is out of range (OFF indices are 0-based; file has " + std::to_string(nv) +
                              " vertices)",
                          rd.line());
-      f[k] = static_cast<int>(i);
+      f[static_cast<size_t>(k)] = static_cast<std::size_t>(i);
     }
-    for (size_t k = 4; k < tok.size(); ++k) parse_double(tok[k], path, rd.line());  // optional color
-    F.push_back(f);
-    ml.face.push_back(rd.line());
+    for (size_t k = static_cast<size_t>(n) + 1; k < tok.size(); ++k)
+      parse_double(tok[k], path, rd.line());  // optional color
+    d.faces.push_back(std::move(f));
+    d.lines.face.push_back(rd.line());
   }
   if (rd.next()) throw InputError(path, "unexpected data after the last face", rd.line());
-  if (lines) *lines = std::move(ml);
-  return to_mesh(V, F, path);
+  return d;
+}
+
+TriMesh read_off(const std::string& path, MeshLines* lines) {
+  OffData d = parse_off(path, 3);
+  std::vector<Eigen::Vector3i> F;
+  F.reserve(d.faces.size());
+  for (const auto& f : d.faces)
+    F.emplace_back(static_cast<int>(f[0]), static_cast<int>(f[1]), static_cast<int>(f[2]));
+  if (lines) *lines = std::move(d.lines);
+  return to_mesh(d.V, F, path);
 }
 
 }  // namespace
+
+PolygonSoupMesh read_off_polygons(const std::string& path) {
+  OffData d = parse_off(path, 0);
+  PolygonSoupMesh out;
+  out.V.resize(static_cast<Eigen::Index>(d.V.size()), 3);
+  for (size_t i = 0; i < d.V.size(); ++i) out.V.row(static_cast<Eigen::Index>(i)) = d.V[i].transpose();
+  out.polygons = std::move(d.faces);
+  return out;
+}
 
 TriMesh read_mesh(const std::string& path, MeshLines* lines) {
   const std::string ext = lower(fs::path(path).extension().string());

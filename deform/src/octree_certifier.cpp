@@ -615,7 +615,7 @@ struct OctreeCertifier::Run {
           resolved_nonpositive = true;
         if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
       }
-      if (p.keep_leaves) cert.leaves.push_back(l);
+      if (p.keep_leaves || p.bound_tolerance > 0) cert.leaves.push_back(l);  // tighten() needs them
     };
     std::vector<int> stack;
     size_t fi = 0;
@@ -652,6 +652,93 @@ struct OctreeCertifier::Run {
     if (!cert.certified) cert.reason = failure_reason();
     return std::move(cert);
   }
+  // --- 6. Tightening (CertifyParams::bound_tolerance), only once the map is certified, so it never changes
+  // the verdict. Each round splits the leaves whose margin is below (1 − tol) · the smallest sampled σ3
+  // into 8 children evaluated like refinement nodes (their own bound only). A leaf is replaced by its
+  // children only when every child's margin exceeds the leaf's: both are valid lower bounds of σ3 on the
+  // same voxel (the children tile it), so the larger is kept; the leaves still tile the base voxels. The
+  // children's σ3 are sampled values of σ3 and lower min_sigma3_center with them.
+  void tighten(Certificate& c) {
+    c.bound_tolerance = p.bound_tolerance;
+    if (p.bound_tolerance <= 0 || !c.certified) {
+      if (!p.keep_leaves) c.leaves.clear();
+      return;
+    }
+    const auto t0 = Clock::now();
+    std::vector<char> settled(c.leaves.size(), 0);
+    std::vector<int> batch;
+    std::vector<NodeValues> vals;
+    for (;;) {
+      const double target = (1 - p.bound_tolerance) * c.min_sigma3_center;
+      std::vector<size_t> split;
+      for (size_t i = 0; i < c.leaves.size(); ++i)
+        if (!settled[i] && c.leaves[i].margin < target && c.leaves[i].depth < p.max_depth &&
+            budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
+          split.push_back(i);
+      if (split.empty()) break;
+      tree.clear();
+      batch.clear();
+      for (size_t i : split) {
+        const CertLeaf& l = c.leaves[i];
+        for (int k = 0; k < 8; ++k) {
+          const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
+          batch.push_back(static_cast<int>(tree.size()));
+          tree.push_back({l.center + l.side * off, l.side / 2, l.depth + 1, kInf, kInf, 0, -1, {}});
+        }
+      }
+      budget_used += static_cast<long>(batch.size());
+      evaluate_batch(batch, vals);
+      std::vector<CertLeaf> next;
+      std::vector<char> next_settled;
+      next.reserve(c.leaves.size() + 7 * split.size());
+      size_t si = 0;
+      for (size_t i = 0; i < c.leaves.size(); ++i) {
+        const CertLeaf& l = c.leaves[i];
+        if (si >= split.size() || split[si] != i) {
+          next.push_back(l);
+          next_settled.push_back(settled[i]);
+          continue;
+        }
+        CertLeaf kids[8];
+        double worst = kInf;
+        for (int k = 0; k < 8; ++k) {
+          const Node& nd = tree[8 * si + k];
+          const NodeValues& v = vals[8 * si + k];
+          const double rad = 0.5 * std::sqrt(3.0) * nd.side;
+          const double L =
+              lipschitz(v.hnorm, v.hnorm_op, combined ? v.own_first : v.own_bound, v.own_bound, rad);
+          const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+          kids[k] = {nd.c, nd.side, nd.depth, v.sigma3, L, margin, margin > 0, l.base, v.sign_unresolved};
+          worst = std::min(worst, margin);
+          c.min_sigma3_center = std::min(c.min_sigma3_center, v.sigma3);
+        }
+        ++si;
+        if (worst > l.margin) {
+          ++c.refined;
+          for (const CertLeaf& kid : kids) {
+            next.push_back(kid);
+            next_settled.push_back(0);
+          }
+        } else {
+          next.push_back(l);  // its own bound is the better one: keep it, and stop splitting it
+          next_settled.push_back(1);
+        }
+      }
+      c.leaves.swap(next);
+      settled.swap(next_settled);
+    }
+    c.min_margin = kInf;
+    for (const CertLeaf& l : c.leaves) {
+      c.min_margin = std::min(c.min_margin, l.margin);
+      c.max_depth_used = std::max(c.max_depth_used, l.depth);
+    }
+    c.min_lower_bound = c.min_margin;
+    c.num_leaves = static_cast<long>(c.leaves.size());
+    c.bound_tolerance_met = c.min_lower_bound >= (1 - p.bound_tolerance) * c.min_sigma3_center;
+    if (!p.keep_leaves) c.leaves.clear();
+    c.ms_refine += ms_since(t0);
+  }
+
   // A resolved σ3 ≤ 0 at an evaluated center (every such center is a leaf): the map folds there.
   bool resolved_nonpositive = false;
   std::string failure_reason() const {
@@ -680,6 +767,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   run.base_bounds();
   run.refine();
   Certificate cert = run.assemble();
+  run.tighten(cert);
   cert.ms_total = ms_since(t_start);
   return cert;
 }

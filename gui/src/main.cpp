@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   std::string scenario, model, compare, view = "mesh", screenshot, size = "1024x768";
   double timeout = 600;
   int multisamples = -1;
+  bool transparent = false;
   app.add_option(
       "PATH", scenario,
       "A scenario/session JSON, a model folder, or a mesh file (.obj/.off/.ply/.stl: automatic cage)");
@@ -42,13 +43,15 @@ int main(int argc, char** argv) {
       "Solve until the solver rests, render --view, write this PNG and exit (0 written, 1 timed out, "
       "2 error)");
   app.add_option("--size", size, "Size of the rendered view for --screenshot, WxH")->capture_default_str();
+  app.add_flag("--transparent", transparent,
+               "With --screenshot: an RGBA PNG whose background is transparent");
   app.add_option("--multisamples", multisamples,
                  "MSAA samples of the 3D view (default: 0 interactive, 4 for --screenshot)");
   app.add_option("--timeout", timeout, "Seconds to wait for the solver in --screenshot mode")
       ->capture_default_str();
   app.footer(
-      "Mouse: click on the mesh adds a handle; drag a cyan target sphere; right-click on it deletes it.\n"
-      "Keys: Ctrl+Z / Ctrl+Shift+Z undo/redo handle edits, Esc stops the solver. Docs: docs/studio.md.");
+      "Mouse: click on the mesh adds a handle (Ctrl+click picks values); drag a cyan target sphere;\n"
+      "right-click on it deletes it. Keys: F1 or H in the window lists them all. Docs: docs/studio.md.");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -78,6 +81,9 @@ int main(int argc, char** argv) {
 
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication qapp(argc, argv);
+  // QSettings (the window layout) under ~/.config/lidef/lidef-studio.conf.
+  QApplication::setOrganizationName("lidef");
+  QApplication::setApplicationName("lidef-studio");
   // QApplication adopts the user's locale (setlocale(LC_ALL, "")); numbers in captions and files are written
   // with printf (format_g), which must keep the '.' of the C locale.
   std::setlocale(LC_NUMERIC, "C");
@@ -117,6 +123,7 @@ int main(int argc, char** argv) {
     win.view_widget()->setFixedSize(w, h);
     win.adjustSize();
   }
+  if (!headless) win.restore_layout();
   win.show();
   win.set_settings(settings);
   const std::string path = !scenario.empty() ? scenario : model;
@@ -145,7 +152,7 @@ int main(int argc, char** argv) {
     if (ex.leaves && f->leaves_version != f->map_version) return;
     if (ex.field && f->field_version != f->map_version) return;
     poll.stop();
-    if (!win.save_screenshot(screenshot)) {
+    if (!win.save_screenshot(screenshot, 0, 0, transparent)) {
       exit_code = 2;
       qapp.exit(2);
       return;

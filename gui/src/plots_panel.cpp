@@ -15,6 +15,7 @@ namespace {
 
 const QColor kEnergyColor(31, 119, 180);  // blue
 const QColor kBoundColor(230, 110, 0);    // orange
+const QColor kSampledColor(148, 103, 189);  // purple
 const QColor kLColor(31, 119, 180);
 const QColor kQuotientColor(44, 160, 44);   // green
 const QColor kViolationColor(214, 39, 40);  // red
@@ -227,8 +228,28 @@ void PlotsPanel::set_history(const std::vector<IterationRecord>& history) {
   iterations_.clear();
   iterations_.reserve(history.size());
   for (const IterationRecord& r : history)
-    iterations_.push_back({r.iteration, r.terms.total, r.min_lower_bound, r.accepted});
+    iterations_.push_back(
+        {r.iteration, r.terms.total, r.min_lower_bound, r.min_sigma3, r.refined, r.accepted});
   update();
+}
+
+void PlotsPanel::set_bound_tolerance(double t) {
+  bound_tolerance_ = t;
+  update();
+}
+
+QString PlotsPanel::history_title() const {
+  if (iterations_.empty()) return "Solver history";
+  const IterationPoint& last = iterations_.back();
+  const QString tol = bound_tolerance_ > 0
+                          ? QString::fromUtf8("within %1% of sampled").arg(100 * bound_tolerance_, 0, 'g', 3)
+                          : QString::fromUtf8("only proven > 0: set bound_tolerance");
+  return QString::fromUtf8("%1 iterations; last: σ3 ≥ %2 certified (%3), sampled min %4, %5 refined")
+      .arg(iterations_.size())
+      .arg(last.lower_bound, 0, 'g', 4)
+      .arg(tol)
+      .arg(last.sampled, 0, 'g', 4)
+      .arg(last.refined);
 }
 
 void PlotsPanel::set_verification(const VerificationResult& v) {
@@ -262,9 +283,7 @@ void PlotsPanel::paintEvent(QPaintEvent*) {
 }
 
 void PlotsPanel::paint_history(QPainter& p, const QRect& area) const {
-  const QString title = QString("Solver history: %1 iteration%2")
-                            .arg(iterations_.size())
-                            .arg(iterations_.size() == 1 ? "" : "s");
+  const QString title = history_title();
   if (iterations_.empty()) return draw_message(p, area, "Solver history", "no data yet");
 
   double e_min = std::numeric_limits<double>::infinity(), e_max = -e_min, b_min = e_min, b_max = -e_min;
@@ -276,10 +295,11 @@ void PlotsPanel::paint_history(QPainter& p, const QRect& area) const {
       e_min = std::min(e_min, it.energy);
       e_max = std::max(e_max, it.energy);
     }
-    if (std::isfinite(it.lower_bound)) {
-      b_min = std::min(b_min, it.lower_bound);
-      b_max = std::max(b_max, it.lower_bound);
-    }
+    for (double v : {it.lower_bound, it.sampled})
+      if (std::isfinite(v)) {
+        b_min = std::min(b_min, v);
+        b_max = std::max(b_max, v);
+      }
   }
   const bool have_energy = e_min <= e_max, have_bound = b_min <= b_max;
   if (!have_energy && !have_bound) return draw_message(p, area, title, "no finite values");
@@ -292,15 +312,21 @@ void PlotsPanel::paint_history(QPainter& p, const QRect& area) const {
 
   const QFontMetrics fm(p.font());
   p.setPen(kTextColor);
-  p.drawText(area.adjusted(6, 4, -6, 0), Qt::AlignHCenter | Qt::AlignTop, title);
+  const QRect title_box = area.adjusted(6, 4, -6, 0);
+  const QRect title_used =
+      fm.boundingRect(title_box, Qt::AlignHCenter | Qt::AlignTop | Qt::TextWordWrap, title);
+  p.drawText(title_box, Qt::AlignHCenter | Qt::AlignTop | Qt::TextWordWrap, title);
   std::vector<LegendEntry> legend;
   if (have_energy) legend.push_back({LegendEntry::kLineCircle, kEnergyColor, "E (left, log)"});
-  if (have_bound)
-    legend.push_back({LegendEntry::kLineSquare, kBoundColor, QString::fromUtf8("min σ3 − rL (right)")});
+  if (have_bound) {
+    legend.push_back(
+        {LegendEntry::kLineSquare, kBoundColor, QString::fromUtf8("certified lower bound of σ3 (right)")});
+    legend.push_back({LegendEntry::kLineCircle, kSampledColor, QString::fromUtf8("smallest sampled σ3")});
+  }
   if (std::any_of(iterations_.begin(), iterations_.end(),
                   [](const IterationPoint& it) { return !it.accepted; }))
     legend.push_back({LegendEntry::kHollowCircle, kFrameColor, "not accepted"});
-  const int legend_top = area.top() + 4 + fm.height();
+  const int legend_top = area.top() + 4 + title_used.height();
   const int legend_h = draw_legend(p, area, legend_top, legend);
   const QRectF plot = plot_rect(fm, area, legend_top + legend_h, left, right);
   draw_axes(p, plot, x, left, kEnergyColor, right, kBoundColor, "iteration");
@@ -335,6 +361,7 @@ void PlotsPanel::paint_history(QPainter& p, const QRect& area) const {
       if (y.usable(it.*field))
         draw_marker(p, map(plot, x, y, it.iteration, it.*field), color, square, it.accepted);
   };
+  if (have_bound) series(bound, &IterationPoint::sampled, kSampledColor, false);
   if (have_bound) series(bound, &IterationPoint::lower_bound, kBoundColor, true);
   if (have_energy) series(energy, &IterationPoint::energy, kEnergyColor, false);
   p.setRenderHint(QPainter::Antialiasing, false);

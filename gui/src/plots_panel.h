@@ -1,7 +1,10 @@
 // Two plots drawn with QPainter (QtCharts is not a dependency):
-//  top    — the solver history, as in Fig. 9 of Liao et al. 2021: energy E per iteration on a log axis (left)
-//           and the certificate's min over leaves of sigma3 - r L on a linear axis (right); hollow markers
-//           for iterations whose step was not accepted;
+//  top    — the solver history, as in Fig. 9 of Liao et al. 2021: energy E per iteration, log axis (left);
+//           on a linear axis (right) the certified lower bound of sigma3 over the voxels (min over leaves of
+//           sigma3 - r L - tau) beside the smallest sampled sigma3 (voxel and node centers): their gap shows
+//           how tight the bound is (with bound_tolerance the certifier refines until the gap is within that
+//           fraction); the title gives the last iteration's numbers and refined voxels; hollow markers for
+//           iterations whose step was not accepted;
 //  bottom — a certificate against its ground truth, as in Fig. 5: per leaf voxel, sorted by the certificate's
 //           Lipschitz bound L, L as a line and the sampled max |sigma3(p) - sigma3(c)| / |p - c| as points
 //           (log axis); the title gives the number of leaves and of bound violations (red unless 0).
@@ -25,6 +28,10 @@ class PlotsPanel : public QWidget {
 
   // Replaces the history shown in the top plot and repaints.
   void set_history(const std::vector<lidef::IterationRecord>& history);
+  // The certifier's bound_tolerance the history was computed with (0: the bound is only proven > 0).
+  void set_bound_tolerance(double t);
+  // The title of the history plot (what it says about the last iteration).
+  QString history_title() const;
   // Shows `v` in the bottom plot and repaints.
   void set_verification(const lidef::VerificationResult& v);
   // Empties the bottom plot ("no data yet").
@@ -41,7 +48,8 @@ class PlotsPanel : public QWidget {
  private:
   struct IterationPoint {
     int iteration;
-    double energy, lower_bound;
+    double energy, lower_bound, sampled;
+    long refined;
     bool accepted;
   };
   struct LeafPoint {
@@ -54,6 +62,7 @@ class PlotsPanel : public QWidget {
   std::vector<IterationPoint> iterations_;
   std::vector<LeafPoint> leaves_;  // sorted by L (precomputed: a paint must stay cheap with 1e5 leaves)
   long violations_ = 0;
+  double bound_tolerance_ = 0;
   bool has_verification_ = false;
 };
 

@@ -57,6 +57,29 @@ View view_from_string(const std::string& name) {
   throw InputError("--view", "unknown view \"" + name + "\" (mesh, sigma3, lipschitz, octree)");
 }
 
+Field shown_field(const ViewSettings& s) {
+  switch (s.view) {
+    case View::kMesh:
+      return s.mesh_volume_ratio ? Field::kDetJ : Field::kEiso;
+    case View::kLipschitz:
+      return s.lipschitz_margin ? Field::kMargin : Field::kL;
+    default:
+      return Field::kSigma3;
+  }
+}
+
+bool has_range(const ViewSettings& s) {
+  return s.view != View::kOctree;
+}
+
+namespace {
+nlohmann::json ranges_json(const ViewSettings& s) {
+  nlohmann::json j = nlohmann::json::object();
+  for (int k = 0; k < kNumFields; ++k) j[to_string(static_cast<Field>(k))] = range_to_json(s.range[k]);
+  return j;
+}
+}  // namespace
+
 nlohmann::json settings_to_json(const ViewSettings& s) {
   return {{"view", to_string(s.view)},
           {"mesh_volume_ratio", s.mesh_volume_ratio},
@@ -72,7 +95,8 @@ nlohmann::json settings_to_json(const ViewSettings& s) {
           {"only_refined_or_failed", s.only_refined_or_failed},
           {"octree_by_status", s.octree_by_status},
           {"clip", s.clip},
-          {"min_depth", s.min_depth}};
+          {"min_depth", s.min_depth},
+          {"ranges", ranges_json(s)}};
 }
 
 void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::string& where) {
@@ -101,6 +125,14 @@ void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::str
     get("clip", s.clip);
     s.clip = std::clamp(s.clip, 0.0, 1.0);
     get("min_depth", s.min_depth);
+    if (j.contains("ranges")) {
+      const auto& r = j.at("ranges");
+      if (!r.is_object()) throw InputError(where, "studio view settings: \"ranges\" must be an object");
+      for (int k = 0; k < kNumFields; ++k) {
+        const char* name = to_string(static_cast<Field>(k));
+        if (r.contains(name)) range_from_json(r.at(name), s.range[k], where);
+      }
+    }
   } catch (const nlohmann::json::exception& e) {
     throw InputError(where, std::string("studio view settings: ") + e.what());
   }
@@ -140,24 +172,6 @@ vtkSmartPointer<vtkPolyData> wireframe(const MatX3d& V, const MatX3i& F) {
   return polydata(pts, cells);
 }
 
-// Diverging blue–white–red around `mid` on a log or linear scale (volume ratio, margins).
-void diverging_lut(vtkLookupTable* lut, double lo, double hi, bool log_scale) {
-  lut->SetNumberOfTableValues(256);
-  if (log_scale) lut->SetScaleToLog10();
-  lut->SetTableRange(lo, hi);
-  for (int i = 0; i < 256; ++i) {
-    const double t = i / 255.0;
-    if (t < 0.5) {
-      const double u = t / 0.5;
-      lut->SetTableValue(i, 0.23 + 0.77 * u, 0.30 + 0.70 * u, 0.75 + 0.25 * u, 1.0);
-    } else {
-      const double u = (t - 0.5) / 0.5;
-      lut->SetTableValue(i, 1.0 - 0.3 * u, 1.0 - 0.9 * u, 1.0 - 0.85 * u, 1.0);
-    }
-  }
-  lut->SetNanColor(0.2, 0.2, 0.2, 1.0);
-}
-
 }  // namespace
 
 void style_scalar_bar(vtkScalarBarActor* bar, double height) {
@@ -192,10 +206,12 @@ void sigma3_colors(vtkColorTransferFunction* ctf, double lo, double hi) {
     ctf->AddRGBPoint(0.0, 1.0, 0.5, 0.5);
     lo = 0;
   }
-  ctf->AddRGBPoint(lo, 0.18, 0.0, 0.33);
-  ctf->AddRGBPoint(lo + 0.33 * (hi - lo), 0.15, 0.40, 0.55);
-  ctf->AddRGBPoint(lo + 0.66 * (hi - lo), 0.20, 0.70, 0.45);
-  ctf->AddRGBPoint(hi, 0.99, 0.91, 0.15);
+  for (int i = 0; i <= 8; ++i) {
+    double c[3];
+    viridis(i / 8.0, c);
+    ctf->AddRGBPoint(lo + (hi - lo) * i / 8.0, c[0], c[1], c[2]);
+  }
+  ctf->ClampingOn();
 }
 
 struct Scene::Impl {
@@ -230,6 +246,8 @@ struct Scene::Impl {
   Ptr<vtkLookupTable> leaves_lut = Ptr<vtkLookupTable>::New();
   Ptr<vtkScalarBarActor> bar = Ptr<vtkScalarBarActor>::New();
   Ptr<vtkTextActor> text = Ptr<vtkTextActor>::New();
+  std::pair<double, double> range{0, 0};  // of the colour bar shown last
+  bool bar_in_strip = false;              // the bar has its own renderer (a strip right of the model)
   long model_version = -1;
   std::string caption;
 
@@ -248,7 +266,7 @@ struct Scene::Impl {
   void set_caption(const std::string& what, const SessionFrame& f);
 };
 
-Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
+Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make_unique<Impl>()) {
   Impl& I = *impl_;
   I.ren = renderer;
   I.mesh_mapper->SetInputData(I.mesh);
@@ -310,6 +328,12 @@ Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
   I.marks->GetProperty()->SetLineWidth(1.5);
   I.marks->PickableOff();
   style_scalar_bar(I.bar, 0.8);
+  I.bar_in_strip = bar_renderer != nullptr;
+  if (bar_renderer) {  // the bar fills its own viewport
+    I.bar->SetPosition(0.08, 0.1);
+    I.bar->SetWidth(0.8);
+    I.bar->SetMaximumWidthInPixels(110);
+  }
   I.text->GetTextProperty()->SetColor(0.1, 0.1, 0.1);
   I.text->GetTextProperty()->SetFontSize(15);
   I.text->SetPosition(10, 10);
@@ -317,10 +341,12 @@ Scene::Scene(vtkRenderer* renderer) : impl_(std::make_unique<Impl>()) {
   I.text->SetPosition(0.01, 0.94);
   for (vtkProp* p :
        std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage, I.images,
-                                       I.slices, I.volume, I.leaves, I.marks, I.bar, I.text}) {
+                                       I.slices, I.volume, I.leaves, I.marks, I.text}) {
     p->VisibilityOff();
     renderer->AddViewProp(p);
   }
+  I.bar->VisibilityOff();
+  (bar_renderer ? bar_renderer : renderer)->AddViewProp(I.bar);
   I.text->VisibilityOn();
 }
 
@@ -333,6 +359,15 @@ vtkPolyData* Scene::mesh_data() const {
 }
 std::string Scene::caption() const {
   return impl_->caption;
+}
+std::pair<double, double> Scene::shown_range() const {
+  return impl_->range;
+}
+vtkActor* Scene::leaves_actor() const {
+  return impl_->leaves;
+}
+vtkActor* Scene::slices_actor() const {
+  return impl_->slices;
 }
 
 namespace {
@@ -387,14 +422,10 @@ Ptr<vtkPolyData> slice_polydata(const FieldGrid& g, const std::vector<float>* de
 // Lowest and highest σ3 of the grid points a view shows (inside the cage, inside the voxels unless the whole
 // cage is asked for); 0, 0 when there are none.
 std::pair<double, double> sigma3_range(const FieldGrid& g, const ViewSettings& s) {
-  double lo = 1e300, hi = -1e300;
+  std::vector<double> v;
   for (size_t i = 0; i < g.sigma3.size(); ++i)
-    if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i]) && std::isfinite(g.sigma3[i])) {
-      lo = std::min<double>(lo, g.sigma3[i]);
-      hi = std::max<double>(hi, g.sigma3[i]);
-    }
-  if (lo > hi) lo = hi = 0;
-  return {lo, hi};
+    if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i])) v.push_back(g.sigma3[i]);
+  return color_range(v, s.range[static_cast<int>(Field::kSigma3)]);
 }
 
 // The chosen grid planes appended into one polydata with σ3 at the points.
@@ -428,6 +459,20 @@ Ptr<vtkPolyData> sigma3_slices(const SessionFrame& f, const ViewSettings& s) {
   return polydata(all_pts, all_quads, all_sig);
 }
 
+}  // namespace
+
+bool leaf_shown(const CertLeaf& l, const Model& model, const ViewSettings& s) {
+  const Vec3 ext = model.cage.bbox_max - model.cage.bbox_min;
+  int axis = 0;
+  for (int a = 1; a < 3; ++a)
+    if (ext(a) > ext(axis)) axis = a;
+  const double cut = model.cage.bbox_min(axis) + s.clip * ext(axis);
+  if (l.center(axis) > cut || l.depth < s.min_depth) return false;
+  return !(s.view == View::kLipschitz && s.only_refined_or_failed && l.depth == 0 && l.certified);
+}
+
+namespace {
+
 // The leaves a Lipschitz/octree view shows, as glyph points (cubes of side `side` coloured by `value`), and
 // the outlines of the refined or failed ones (Lipschitz view).
 struct LeafGlyphs {
@@ -438,17 +483,12 @@ struct LeafGlyphs {
   Ptr<vtkDoubleArray> mark_side = Ptr<vtkDoubleArray>::New();
   Ptr<vtkDoubleArray> mark_failed = Ptr<vtkDoubleArray>::New();
   long shown = 0, failed = 0;
-  double lo = 1e300, hi = -1e300;  // range of the finite values shown (0, 0 when none)
+  std::vector<double> finite;  // the finite values shown (colour range)
 };
 
 // Leaves in front of the clip plane across the longest axis of the cage's box (so the inside shows).
 LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSettings& s) {
   const bool lip = s.view == View::kLipschitz;
-  const Vec3 ext = model.cage.bbox_max - model.cage.bbox_min;
-  int axis = 0;
-  for (int a = 1; a < 3; ++a)
-    if (ext(a) > ext(axis)) axis = a;
-  const double cut = model.cage.bbox_min(axis) + s.clip * ext(axis);
   LeafGlyphs L;
   L.side->SetName("side");
   L.value->SetName("value");
@@ -456,8 +496,7 @@ LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSetti
   L.mark_failed->SetName("failed");
   for (const CertLeaf& l : c.leaves) {
     if (!l.certified) ++L.failed;
-    if (l.center(axis) > cut || l.depth < s.min_depth) continue;
-    if (lip && s.only_refined_or_failed && l.depth == 0 && l.certified) continue;
+    if (!leaf_shown(l, model, s)) continue;
     double x;
     if (lip)
       x = s.lipschitz_margin ? l.margin : l.L;
@@ -465,20 +504,16 @@ LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSetti
       x = s.octree_by_status ? (l.certified ? 1 : 0) : l.depth;
     if (!std::isfinite(x)) x = lip && !s.lipschitz_margin ? 1e300 : -1e300;
     L.pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
-    L.side->InsertNextValue(l.side * 0.97);  // a small gap shows the cells
+    L.side->InsertNextValue(l.side * kLeafDrawnSide);  // a small gap shows the cells
     if (lip && (l.depth > 0 || !l.certified)) {
       L.mark_pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
       L.mark_side->InsertNextValue(l.side);
       L.mark_failed->InsertNextValue(l.certified ? 0 : 1);
     }
     L.value->InsertNextValue(x);
-    if (std::abs(x) < 1e299) {
-      L.lo = std::min(L.lo, x);
-      L.hi = std::max(L.hi, x);
-    }
+    if (std::abs(x) < 1e299) L.finite.push_back(x);
     ++L.shown;
   }
-  if (L.lo > L.hi) L.lo = L.hi = 0;
   return L;
 }
 
@@ -489,6 +524,7 @@ void Scene::Impl::hide_all() {
                                                     slices, volume, leaves, marks, bar})
     p->VisibilityOff();
   bar->SetNumberOfLabels(5);
+  range = {0, 0};
 }
 
 void Scene::Impl::show_no_model(const SessionFrame& f) {
@@ -548,6 +584,13 @@ void Scene::Impl::update_handle_images(const SessionFrame& f, const ViewSettings
 
 void Scene::Impl::show_bar(vtkScalarsToColors* colors, const char* title) {
   bar->SetLookupTable(colors);
+  // Annotations (indexed tables: depth, status) are drawn left of the bar, tick labels right of it; both
+  // must stay inside the bar's strip, whose left edge touches the model's viewport.
+  if (bar_in_strip) {
+    const bool indexed = colors->GetIndexedLookup() != 0;  // annotations left of the bar: room for them
+    bar->SetPosition(indexed ? 0.5 : 0.08, 0.1);
+    bar->SetWidth(indexed ? 0.45 : 0.8);
+  }
   bar->SetTitle(title);
   bar->VisibilityOn();
 }
@@ -557,24 +600,37 @@ std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSetting
   mesh_actor->VisibilityOn();
   rest_cage->SetVisibility(s.rest_cage);
   def_cage->SetVisibility(s.deformed_cage);
+  const Field fld = shown_field(s);
+  const ColorRange& cr = s.range[static_cast<int>(fld)];
   if (s.mesh_volume_ratio) {
-    double lo = 1, hi = 1;
+    // Symmetric around 1 on a log scale (a volume halved and doubled get opposite colours): the range is
+    // taken on log det J.
+    std::vector<double> v;
+    v.reserve(static_cast<size_t>(f.mesh_det.size()));
     for (Eigen::Index i = 0; i < f.mesh_det.size(); ++i)
-      if (f.mesh_det(i) > 0) {
-        lo = std::min(lo, f.mesh_det(i));
-        hi = std::max(hi, f.mesh_det(i));
-      }
-    const double m = std::max({hi, 1 / lo, 1.05});  // symmetric on a log scale around 1
-    diverging_lut(mesh_lut, 1 / m, m, true);
+      if (f.mesh_det(i) > 0) v.push_back(f.mesh_det(i));
+    auto [lo, hi] = color_range(v, cr);
+    if (cr.mode != ColorRange::Mode::kManual) {
+      const double m = std::max({hi, 1 / std::max(lo, 1e-300), 1.05});
+      lo = 1 / m;
+      hi = m;
+    }
+    lo = std::max(lo, 1e-6);
+    cool_warm_lut(mesh_lut, lo, std::max(hi, lo * 1.001), true);
   } else {
-    double hi = 0;
-    for (Eigen::Index i = 0; i < f.mesh_e_iso.size(); ++i)
-      if (std::isfinite(f.mesh_e_iso(i))) hi = std::max(hi, f.mesh_e_iso(i));
+    std::vector<double> v(f.mesh_e_iso.data(), f.mesh_e_iso.data() + f.mesh_e_iso.size());
+    auto [lo, hi] = color_range(v, cr);
+    if (cr.mode != ColorRange::Mode::kManual) {  // 0 = isometry: the heat map starts there
+      lo = 0;
+      hi = std::max(hi, 0.05);
+    }
     mesh_lut->SetScaleToLinear();
-    heat_lut(mesh_lut, std::max(hi, 0.05));
+    heat_lut(mesh_lut, hi);
+    mesh_lut->SetTableRange(lo, std::max(hi, lo + 1e-9));
   }
   mesh_lut->Build();
   mesh_mapper->SetScalarRange(mesh_lut->GetTableRange());
+  range = {mesh_lut->GetTableRange()[0], mesh_lut->GetTableRange()[1]};
   show_bar(mesh_lut, s.mesh_volume_ratio ? "det J" : "E_iso - 6");
   return std::string("deformed mesh, ") + (s.mesh_volume_ratio ? "local volume ratio det J" : "E_iso - 6");
 }
@@ -590,6 +646,7 @@ std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSetti
   if (!f.field) return what + " (computing...)";
   const auto [lo, hi] = sigma3_range(*f.field, s);
   sigma3_colors(sigma_colors, lo, hi);
+  range = {lo, hi};
   slices_mapper->SetInputData(sigma3_slices(f, s));
   slices_mapper->SetScalarRange(lo, hi);
   slices->VisibilityOn();
@@ -597,7 +654,7 @@ std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSetti
   show_bar(sigma_colors, "sigma3");
   what += std::string(s.sigma_whole_cage ? " (whole cage interior; certified only inside the voxels)"
                                          : " (inside the voxels)") +
-          ", min " + format_g(lo, 3) + ", max " + format_g(hi, 3);
+          ", colours " + format_g(lo, 3) + " to " + format_g(hi, 3);
   if (f.field_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
   return what;
 }
@@ -651,15 +708,17 @@ std::string Scene::Impl::show_leaves_view(const SessionFrame& f, const ViewSetti
           : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
   if (!f.leaves) return what + " (computing...)";
   const Certificate& c = *f.leaves;
-  const LeafGlyphs L = leaf_glyphs(c, *f.model, s);
+  LeafGlyphs L = leaf_glyphs(c, *f.model, s);
   auto pd = Ptr<vtkPolyData>::New();
   pd->SetPoints(L.pts);
   pd->GetPointData()->AddArray(L.side);
   pd->GetPointData()->AddArray(L.value);
   leaves_mapper->SetInputData(pd);
   leaves_mapper->SelectColorArray("value");
-  const char* title = color_leaves(c, s, L.lo, L.hi);
+  const auto [lo, hi] = color_range(L.finite, s.range[static_cast<int>(shown_field(s))]);
+  const char* title = color_leaves(c, s, lo, hi);
   leaves_mapper->SetScalarRange(leaves_lut->GetTableRange());
+  if (lip) range = {leaves_lut->GetTableRange()[0], leaves_lut->GetTableRange()[1]};
   leaves->GetProperty()->SetEdgeVisibility(!lip);
   leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
   leaves->VisibilityOn();
@@ -688,22 +747,29 @@ const char* Scene::Impl::color_leaves(const Certificate& c, const ViewSettings& 
   leaves_lut->ResetAnnotations();
   leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);
   if (lip && !s.lipschitz_margin) {
-    // L spans decades: log scale.
+    // L spans decades: log scale, viridis (a rainbow would invent boundaries that are not in the data).
     lo = std::max(lo, 1e-12);
-    hi = std::max(hi, lo * 10);
-    leaves_lut->SetNumberOfTableValues(256);
-    leaves_lut->SetScaleToLog10();
-    leaves_lut->SetTableRange(lo, hi);
-    leaves_lut->SetHueRange(0.66, 0.0);
-    leaves_lut->SetSaturationRange(0.8, 0.8);
-    leaves_lut->SetValueRange(0.9, 0.9);
-    leaves_lut->ForceBuild();
+    viridis_lut(leaves_lut, lo, std::max(hi, lo * 10), true);
+    leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);  // infinite L: dark grey
+    leaves_lut->SetUseAboveRangeColor(s.range[static_cast<int>(Field::kL)].mode == ColorRange::Mode::kAuto);
     return "L";
   }
   if (lip) {
-    const double m = std::max(std::abs(lo), std::abs(hi));
-    diverging_lut(leaves_lut, -m, m, false);
-    leaves_lut->Build();
+    // Diverging around 0 (certified above, red at and below 0), symmetric unless set by hand.
+    if (s.range[static_cast<int>(Field::kMargin)].mode != ColorRange::Mode::kManual) {
+      const double m = std::max({std::abs(lo), std::abs(hi), 1e-12});
+      lo = -m;
+      hi = m;
+    }
+    cool_warm_lut(leaves_lut, lo, hi, false);
+    // Reversed: a positive margin (certified) blue, a failing one red.
+    for (int i = 0; i < 128; ++i) {
+      double a[4], b[4];
+      leaves_lut->GetTableValue(i, a);
+      leaves_lut->GetTableValue(255 - i, b);
+      leaves_lut->SetTableValue(i, b);
+      leaves_lut->SetTableValue(255 - i, a);
+    }
     return "sigma3 - rL";
   }
   if (s.octree_by_status) {
@@ -713,7 +779,7 @@ const char* Scene::Impl::color_leaves(const Certificate& c, const ViewSettings& 
     leaves_lut->SetTableValue(1, 0.3, 0.75, 0.35, 1);
     leaves_lut->ResetAnnotations();
     leaves_lut->SetAnnotation(vtkVariant(0.0), "failed");
-    leaves_lut->SetAnnotation(vtkVariant(1.0), "certified");
+    leaves_lut->SetAnnotation(vtkVariant(1.0), "ok");
     leaves_lut->IndexedLookupOn();
     return "status";
   }
@@ -722,9 +788,10 @@ const char* Scene::Impl::color_leaves(const Certificate& c, const ViewSettings& 
   leaves_lut->SetTableRange(0, dmax);
   leaves_lut->ResetAnnotations();
   for (int d = 0; d <= dmax; ++d) {
-    const double t = static_cast<double>(d) / dmax;
-    leaves_lut->SetTableValue(d, 0.85 - 0.6 * t, 0.85 - 0.75 * t, 0.95 - 0.35 * t, 1);
-    leaves_lut->SetAnnotation(vtkVariant(static_cast<double>(d)), "depth " + std::to_string(d));
+    double c[3];
+    viridis(1 - static_cast<double>(d) / dmax, c);  // deep leaves dark
+    leaves_lut->SetTableValue(d, c[0], c[1], c[2], 1);
+    leaves_lut->SetAnnotation(vtkVariant(static_cast<double>(d)), std::to_string(d));  // title: depth
   }
   leaves_lut->IndexedLookupOn();
   return "depth";

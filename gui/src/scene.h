@@ -5,6 +5,7 @@
 
 #include <string>
 
+#include "color_range.h"
 #include "lidef/interactive_session.h"
 
 class vtkActor;
@@ -39,17 +40,30 @@ struct ViewSettings {
   bool octree_by_status = false;        // colour by certified/failed instead of depth
   double clip = 0.5;  // keep leaves whose center is below this fraction of the longest axis (1 = all)
   int min_depth = 0;  // keep leaves at least this deep
+  // Colour-bar range of each field (color_range.h). E_iso − 6 clamps at its 99th percentile by default: one
+  // outlier at a pulled corner would otherwise wash out the rest of the mesh.
+  ColorRange range[kNumFields] = {{ColorRange::Mode::kPercentile, 99, 0, 1}, {}, {}, {}, {}};
 };
+// The field the view colours by (kSigma3 for the octree view, which colours by depth or status: no range).
+Field shown_field(const ViewSettings& s);
+bool has_range(const ViewSettings& s);  // false for the octree view
 nlohmann::json settings_to_json(const ViewSettings& s);
 // Reads what settings_to_json wrote; unknown or missing keys keep `s`'s values; bad types throw InputError.
 void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::string& where);
+
+// Whether the Lipschitz/octree view `s` draws leaf `l` (clip plane across the longest axis, min depth, "only
+// refined or failed"). Drawn leaves are cubes of kLeafDrawnSide times their side about their center.
+bool leaf_shown(const CertLeaf& l, const Model& model, const ViewSettings& s);
+constexpr double kLeafDrawnSide = 0.97;
 
 // The extras a view needs from the engine.
 ExtrasRequest extras_for(const ViewSettings& s);
 
 class Scene {
  public:
-  explicit Scene(vtkRenderer* renderer);
+  // The colour bar goes into `bar_renderer` (a viewport beside the model's, so it never covers the model)
+  // when given, else into `renderer`.
+  explicit Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer = nullptr);
   ~Scene();
   // Rebuilds the actors of `s.view` from the frame (cheap for the mesh view; the leaves/field views rebuild
   // only when their extras changed). A frame without a map shows the status line only.
@@ -59,6 +73,11 @@ class Scene {
   vtkPolyData* mesh_data() const;
   // Text shown in the top-left corner of the view (what is shown, and when extras lag the map).
   std::string caption() const;
+  // The colour-bar range of the last shown view ({0, 0} before a map is shown or in the octree view).
+  std::pair<double, double> shown_range() const;
+  // The leaves glyph actor (Lipschitz/octree views) and the σ3 slices, for picking.
+  vtkActor* leaves_actor() const;
+  vtkActor* slices_actor() const;
 
  private:
   struct Impl;

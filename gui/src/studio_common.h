@@ -29,7 +29,8 @@ void report_to_user(QWidget* parent, QLabel* status, const std::function<void(co
                     const std::string& title, const std::string& message);
 
 // Renders `window` and writes it as PNG: temporary file in the same folder, then rename. Returns "" or the
-// reason it failed (nothing is left behind then). (studio_window.cpp)
-std::string write_window_png(vtkRenderWindow* window, const std::string& path);
+// reason it failed (nothing is left behind then). rgba: 4 channels, the alpha of the frame buffer (a
+// transparent background needs renderers with background alpha 0 and alpha bit planes). (studio_window.cpp)
+std::string write_window_png(vtkRenderWindow* window, const std::string& path, bool rgba = false);
 
 }  // namespace lidef::studio

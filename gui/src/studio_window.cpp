@@ -10,6 +10,7 @@
 #include <vtkInteractorStyleTrackballCamera.h>
 #include <vtkObjectFactory.h>
 #include <vtkPNGWriter.h>
+#include <vtkPropPicker.h>
 #include <vtkProperty.h>
 #include <vtkRenderWindowInteractor.h>
 #include <vtkRenderer.h>
@@ -20,20 +21,28 @@
 #include <QApplication>
 #include <QButtonGroup>
 #include <QCheckBox>
+#include <QClipboard>
 #include <QCloseEvent>
+#include <QComboBox>
 #include <QDockWidget>
+#include <QDoubleSpinBox>
 #include <QDragEnterEvent>
 #include <QDropEvent>
 #include <QFileDialog>
 #include <QFileInfo>
 #include <QFormLayout>
 #include <QGroupBox>
+#include <QGuiApplication>
 #include <QLabel>
 #include <QMenuBar>
 #include <QMessageBox>
 #include <QMimeData>
 #include <QProgressDialog>
+#include <QPushButton>
 #include <QRadioButton>
+#include <QScreen>
+#include <QScrollArea>
+#include <QSettings>
 #include <QSlider>
 #include <QSpinBox>
 #include <QStatusBar>
@@ -46,6 +55,7 @@
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -55,10 +65,14 @@
 #include "explorer_panel.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
+#include "lidef/coefficients.h"
 #include "lidef/errors.h"
+#include "lidef/mesh_export.h"
+#include "lidef/mesh_fields.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/subspace.h"
+#include "lidef/vtk_export.h"
 #include "params_panel.h"
 #include "plots_panel.h"
 #include "studio_common.h"
@@ -71,7 +85,8 @@ namespace lidef::studio {
 class StudioStyle : public vtkInteractorStyleTrackballCamera {
  public:
   static StudioStyle* New();
-  vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera) std::function<void(int, int)> on_click;
+  vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera)
+      std::function<void(int, int, bool)> on_click;  // x, y, Ctrl held
   std::function<bool(int, int)> on_right_press;  // true = consumed
   void OnLeftButtonDown() override {
     this->Interactor->GetEventPosition(press_);
@@ -82,7 +97,7 @@ class StudioStyle : public vtkInteractorStyleTrackballCamera {
     int xy[2];
     this->Interactor->GetEventPosition(xy);
     if (std::abs(xy[0] - press_[0]) <= 3 && std::abs(xy[1] - press_[1]) <= 3 && on_click)
-      on_click(xy[0], xy[1]);
+      on_click(xy[0], xy[1], this->Interactor->GetControlKey() != 0);
   }
   void OnRightButtonDown() override {
     int xy[2];
@@ -147,14 +162,29 @@ void StudioWindow::build_ui() {
   ren->GradientBackgroundOn();
   window_->AddRenderer(ren);
   renderer_ = ren;
-  scene_ = std::make_unique<Scene>(renderer_);
+  // The colour bar lives in its own strip at the right edge, so it never covers the model.
+  auto bar_ren = vtkSmartPointer<vtkRenderer>::New();
+  bar_ren->SetBackground(1, 1, 1);
+  bar_ren->SetBackground2(0.86, 0.89, 0.94);
+  bar_ren->GradientBackgroundOn();
+  bar_ren->InteractiveOff();
+  ren->SetViewport(0, 0, 0.84, 1);
+  bar_ren->SetViewport(0.84, 0, 1, 1);
+  window_->AddRenderer(bar_ren);
+  bar_renderer_ = bar_ren;
+  scene_ = std::make_unique<Scene>(renderer_, bar_renderer_);
   setCentralWidget(view_);
 
   // Click on the mesh adds a handle; right-click on a target deletes it. The handle widgets (observer
   // priority 0.5) see a press before the style and keep it when they grab a sphere.
   auto style = vtkSmartPointer<StudioStyle>::New();
-  style->on_click = [this](int x, int y) {
-    if (dragging_ < 0) add_handle_at_display(x, y);
+  // In the mesh view a click adds a handle and Ctrl+click picks; in the other views a click picks.
+  style->on_click = [this](int x, int y, bool ctrl) {
+    if (dragging_ >= 0) return;
+    if (settings_.view == View::kMesh && !ctrl)
+      add_handle_at_display(x, y);
+    else
+      pick_at_display(x, y);
   };
   style->on_right_press = [this](int x, int y) { return delete_handle_at_display(x, y); };
   window_->GetInteractor()->SetInteractorStyle(style);
@@ -189,6 +219,18 @@ void StudioWindow::build_ui() {
     const QString f = QFileDialog::getSaveFileName(this, "Save screenshot", {}, "PNG (*.png)");
     if (!f.isEmpty()) save_screenshot(f.toStdString());
   });
+  file->addAction("Save screenshot, transparent &background...", this, [this] {
+    const QString f = QFileDialog::getSaveFileName(this, "Save screenshot (RGBA)", {}, "PNG (*.png)");
+    if (!f.isEmpty()) save_screenshot(f.toStdString(), 0, 0, true);
+  });
+  file->addAction("Save screenshot at &1920x1080...", this, [this] {
+    const QString f = QFileDialog::getSaveFileName(this, "Save screenshot (1920x1080)", {}, "PNG (*.png)");
+    if (!f.isEmpty()) save_screenshot(f.toStdString(), 1920, 1080, false);
+  });
+  file->addAction("&Export map, certificate and fields (as the CLI writes them)...", this, [this] {
+    const QString d = QFileDialog::getExistingDirectory(this, "Export into folder");
+    if (!d.isEmpty()) export_current(d.toStdString());
+  });
   file->addSeparator();
   file->addAction("&Quit", this, [this] { close(); })->setShortcut(QKeySequence::Quit);
   QMenu* edit = menuBar()->addMenu("&Edit");
@@ -209,7 +251,27 @@ void StudioWindow::build_ui() {
   QAction* reset_a = solver->addAction("&Reset to identity", this, [this] { session_->reset(); });
   QAction* verify_a = solver->addAction("&Verify certificate (dense sampling, Fig. 5)", this,
                                         [this] { session_->verify(32); });
+  QMenu* camera = menuBar()->addMenu("&Camera");
+  camera->addAction("&Reset", this, [this] { reset_camera(); })->setShortcut(Qt::Key_R);
+  const char* preset_names[6] = {"From +X", "From -X", "From +Y", "From -Y", "From +Z", "From -Z"};
+  for (int k = 0; k < 6; ++k)
+    camera->addAction(preset_names[k], this, [this, k] { camera_preset(k / 2, k % 2 == 0); })
+        ->setShortcut(Qt::Key_1 + k);
+  QAction* ortho = camera->addAction("&Orthographic projection");
+  ortho->setCheckable(true);
+  ortho->setObjectName("orthographic");
+  ortho->setShortcut(Qt::Key_O);
+  connect(ortho, &QAction::toggled, this, [this](bool on) { set_orthographic(on); });
+  camera->addSeparator();
+  camera->addAction("&Copy camera (JSON)", this, [this] { copy_camera(); })
+      ->setShortcut(QKeySequence("Ctrl+Shift+C"));
+  camera->addAction("&Paste camera (JSON)", this, [this] { paste_camera(); })
+      ->setShortcut(QKeySequence("Ctrl+Shift+V"));
+  QMenu* help = menuBar()->addMenu("&Help");
+  QAction* cheat = help->addAction("&Keyboard and mouse (cheat sheet)", this, [this] { show_cheat_sheet(); });
+  cheat->setShortcuts({QKeySequence(Qt::Key_F1), QKeySequence(Qt::Key_H)});
   QToolBar* tb = addToolBar("Main");
+  tb->setObjectName("Main");
   tb->addAction(open_model);
   tb->addAction(open_sc);
   tb->addAction(save);
@@ -224,43 +286,68 @@ void StudioWindow::build_ui() {
   chrome_.push_back(tb);
   chrome_.push_back(menuBar());
 
-  // Panels.
-  auto dock = [&](const char* title, QWidget* w, Qt::DockWidgetArea area) {
+  // Panels: one column of dock widgets on the right (collapsible, movable; the layout is saved with
+  // QSettings), so the 3D view keeps most of the window.
+  auto dock = [&](const char* title, QWidget* w) {
     auto* d = new QDockWidget(title, this);
     d->setObjectName(title);
     d->setWidget(w);
-    addDockWidget(area, d);
+    addDockWidget(Qt::RightDockWidgetArea, d);
     chrome_.push_back(d);
     return d;
   };
   view_panel_ = build_view_panel();
-  dock("View", view_panel_, Qt::LeftDockWidgetArea);
+  auto* view_scroll = new QScrollArea;
+  view_scroll->setObjectName("view_scroll");
+  view_scroll->setWidgetResizable(true);
+  view_scroll->setWidget(view_panel_);
+  auto* vd = dock("View", view_scroll);
   params_ = new ParamsPanel(this);
-  auto* pd = dock("Parameters", params_, Qt::LeftDockWidgetArea);
-  tabifyDockWidget(findChild<QDockWidget*>("View"), pd);
-  findChild<QDockWidget*>("View")->raise();
+  auto* pd = dock("Parameters", params_);
+  tabifyDockWidget(vd, pd);
+  vd->raise();
   connect(params_, &ParamsPanel::params_applied, this, [this](const DeformParams& p, bool) {
     try {
       session_->set_params(p);
+      plots_->set_bound_tolerance(p.bound_tolerance);
     } catch (const std::exception& e) {
       report_error("Parameters", e.what());
     }
   });
+  picked_label_ = new QLabel(QString::fromStdString(to_text(picked_)));
+  picked_label_->setObjectName("picked");
+  picked_label_->setTextInteractionFlags(Qt::TextSelectableByMouse);
+  picked_label_->setWordWrap(true);
+  picked_label_->setAlignment(Qt::AlignTop | Qt::AlignLeft);
+  picked_label_->setMargin(4);
+  auto* picked_dock = dock("Picked values", picked_label_);
   plots_ = new PlotsPanel(this);
-  auto* plots_dock = dock("Plots", plots_, Qt::RightDockWidgetArea);
+  auto* plots_dock = dock("Plots", plots_);
   // The σ3 counterexample explorer (docs/explorer.md): its own map and view, beside the plots.
   const char* data_env = std::getenv("LIDEF_DATA");
   auto* explorer = new ExplorerPanel(data_env ? data_env : LIDEF_STUDIO_DATA_DIR, this);
   explorer->set_error_sink([this](const std::string& e) { report_error("Explorer", e); });
-  tabifyDockWidget(plots_dock, dock("sigma3 explorer", explorer, Qt::RightDockWidgetArea));
+  tabifyDockWidget(plots_dock, dock("sigma3 explorer", explorer));
   plots_dock->raise();
+  splitDockWidget(vd, picked_dock, Qt::Vertical);
+  splitDockWidget(picked_dock, plots_dock, Qt::Vertical);
+  resizeDocks({vd, picked_dock, plots_dock}, {330, 150, 330}, Qt::Vertical);
+  resizeDocks({vd}, {360}, Qt::Horizontal);
 
   badge_ = new QLabel(" no map ");
   status_ = new QLabel("File > Open a model folder or a scenario; click on the mesh to add a handle");
   statusBar()->addWidget(status_, 1);
   statusBar()->addPermanentWidget(badge_);
   chrome_.push_back(statusBar());
-  resize(1280, 800);
+  // First run: most of the screen (the saved geometry replaces it, restore_layout()).
+  QSize size(1280, 800);
+  if (const QScreen* screen = QGuiApplication::primaryScreen()) {
+    const QRect avail = screen->availableGeometry();
+    size = QSize(std::max(1024, static_cast<int>(0.85 * avail.width())),
+                 std::max(700, static_cast<int>(0.85 * avail.height())));
+    size = size.boundedTo(avail.size());
+  }
+  resize(size);
 }
 
 QWidget* StudioWindow::build_view_panel() {
@@ -280,8 +367,12 @@ QWidget* StudioWindow::build_view_panel() {
   connect(group, &QButtonGroup::idClicked, this, [this](int id) {
     settings_.view = static_cast<View>(id);
     settings_changed();
+    // The colour-range group shows the new view's field.
+    QMetaObject::invokeMethod(
+        this, [this] { refresh_view_panel(); }, Qt::QueuedConnection);
   });
   lay->addWidget(views);
+  lay->addWidget(build_range_controls());
   auto check = [&](QLayout* l, const char* text, bool* field, const char* tip) {
     auto* c = new QCheckBox(text);
     c->setChecked(*field);
@@ -361,6 +452,7 @@ void StudioWindow::set_multisamples(int n) {
 }
 
 void StudioWindow::set_view_only(bool on) {
+  view_only_ = on;
   for (QWidget* c : chrome_) c->setVisible(!on);
 }
 
@@ -372,16 +464,17 @@ void StudioWindow::set_settings(const ViewSettings& s) {
 
 void StudioWindow::refresh_view_panel() {
   // The panel's widgets are bound to settings_ fields; rebuilding it is the simplest way to show new values.
-  auto* d = findChild<QDockWidget*>("View");
-  if (!d) return;
-  QWidget* old = d->widget();
+  auto* scroll = findChild<QScrollArea*>("view_scroll");
+  if (!scroll) return;
+  QWidget* old = scroll->takeWidget();
   view_panel_ = build_view_panel();
-  d->setWidget(view_panel_);
+  scroll->setWidget(view_panel_);
   if (old) old->deleteLater();
 }
 
 void StudioWindow::set_params(const DeformParams& p) {
   params_->set_params(p);
+  plots_->set_bound_tolerance(p.bound_tolerance);
   try {
     session_->set_params(p);
   } catch (const std::exception& e) {
@@ -473,6 +566,7 @@ bool StudioWindow::open_path(const std::string& path) {
         }
       }
       params_->set_params(sc.params);
+      plots_->set_bound_tolerance(sc.params.bound_tolerance);
     }
   } catch (const std::exception& e) {
     report_error("Cannot open " + path, e.what());
@@ -491,7 +585,7 @@ bool StudioWindow::open_path(const std::string& path) {
   return true;
 }
 
-std::string StudioWindow::studio_json() const {
+std::string StudioWindow::camera_json() const {
   vtkCamera* cam = renderer_->GetActiveCamera();
   const double* p = cam->GetPosition();
   const double* fp = cam->GetFocalPoint();
@@ -500,9 +594,40 @@ std::string StudioWindow::studio_json() const {
   j["camera"] = {{"position", {p[0], p[1], p[2]}},
                  {"focal_point", {fp[0], fp[1], fp[2]}},
                  {"view_up", {up[0], up[1], up[2]}},
-                 {"view_angle", cam->GetViewAngle()}};
+                 {"view_angle", cam->GetViewAngle()},
+                 {"parallel_projection", cam->GetParallelProjection() != 0},
+                 {"parallel_scale", cam->GetParallelScale()}};
+  return j.dump();
+}
+
+std::string StudioWindow::studio_json() const {
+  nlohmann::json j = nlohmann::json::parse(camera_json());
   j["views"] = settings_to_json(settings_);
   return j.dump();
+}
+
+void StudioWindow::apply_camera_object(const nlohmann::json& c) {
+  auto v = [&](const char* k) {
+    const auto x = c.at(k).get<std::vector<double>>();
+    if (x.size() != 3) throw InputError("camera", std::string("\"") + k + "\" needs 3 numbers");
+    return x;
+  };
+  const auto p = v("position"), fp = v("focal_point"), up = v("view_up");
+  const double angle = c.at("view_angle").get<double>();
+  const bool parallel = c.value("parallel_projection", false);
+  const double scale = c.value("parallel_scale", 1.0);
+  vtkCamera* cam = renderer_->GetActiveCamera();
+  cam->SetPosition(p[0], p[1], p[2]);
+  cam->SetFocalPoint(fp[0], fp[1], fp[2]);
+  cam->SetViewUp(up[0], up[1], up[2]);
+  cam->SetViewAngle(angle);
+  cam->SetParallelProjection(parallel ? 1 : 0);
+  cam->SetParallelScale(scale);
+  renderer_->ResetCameraClippingRange();
+  if (auto* a = findChild<QAction*>("orthographic")) {
+    const QSignalBlocker block(a);
+    a->setChecked(parallel);
+  }
 }
 
 void StudioWindow::apply_camera_json(const std::string& text) {
@@ -510,18 +635,131 @@ void StudioWindow::apply_camera_json(const std::string& text) {
   try {
     const auto j = nlohmann::json::parse(text);
     if (!j.contains("camera")) return;
-    const auto& c = j.at("camera");
-    vtkCamera* cam = renderer_->GetActiveCamera();
-    auto v = [&](const char* k) { return c.at(k).get<std::vector<double>>(); };
-    const auto p = v("position"), fp = v("focal_point"), up = v("view_up");
-    cam->SetPosition(p.at(0), p.at(1), p.at(2));
-    cam->SetFocalPoint(fp.at(0), fp.at(1), fp.at(2));
-    cam->SetViewUp(up.at(0), up.at(1), up.at(2));
-    cam->SetViewAngle(c.at("view_angle").get<double>());
-    renderer_->ResetCameraClippingRange();
+    apply_camera_object(j.at("camera"));
   } catch (const std::exception& e) {
     report_error("Session camera", e.what());
   }
+}
+
+void StudioWindow::set_camera_json(const std::string& text) {
+  try {
+    const auto j = nlohmann::json::parse(text);
+    if (!j.is_object() || !j.contains("camera"))
+      throw InputError("camera", "expected {\"camera\": {...}} as Camera > Copy writes it");
+    apply_camera_object(j.at("camera"));
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError("camera", e.what());
+  }
+  window_->Render();
+}
+
+void StudioWindow::copy_camera() {
+  QGuiApplication::clipboard()->setText(QString::fromStdString(camera_json()));
+  status_->setText("camera copied to the clipboard (JSON)");
+}
+
+bool StudioWindow::paste_camera() {
+  try {
+    set_camera_json(QGuiApplication::clipboard()->text().toStdString());
+  } catch (const std::exception& e) {
+    report_error("Paste camera", e.what());
+    return false;
+  }
+  status_->setText("camera pasted");
+  return true;
+}
+
+void StudioWindow::reset_camera() {
+  vtkCamera* cam = renderer_->GetActiveCamera();
+  cam->SetPosition(0, 0, 1);
+  cam->SetFocalPoint(0, 0, 0);
+  cam->SetViewUp(0, 1, 0);
+  renderer_->ResetCamera();
+  cam->Azimuth(25);  // a three-quarter view shows depth
+  cam->Elevation(20);
+  cam->OrthogonalizeViewUp();
+  renderer_->ResetCamera();
+  window_->Render();
+}
+
+void StudioWindow::camera_preset(int axis, bool positive) {
+  vtkCamera* cam = renderer_->GetActiveCamera();
+  double dir[3] = {0, 0, 0};
+  dir[axis] = positive ? 1 : -1;
+  const double up[3][3] = {{0, 0, 1}, {0, 0, 1}, {0, 1, 0}};  // z up when looking along x or y
+  cam->SetFocalPoint(0, 0, 0);
+  cam->SetPosition(dir);
+  cam->SetViewUp(up[axis][0], up[axis][1], up[axis][2]);
+  renderer_->ResetCamera();
+  window_->Render();
+}
+
+void StudioWindow::set_orthographic(bool on) {
+  vtkCamera* cam = renderer_->GetActiveCamera();
+  cam->SetParallelProjection(on ? 1 : 0);
+  if (on) {  // the same apparent size at the focal point
+    const double d = cam->GetDistance();
+    cam->SetParallelScale(d * std::tan(0.5 * cam->GetViewAngle() * M_PI / 180));
+  }
+  renderer_->ResetCameraClippingRange();
+  if (auto* a = findChild<QAction*>("orthographic")) {
+    const QSignalBlocker block(a);
+    a->setChecked(on);
+  }
+  window_->Render();
+}
+
+bool StudioWindow::orthographic() const {
+  return renderer_->GetActiveCamera()->GetParallelProjection() != 0;
+}
+
+std::string StudioWindow::cheat_sheet() {
+  return "Mouse\n"
+         "  left click on the mesh (mesh view)   add a handle\n"
+         "  Ctrl+left click (mesh view)          pick: sigma1, sigma3, det J, E_iso there\n"
+         "  left click (sigma3, Lipschitz, octree views)  pick (with the leaf's depth, L, margin, status)\n"
+         "  drag a cyan sphere                   move that handle's target\n"
+         "  right click on a cyan sphere         delete the handle\n"
+         "  left drag / middle drag / wheel      rotate / pan / zoom\n"
+         "Keys\n"
+         "  R                 reset the camera\n"
+         "  1 2 / 3 4 / 5 6   look from +X -X / +Y -Y / +Z -Z\n"
+         "  O                 orthographic projection on/off\n"
+         "  Ctrl+Shift+C / V  copy / paste the camera as JSON\n"
+         "  Ctrl+Z / Ctrl+Shift+Z  undo / redo handle edits\n"
+         "  Esc               stop the solver\n"
+         "  Ctrl+O / Ctrl+S   open / save a session\n"
+         "  F1 or H           this sheet\n"
+         "Panels (right): View (colour range per field), Parameters, Picked values, Plots, sigma3 explorer;\n"
+         "drag a panel's title to move it, double-click to float it; the layout is kept between runs.";
+}
+
+void StudioWindow::show_cheat_sheet() {
+  auto* box = new QMessageBox(QMessageBox::NoIcon, "lidef-studio: keys and mouse",
+                              QString::fromStdString(cheat_sheet()), QMessageBox::Close, this);
+  box->setObjectName("cheat_sheet");
+  box->setAttribute(Qt::WA_DeleteOnClose);
+  QFont mono("Monospace");
+  mono.setStyleHint(QFont::TypeWriter);
+  box->setFont(mono);
+  box->setModal(false);
+  box->show();
+}
+
+bool StudioWindow::restore_layout() {
+  QSettings st;
+  const QByteArray geometry = st.value("window/geometry").toByteArray();
+  const QByteArray state = st.value("window/state").toByteArray();
+  if (geometry.isEmpty() || state.isEmpty()) return false;
+  restoreGeometry(geometry);
+  return restoreState(state, 1);
+}
+
+void StudioWindow::save_layout() {
+  QSettings st;
+  st.setValue("window/geometry", saveGeometry());
+  st.setValue("window/state", saveState(1));
+  st.sync();
 }
 
 bool StudioWindow::save_session(const std::string& path) {
@@ -544,10 +782,11 @@ bool StudioWindow::save_session(const std::string& path) {
   return true;
 }
 
-std::string write_window_png(vtkRenderWindow* window, const std::string& path) {
+std::string write_window_png(vtkRenderWindow* window, const std::string& path, bool rgba) {
   window->Render();
   auto grab = vtkSmartPointer<vtkWindowToImageFilter>::New();
   grab->SetInput(window);
+  if (rgba) grab->SetInputBufferTypeToRGBA();
   grab->ReadFrontBufferOff();
   grab->ShouldRerenderOn();
   grab->Update();
@@ -565,10 +804,203 @@ std::string write_window_png(vtkRenderWindow* window, const std::string& path) {
   return "";
 }
 
-bool StudioWindow::save_screenshot(const std::string& path) {
-  const std::string why = write_window_png(window_, path);
+bool StudioWindow::save_screenshot(const std::string& path, int width, int height, bool transparent) {
+  const QSize min = view_->minimumSize(), max = view_->maximumSize(), window_size = size();
+  const bool resize_view = width > 0 && height > 0 && QSize(width, height) != view_->size();
+  if (resize_view) {
+    view_->setFixedSize(width, height);
+    adjustSize();
+    QApplication::processEvents();
+  }
+  if (transparent) {
+    window_->SetAlphaBitPlanes(1);
+    for (vtkRenderer* r : {renderer_, bar_renderer_}) {
+      r->GradientBackgroundOff();
+      r->SetBackgroundAlpha(0.0);
+    }
+  }
+  const std::string why = write_window_png(window_, path, transparent);
+  if (transparent)
+    for (vtkRenderer* r : {renderer_, bar_renderer_}) {
+      r->GradientBackgroundOn();
+      r->SetBackgroundAlpha(1.0);
+    }
+  if (resize_view) {
+    view_->setMinimumSize(min);
+    view_->setMaximumSize(max);
+    resize(window_size);
+    QApplication::processEvents();
+  }
+  window_->Render();
   if (!why.empty()) report_error("Cannot save screenshot", why);
   return why.empty();
+}
+
+bool StudioWindow::export_current(const std::string& dir) {
+  const auto f = shown_;
+  try {
+    if (!f || !f->model || f->coefficients.rows() == 0) throw InputError(dir, "no map to export yet");
+    std::filesystem::create_directories(dir);
+    const std::filesystem::path d(dir);
+    // The files lidef deform writes for a map, with its writers (coefficients.h, mesh_export.h,
+    // vtk_export.h).
+    write_file_atomic((d / "coefficients.txt").string(),
+                      [&](std::ostream& s) { write_coefficients(s, f->coefficients); });
+    const MeshFields mf =
+        mesh_fields(HarmonicBasis(f->model->cage), f->coefficients, f->model->mesh.V, {true});
+    write_mesh_vtp((d / "deformed.vtp").string(), mf.V, f->model->mesh.F,
+                   {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
+    std::string also;
+    if (f->leaves && f->leaves_version == f->map_version) {
+      write_leaves_vtu((d / "leaves.vtu").string(), f->leaves->leaves);
+      also += ", leaves.vtu";
+    }
+    if (f->field && f->field_version == f->map_version) {
+      write_field_vti((d / "field.vti").string(), *f->field);
+      also += ", field.vti";
+    }
+    status_->setText(QString::fromStdString("exported coefficients.txt, deformed.vtp" + also + " to " + dir +
+                                            (also.empty() ? " (show the Lipschitz/octree or sigma3 view "
+                                                            "for leaves.vtu / field.vti)"
+                                                          : "")));
+  } catch (const std::exception& e) {
+    report_error("Cannot export", e.what());
+    return false;
+  }
+  return true;
+}
+
+void StudioWindow::set_color_range(Field f, const ColorRange& r) {
+  if (r.mode == ColorRange::Mode::kManual && !(r.min < r.max)) {
+    report_error("Colour range", "min must be below max");
+    return;
+  }
+  settings_.range[static_cast<int>(f)] = r;
+  refresh_view_panel();
+  settings_changed();
+}
+
+QWidget* StudioWindow::build_range_controls() {
+  auto* box = new QGroupBox("Colour range");
+  auto* form = new QFormLayout(box);
+  if (!has_range(settings_)) {
+    form->addRow(new QLabel("(the octree view colours by depth or status)"));
+    return box;
+  }
+  const Field fld = shown_field(settings_);
+  const ColorRange cur = settings_.range[static_cast<int>(fld)];
+  form->addRow(new QLabel(QString("field: ") + to_string(fld)));
+  auto* mode = new QComboBox;
+  mode->setObjectName("range_mode");
+  mode->addItems({"auto (data min/max)", "percentile clamp", "manual min/max"});
+  mode->setCurrentIndex(static_cast<int>(cur.mode));
+  auto* pct = new QDoubleSpinBox;
+  pct->setObjectName("range_percentile");
+  pct->setRange(50, 100);
+  pct->setDecimals(1);
+  pct->setSuffix(" %");
+  pct->setValue(cur.percentile);
+  pct->setToolTip("The range spans the (100 - p)-th to the p-th percentile of the shown values");
+  auto make_edit = [](const char* name, double v) {
+    auto* e = new QDoubleSpinBox;
+    e->setObjectName(name);
+    e->setRange(-1e12, 1e12);
+    e->setDecimals(6);
+    e->setValue(v);
+    return e;
+  };
+  const auto shown = scene_->shown_range();
+  auto* lo = make_edit("range_min", cur.mode == ColorRange::Mode::kManual ? cur.min : shown.first);
+  auto* hi = make_edit("range_max", cur.mode == ColorRange::Mode::kManual ? cur.max : shown.second);
+  form->addRow("Mode", mode);
+  form->addRow("Percentile", pct);
+  form->addRow("Min", lo);
+  form->addRow("Max", hi);
+  auto* apply = new QPushButton("Apply range");
+  apply->setObjectName("range_apply");
+  form->addRow(apply);
+  connect(apply, &QPushButton::clicked, this, [this, fld, mode, pct, lo, hi] {
+    ColorRange r;
+    r.mode = static_cast<ColorRange::Mode>(mode->currentIndex());
+    r.percentile = pct->value();
+    r.min = lo->value();
+    r.max = hi->value();
+    set_color_range(fld, r);
+  });
+  return box;
+}
+
+bool StudioWindow::pick_at_display(int x, int y) {
+  if (!shown_ || !shown_->model) return false;
+  vtkActor* actor = nullptr;
+  std::string where;
+  if (settings_.view == View::kMesh) {
+    actor = scene_->mesh_actor();
+    where = "mesh surface";
+  } else if (settings_.view == View::kSigma3) {
+    if (settings_.sigma_deformed_space) {
+      status_->setText("picking on sigma3 slices works in rest space only (untick \"Deformed space\")");
+      return false;
+    }
+    actor = scene_->slices_actor();
+    where = "sigma3 slice";
+  } else {
+    actor = scene_->leaves_actor();
+    where = "leaf voxel";
+  }
+  Vec3 rest;
+  if (settings_.view == View::kMesh) {
+    // The deformed mesh: the picked point pulled back to rest space (the same barycentric combination of the
+    // rest triangle), as a handle's source.
+    if (!mesh_rest_point_at_display(x, y, rest)) return false;
+  } else if (settings_.view == View::kSigma3) {
+    // The slices are drawn in rest space: the picked world point (depth buffer) is the rest point.
+    actor->PickableOn();
+    auto picker = vtkSmartPointer<vtkPropPicker>::New();
+    picker->PickFromListOn();
+    picker->AddPickList(actor);
+    const int hit = picker->Pick(x, y, 0, renderer_);
+    actor->PickableOff();
+    if (!hit) return false;
+    const double* w = picker->GetPickPosition();
+    rest = Vec3(w[0], w[1], w[2]);
+  } else {
+    // Leaves: the nearest drawn cube along the ray through the pixel (exact, unlike the depth buffer, whose
+    // precision is coarser than the gap between neighbouring cubes).
+    if (!shown_->leaves) return false;
+    double ends[2][3];
+    for (int k = 0; k < 2; ++k) {
+      renderer_->SetDisplayPoint(x, y, k);
+      renderer_->DisplayToWorld();
+      const double* w = renderer_->GetWorldPoint();
+      for (int a = 0; a < 3; ++a) ends[k][a] = w[a] / w[3];
+    }
+    const Vec3 o(ends[0][0], ends[0][1], ends[0][2]);
+    const Vec3 d = Vec3(ends[1][0], ends[1][1], ends[1][2]) - o;
+    double best = std::numeric_limits<double>::infinity();
+    for (const CertLeaf& l : shown_->leaves->leaves) {
+      if (!leaf_shown(l, *shown_->model, settings_)) continue;
+      const double h = 0.5 * kLeafDrawnSide * l.side;
+      double t0 = 0, t1 = best;
+      for (int a = 0; a < 3 && t0 <= t1; ++a) {
+        if (std::abs(d(a)) < 1e-300) {
+          if (std::abs(o(a) - l.center(a)) > h) t0 = t1 + 1;
+          continue;
+        }
+        double ta = (l.center(a) - h - o(a)) / d(a), tb = (l.center(a) + h - o(a)) / d(a);
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta);
+        t1 = std::min(t1, tb);
+      }
+      if (t0 <= t1 && t0 < best) best = t0;
+    }
+    if (!std::isfinite(best)) return false;
+    rest = o + best * d;  // on a drawn cube: strictly inside that leaf's voxel
+  }
+  picked_ = picked_values(*shown_, rest, where);
+  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  status_->setText(QString::fromStdString("picked " + where));
+  return picked_.valid;
 }
 
 bool StudioWindow::open_comparison(const std::string& dir) {
@@ -736,23 +1168,29 @@ bool StudioWindow::add_handle(const Vec3& source) {
   return true;
 }
 
-bool StudioWindow::add_handle_at_display(int x, int y) {
-  if (!shown_ || !shown_->model || settings_.view != View::kMesh) return false;
+bool StudioWindow::mesh_rest_point_at_display(int x, int y, Vec3& rest) {
   auto picker = vtkSmartPointer<vtkCellPicker>::New();
   picker->SetTolerance(0.0005);
   picker->PickFromListOn();
   picker->AddPickList(scene_->mesh_actor());
   if (!picker->Pick(x, y, 0, renderer_) || picker->GetCellId() < 0) return false;
-  // The source is the picked point pulled back to rest space: the same barycentric combination of the rest
-  // triangle's corners (the shown mesh is the deformed one).
+  // The picked point pulled back to rest space: the same barycentric combination of the rest triangle's
+  // corners (the shown mesh is the deformed one).
   const vtkIdType t = picker->GetCellId();
   const MatX3i& F = shown_->model->mesh.F;
   const MatX3d& V = shown_->model->mesh.V;
   if (t >= F.rows()) return false;
   const double* pc = picker->GetPCoords();
   const double w[3] = {1 - pc[0] - pc[1], pc[0], pc[1]};
-  Vec3 src = Vec3::Zero();
-  for (int k = 0; k < 3; ++k) src += w[k] * V.row(F(t, k)).transpose();
+  rest.setZero();
+  for (int k = 0; k < 3; ++k) rest += w[k] * V.row(F(t, k)).transpose();
+  return true;
+}
+
+bool StudioWindow::add_handle_at_display(int x, int y) {
+  if (!shown_ || !shown_->model || settings_.view != View::kMesh) return false;
+  Vec3 src;
+  if (!mesh_rest_point_at_display(x, y, src)) return false;
   // Mesh surface points may sit on the cage; step slightly inside along the direction to the cage's center.
   const Model& m = *shown_->model;
   if (!session_->check_source(src).empty()) {
@@ -847,6 +1285,7 @@ void StudioWindow::dropEvent(QDropEvent* e) {
 
 void StudioWindow::closeEvent(QCloseEvent* e) {
   session_->stop();
+  if (!view_only_) save_layout();
   e->accept();
 }
 

@@ -10,9 +10,11 @@
 #include <vector>
 
 #include "lidef/interactive_session.h"
+#include "pick.h"
 #include "scene.h"
 
 class QLabel;
+class QDockWidget;
 class QVTKOpenGLNativeWidget;
 class vtkGenericOpenGLRenderWindow;
 class vtkRenderer;
@@ -43,8 +45,43 @@ class StudioWindow : public QMainWindow {
   bool save_session(const std::string& path);
   // Opens the side-by-side picture of a `lidef compare --out` folder in its own window (compare_view.h).
   bool open_comparison(const std::string& dir);  // scenario JSON with a "studio" object (camera, views)
-  // Renders the 3D view now and writes it as PNG (atomically: temporary file, then rename).
-  bool save_screenshot(const std::string& path);
+  // Renders the 3D view now and writes it as PNG (atomically: temporary file, then rename). width/height > 0:
+  // the view is rendered at that size (then restored); transparent: RGBA with a transparent background.
+  bool save_screenshot(const std::string& path, int width = 0, int height = 0, bool transparent = false);
+  // Writes what the CLI writes for the map on screen into `dir` (created): coefficients.txt, deformed.vtp
+  // (lidef deform's point data), and, when the frame has them, the certificate's leaves.vtu and the σ3
+  // field's field.vti (the CLI's writers, vtk_export.h). Returns false after reporting the problem.
+  bool export_current(const std::string& dir);
+
+  // Window layout: dock state and geometry saved with QSettings (organization and application names of the
+  // QApplication; tests point QSettings at a temporary folder). restore_layout() returns false on a first
+  // run (no saved state): the window keeps its first-run size, a share of the screen.
+  bool restore_layout();
+  void save_layout();
+
+  // Camera (View > Camera). Presets look along -axis (positive = from the + side).
+  void reset_camera();
+  void camera_preset(int axis, bool positive);
+  void set_orthographic(bool on);
+  bool orthographic() const;
+  // {"camera": {position, focal_point, view_up, view_angle, parallel_projection, parallel_scale}}; the same
+  // object saved sessions hold. set_camera_json throws InputError on bad JSON; copy/paste use the clipboard.
+  std::string camera_json() const;
+  void set_camera_json(const std::string& json);
+  void copy_camera();
+  bool paste_camera();  // false (and a message) when the clipboard holds no camera
+  // The keyboard/mouse cheat sheet (F1 or H).
+  static std::string cheat_sheet();
+  void show_cheat_sheet();
+
+  // Colour range of a field (View panel, "Colour range").
+  void set_color_range(Field f, const ColorRange& r);
+  std::pair<double, double> shown_color_range() const { return scene_->shown_range(); }
+
+  // Picking: the point under display position (x, y) in the current view (mesh surface, σ3 slices in rest
+  // space, leaf voxels); fills the Picked panel. False when nothing is there.
+  bool pick_at_display(int x, int y);
+  const PickedValues& picked() const { return picked_; }
 
   void set_settings(const ViewSettings& s);
   // The solver parameters (panel and engine); used for models opened without a scenario.
@@ -106,12 +143,17 @@ class StudioWindow : public QMainWindow {
   void send_handles();
   void settings_changed();
   void apply_camera_json(const std::string& studio_json);
+  void apply_camera_object(const nlohmann::json& camera);  // throws
+  QWidget* build_range_controls();
+  // The rest-space point under display (x, y) on the deformed mesh (barycentric pull-back); needs a frame.
+  bool mesh_rest_point_at_display(int x, int y, Vec3& rest);
   std::string studio_json() const;
 
   std::unique_ptr<InteractiveSession> session_;
   QVTKOpenGLNativeWidget* view_ = nullptr;
   vtkGenericOpenGLRenderWindow* window_ = nullptr;
   vtkRenderer* renderer_ = nullptr;
+  vtkRenderer* bar_renderer_ = nullptr;  // the colour bar's viewport, right of the model's
   std::unique_ptr<Scene> scene_;
   ParamsPanel* params_ = nullptr;
   PlotsPanel* plots_ = nullptr;
@@ -119,7 +161,8 @@ class StudioWindow : public QMainWindow {
   // shows its stages; a folder is returned unchanged. Throws what the cage maker throws.
   std::string resolve_model(const std::string& path);
   std::string model_note_;
-  QLabel *badge_ = nullptr, *status_ = nullptr;
+  QLabel *badge_ = nullptr, *status_ = nullptr, *picked_label_ = nullptr;
+  PickedValues picked_;
   std::vector<QWidget*> chrome_;  // docks and bars hidden in view-only mode
   QWidget* view_panel_ = nullptr;
   ViewSettings settings_;
@@ -128,6 +171,7 @@ class StudioWindow : public QMainWindow {
   struct Widget;
   std::vector<std::unique_ptr<Widget>> widgets_;
   int dragging_ = -1;
+  bool view_only_ = false;
   std::mutex pending_mutex_;
   std::shared_ptr<const SessionFrame> pending_;
   bool render_scheduled_ = false;

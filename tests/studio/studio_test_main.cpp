@@ -4,10 +4,12 @@
 #include <gtest/gtest.h>
 
 #include <QApplication>
-#include <clocale>
+#include <QSettings>
 #include <QSurfaceFormat>
+#include <clocale>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
@@ -21,6 +23,15 @@ int main(int argc, char** argv) {
   setenv("QT_QPA_PLATFORM", "xcb", 1);
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
+  // The window layout (QSettings) of the tests lives in a temporary folder, never in the user's settings.
+  char settings_dir[] = "/tmp/lidef_studio_settings_XXXXXX";
+  if (!mkdtemp(settings_dir)) return 1;
+  QSettings::setDefaultFormat(QSettings::IniFormat);
+  QSettings::setPath(QSettings::IniFormat, QSettings::UserScope, settings_dir);
+  QApplication::setOrganizationName("lidef-tests");
+  QApplication::setApplicationName("lidef-studio-tests");
   std::setlocale(LC_NUMERIC, "C");  // as lidef-studio does (gui/src/main.cpp): printf keeps its '.'
-  return RUN_ALL_TESTS();
+  const int rc = RUN_ALL_TESTS();
+  std::filesystem::remove_all(settings_dir);
+  return rc;
 }

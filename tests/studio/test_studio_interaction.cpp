@@ -2,21 +2,30 @@
 // delivers them (click on the mesh adds a handle, dragging the cyan sphere moves its target, right-click
 // deletes), and the shown map must be certified with the handle moved. Also undo/redo, bad files, saved
 // sessions.
+#include <QVTKOpenGLNativeWidget.h>
 #include <gtest/gtest.h>
 #include <vtkCamera.h>
 #include <vtkCommand.h>
+#include <vtkImageData.h>
+#include <vtkNew.h>
+#include <vtkPNGReader.h>
 #include <vtkRenderWindow.h>
 #include <vtkRenderWindowInteractor.h>
 #include <vtkRenderer.h>
 #include <vtkRendererCollection.h>
 
+#include <QAction>
 #include <QApplication>
+#include <QClipboard>
+#include <QDockWidget>
+#include <QMessageBox>
 #include <QStatusBar>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <thread>
 
 #include "lidef/scenario.h"
@@ -241,6 +250,317 @@ TEST(StudioInteraction, MeshFileOpensWithAnAutomaticCage) {
   EXPECT_TRUE(win.shown_frame()->certified);
   EXPECT_TRUE(fx.errors.empty()) << fx.errors.front();
   ::unsetenv("LIDEF_CACHE_DIR");
+}
+
+// ---------------------------------------------------------------- issue 18: inspect, camera, colour, layout
+
+// The beam with two handles, the second pulled up: a bent map with some E_iso − 6 spread.
+void open_bent_beam(Fixture& fx) {
+  StudioWindow& win = fx.win;
+  ASSERT_TRUE(win.open_path(project_data() + "/models/beam"));
+  ASSERT_TRUE(settled(win)) << "no frame";
+  ASSERT_TRUE(win.add_handle(Vec3(-0.8, 0.0, 0.1)));
+  ASSERT_TRUE(win.add_handle(Vec3(0.8, 0.0, 0.1)));
+  win.move_target(1, win.targets().row(1).transpose() + Vec3(0, 0, 1.0));
+  ASSERT_TRUE(settled(win));
+  ASSERT_TRUE(win.shown_frame()->certified);
+  ASSERT_TRUE(fx.errors.empty()) << fx.errors.front();
+}
+
+nlohmann::json camera_of(StudioWindow& w) {
+  return nlohmann::json::parse(w.camera_json()).at("camera");
+}
+
+TEST(StudioInteraction, CameraPresetsOrthographicAndCopyPasteRoundTrip) {
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  ASSERT_TRUE(win.open_path(project_data() + "/models/beam"));
+  ASSERT_TRUE(settled(win));
+  win.camera_preset(2, true);  // from +z
+  auto c = camera_of(win);
+  const auto pos = c.at("position").get<std::vector<double>>();
+  const auto fp = c.at("focal_point").get<std::vector<double>>();
+  EXPECT_NEAR(pos[0], fp[0], 1e-9);
+  EXPECT_NEAR(pos[1], fp[1], 1e-9);
+  EXPECT_GT(pos[2], fp[2]);
+  win.camera_preset(0, false);  // from -x: the camera sits at smaller x
+  c = camera_of(win);
+  EXPECT_LT(c.at("position")[0].get<double>(), c.at("focal_point")[0].get<double>());
+  win.set_orthographic(true);
+  EXPECT_TRUE(win.orthographic());
+  const nlohmann::json copied = camera_of(win);
+  EXPECT_TRUE(copied.at("parallel_projection").get<bool>());
+  win.copy_camera();
+  EXPECT_EQ(QApplication::clipboard()->text().toStdString(), win.camera_json());
+
+  // Change everything, paste, and the camera is back (numbers exactly: JSON keeps 17 digits).
+  win.reset_camera();
+  win.set_orthographic(false);
+  EXPECT_NE(camera_of(win), copied);
+  ASSERT_TRUE(win.paste_camera());
+  EXPECT_EQ(camera_of(win), copied);
+  EXPECT_TRUE(win.orthographic());
+
+  // Not a camera in the clipboard: refused with a message, the camera unchanged.
+  QApplication::clipboard()->setText("{\"camera\": {\"position\": [1, 2]}}");
+  EXPECT_FALSE(win.paste_camera());
+  ASSERT_FALSE(fx.errors.empty());
+  EXPECT_EQ(camera_of(win), copied);
+  QApplication::clipboard()->setText("not json");
+  EXPECT_FALSE(win.paste_camera());
+  EXPECT_EQ(camera_of(win), copied);
+
+  // A saved session keeps the projection.
+  TempDir dir;
+  ASSERT_TRUE(win.add_handle(Vec3(-0.8, 0.0, 0.1)));
+  ASSERT_TRUE(win.save_session(dir / "s.json"));
+  Fixture other;
+  ASSERT_TRUE(other.win.open_path(dir / "s.json"));
+  ASSERT_TRUE(settled(other.win));
+  EXPECT_EQ(camera_of(other.win), copied);
+}
+
+TEST(StudioInteraction, ColorRangeAutoPercentileManual) {
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  open_bent_beam(fx);
+  const auto f = win.shown_frame();
+  double e_max = 0;
+  for (Eigen::Index i = 0; i < f->mesh_e_iso.size(); ++i)
+    if (std::isfinite(f->mesh_e_iso(i))) e_max = std::max(e_max, f->mesh_e_iso(i));
+  ASSERT_GT(e_max, 0.05) << "the bent beam must be bent more than the colour floor (0.05)";
+  // Default for E_iso − 6: the 99th percentile, below the largest value (the outlier no longer sets it).
+  auto r = win.shown_color_range();
+  EXPECT_EQ(r.first, 0);
+  EXPECT_LT(r.second, e_max);
+  EXPECT_GT(r.second, 0);
+  using studio::ColorRange;
+  using studio::Field;
+  auto pump = [&] { pump_until([] { return false; }, 0.3); };
+  win.set_color_range(Field::kEiso, {ColorRange::Mode::kAuto, 99, 0, 1});
+  pump();
+  r = win.shown_color_range();
+  EXPECT_EQ(r.first, 0);
+  EXPECT_DOUBLE_EQ(r.second, std::max(e_max, 0.05));
+  win.set_color_range(Field::kEiso, {ColorRange::Mode::kManual, 99, 0.1, 0.3});
+  pump();
+  r = win.shown_color_range();
+  EXPECT_DOUBLE_EQ(r.first, 0.1);
+  EXPECT_DOUBLE_EQ(r.second, 0.3);
+  // Manual min above max is refused.
+  win.set_color_range(Field::kEiso, {ColorRange::Mode::kManual, 99, 0.5, 0.2});
+  EXPECT_FALSE(fx.errors.empty());
+  pump();
+  EXPECT_DOUBLE_EQ(win.shown_color_range().second, 0.3);
+  // det J: symmetric around 1 on a log scale (auto); manual as given.
+  studio::ViewSettings s = win.settings();
+  s.mesh_volume_ratio = true;
+  win.set_settings(s);
+  pump();
+  r = win.shown_color_range();
+  EXPECT_NEAR(r.first * r.second, 1.0, 1e-9);
+  // The ranges are part of the saved view settings.
+  const nlohmann::json j = studio::settings_to_json(win.settings());
+  studio::ViewSettings back;
+  studio::settings_from_json(j, back, "test");
+  EXPECT_EQ(back.range[0].mode, ColorRange::Mode::kManual);
+  EXPECT_EQ(back.range[0].min, 0.1);
+  EXPECT_EQ(back.range[0].max, 0.3);
+  nlohmann::json bad = j;
+  bad["ranges"]["e_iso"]["mode"] = "rainbow";
+  EXPECT_THROW(studio::settings_from_json(bad, back, "test"), InputError);
+}
+
+// Reads `lidef eval`'s CSV (header + rows of numbers).
+std::vector<std::vector<double>> read_eval_csv(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::vector<double>> rows;
+  while (std::getline(in, line)) {
+    std::vector<double> row;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) row.push_back(std::stod(cell));
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+// Picking: the values at a picked point are what `lidef eval` gives there for the exported map (and the
+// export writes what the CLI writes). Mesh view by Ctrl+click through the interactor; Lipschitz view by
+// click, with the leaf that holds the point.
+TEST(StudioInteraction, PickedValuesEqualLidefEval) {
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  open_bent_beam(fx);
+  win.render_window()->Render();
+  // Ctrl+click on the image of the centroid of a top-face triangle (+z faces the camera): the rendered
+  // triangle is the deformed one, so the centroid of its deformed corners is the image of the rest centroid
+  // under the barycentric pull-back.
+  const auto f = win.shown_frame();
+  const MatX3d& V = f->model->mesh.V;
+  const MatX3i& F = f->model->mesh.F;
+  const double zmax = V.col(2).maxCoeff();
+  Eigen::Index tri = -1;
+  Vec3 rest_c = Vec3::Zero(), image_c = Vec3::Zero();
+  for (Eigen::Index t = 0; t < F.rows(); ++t) {
+    Vec3 c = Vec3::Zero(), ci = Vec3::Zero();
+    bool top = true;
+    for (int k = 0; k < 3; ++k) {
+      top = top && V(F(t, k), 2) > zmax - 1e-9;
+      c += V.row(F(t, k)).transpose() / 3;
+      ci += f->mesh_V.row(F(t, k)).transpose() / 3;
+    }
+    if (top && (tri < 0 || (c - Vec3(0.3, 0, zmax)).norm() < (rest_c - Vec3(0.3, 0, zmax)).norm())) {
+      tri = t;
+      rest_c = c;
+      image_c = ci;
+    }
+  }
+  ASSERT_GE(tri, 0);
+  double xy[2];
+  display_of(win, image_c, xy);
+  vtkRenderWindowInteractor* iren = win.render_window()->GetInteractor();
+  for (unsigned long ev : {vtkCommand::LeftButtonPressEvent, vtkCommand::LeftButtonReleaseEvent}) {
+    iren->SetEventInformation(static_cast<int>(xy[0]), static_cast<int>(xy[1]), 1, 0, 0, 0);
+    iren->InvokeEvent(ev, nullptr);
+    QApplication::processEvents();
+  }
+  EXPECT_EQ(win.num_handles(), 2) << "Ctrl+click must pick, not add a handle";
+  ASSERT_TRUE(win.picked().valid);
+  const studio::PickedValues on_mesh = win.picked();
+  EXPECT_LT((on_mesh.rest - rest_c).norm(), 0.02);
+  EXPECT_LT((on_mesh.image - image_c).norm(), 0.02);
+
+  // The Lipschitz view: click where a leaf is drawn.
+  studio::ViewSettings s = win.settings();
+  s.view = studio::View::kLipschitz;
+  s.clip = 1.0;
+  win.set_settings(s);
+  ASSERT_TRUE(pump_until(
+      [&] {
+        const auto g = win.shown_frame();
+        return g && g->leaves && g->leaves_version == g->map_version;
+      },
+      120));
+  win.render_window()->Render();
+  const auto g = win.shown_frame();
+  display_of(win, Vec3(0.3, 0.0, 0.0), xy);
+  ASSERT_TRUE(win.pick_at_display(static_cast<int>(xy[0]), static_cast<int>(xy[1])));
+  const studio::PickedValues on_leaf = win.picked();
+  ASSERT_TRUE(on_leaf.has_leaf);
+  const Vec3 off = (on_leaf.rest - on_leaf.leaf.center).cwiseAbs();
+  EXPECT_LE(off.maxCoeff(), 0.5 * on_leaf.leaf.side * (1 + 1e-6)) << "the point is not in its leaf";
+  bool found = false;
+  for (const CertLeaf& l : g->leaves->leaves)
+    found = found ||
+            (l.center == on_leaf.leaf.center && l.L == on_leaf.leaf.L && l.margin == on_leaf.leaf.margin);
+  EXPECT_TRUE(found) << "the picked leaf is not one of the certificate's";
+
+  // Export the map as the CLI writes it, and evaluate both points with lidef eval.
+  TempDir dir;
+  ASSERT_TRUE(win.export_current(dir / "export"));
+  for (const char* name : {"coefficients.txt", "deformed.vtp", "leaves.vtu"})
+    EXPECT_TRUE(std::filesystem::exists(std::filesystem::path(dir / "export") / name)) << name;
+  {
+    std::ofstream pts(dir / "p.xyz");
+    pts.precision(17);
+    for (const auto* v : {&on_mesh, &on_leaf})
+      pts << v->rest.x() << " " << v->rest.y() << " " << v->rest.z() << "\n";
+  }
+  std::string log;
+  ASSERT_EQ(run_command(cli() + " eval " + project_data() + "/models/beam --coeffs " +
+                            (dir / "export/coefficients.txt") + " --points " + (dir / "p.xyz") + " --out " +
+                            (dir / "e.csv"),
+                        &log),
+            0)
+      << log;
+  const auto rows = read_eval_csv(dir / "e.csv");
+  ASSERT_EQ(rows.size(), 2u);
+  int k = 0;
+  for (const auto* v : {&on_mesh, &on_leaf}) {
+    const auto& row = rows[k++];
+    ASSERT_EQ(row.size(), 19u);
+    // x,y,z,fx,fy,fz,J00..J22,s1,s2,s3,detJ
+    EXPECT_NEAR(v->image.x(), row[3], 1e-12);
+    EXPECT_NEAR(v->sigma1, row[15], 1e-12 * std::abs(row[15]));
+    EXPECT_NEAR(v->sigma3, row[17], 1e-12 * std::abs(row[17]) + 1e-15);
+    EXPECT_NEAR(v->det_j, row[18], 1e-12 * std::abs(row[18]));
+    // E_iso − 6 = ||J||_F^2 + ||J^-1||_F^2 − 6 from eval's J.
+    Mat3 J;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) J(a, b) = row[6 + 3 * a + b];
+    const double e = J.squaredNorm() + J.inverse().squaredNorm() - 6;
+    EXPECT_NEAR(v->e_iso, e, 1e-9 * std::max(1.0, std::abs(e)));
+  }
+  EXPECT_TRUE(fx.errors.empty()) << fx.errors.front();
+}
+
+TEST(StudioInteraction, LayoutDominantViewDocksSavedAndCheatSheet) {
+  StudioWindow win;
+  win.show();
+  pump_until([] { return false; }, 0.5);
+  // The 3D view takes most of the window's width at the first-run size.
+  EXPECT_GT(win.view_widget()->width(), 0.6 * win.width())
+      << win.view_widget()->width() << " of " << win.width();
+  EXPECT_GT(win.width(), 1000);
+  auto* plots = win.findChild<QDockWidget*>("Plots");
+  ASSERT_NE(plots, nullptr);
+  EXPECT_TRUE(plots->features() & QDockWidget::DockWidgetClosable);
+  plots->hide();
+  win.resize(1111, 777);
+  pump_until([] { return false; }, 0.3);
+  win.save_layout();
+  {
+    StudioWindow again;
+    ASSERT_TRUE(again.restore_layout());
+    again.show();
+    pump_until([] { return false; }, 0.3);
+    EXPECT_FALSE(again.findChild<QDockWidget*>("Plots")->isVisible());
+    EXPECT_EQ(again.size(), QSize(1111, 777));
+  }
+  // F1 and H open the cheat sheet, which names the camera keys.
+  QAction* cheat = nullptr;
+  for (QAction* a : win.findChildren<QAction*>())
+    if (a->shortcuts().contains(QKeySequence(Qt::Key_F1))) cheat = a;
+  ASSERT_NE(cheat, nullptr);
+  EXPECT_TRUE(cheat->shortcuts().contains(QKeySequence(Qt::Key_H)));
+  cheat->trigger();
+  pump_until([] { return false; }, 0.2);
+  auto* box = win.findChild<QMessageBox*>("cheat_sheet");
+  ASSERT_NE(box, nullptr);
+  EXPECT_TRUE(box->isVisible());
+  for (const char* key : {"reset the camera", "orthographic", "copy / paste the camera", "pick"})
+    EXPECT_NE(StudioWindow::cheat_sheet().find(key), std::string::npos) << key;
+  box->close();
+}
+
+TEST(StudioInteraction, ScreenshotAtSizeWithTransparentBackground) {
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  ASSERT_TRUE(win.open_path(project_data() + "/models/beam"));
+  ASSERT_TRUE(settled(win));
+  TempDir dir;
+  ASSERT_TRUE(win.save_screenshot(dir / "t.png", 320, 240, true));
+  vtkNew<vtkPNGReader> r;
+  r->SetFileName((dir / "t.png").c_str());
+  r->Update();
+  int dims[3];
+  r->GetOutput()->GetDimensions(dims);
+  EXPECT_EQ(dims[0], 320);
+  EXPECT_EQ(dims[1], 240);
+  ASSERT_EQ(r->GetOutput()->GetNumberOfScalarComponents(), 4);
+  auto alpha = [&](int x, int y) {
+    return static_cast<unsigned char*>(r->GetOutput()->GetScalarPointer(x, y, 0))[3];
+  };
+  EXPECT_EQ(alpha(2, 2), 0) << "background not transparent";
+  long opaque = 0;
+  for (int y = 0; y < dims[1]; y += 4)
+    for (int x = 0; x < dims[0]; x += 4) opaque += alpha(x, y) == 255;
+  EXPECT_GT(opaque, 100) << "the model is missing";
+  // The view is back to its size afterwards.
+  EXPECT_NE(win.view_widget()->size(), QSize(320, 240));
 }
 
 }  // namespace

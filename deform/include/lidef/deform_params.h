@@ -51,6 +51,8 @@ struct DeformParams {
   long max_refined = 200000;                           // child voxels evaluated per certification of a result
   long line_search_max_refined = 20000;  // the same budget for line-search trials: a trial that needs more is
                                          // rejected (sound: "not certified") and the step halved
+  double bound_tolerance = 0;  // > 0: refine a certified map's leaves until the lower bound of σ3 is within
+                               // this fraction of the smallest sampled σ3 (CertifyParams::bound_tolerance)
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
   bool dynamic_weighting = true;
   double e0 = 1e-4;                // E_P2P threshold, relative to the squared cage bounding-box diagonal

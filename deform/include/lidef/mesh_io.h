@@ -33,6 +33,15 @@ struct MeshLines {
 // line of every vertex and face.
 TriMesh read_mesh(const std::string& path, MeshLines* lines = nullptr);
 
+// An ASCII .off file with faces of any size (the automatic cage's reader, cage/auto_cage.h): V (#V by 3) and
+// each face's 0-based vertex indices. The same syntax checks as read_mesh (line-based: one vertex or face per
+// line; extra numbers on a line — normals, colours — must be numbers and are ignored), but no arity check.
+struct PolygonSoupMesh {
+  MatX3d V;
+  std::vector<std::vector<std::size_t>> polygons;
+};
+PolygonSoupMesh read_off_polygons(const std::string& path);
+
 // Writes V (#V by 3) and F (#F by 3, 0-based) as OBJ with 1-based `f` lines. Coordinates use the shortest
 // decimal form that reads back to the identical double (std::to_chars), so write/read round-trips exactly
 // and the output is deterministic. `comment`, when non-empty, is written first as `# ...` lines.

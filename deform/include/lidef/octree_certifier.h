@@ -37,6 +37,11 @@ struct CertifyParams {
   // bound); false: the previous per-face evaluation (benchmarks compare the two in one run).
   bool per_edge_refinement = true;
   int max_failing_reported = 20;
+  // Above 0 (a fraction, 0.1 = 10%): once the map is certified, keep refining the leaves whose bound is
+  // loosest until min_lower_bound ≥ (1 − bound_tolerance) · min_sigma3_center, so the lower bound says how
+  // small σ3 really is, not merely that it is positive. Never changes the verdict; uses what is left of
+  // max_refined_voxels and max_depth (docs/certificate.md, "Tight lower bound").
+  double bound_tolerance = 0;
 };
 
 // One leaf of the certification octree.
@@ -70,6 +75,10 @@ struct Certificate {
   // Leaves whose center has a det J of unresolved sign (signed_svd.h): σ3 is reported as 0 there and the
   // leaf is not certified, but the map is not shown to fold (reason: "could not prove sigma3 > 0 ...").
   long sign_unresolved_leaves = 0;
+  // The tolerance asked for (CertifyParams::bound_tolerance) and whether min_lower_bound reached it
+  // (false when it was not asked for, the map is not certified, or depth/budget ran out first).
+  double bound_tolerance = 0;
+  bool bound_tolerance_met = false;
   std::vector<CertLeaf> leaves;   // when keep_leaves (in base-voxel order, children depth-first)
   std::vector<CertLeaf> failing;  // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;

@@ -58,6 +58,8 @@ struct MethodResult {
       std::numeric_limits<double>::quiet_NaN();  // meshing, basis, subspace, factor setup
   int iterations = 0;
   double max_handle_error = std::numeric_limits<double>::quiet_NaN();
+  // 1 when max_handle_error ≤ handle_tolerance × the model's size (as `lidef deform` judges), 0 not, -1 failed.
+  int reached = -1;
   double mean_e_iso = std::numeric_limits<double>::quiet_NaN();    // mean of E_iso − 6 over mesh vertices
   double max_e_iso = std::numeric_limits<double>::quiet_NaN();     // max (+∞ if some vertex is inverted)
   double volume_ratio = std::numeric_limits<double>::quiet_NaN();  // deformed / rest mesh volume (Fig. 12)
