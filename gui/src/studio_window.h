@@ -13,6 +13,8 @@
 #include "scene.h"
 
 class QLabel;
+class QProgressBar;
+class QPushButton;
 class QVTKOpenGLNativeWidget;
 class vtkGenericOpenGLRenderWindow;
 class vtkRenderer;
@@ -120,6 +122,9 @@ class StudioWindow : public QMainWindow {
   std::string resolve_model(const std::string& path);
   std::string model_note_;
   QLabel *badge_ = nullptr, *status_ = nullptr;
+  // Preprocessing of an opened model: stage and percent, and Cancel (shown only while preparing).
+  QProgressBar* prepare_bar_ = nullptr;
+  QPushButton* prepare_cancel_ = nullptr;
   std::vector<QWidget*> chrome_;  // docks and bars hidden in view-only mode
   QWidget* view_panel_ = nullptr;
   ViewSettings settings_;
