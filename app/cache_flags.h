@@ -23,9 +23,10 @@ struct CacheFlags {
 };
 
 inline void add_cache_flags(CLI::App* sub, CacheFlags* f) {
-  sub->add_option("--cache-dir", f->dir,
-                  "Precomputation cache folder (subspace, sampling, basis derivatives; '' = no cache; default "
-                  "$LIDEF_CACHE_DIR, else $XDG_CACHE_HOME/lidef, else ~/.cache/lidef)");
+  sub->add_option(
+      "--cache-dir", f->dir,
+      "Precomputation cache folder (subspace, sampling, basis derivatives; '' = no cache; default "
+      "$LIDEF_CACHE_DIR, else $XDG_CACHE_HOME/lidef, else ~/.cache/lidef)");
   sub->add_flag("--no-cache", f->off, "Neither read nor write the precomputation cache");
   sub->add_option("--cache-max-mb", f->max_mb,
                   "Size limit of the cache folder in MiB; the least recently used files are evicted (default "

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "cache_flags.h"
 #include "commands.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
@@ -24,7 +25,6 @@
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
 #include "lidef/vtk_export.h"
-#include "cache_flags.h"
 #include "param_flags.h"
 #include "staged_outputs.h"
 

@@ -17,6 +17,7 @@
 #include <type_traits>
 #include <variant>
 
+#include "cache_flags.h"
 #include "commands.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
@@ -34,7 +35,6 @@
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
 #include "lidef/vtk_export.h"
-#include "cache_flags.h"
 #include "param_flags.h"
 #include "staged_outputs.h"
 

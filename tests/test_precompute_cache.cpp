@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <thread>
 
 #include "lidef/interactive_session.h"
@@ -84,7 +85,8 @@ TEST(PrecomputeCache, RoundTripAndKeyMismatchMisses) {
   other.add(8).add(std::string("abc"));
   EXPECT_FALSE(cache.load(other, payload, &ev));
   EXPECT_EQ(ev.outcome, "miss");
-  EXPECT_NE(CacheKey("a").add(std::string("bc")).value(), CacheKey("a").add(std::string("b")).add(std::string("c")).value());
+  EXPECT_NE(CacheKey("a").add(std::string("bc")).value(),
+            CacheKey("a").add(std::string("b")).add(std::string("c")).value());
   // Disabled: never reads, never writes.
   const PrecomputeCache off("");
   off.store(key, payload_of(v), &ev);
@@ -202,7 +204,8 @@ Run solve_beam(const std::string& cache_dir, const DeformParams& p) {
 
 void expect_same(const Run& a, const Run& b) {
   ASSERT_EQ(a.coefficients.rows(), b.coefficients.rows());
-  EXPECT_EQ(std::memcmp(a.coefficients.data(), b.coefficients.data(), sizeof(double) * a.coefficients.size()), 0);
+  EXPECT_EQ(std::memcmp(a.coefficients.data(), b.coefficients.data(), sizeof(double) * a.coefficients.size()),
+            0);
   EXPECT_EQ(a.energies, b.energies);
   EXPECT_EQ(a.min_lower_bound, b.min_lower_bound);
 }
@@ -261,6 +264,32 @@ TEST(PrecomputeCache, SolverConstructionCanBeCancelledAndReportsProgress) {
   EXPECT_EQ(seen.back().second, 1.0);
 }
 
+// `lidef certify` through the cache: the second run reads the sampling, and the certificate is the same
+// bytes;
+// --no-cache neither reads nor writes.
+TEST(PrecomputeCache, CertifyCliGivesTheSameCertificateFromTheCache) {
+  TempDir dir;
+  const std::string base =
+      cli() + " certify " + project_data() + "/models/beam --coeffs identity --grid 0 --samples 3000";
+  std::string out;
+  std::vector<std::string> certs, sampling;
+  for (const std::string& flags :
+       {std::string(" --cache-dir ") + (dir / "cache"), std::string(" --cache-dir ") + (dir / "cache"),
+        std::string(" --no-cache --cache-dir ") + (dir / "other")}) {
+    const std::string o = dir / ("out" + std::to_string(certs.size()));
+    ASSERT_EQ(run_command(base + flags + " --out " + o, &out), 0) << out;
+    certs.push_back(read_text(o + "/certificate.json"));
+    const auto t = nlohmann::json::parse(read_text(o + "/timings.json"));
+    sampling.push_back(t.at("sampling_cache").get<std::string>());
+  }
+  EXPECT_EQ(sampling[0], "miss");
+  EXPECT_EQ(sampling[1], "hit");
+  EXPECT_EQ(sampling[2], "disabled");
+  EXPECT_FALSE(fs::exists(dir / "other"));
+  EXPECT_EQ(certs[0], certs[1]);
+  EXPECT_EQ(certs[0], certs[2]);
+}
+
 // --- The studio's engine: opening from the cache, cancelling.
 
 struct Frames {
@@ -304,7 +333,8 @@ TEST(PrecomputeCache, SessionReopensFromTheCacheWithTheSameFrames) {
   ASSERT_EQ(first->state, SessionState::kResting);
   ASSERT_EQ(second->state, SessionState::kResting);
   EXPECT_EQ(first->mesh_V.rows(), second->mesh_V.rows());
-  EXPECT_EQ(std::memcmp(first->mesh_V.data(), second->mesh_V.data(), sizeof(double) * first->mesh_V.size()), 0);
+  EXPECT_EQ(std::memcmp(first->mesh_V.data(), second->mesh_V.data(), sizeof(double) * first->mesh_V.size()),
+            0);
   EXPECT_TRUE(second->certified);
   EXPECT_EQ(std::memcmp(first->mesh_e_iso.data(), second->mesh_e_iso.data(),
                         sizeof(double) * first->mesh_e_iso.size()),

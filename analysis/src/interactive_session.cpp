@@ -3,8 +3,8 @@
 #include <omp.h>
 
 #include <chrono>
-#include <filesystem>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 
 #include "lidef/continuation.h"
@@ -594,8 +594,7 @@ void InteractiveSession::Engine::build_solver(const std::shared_ptr<const Model>
 }
 
 void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const Model>& new_model,
-                                                     const DeformParams& new_params,
-                                                     PrecomputeSetup& setup) {
+                                                     const DeformParams& new_params, PrecomputeSetup& setup) {
   if (new_params.threads > 0)
     omp_set_num_threads(new_params.threads);
   else
@@ -620,7 +619,9 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
   MatXd v, g;
   const PrecomputeCache cache(setup.cache_dir, setup.cache_max_bytes);
   status = "preprocessing: mesh vertices in the subspace";
-  reduced_mesh_matrices(*built, new_model->mesh.V, cache, [&](double f) { on_progress("mesh vertices in the subspace", 0.9 + 0.1 * f); }, v, g);
+  reduced_mesh_matrices(
+      *built, new_model->mesh.V, cache,
+      [&](double f) { on_progress("mesh vertices in the subspace", 0.9 + 0.1 * f); }, v, g);
   // Committed only now: a failure above leaves the previous session as it was.
   solver = std::move(built);
   backend = new_backend;
@@ -815,7 +816,8 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
   return f;
 }
 
-// A frame of the model being prepared, at rest: the identity map (E_iso − 6 = 0, det J = 1), not yet certified.
+// A frame of the model being prepared, at rest: the identity map (E_iso − 6 = 0, det J = 1), not yet
+// certified.
 std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_preparing_frame() {
   auto f = std::make_shared<SessionFrame>();
   f->serial = ++serial;

@@ -221,7 +221,8 @@ void PrecomputeCache::store(const CacheKey& key, const CacheWriter& w, CacheEven
   };
   if (!enabled()) return done("disabled");
   if (sizeof(Header) + ev.bytes > max_bytes_)
-    return done("not stored (" + megabytes(ev.bytes) + " is over the limit of " + megabytes(max_bytes_) + ")");
+    return done("not stored (" + megabytes(ev.bytes) + " is over the limit of " + megabytes(max_bytes_) +
+                ")");
   try {
     ensure_directory(dir_);
     std::vector<const void*> data;
@@ -312,8 +313,8 @@ CacheKey sampling_key(const Cage& cage, const SamplingParams& p) {
   return k.add_numerics();
 }
 
-VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& params, const PrecomputeCache& cache,
-                                   CacheEvent* event) {
+VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& params,
+                                   const PrecomputeCache& cache, CacheEvent* event) {
   const CacheKey key = sampling_key(cage, params);
   std::vector<char> payload;
   CacheEvent ev;
@@ -353,7 +354,8 @@ std::string describe(const CacheEvent& e) {
 }
 
 std::string describe(const CacheUsage& u) {
-  return "cache: " + std::to_string(u.entries) + " files, " + megabytes(u.bytes) + " of " + megabytes(u.limit);
+  return "cache: " + std::to_string(u.entries) + " files, " + megabytes(u.bytes) + " of " +
+         megabytes(u.limit);
 }
 
 }  // namespace lidef

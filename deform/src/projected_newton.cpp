@@ -124,11 +124,12 @@ struct DeformationSolver::Precompute {
     S.sampling_ = sample_voxels(S.cage_, S.sampling_params());  // laid out in frame_ (sampling.h)
     S.nsampling_ = S.frame_.to_normalized(S.sampling_);
     if (S.sampling_.size() == 0)
-      throw InputError(S.cage_.source, "no voxel of side " + format_g(S.sampling_.side, 4) +
-                                           " fits inside the cage (use a smaller voxel_side or more samples)");
-    say("sampling: " + std::to_string(S.sampling_.size()) + " voxels of side " + format_g(S.sampling_.side, 4) +
-        ", " + std::to_string(S.sampling_.hessian_subset.size()) + " in the Hessian subset (" +
-        format_g(ms_since(t0), 4) + " ms)");
+      throw InputError(S.cage_.source,
+                       "no voxel of side " + format_g(S.sampling_.side, 4) +
+                           " fits inside the cage (use a smaller voxel_side or more samples)");
+    say("sampling: " + std::to_string(S.sampling_.size()) + " voxels of side " +
+        format_g(S.sampling_.side, 4) + ", " + std::to_string(S.sampling_.hessian_subset.size()) +
+        " in the Hessian subset (" + format_g(ms_since(t0), 4) + " ms)");
   }
 
   void certifier() {
@@ -141,8 +142,8 @@ struct DeformationSolver::Precompute {
   }
 
   // The reduced gradient matrix G = (∇basis at the centers) Ξ (3|I| by s) of the energy, from the certifier's
-  // gradient rows: the energy keeps G in float (deformation_energy.h), and float(∇basis Ξ) is exactly what the
-  // certifier stores, so the basis is evaluated once for both.
+  // gradient rows: the energy keeps G in float (deformation_energy.h), and float(∇basis Ξ) is exactly what
+  // the certifier stores, so the basis is evaluated once for both.
   MatXdR gradients() const {
     const OctreeCertifier::ReducedDerivativesRef d = S.certifier_->reduced_derivatives();
     const long n = S.nsampling_.size(), m = d.m;
@@ -240,7 +241,8 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
           }(),
           std::move(backend)) {}
 
-DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params, const PrecomputeSetup& setup,
+DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
+                                     const PrecomputeSetup& setup,
                                      std::shared_ptr<const ComputeBackend> backend)
     : cage_(cage),
       frame_(Frame::of(cage)),
@@ -260,8 +262,8 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
     pc.sampling();
     pc.certifier();
   }
-  energy_ = std::make_unique<DeformationEnergy>(pc.gradients(), nsampling_.hessian_subset, subspace_.eigenvalues,
-                                                ncage_.num_edges());
+  energy_ = std::make_unique<DeformationEnergy>(pc.gradients(), nsampling_.hessian_subset,
+                                                subspace_.eigenvalues, ncage_.num_edges());
 
   pc.enter("certificate of the identity", pc.end, cached || !pc.cache.enabled() ? 1.0 : 0.93);
   auto t0 = Clock::now();
@@ -274,7 +276,7 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   t0 = Clock::now();
   reset();
   pc.say("certificate of the identity: " + format_g(ms_since(t0), 4) + " ms");
-  if (!cached) {
+  if (!cached && pc.cache.enabled()) {
     pc.enter("writing the cache", pc.end, 1.0);
     pc.store(key);
   }

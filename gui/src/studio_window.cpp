@@ -17,7 +17,6 @@
 #include <vtkWindowToImageFilter.h>
 
 #include <QAction>
-#include <algorithm>
 #include <QApplication>
 #include <QButtonGroup>
 #include <QCheckBox>
@@ -43,6 +42,7 @@
 #include <QTimer>
 #include <QToolBar>
 #include <QVBoxLayout>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>

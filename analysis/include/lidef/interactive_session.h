@@ -170,7 +170,7 @@ class InteractiveSession {
   SessionState state_ = SessionState::kEmpty;
   bool idle_ = true;  // engine waiting with an empty queue and nothing to do
   std::shared_ptr<const Model> model_;
-  Scenario scenario_;  // handles and parameters as last set (guarded by mutex_)
+  Scenario scenario_;      // handles and parameters as last set (guarded by mutex_)
   std::string cache_dir_;  // guarded by mutex_
   std::uint64_t cache_max_bytes_ = 0;
   std::thread thread_;

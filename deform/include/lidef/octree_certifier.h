@@ -137,7 +137,7 @@ class OctreeCertifier {
 
  private:
   struct Impl;
-  struct Run;  // the stages of one certification (octree_certifier.cpp)
+  struct Run;                                // the stages of one certification (octree_certifier.cpp)
   void init_common(const MatXd* reduction);  // checks the sampling, edge endpoints
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,

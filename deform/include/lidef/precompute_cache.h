@@ -95,8 +95,8 @@ class CacheWriter {
   std::vector<Span> spans_;
 };
 
-// Reads a payload back; any mismatch (too short, wrong shape) throws CacheReader::Bad, which the caller treats
-// as a corrupted entry.
+// Reads a payload back; any mismatch (too short, wrong shape) throws CacheReader::Bad, which the caller
+// treats as a corrupted entry.
 class CacheReader {
  public:
   struct Bad {};
@@ -165,8 +165,8 @@ class PrecomputeCache {
   std::uint64_t max_bytes() const { return max_bytes_; }
   std::string path(const CacheKey& key) const;  // <dir>/<kind>-<key16hex>.lpc
 
-  // The payload of a valid entry for `key` (and its time refreshed), or false. A file that exists but does not
-  // check out is removed; `event` says which.
+  // The payload of a valid entry for `key` (and its time refreshed), or false. A file that exists but does
+  // not check out is removed; `event` says which.
   bool load(const CacheKey& key, std::vector<char>& payload, CacheEvent* event = nullptr) const;
   // Writes the entry atomically, then evicts least-recently-used files beyond the limit (never this one). An
   // entry larger than the limit, or a directory that cannot be written, is not stored (the cache is an
@@ -188,8 +188,8 @@ void write_sampling(CacheWriter& w, const VoxelSampling& s);
 VoxelSampling read_sampling(CacheReader& r);  // throws CacheReader::Bad
 
 // sample_voxels(cage, params) through the cache (entry kind "sampling"; `lidef certify`).
-VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& params, const PrecomputeCache& cache,
-                                   CacheEvent* event = nullptr);
+VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& params,
+                                   const PrecomputeCache& cache, CacheEvent* event = nullptr);
 
 // "hit 12.3 MB in 40 ms" etc., and "cache: 3 entries, 1.2 GB of 4.0 GB" (for logs).
 std::string describe(const CacheEvent& e);

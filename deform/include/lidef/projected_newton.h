@@ -121,9 +121,10 @@ class DeformationSolver {
                     const std::string& cache_dir = default_cache_dir(),
                     const std::function<void(const std::string&)>& log = {},
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
-  // The same with progress, cancellation and the cache limit. The sampling, the reduced basis gradients and the
-  // certifier's derivatives come from the cache when it holds them for exactly this cage, these parameters
-  // and this subspace (else they are computed and stored): the solver is the same either way, byte for byte.
+  // The same with progress, cancellation and the cache limit. The sampling, the reduced basis gradients and
+  // the certifier's derivatives come from the cache when it holds them for exactly this cage, these
+  // parameters and this subspace (else they are computed and stored): the solver is the same either way, byte
+  // for byte.
   DeformationSolver(const Cage& cage, const DeformParams& params, const PrecomputeSetup& setup,
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
   ~DeformationSolver();
