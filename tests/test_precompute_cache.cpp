@@ -174,14 +174,14 @@ DeformParams small_params() {
   return p;
 }
 
-struct Run {
+struct SolveRun {
   std::string outcome;
   MatX3d coefficients;
   std::vector<double> energies;
   double min_lower_bound = 0;
 };
 
-Run solve_beam(const std::string& cache_dir, const DeformParams& p) {
+SolveRun solve_beam(const std::string& cache_dir, const DeformParams& p) {
   const Model model = load_model(project_data() + "/models/beam");
   PrecomputeSetup setup;
   setup.cache_dir = cache_dir;
@@ -191,7 +191,7 @@ Run solve_beam(const std::string& cache_dir, const DeformParams& p) {
   T = S;
   T(1, 1) += 0.3;
   s.set_handles(S, T, "test");
-  Run r;
+  SolveRun r;
   r.outcome = s.cache_outcome();
   s.solve([&](const IterationRecord& rec) {
     r.energies.push_back(rec.terms.total);
@@ -202,7 +202,7 @@ Run solve_beam(const std::string& cache_dir, const DeformParams& p) {
   return r;
 }
 
-void expect_same(const Run& a, const Run& b) {
+void expect_same(const SolveRun& a, const SolveRun& b) {
   ASSERT_EQ(a.coefficients.rows(), b.coefficients.rows());
   EXPECT_EQ(std::memcmp(a.coefficients.data(), b.coefficients.data(), sizeof(double) * a.coefficients.size()),
             0);
@@ -213,21 +213,21 @@ void expect_same(const Run& a, const Run& b) {
 TEST(PrecomputeCache, SolverIsByteIdenticalFromTheCacheAndRebuildsCorruptedOrStaleEntries) {
   TempDir dir;
   const DeformParams p = small_params();
-  const Run plain = solve_beam("", p);
+  const SolveRun plain = solve_beam("", p);
   EXPECT_EQ(plain.outcome, "disabled");
   ASSERT_FALSE(plain.energies.empty());
 
-  const Run first = solve_beam(dir.str(), p);
+  const SolveRun first = solve_beam(dir.str(), p);
   EXPECT_EQ(first.outcome, "miss");
   ASSERT_EQ(entries(dir.str(), "solver-").size(), 1u);
-  const Run again = solve_beam(dir.str(), p);
+  const SolveRun again = solve_beam(dir.str(), p);
   EXPECT_EQ(again.outcome, "hit");
   expect_same(plain, first);
   expect_same(plain, again);
 
   // A corrupted entry is detected and rebuilt, never trusted.
   flip_byte(entries(dir.str(), "solver-")[0], 12345);
-  const Run rebuilt = solve_beam(dir.str(), p);
+  const SolveRun rebuilt = solve_beam(dir.str(), p);
   EXPECT_EQ(rebuilt.outcome, "rebuilt (checksum mismatch)");
   expect_same(plain, rebuilt);
   EXPECT_EQ(solve_beam(dir.str(), p).outcome, "hit");
@@ -247,16 +247,18 @@ TEST(PrecomputeCache, SolverConstructionCanBeCancelledAndReportsProgress) {
   const Model model = load_model(project_data() + "/models/beam");
   std::atomic<bool> cancel{false};
   std::vector<std::pair<std::string, double>> seen;
+  bool armed = true;  // cancel the first construction in its derivatives stage
   PrecomputeSetup setup;
   setup.cache_dir = "";
   setup.cancel = &cancel;
   setup.progress = [&](const std::string& stage, double f) {
     seen.emplace_back(stage, f);
-    if (stage == "basis derivatives at the samples" && f > 0) cancel.store(true);
+    if (armed && stage == "basis derivatives at the samples" && f > 0) cancel.store(true);
   };
   EXPECT_THROW(DeformationSolver(model.cage, small_params(), setup), Cancelled);
   ASSERT_GE(seen.size(), 3u);
   for (size_t i = 1; i < seen.size(); ++i) EXPECT_GE(seen[i].second, seen[i - 1].second);
+  armed = false;
   cancel.store(false);
   seen.clear();
   DeformationSolver s(model.cage, small_params(), setup);
