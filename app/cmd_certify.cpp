@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "cache_flags.h"
 #include "commands.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
@@ -54,6 +55,7 @@ void add_certify_command(CLI::App& app, Action& action) {
     std::string model, coeffs, out;
     int grid = 64;
     ParamOverrides overrides;
+    CacheFlags cache;
   };
   auto opts = std::make_shared<Opts>();
   auto* sub =
@@ -69,6 +71,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   // The same names as `lidef deform` and a scenario's "parameters" (one table, docs/parameters.md).
   add_param_flags(sub, &opts->overrides, "Parameters: ", certify_param);
+  add_cache_flags(sub, &opts->cache);
   sub->footer(
       "Writes into --out: certificate.json (verdict, counts, parameters; deterministic), voxels.csv (one row "
       "per\n"
@@ -118,7 +121,10 @@ void add_certify_command(CLI::App& app, Action& action) {
 
       // --- Sampling and certificate.
       t0 = Clock::now();
-      const VoxelSampling sampling = sample_voxels(model.cage, sp);
+      // The sampling through the precomputation cache: the same voxels, byte for byte, either way.
+      const PrecomputeCache cache(o.cache.folder(), o.cache.max_bytes());
+      CacheEvent cache_event;
+      const VoxelSampling sampling = cached_sample_voxels(model.cage, sp, cache, &cache_event);
       const double ms_sampling = ms_since(t0);
       if (sampling.size() == 0)
         throw InputError(o.model, "no voxel of side " + format_g(sampling.side) +
@@ -127,7 +133,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       // In the model's normalized frame, as lidef deform certifies (normalization.h).
       NormalizedCertifier certifier(model.cage, sampling);
       std::string backend_msg;
-      const auto backend = select_backend(dp, default_cache_dir(), &backend_msg);
+      const auto backend = select_backend(dp, o.cache.folder(), &backend_msg);
       std::cerr << "lidef certify: " << backend_msg << "\n";
       certifier.set_backend(*backend);
       t0 = Clock::now();
@@ -157,6 +163,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       tj["backend"] = backend->name();
       tj["load_ms"] = ms_load;
       tj["sampling_ms"] = ms_sampling;
+      tj["sampling_cache"] = cache_event.outcome;
       tj["precompute_ms"] = certifier.precompute_seconds() * 1000;
       tj["certify_ms"] = ms_certify;
       tj["certify_breakdown_ms"] = {{"jacobian", cert.ms_jacobian},

@@ -17,6 +17,7 @@
 #include <type_traits>
 #include <variant>
 
+#include "cache_flags.h"
 #include "commands.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
@@ -84,7 +85,8 @@ std::string iteration_row(const IterationRecord& r) {
 
 void add_deform_command(CLI::App& app, Action& action) {
   struct Opts {
-    std::string scenario, out, models, init, cache_dir = "<default>";
+    std::string scenario, out, models, init;
+    CacheFlags cache;
     int grid = 0;
     bool quiet = false;
     ParamOverrides overrides;  // parameter name → text from the command line
@@ -100,8 +102,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       "--init", opts->init,
       "Start from this certified map (a coefficients.txt of an earlier run with the same reduced_dof) "
       "instead of the identity");
-  sub->add_option("--cache-dir", opts->cache_dir,
-                  "Subspace cache folder ('' = no cache; default $LIDEF_CACHE_DIR or ~/.cache/lidef)");
+  add_cache_flags(sub, &opts->cache);
   sub->add_option("--grid", opts->grid,
                   "Also write field.vti with this many points along the longest axis (0 = no)")
       ->capture_default_str();
@@ -146,7 +147,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       // A mesh file as the model: its automatic cage, made once and cached (lidef/cage/auto_cage.h).
       const Model model = load_model(resolve_model_path(
           sc.model_dir, [](const std::string& m) { std::cerr << "lidef deform: " << m << "\n"; },
-          o.cache_dir));
+          o.cache.folder()));
       for (size_t k = 0; k < model.report.warnings.size() && k < 5; ++k)
         std::cerr << "lidef deform: warning: " << model.report.warnings[k].str() << "\n";
       if (model.report.warnings.size() > 5)
@@ -156,18 +157,22 @@ void add_deform_command(CLI::App& app, Action& action) {
       auto log = [&](const std::string& s) {
         if (!o.quiet) std::cerr << "lidef deform: " << s << "\n";
       };
-      const std::string cache = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
+      const std::string cache = o.cache.folder();
+      PrecomputeSetup setup;
+      setup.cache_dir = cache;
+      setup.cache_max_bytes = o.cache.max_bytes();
+      setup.log = log;
       std::string backend_msg;
       const auto backend = select_backend(sc.params, cache, &backend_msg);
       std::cerr << "lidef deform: " << backend_msg << "\n";
       std::unique_ptr<DeformationSolver> solver_ptr;
       try {
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, backend);
+        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, setup, backend);
       } catch (const OpenCLError& e) {
         // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
         if (sc.params.backend != BackendKind::kAuto) throw;
         std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, cpu_backend());
+        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, setup, cpu_backend());
       }
       DeformationSolver& solver = *solver_ptr;
       solver.set_handles(sc.sources, sc.targets, sc.path);

@@ -30,4 +30,12 @@ inline std::string cpu_model() {
   return "unknown";
 }
 
+// The first line of /proc/loadavg (the machine's load when a benchmark ran).
+inline std::string load_average() {
+  std::ifstream in("/proc/loadavg");
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
 }  // namespace lidef::bench

@@ -4,11 +4,13 @@
 
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 
 #include "lidef/continuation.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
+#include "lidef/precompute_cache.h"
 
 namespace lidef {
 
@@ -100,7 +102,16 @@ struct InteractiveSession::Engine {
   void drop_command(const std::exception& e);
 
   // --- The solver.
-  void build_solver(const std::shared_ptr<const Model>& new_model, const DeformParams& new_params);
+  // The model being prepared, its handles and the stage (preparing frames show it at rest).
+  std::shared_ptr<const Model> preparing;
+  std::string stage;
+  double progress = -1;
+  MatX3d prep_sources, prep_targets;
+  void build_solver(const std::shared_ptr<const Model>& new_model, const DeformParams& new_params,
+                    const MatX3d& new_sources, const MatX3d& new_targets);
+  void build_solver_stages(const std::shared_ptr<const Model>& new_model, const DeformParams& new_params,
+                           PrecomputeSetup& setup);
+  void on_progress(const std::string& name, double fraction);  // a preparing frame; throws Cancelled
   void handles_to_solver();
   bool iterate();  // false: go straight back for the waiting commands (no resting frame)
   bool on_iteration(const IterationRecord& r);
@@ -116,6 +127,7 @@ struct InteractiveSession::Engine {
   std::shared_ptr<SessionFrame> make_frame();
   void publish_frame(std::shared_ptr<const SessionFrame> f);
   void publish_state(SessionState st, const std::string& text);
+  std::shared_ptr<SessionFrame> make_preparing_frame();
   void report_error(const std::string& what);
 };
 
@@ -124,7 +136,9 @@ InteractiveSession::InteractiveSession(FrameCallback on_frame, ErrorCallback on_
     : on_frame_(std::move(on_frame)),
       on_error_(std::move(on_error)),
       backends_(std::move(backends)),
-      engine_(std::make_unique<Engine>(*this)) {
+      engine_(std::make_unique<Engine>(*this)),
+      cache_dir_(default_cache_dir()),
+      cache_max_bytes_(default_cache_max_bytes()) {
   thread_ = std::thread([this] { run(); });
 }
 
@@ -145,6 +159,8 @@ void InteractiveSession::post(Command c) {
     if (c.kind == Command::kLoad || c.kind == Command::kStop || c.kind == Command::kReset ||
         c.kind == Command::kParams)
       interrupt_.store(true);
+    // A newer model replaces one still being prepared.
+    if (c.kind == Command::kLoad) cancel_.store(true);
     queue_.push_back(std::move(c));
     idle_ = false;
   }
@@ -250,6 +266,16 @@ void InteractiveSession::set_params(const DeformParams& params) {
   post(std::move(c));
 }
 
+void InteractiveSession::set_cache(const std::string& dir, std::uint64_t max_bytes) {
+  std::lock_guard<std::mutex> lk(mutex_);
+  cache_dir_ = dir;
+  cache_max_bytes_ = max_bytes;
+}
+
+void InteractiveSession::cancel_preparation() {
+  cancel_.store(true);
+}
+
 void InteractiveSession::solve() {
   post(Command(Command::kSolve));
 }
@@ -293,19 +319,65 @@ SessionState InteractiveSession::state() const {
 
 namespace {
 
+// HarmonicBasis::value_matrix(P) and gradient_matrix(P) (the same numbers, bit for bit) from one evaluation
+// per point, which shares the per-face work between the two.
+void value_gradient_matrices(const HarmonicBasis& basis, const MatX3d& P, MatXd& val, MatXd& grad) {
+  const int n = basis.size();
+  val.resize(P.rows(), n);
+  grad.resize(3 * P.rows(), n);
+#pragma omp parallel
+  {
+    std::vector<double> v(n), g(3 * static_cast<size_t>(n));
+#pragma omp for schedule(static)
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+      basis.evaluate(P.row(i).transpose(), 1, v.data(), g.data(), nullptr);
+      for (int k = 0; k < n; ++k) {
+        val(i, k) = v[k];
+        for (int b = 0; b < 3; ++b) grad(3 * i + b, k) = g[3 * k + b];
+      }
+    }
+  }
+}
+
 // Mesh vertices in the reduced space, in blocks so that the full-space matrices (#Vm by #Vc+#Fc) never
-// exist at once (the animal's would take 1.4 GB).
-void reduced_mesh_matrices(const HarmonicBasis& basis, const MatXd& Xi, const MatX3d& V, MatXd& Mv,
-                           MatXd& Mg) {
-  const Eigen::Index n = V.rows(), s = Xi.cols(), block = 2048;
+// exist at once (the animal's would take 1.4 GB): Mv = (basis values at the mesh vertices) Ξ (#Vm by s),
+// Mg = (basis gradients) Ξ (3#Vm by s), in the solver's normalized frame. From the cache when it holds them
+// for this cage, mesh and subspace. `tick` gets the fraction done (and may throw Cancelled).
+void reduced_mesh_matrices(const DeformationSolver& S, const MatX3d& mesh_V, const PrecomputeCache& cache,
+                           const std::function<void(double)>& tick, MatXd& Mv, MatXd& Mg) {
+  CacheKey key("mesh");
+  key.add_matrix(S.cage().V).add_matrix(S.cage().F).add_matrix(mesh_V).add_matrix(S.subspace().basis);
+  key.add_numerics();
+  std::vector<char> payload;
+  const Eigen::Index n = mesh_V.rows(), s = S.subspace().size(), block = 2048;
+  if (cache.load(key, payload)) {
+    try {
+      CacheReader r(std::move(payload));
+      r.matrix(Mv, n, s);
+      r.matrix(Mg, 3 * n, s);
+      if (r.at_end()) return;
+    } catch (const CacheReader::Bad&) {
+    }
+    std::error_code ec;
+    std::filesystem::remove(cache.path(key), ec);  // malformed: rebuilt below
+  }
+  const HarmonicBasis& basis = S.normalized_basis();
+  const MatXd& Xi = S.subspace().basis;
+  const MatX3d V = S.frame().points_to_normalized(mesh_V);
   Mv.resize(n, s);
   Mg.resize(3 * n, s);
   for (Eigen::Index b = 0; b < n; b += block) {
     const Eigen::Index m = std::min(block, n - b);
-    const MatX3d P = V.middleRows(b, m);
-    Mv.middleRows(b, m).noalias() = basis.value_matrix(P) * Xi;
-    Mg.middleRows(3 * b, 3 * m).noalias() = basis.gradient_matrix(P) * Xi;
+    MatXd val, grad;
+    value_gradient_matrices(basis, V.middleRows(b, m), val, grad);
+    Mv.middleRows(b, m).noalias() = val * Xi;
+    Mg.middleRows(3 * b, 3 * m).noalias() = grad * Xi;
+    tick(static_cast<double>(b + m) / static_cast<double>(n));
   }
+  CacheWriter w;
+  w.matrix(Mv);
+  w.matrix(Mg);
+  cache.store(key, w);
 }
 
 }  // namespace
@@ -336,6 +408,7 @@ bool InteractiveSession::Engine::take_commands(std::vector<Command>& cmds) {
   }
   cmds.swap(session.queue_);
   session.interrupt_.store(false);  // every interrupting command is in `cmds`
+  session.cancel_.store(false);     // a cancel is of a preparation that ended (these commands come after it)
   session.idle_ = false;
   return true;
 }
@@ -392,7 +465,7 @@ bool InteractiveSession::Engine::targets_superseded(const std::vector<Command>& 
 
 void InteractiveSession::Engine::apply_load(const Command& c) {
   want_iterate = false;
-  build_solver(c.model, c.scenario.params);
+  build_solver(c.model, c.scenario.params, c.scenario.sources, c.scenario.targets);
   sources = c.scenario.sources;
   targets = c.scenario.targets;
   handles_to_solver();
@@ -430,7 +503,7 @@ void InteractiveSession::Engine::apply_params(const Command& c) {
     return;
   }
   if (changes_precomputation(params, c.params)) {
-    build_solver(model, c.params);
+    build_solver(model, c.params, sources, targets);
     handles_to_solver();
   } else {
     solver->set_params(c.params);
@@ -474,41 +547,81 @@ void InteractiveSession::Engine::drop_command(const std::exception& e) {
     session.model_ = model;
     session.scenario_ = scenario;
   }
+  if (dynamic_cast<const Cancelled*>(&e)) {  // the user's own request: no error dialog
+    publish_state(solver ? SessionState::kResting : SessionState::kEmpty,
+                  solver ? "preprocessing cancelled; the model before is kept" : "preprocessing cancelled");
+    return;
+  }
   publish_state(solver ? SessionState::kResting : SessionState::kFailed, std::string("error: ") + e.what());
   report_error(e.what());
 }
 
 // --- The solver.
 
+// Prepares a solver for the model on this thread and commits it only when done: a failure or a cancel
+// (cancel_preparation()) leaves the session as it was. Meanwhile preparing frames show the new model at rest
+// with the stage and its progress.
 void InteractiveSession::Engine::build_solver(const std::shared_ptr<const Model>& new_model,
-                                              const DeformParams& new_params) {
+                                              const DeformParams& new_params, const MatX3d& new_sources,
+                                              const MatX3d& new_targets) {
+  PrecomputeSetup setup;
+  {
+    std::lock_guard<std::mutex> lk(session.mutex_);
+    setup.cache_dir = session.cache_dir_;
+    setup.cache_max_bytes = session.cache_max_bytes_;
+  }
+  preparing = new_model;
+  prep_sources = new_sources;
+  prep_targets = new_targets;
+  // The views adopt the new model now (at rest) and keep it when the solver is ready.
+  ++model_version;
   publish_state(SessionState::kPreparing, "preprocessing " + new_model->dir);
-  publish_frame(make_frame());
+  stage = "starting";
+  progress = 0;
+  publish_frame(make_preparing_frame());
+  try {
+    build_solver_stages(new_model, new_params, setup);
+  } catch (...) {
+    preparing.reset();
+    progress = -1;
+    stage.clear();
+    ++model_version;  // back to the model before (or to none)
+    throw;
+  }
+  preparing.reset();
+  progress = -1;
+  stage.clear();
+}
+
+void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const Model>& new_model,
+                                                     const DeformParams& new_params, PrecomputeSetup& setup) {
   if (new_params.threads > 0)
     omp_set_num_threads(new_params.threads);
   else
     omp_set_num_threads(omp_get_num_procs());
   std::string msg;
   auto new_backend = session.backends_(new_params, &msg);
-  auto log = [&](const std::string& line) {
-    status = "preprocessing: " + line;
-    publish_frame(make_frame());
-  };
+  // The solver's stages take 90% of the bar, the mesh matrices the rest.
+  setup.log = [&](const std::string& line) { status = "preprocessing: " + line; };
+  setup.progress = [&](const std::string& name, double f) { on_progress(name, 0.9 * f); };
+  setup.cancel = &session.cancel_;
   std::unique_ptr<DeformationSolver> built;
   try {
-    built = std::make_unique<DeformationSolver>(new_model->cage, new_params, default_cache_dir(), log,
-                                                new_backend);
+    built = std::make_unique<DeformationSolver>(new_model->cage, new_params, setup, new_backend);
+  } catch (const Cancelled&) {
+    throw;
   } catch (const Error&) {
     // "auto" chose a device that cannot hold this problem: the CPU takes it.
     if (new_params.backend != BackendKind::kAuto || new_backend->is_cpu()) throw;
     new_backend = cpu_backend();
-    built = std::make_unique<DeformationSolver>(new_model->cage, new_params, default_cache_dir(), log,
-                                                new_backend);
+    built = std::make_unique<DeformationSolver>(new_model->cage, new_params, setup, new_backend);
   }
   MatXd v, g;
+  const PrecomputeCache cache(setup.cache_dir, setup.cache_max_bytes);
   status = "preprocessing: mesh vertices in the subspace";
-  reduced_mesh_matrices(built->normalized_basis(), built->subspace().basis,
-                        built->frame().points_to_normalized(new_model->mesh.V), v, g);
+  reduced_mesh_matrices(
+      *built, new_model->mesh.V, cache,
+      [&](double f) { on_progress("mesh vertices in the subspace", 0.9 + 0.1 * f); }, v, g);
   // Committed only now: a failure above leaves the previous session as it was.
   solver = std::move(built);
   backend = new_backend;
@@ -516,13 +629,19 @@ void InteractiveSession::Engine::build_solver(const std::shared_ptr<const Model>
   Mg = std::move(g);
   model = new_model;
   params = new_params;
-  ++model_version;
   ++map_version;
   leaves.reset();
   field.reset();
   field_deformed.reset();
   verification.reset();
   leaves_version = field_version = verification_version = -1;
+}
+
+void InteractiveSession::Engine::on_progress(const std::string& name, double fraction) {
+  if (session.cancel_.load()) throw Cancelled();
+  stage = name;
+  progress = fraction;
+  publish_frame(make_preparing_frame());
 }
 
 void InteractiveSession::Engine::handles_to_solver() {
@@ -694,6 +813,31 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
     }
   }
   f->ms_frame = 1000 * seconds_since(t0);
+  return f;
+}
+
+// A frame of the model being prepared, at rest: the identity map (E_iso − 6 = 0, det J = 1), not yet
+// certified.
+std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_preparing_frame() {
+  auto f = std::make_shared<SessionFrame>();
+  f->serial = ++serial;
+  f->map_version = map_version;
+  f->model_version = model_version;
+  f->state = SessionState::kPreparing;
+  f->status = status;
+  f->stage = stage;
+  f->progress = progress;
+  f->model = preparing;
+  f->not_certified_reason = "preprocessing";
+  f->sources = prep_sources;
+  f->targets = prep_targets;
+  f->images = prep_sources;
+  const Model& m = *preparing;
+  f->mesh_V = m.mesh.V;
+  f->mesh_e_iso = VecXd::Zero(m.mesh.V.rows());
+  f->mesh_det = VecXd::Ones(m.mesh.V.rows());
+  f->cage_V = m.cage.V;
+  f->coefficients = m.cage.identity_coefficients();
   return f;
 }
 

@@ -37,6 +37,26 @@ inline double hessian_norm_sym(const double* h0, int stride_a) {
   return std::sqrt(s);
 }
 
+// HarmonicBasis::gradient_matrix(P) and hessian_matrix(P) (the same numbers, bit for bit) from one evaluation
+// per point: order 2 computes the gradients on the way, which halves the cost of this precomputation.
+void gradient_hessian_matrices(const HarmonicBasis& basis, const MatX3d& P, MatXd& G, MatXd& H) {
+  const int n = basis.size();
+  G.resize(3 * P.rows(), n);
+  H.resize(kSym * P.rows(), n);
+#pragma omp parallel
+  {
+    std::vector<double> grad(3 * static_cast<size_t>(n)), hess(kSym * static_cast<size_t>(n));
+#pragma omp for schedule(static)
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+      basis.evaluate(P.row(i).transpose(), 2, nullptr, grad.data(), hess.data());
+      for (int k = 0; k < n; ++k) {
+        for (int b = 0; b < 3; ++b) G(3 * i + b, k) = grad[3 * k + b];
+        for (int b = 0; b < kSym; ++b) H(kSym * i + b, k) = hess[kSym * k + b];
+      }
+    }
+  }
+}
+
 }  // namespace
 
 struct OctreeCertifier::Impl {
@@ -62,18 +82,11 @@ struct OctreeCertifier::Impl {
 };
 
 OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
-                                 double max_matrix_bytes)
+                                 double max_matrix_bytes, const std::function<void(double)>& on_chunk)
     : cage_(cage), sampling_(sampling), basis_(cage), impl_(std::make_unique<Impl>()) {
   const auto t0 = Clock::now();
-  if (!(sampling.side > 0)) throw InputError("", "voxel side must be > 0");
-  if (sampling.size() == 0) throw InputError("", "no voxels to certify");
+  init_common(reduction);
   Impl& im = *impl_;
-  im.reduction = reduction;
-  im.edge_jet = std::make_unique<EdgeJet>(cage);
-  for (const CageEdge& e : cage.edges) {
-    im.eu.push_back(cage.V.row(e.v0));
-    im.ew.push_back(cage.V.row(e.v1));
-  }
   const long N = sampling.size(), n = basis_.size();
   const long m = reduction ? reduction->cols() : n;
   if (reduction && reduction->rows() != n)
@@ -91,12 +104,10 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
       const long c = std::min(chunk, N - s);
       const MatX3d P = sampling.centers.middleRows(s, c);
       MatXd Gc, Hc;
+      gradient_hessian_matrices(basis_, P, Gc, Hc);
       if (reduction) {
-        Gc.noalias() = basis_.gradient_matrix(P) * (*reduction);
-        Hc.noalias() = basis_.hessian_matrix(P) * (*reduction);
-      } else {
-        Gc = basis_.gradient_matrix(P);
-        Hc = basis_.hessian_matrix(P);
+        Gc = Gc * (*reduction);
+        Hc = Hc * (*reduction);
       }
 #pragma omp parallel for schedule(static)
       for (long j = 0; j < c; ++j) {
@@ -111,9 +122,70 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
         im.scale_J(s + j) = sj;
         im.scale_H(s + j) = sh;
       }
+      if (on_chunk) on_chunk(static_cast<double>(s + c) / static_cast<double>(N));
     }
   }
   precompute_seconds_ = ms_since(t0) / 1000.0;
+}
+
+OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
+                                 ReducedDerivatives d)
+    : cage_(cage), sampling_(sampling), basis_(cage), impl_(std::make_unique<Impl>()) {
+  const auto t0 = Clock::now();
+  if (!reduction) throw Error("OctreeCertifier: precomputed derivatives need the reduction basis");
+  init_common(reduction);
+  Impl& im = *impl_;
+  const long N = sampling.size();
+  if (d.m != reduction->cols() || d.GH.size() != static_cast<size_t>(9 * N * d.m) || d.scale_J.size() != N ||
+      d.scale_H.size() != N)
+    throw Error("OctreeCertifier: precomputed derivatives of another shape");
+  im.mode = Impl::Mode::kReduced;
+  im.m = d.m;
+  im.GH = std::move(d.GH);
+  im.scale_J = std::move(d.scale_J);
+  im.scale_H = std::move(d.scale_H);
+  precompute_seconds_ = ms_since(t0) / 1000.0;
+}
+
+void OctreeCertifier::init_common(const MatXd* reduction) {
+  if (!(sampling_.side > 0)) throw InputError("", "voxel side must be > 0");
+  if (sampling_.size() == 0) throw InputError("", "no voxels to certify");
+  Impl& im = *impl_;
+  im.reduction = reduction;
+  im.edge_jet = std::make_unique<EdgeJet>(cage_);
+  for (const CageEdge& e : cage_.edges) {
+    im.eu.push_back(cage_.V.row(e.v0));
+    im.ew.push_back(cage_.V.row(e.v1));
+  }
+}
+
+const OctreeCertifier::FactorMatrix* OctreeCertifier::third_factors(const std::vector<char>** finite) const {
+  const Impl& im = *impl_;
+  if (im.third.size() == 0) return nullptr;
+  *finite = &im.third_finite;
+  return &im.third;
+}
+
+void OctreeCertifier::adopt_third_factors(FactorMatrix factors, std::vector<char> finite) {
+  Impl& im = *impl_;
+  if (factors.rows() != sampling_.size() || factors.cols() != cage_.num_edges() ||
+      finite.size() != static_cast<size_t>(sampling_.size()))
+    throw Error("OctreeCertifier: third-order factors of another shape");
+  std::call_once(im.third_once, [&] {
+    im.third = std::move(factors);
+    im.third_finite = std::move(finite);
+  });
+}
+
+OctreeCertifier::ReducedDerivativesRef OctreeCertifier::reduced_derivatives() const {
+  ReducedDerivativesRef d;
+  const Impl& im = *impl_;
+  if (im.mode != Impl::Mode::kReduced) return d;
+  d.GH = &im.GH;
+  d.m = im.m;
+  d.scale_J = &im.scale_J;
+  d.scale_H = &im.scale_H;
+  return d;
 }
 
 OctreeCertifier::~OctreeCertifier() = default;

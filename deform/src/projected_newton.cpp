@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <sstream>
 
 #include "lidef/errors.h"
@@ -67,9 +68,181 @@ const char* to_string(StopReason r) {
   return "?";
 }
 
+// The stages of the constructor, with progress, cancellation and the precomputation cache around them.
+struct DeformationSolver::Precompute {
+  DeformationSolver& S;
+  const PrecomputeSetup& setup;
+  PrecomputeCache cache;
+  std::string stage;
+  double begin = 0, end = 0;  // fractions of the whole precomputation the current stage spans
+
+  Precompute(DeformationSolver& solver, const PrecomputeSetup& st)
+      : S(solver), setup(st), cache(st.cache_dir, st.cache_max_bytes) {}
+
+  void say(const std::string& s) const {
+    if (setup.log) setup.log(s);
+  }
+  // Stage `name` runs from fraction b to e of the whole. The spans are the stage times measured on the
+  // animal (docs/benchmarks.md), so that the bar moves evenly.
+  void enter(const std::string& name, double b, double e) {
+    stage = name;
+    begin = b;
+    end = e;
+    tick(0);
+  }
+  // `f` of the current stage done; throws Cancelled once the caller asked.
+  void tick(double f) const {
+    if (setup.cancel && setup.cancel->load(std::memory_order_relaxed)) throw Cancelled();
+    if (setup.progress) setup.progress(stage, begin + (end - begin) * std::min(1.0, std::max(0.0, f)));
+  }
+
+  // Everything the sampling, the gradients and the certifier's derivatives depend on.
+  CacheKey key() const {
+    CacheKey k("solver");
+    k.add_matrix(S.cage_.V).add_matrix(S.cage_.F);
+    const SamplingParams sp = S.sampling_params();
+    k.add(sp.target_count).add(sp.count_tolerance).add(sp.voxel_side).add(sp.safety);
+    k.add(sp.hessian_fraction).add(sp.max_search_iterations);
+    k.add_matrix(S.subspace_.basis).add_matrix(S.subspace_.eigenvalues);
+    return k.add_numerics();
+  }
+
+  void subspace() {
+    enter("subspace", 0.0, 0.02);
+    const auto t0 = Clock::now();
+    // Keyed by the normalized cage's exact vertex bytes: a translated or scaled copy that normalizes to other
+    // bytes gets its own entry, one that normalizes to the same bytes (a power-of-two scaling) shares it, and
+    // rightly so, since the subspace is computed from those bytes alone.
+    S.subspace_ = load_or_compute_subspace(S.ncage_, S.params_.reduced_dof, setup.cache_dir);
+    say("subspace: " + std::to_string(S.subspace_.size()) + " of " + std::to_string(S.ncage_.num_coeffs()) +
+        " coefficients per coordinate (" + S.subspace_.solver + ", " + format_g(ms_since(t0), 4) + " ms)");
+  }
+
+  void sampling() {
+    enter("sampling", 0.02, 0.04);
+    const auto t0 = Clock::now();
+    S.sampling_ = sample_voxels(S.cage_, S.sampling_params());  // laid out in frame_ (sampling.h)
+    S.nsampling_ = S.frame_.to_normalized(S.sampling_);
+    if (S.sampling_.size() == 0)
+      throw InputError(S.cage_.source,
+                       "no voxel of side " + format_g(S.sampling_.side, 4) +
+                           " fits inside the cage (use a smaller voxel_side or more samples)");
+    say("sampling: " + std::to_string(S.sampling_.size()) + " voxels of side " +
+        format_g(S.sampling_.side, 4) + ", " + std::to_string(S.sampling_.hessian_subset.size()) +
+        " in the Hessian subset (" + format_g(ms_since(t0), 4) + " ms)");
+  }
+
+  void certifier() {
+    enter("basis derivatives at the samples", 0.04, 0.85);
+    const auto t0 = Clock::now();
+    S.certifier_ = std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, 1.5e9,
+                                                     [this](double f) { tick(f); });
+    say("certificate precomputation (basis gradients and Hessians at the samples): " +
+        format_g(ms_since(t0), 4) + " ms");
+  }
+
+  // The reduced gradient matrix G = (∇basis at the centers) Ξ (3|I| by s) of the energy, from the certifier's
+  // gradient rows: the energy keeps G in float (deformation_energy.h), and float(∇basis Ξ) is exactly what
+  // the certifier stores, so the basis is evaluated once for both.
+  MatXdR gradients() const {
+    const OctreeCertifier::ReducedDerivativesRef d = S.certifier_->reduced_derivatives();
+    const long n = S.nsampling_.size(), m = d.m;
+    MatXdR G(3 * n, m);
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < n; ++i)
+      for (long r = 0; r < 3; ++r)
+        for (long k = 0; k < m; ++k) G(3 * i + r, k) = (*d.GH)[static_cast<size_t>((9 * i + r) * m + k)];
+    return G;
+  }
+
+  // The sampling and the certifier (its derivatives and, when the entry has them, its third-order bound
+  // factors) from the cache; false (nothing changed) when it has no valid entry.
+  bool load(const CacheKey& k) {
+    enter("reading the cache", 0.02, 0.5);
+    std::vector<char> payload;
+    CacheEvent ev;
+    if (!cache.load(k, payload, &ev)) {
+      S.cache_outcome_ = ev.outcome;
+      if (cache.enabled()) say("precomputation " + describe(ev));
+      return false;
+    }
+    tick(0.7);
+    try {
+      CacheReader r(std::move(payload));
+      VoxelSampling vs = read_sampling(r);
+      const long n = vs.size();
+      OctreeCertifier::ReducedDerivatives d;
+      d.GH = r.array<float>();
+      d.m = r.scalar<long>();
+      r.matrix(d.scale_J, n, 1);
+      r.matrix(d.scale_H, n, 1);
+      OctreeCertifier::FactorMatrix third;
+      r.matrix(third);
+      std::vector<char> third_finite = r.array<char>();
+      if (!r.at_end() || n == 0) throw CacheReader::Bad{};
+      S.sampling_ = std::move(vs);
+      S.nsampling_ = S.frame_.to_normalized(S.sampling_);
+      S.certifier_ =
+          std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, std::move(d));
+      if (third.size() > 0) S.certifier_->adopt_third_factors(std::move(third), std::move(third_finite));
+    } catch (const CacheReader::Bad&) {
+      return rejected(k, "malformed payload");
+    } catch (const Error& e) {
+      return rejected(k, e.what());
+    }
+    S.cache_outcome_ = "hit";
+    say("precomputation (sampling, certificate derivatives and bound factors) " + describe(ev));
+    return true;
+  }
+  bool rejected(const CacheKey& k, const std::string& why) {
+    S.certifier_.reset();
+    std::error_code ec;
+    std::filesystem::remove(cache.path(k), ec);
+    S.cache_outcome_ = "rebuilt (" + why + ")";
+    say("precomputation cache: " + S.cache_outcome_);
+    return false;
+  }
+
+  // After the identity's certificate, which built the third-order bound factors (unless the bound is the
+  // first-order one: then the entry has none).
+  void store(const CacheKey& k) {
+    if (!cache.enabled()) return;
+    const auto d = S.certifier_->reduced_derivatives();
+    const std::vector<char>* finite = nullptr;
+    const OctreeCertifier::FactorMatrix* third = S.certifier_->third_factors(&finite);
+    const OctreeCertifier::FactorMatrix none;
+    const std::vector<char> no_finite;
+    CacheWriter w;
+    write_sampling(w, S.sampling_);
+    w.array(d.GH->data(), d.GH->size());
+    w.scalar(d.m);
+    w.matrix(*d.scale_J);
+    w.matrix(*d.scale_H);
+    w.matrix(third ? *third : none);
+    const std::vector<char>& f = third ? *finite : no_finite;
+    w.array(f.data(), f.size());
+    CacheEvent ev;
+    cache.store(k, w, &ev);
+    say("precomputation " + describe(ev) + "; " + describe(cache.usage()));
+  }
+};
+
 DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
                                      const std::string& cache_dir,
                                      const std::function<void(const std::string&)>& log,
+                                     std::shared_ptr<const ComputeBackend> backend)
+    : DeformationSolver(
+          cage, params,
+          [&] {
+            PrecomputeSetup s;
+            s.cache_dir = cache_dir;
+            s.log = log;
+            return s;
+          }(),
+          std::move(backend)) {}
+
+DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
+                                     const PrecomputeSetup& setup,
                                      std::shared_ptr<const ComputeBackend> backend)
     : cage_(cage),
       frame_(Frame::of(cage)),
@@ -81,54 +254,33 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   validate_params(params_, "parameters");
   if (params_.threads > 0) omp_set_num_threads(params_.threads);
   const auto t_all = Clock::now();
-  auto say = [&](const std::string& s) {
-    if (log) log(s);
-  };
-
-  auto t0 = Clock::now();
-  // Keyed by the normalized cage's exact vertex bytes: a translated or scaled copy that normalizes to other
-  // bytes gets its own entry, one that normalizes to the same bytes (a power-of-two scaling) shares it, and
-  // rightly so, since the subspace is computed from those bytes alone.
-  subspace_ = load_or_compute_subspace(ncage_, params_.reduced_dof, cache_dir);
-  say("subspace: " + std::to_string(subspace_.size()) + " of " + std::to_string(ncage_.num_coeffs()) +
-      " coefficients per coordinate (" + subspace_.solver + ", " + format_g(ms_since(t0), 4) + " ms)");
-
-  t0 = Clock::now();
-  sampling_ = sample_voxels(cage_, sampling_params());  // laid out in frame_ (sampling.h)
-  nsampling_ = frame_.to_normalized(sampling_);
-  if (sampling_.size() == 0)
-    throw InputError(cage_.source, "no voxel of side " + format_g(sampling_.side, 4) +
-                                       " fits inside the cage (use a smaller voxel_side or more samples)");
-  say("sampling: " + std::to_string(sampling_.size()) + " voxels of side " + format_g(sampling_.side, 4) +
-      ", " + std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" +
-      format_g(ms_since(t0), 4) + " ms)");
-
-  // Reduced gradient matrix G = (∇basis at the centers) Ξ, in chunks so that the full-space matrix of a large
-  // cage never exists at once.
-  t0 = Clock::now();
-  const int n = sampling_.size(), s = subspace_.size();
-  MatXdR G(3 * static_cast<Eigen::Index>(n), s);
-  constexpr int kRows = 2048;
-  for (int b = 0; b < n; b += kRows) {
-    const int e = std::min(n, b + kRows);
-    const MatXd Gc = nbasis_.gradient_matrix(nsampling_.centers.middleRows(b, e - b));
-    G.middleRows(3 * b, 3 * (e - b)).noalias() = Gc * subspace_.basis;
+  Precompute pc(*this, setup);
+  pc.subspace();
+  const CacheKey key = pc.key();
+  const bool cached = pc.load(key);
+  if (!cached) {
+    pc.sampling();
+    pc.certifier();
   }
-  energy_ = std::make_unique<DeformationEnergy>(std::move(G), nsampling_.hessian_subset,
+  energy_ = std::make_unique<DeformationEnergy>(pc.gradients(), nsampling_.hessian_subset,
                                                 subspace_.eigenvalues, ncage_.num_edges());
-  say("reduced basis gradients at the samples: " + format_g(ms_since(t0), 4) + " ms");
 
-  t0 = Clock::now();
-  certifier_ = std::make_unique<OctreeCertifier>(ncage_, nsampling_, &subspace_.basis);
-  say("certificate precomputation: " + format_g(ms_since(t0), 4) + " ms");
-  t0 = Clock::now();
+  pc.enter("certificate of the identity", pc.end, cached || !pc.cache.enabled() ? 1.0 : 0.93);
+  auto t0 = Clock::now();
   kernels_ = backend_->energy_kernels(*energy_);
   certifier_->set_backend(*backend_);
   if (!backend_->is_cpu())
-    say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
+    pc.say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
 
   bbox_diag2_ = (ncage_.bbox_max - ncage_.bbox_min).squaredNorm();
+  t0 = Clock::now();
   reset();
+  pc.say("certificate of the identity: " + format_g(ms_since(t0), 4) + " ms");
+  if (!cached && pc.cache.enabled()) {
+    pc.enter("writing the cache", pc.end, 1.0);
+    pc.store(key);
+  }
+  pc.tick(1);
   preprocess_seconds_ = ms_since(t_all) / 1000;
 }
 

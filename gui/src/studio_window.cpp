@@ -37,6 +37,7 @@
 #include <QMenuBar>
 #include <QMessageBox>
 #include <QMimeData>
+#include <QProgressBar>
 #include <QProgressDialog>
 #include <QPushButton>
 #include <QRadioButton>
@@ -49,6 +50,7 @@
 #include <QTimer>
 #include <QToolBar>
 #include <QVBoxLayout>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -337,6 +339,16 @@ void StudioWindow::build_ui() {
   badge_ = new QLabel(" no map ");
   status_ = new QLabel("File > Open a model folder or a scenario; click on the mesh to add a handle");
   statusBar()->addWidget(status_, 1);
+  prepare_bar_ = new QProgressBar;
+  prepare_bar_->setRange(0, 1000);
+  prepare_bar_->setMinimumWidth(320);
+  prepare_bar_->setVisible(false);
+  prepare_cancel_ = new QPushButton("Cancel");
+  prepare_cancel_->setToolTip("Stop preprocessing this model (the model before stays open)");
+  prepare_cancel_->setVisible(false);
+  connect(prepare_cancel_, &QPushButton::clicked, this, [this] { session_->cancel_preparation(); });
+  statusBar()->addPermanentWidget(prepare_bar_);
+  statusBar()->addPermanentWidget(prepare_cancel_);
   statusBar()->addPermanentWidget(badge_);
   chrome_.push_back(statusBar());
   // First run: most of the screen (the saved geometry replaces it, restore_layout()).
@@ -1065,6 +1077,17 @@ void StudioWindow::render_pending() {
 }
 
 void StudioWindow::update_status(const SessionFrame& f) {
+  const bool preparing = f.state == SessionState::kPreparing;
+  prepare_bar_->setVisible(preparing);
+  prepare_cancel_->setVisible(preparing);
+  if (preparing) {
+    prepare_bar_->setValue(static_cast<int>(1000 * std::max(0.0, f.progress)));
+    prepare_bar_->setFormat(QString::fromStdString(f.stage) + " %p%");
+    badge_->setText(" preprocessing ");
+    badge_->setStyleSheet("");
+    status_->setText(QString::fromStdString(f.status));
+    return;
+  }
   if (f.mesh_V.rows() == 0) {
     badge_->setText(" no map ");
     badge_->setStyleSheet("");

@@ -15,6 +15,8 @@
 
 class QLabel;
 class QDockWidget;
+class QProgressBar;
+class QPushButton;
 class QVTKOpenGLNativeWidget;
 class vtkGenericOpenGLRenderWindow;
 class vtkRenderer;
@@ -163,6 +165,9 @@ class StudioWindow : public QMainWindow {
   std::string model_note_;
   QLabel *badge_ = nullptr, *status_ = nullptr, *picked_label_ = nullptr;
   PickedValues picked_;
+  // Preprocessing of an opened model: stage and percent, and Cancel (shown only while preparing).
+  QProgressBar* prepare_bar_ = nullptr;
+  QPushButton* prepare_cancel_ = nullptr;
   std::vector<QWidget*> chrome_;  // docks and bars hidden in view-only mode
   QWidget* view_panel_ = nullptr;
   ViewSettings settings_;

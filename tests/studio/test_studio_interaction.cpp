@@ -19,6 +19,8 @@
 #include <QClipboard>
 #include <QDockWidget>
 #include <QMessageBox>
+#include <QProgressBar>
+#include <QPushButton>
 #include <QStatusBar>
 #include <chrono>
 #include <filesystem>
@@ -561,6 +563,52 @@ TEST(StudioInteraction, ScreenshotAtSizeWithTransparentBackground) {
   EXPECT_GT(opaque, 100) << "the model is missing";
   // The view is back to its size afterwards.
   EXPECT_NE(win.view_widget()->size(), QSize(320, 240));
+}
+
+}  // namespace
+
+namespace {
+
+// Opening shows the model at rest at once with a progress bar and Cancel; Cancel stops the preprocessing and
+// the window returns to the model before (here: none).
+TEST(StudioInteraction, PreprocessingShowsProgressAndCancelReturnsToACleanState) {
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  win.session().set_cache("");  // every opening computes: there is a preprocessing to watch and cancel
+  DeformParams p;               // the defaults: several seconds of preprocessing
+  win.set_params(p);
+  ASSERT_TRUE(win.open_path(project_data() + "/models/beam"));
+  QProgressBar* bar = nullptr;
+  QPushButton* cancel = nullptr;
+  for (QPushButton* b : win.findChildren<QPushButton*>())
+    if (b->text() == "Cancel") cancel = b;
+  bar = win.statusBar()->findChild<QProgressBar*>();
+  ASSERT_TRUE(cancel && bar);
+  ASSERT_TRUE(pump_until(
+      [&] {
+        const auto s = win.shown_frame();
+        return s && s->state == SessionState::kPreparing && s->progress > 0.05;
+      },
+      120));
+  // The rest mesh is on screen while preparing, with the stage on the bar.
+  EXPECT_GT(win.shown_frame()->mesh_V.rows(), 0);
+  EXPECT_TRUE(bar->isVisible());
+  EXPECT_TRUE(cancel->isVisible());
+  EXPECT_FALSE(bar->format().isEmpty());
+  cancel->click();
+  ASSERT_TRUE(pump_until(
+      [&] {
+        const auto s = win.shown_frame();
+        return win.session().wait_until_resting(0.0) && s && s->state != SessionState::kPreparing &&
+               s->serial == win.session().latest_frame()->serial;
+      },
+      120));
+  EXPECT_EQ(win.session().state(), SessionState::kEmpty);
+  EXPECT_FALSE(win.session().model());
+  EXPECT_NE(win.shown_frame()->status.find("cancelled"), std::string::npos) << win.shown_frame()->status;
+  EXPECT_FALSE(bar->isVisible());
+  EXPECT_FALSE(cancel->isVisible());
+  EXPECT_TRUE(fx.errors.empty());  // a cancel is not an error
 }
 
 }  // namespace

@@ -45,6 +45,11 @@ struct SessionFrame {
   long model_version = 0;  // changes when a model is (re)loaded or the solver rebuilt
   SessionState state = SessionState::kEmpty;
   std::string status;  // one line: what happened last ("converged: ...", "preprocessing: ...")
+  // While preparing: the preprocessing stage running and the fraction of the whole done (0..1); else -1.
+  // A preparing frame already carries the new model at rest (mesh_V, cage_V = the rest pose, the identity
+  // map's fields, no certificate yet) so that the views show it at once.
+  std::string stage;
+  double progress = -1;
   std::shared_ptr<const Model> model;    // the model this frame belongs to (rest mesh, cage)
   std::vector<IterationRecord> history;  // all iterations since the model was loaded or the map reset
   // Certificate of this map (the solver's line-search certificate, no leaves).
@@ -120,6 +125,13 @@ class InteractiveSession {
   // Checks one source point as set_handles would (handle_source_problem); "" when fine, else the reason.
   std::string check_source(const Vec3& p) const;
 
+  // --- Preprocessing. The solver's precomputation (and the mesh matrices) is cached on disk
+  // (precompute_cache.h) in `dir` ("" = no cache; default_cache_dir() until set) up to `max_bytes`.
+  void set_cache(const std::string& dir, std::uint64_t max_bytes = default_cache_max_bytes());
+  // Stops a running preprocessing (a load or a parameter change) at its next chunk of work: the model and map
+  // before it stay (or the session stays empty), the frame's status says "cancelled". No effect otherwise.
+  void cancel_preparation();
+
   // --- Solver control.
   void set_params(const DeformParams& params);  // rebuilds the solver when a precomputation parameter changed
   void solve();  // iterate from the current map (after stop(), or to continue after the iteration limit)
@@ -153,11 +165,14 @@ class InteractiveSession {
   std::vector<Command> queue_;
   bool quit_ = false;
   std::atomic<bool> interrupt_{false};
+  std::atomic<bool> cancel_{false};  // cancel_preparation(); cleared when the engine takes new commands
   std::shared_ptr<const SessionFrame> latest_;
   SessionState state_ = SessionState::kEmpty;
   bool idle_ = true;  // engine waiting with an empty queue and nothing to do
   std::shared_ptr<const Model> model_;
-  Scenario scenario_;  // handles and parameters as last set (guarded by mutex_)
+  Scenario scenario_;      // handles and parameters as last set (guarded by mutex_)
+  std::string cache_dir_;  // guarded by mutex_
+  std::uint64_t cache_max_bytes_ = 0;
   std::thread thread_;
 };
 

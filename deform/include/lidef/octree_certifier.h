@@ -12,6 +12,7 @@
 // Depth exhausted, σ3 ≤ 0 at any center, or a center where the sign of det J is not resolved in double
 // precision (signed_svd.h) means NOT certified.
 #pragma once
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -92,8 +93,37 @@ class OctreeCertifier {
   // basis Jacobians/Hessians at the centers are then precomputed in that space (3|I| by s and 6|I| by s).
   // Without it, full-space matrices are precomputed when they fit in `max_matrix_bytes`, else the
   // centers are evaluated on the fly.
+  // `on_chunk` (optional) is called with the fraction done after each chunk of centers; it may throw (to
+  // cancel: projected_newton.h's PrecomputeSetup).
   OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction = nullptr,
-                  double max_matrix_bytes = 1.5e9);
+                  double max_matrix_bytes = 1.5e9, const std::function<void(double)>& on_chunk = {});
+  // The reduced basis derivatives at the centers (certifier with a reduction), as the constructor computes
+  // them: per voxel 9 rows of m floats (3 gradient rows, 6 Hessian rows), and per voxel the sums of |value|
+  // of the gradient and the Hessian rows (the rounding allowance). precompute_cache.h stores them.
+  struct ReducedDerivatives {
+    std::vector<float> GH;  // 9 |I| m
+    long m = 0;
+    VecXd scale_J, scale_H;  // |I|
+  };
+  // From derivatives computed earlier for the same cage, sampling and reduction (checked: shapes only).
+  OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
+                  ReducedDerivatives derivatives);
+  // Those of a certifier built with a reduction (GH = nullptr otherwise), without a copy. The gradient rows
+  // are float(∇basis Ξ) at each center: the solver's energy takes its G from them (deformation_energy.h
+  // stores G as floats too).
+  struct ReducedDerivativesRef {
+    const std::vector<float>* GH = nullptr;
+    long m = 0;
+    const VecXd* scale_J = nullptr;
+    const VecXd* scale_H = nullptr;
+  };
+  ReducedDerivativesRef reduced_derivatives() const;
+  // The third-order bound's per-voxel per-edge factors Θ (|I| by #E, floats rounded up), built by the first
+  // certification that needs them, and per voxel whether all are finite; nullptr before. adopt_third_factors
+  // takes factors built earlier for the same cage and sampling (shapes checked) instead of building them.
+  using FactorMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const FactorMatrix* third_factors(const std::vector<char>** finite) const;
+  void adopt_third_factors(FactorMatrix factors, std::vector<char> finite);
   ~OctreeCertifier();
 
   // Certifies the map with full coefficients y (#V+#F by 3).
@@ -120,7 +150,8 @@ class OctreeCertifier {
 
  private:
   struct Impl;
-  struct Run;  // the stages of one certification (octree_certifier.cpp)
+  struct Run;                                // the stages of one certification (octree_certifier.cpp)
+  void init_common(const MatXd* reduction);  // checks the sampling, edge endpoints
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,
                   const CertifyParams& p) const;

@@ -35,14 +35,35 @@
 #include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
 #include "lidef/deformation_energy.h"
+#include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/normalization.h"
 #include "lidef/octree_certifier.h"
+#include "lidef/precompute_cache.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
 #include "lidef/types.h"
 
 namespace lidef {
+
+// The precomputation stopped because its caller asked (PrecomputeSetup::cancel; the studio's Cancel):
+// nothing it would have produced exists.
+class Cancelled : public Error {
+ public:
+  Cancelled() : Error("cancelled") {}
+};
+
+// How the solver's precomputation runs: where it caches (precompute_cache.h), what it reports, and when it
+// stops early.
+struct PrecomputeSetup {
+  std::string cache_dir = default_cache_dir();  // "" = no cache (the subspace's and the precomputation's)
+  std::uint64_t cache_max_bytes = default_cache_max_bytes();
+  std::function<void(const std::string&)> log;  // one line per stage (and the cache's outcome)
+  // The stage running and the fraction of the whole precomputation done (0..1), at every chunk of work.
+  std::function<void(const std::string& stage, double fraction)> progress;
+  // Polled at every chunk of work; once set the constructor throws Cancelled.
+  const std::atomic<bool>* cancel = nullptr;
+};
 
 // One Newton iteration, as iterations.csv records it.
 struct IterationRecord {
@@ -99,6 +120,12 @@ class DeformationSolver {
   DeformationSolver(const Cage& cage, const DeformParams& params,
                     const std::string& cache_dir = default_cache_dir(),
                     const std::function<void(const std::string&)>& log = {},
+                    std::shared_ptr<const ComputeBackend> backend = nullptr);
+  // The same with progress, cancellation and the cache limit. The sampling, the reduced basis gradients and
+  // the certifier's derivatives come from the cache when it holds them for exactly this cage, these
+  // parameters and this subspace (else they are computed and stored): the solver is the same either way, byte
+  // for byte.
+  DeformationSolver(const Cage& cage, const DeformParams& params, const PrecomputeSetup& setup,
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
   ~DeformationSolver();
 
@@ -162,6 +189,8 @@ class DeformationSolver {
   // The Jacobians of the current map at the samples (3|I| by 3, JT layout), from the backend.
   MatJT current_jacobians() const { return kernels_->current_jacobians(); }
   double preprocess_seconds() const { return preprocess_seconds_; }
+  // What the precomputation cache did ("hit", "miss", "rebuilt (...)", "disabled"; precompute_cache.h).
+  const std::string& cache_outcome() const { return cache_outcome_; }
   SamplingParams sampling_params() const;
   CertifyParams certify_params(bool stop_on_failure, bool keep_leaves) const;
 
@@ -189,6 +218,8 @@ class DeformationSolver {
   double bbox_diag2_ = 1;
   std::vector<IterationRecord> history_;
   double preprocess_seconds_ = 0;
+  std::string cache_outcome_;
+  struct Precompute;  // the stages of the constructor (projected_newton.cpp)
 };
 
 }  // namespace lidef
