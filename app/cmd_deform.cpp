@@ -162,12 +162,12 @@ void add_deform_command(CLI::App& app, Action& action) {
       std::cerr << "lidef deform: " << backend_msg << "\n";
       std::unique_ptr<DeformationSolver> solver_ptr;
       try {
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, backend);
+        solver_ptr = std::make_unique<DeformationSolver>(model.cage, model.mesh, sc.params, cache, log, backend);
       } catch (const OpenCLError& e) {
         // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
         if (sc.params.backend != BackendKind::kAuto) throw;
         std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, cache, log, cpu_backend());
+        solver_ptr = std::make_unique<DeformationSolver>(model.cage, model.mesh, sc.params, cache, log, cpu_backend());
       }
       DeformationSolver& solver = *solver_ptr;
       solver.set_handles(sc.sources, sc.targets, sc.path);
@@ -210,7 +210,7 @@ void add_deform_command(CLI::App& app, Action& action) {
                              cert.reason + ")");
       const SamplingParams sp = solver.sampling_params();
       CertificateReport report =
-          make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir, "coefficients.txt", sp,
+          make_certificate_report(cert, model.cage, model.mesh, y, sc.model_dir, "coefficients.txt", sp,
                                   solver.sampling(), solver.certify_params(false, true));
       // Evaluated in the solver's normalized frame (a model far from the origin would otherwise lose the
       // Jacobian's digits to the cancellation of large vertex coefficients), positions mapped back.

@@ -88,7 +88,7 @@ struct Shared {
 
 void run_lidef(Shared& s, MethodResult& r) {
   const auto t0 = Clock::now();
-  DeformationSolver solver(s.model.cage, s.sc.params, s.opt.cache_dir,
+  DeformationSolver solver(s.model.cage, s.model.mesh, s.sc.params, s.opt.cache_dir,
                            [&](const std::string& l) { s.say(r.method, l); });
   solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
   r.preprocess_seconds = seconds_since(t0);

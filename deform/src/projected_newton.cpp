@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <sstream>
 
+#include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
 
@@ -71,6 +72,18 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
                                      const std::string& cache_dir,
                                      const std::function<void(const std::string&)>& log,
                                      std::shared_ptr<const ComputeBackend> backend)
+    : DeformationSolver(cage, nullptr, params, cache_dir, log, std::move(backend)) {}
+
+DeformationSolver::DeformationSolver(const Cage& cage, const TriMesh& mesh, const DeformParams& params,
+                                     const std::string& cache_dir,
+                                     const std::function<void(const std::string&)>& log,
+                                     std::shared_ptr<const ComputeBackend> backend)
+    : DeformationSolver(cage, &mesh, params, cache_dir, log, std::move(backend)) {}
+
+DeformationSolver::DeformationSolver(const Cage& cage, const TriMesh* mesh, const DeformParams& params,
+                                     const std::string& cache_dir,
+                                     const std::function<void(const std::string&)>& log,
+                                     std::shared_ptr<const ComputeBackend> backend)
     : cage_(cage),
       frame_(Frame::of(cage)),
       ncage_(frame_.normalized(cage)),
@@ -94,12 +107,15 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
       " coefficients per coordinate (" + subspace_.solver + ", " + format_g(ms_since(t0), 4) + " ms)");
 
   t0 = Clock::now();
-  sampling_ = sample_voxels(cage_, sampling_params());  // laid out in frame_ (sampling.h)
+  // Laid out in frame_ (sampling.h, domain_sampling.h).
+  sampling_ = mesh && params_.domain == DomainKind::kMesh ? sample_domain(cage_, mesh->V, mesh->F, sampling_params())
+                                                          : sample_voxels(cage_, sampling_params());
   nsampling_ = frame_.to_normalized(sampling_);
   if (sampling_.size() == 0)
     throw InputError(cage_.source, "no voxel of side " + format_g(sampling_.side, 4) +
                                        " fits inside the cage (use a smaller voxel_side or more samples)");
-  say("sampling: " + std::to_string(sampling_.size()) + " voxels of side " + format_g(sampling_.side, 4) +
+  say("sampling (" + sampling_.domain + " domain): " + std::to_string(sampling_.size()) + " voxels of side " +
+      format_g(sampling_.side, 4) + (sampling_.max_level() > 0 ? " refined to level " + std::to_string(sampling_.max_level()) : std::string()) +
       ", " + std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" +
       format_g(ms_since(t0), 4) + " ms)");
 
@@ -116,6 +132,11 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   }
   energy_ = std::make_unique<DeformationEnergy>(std::move(G), nsampling_.hessian_subset,
                                                 subspace_.eigenvalues, ncage_.num_edges());
+  if (nsampling_.max_level() > 0) {  // volume weights of the refined leaves (deformation_energy.h)
+    VecXd w(n);
+    for (int i = 0; i < n; ++i) w(i) = nsampling_.weight_of(i);
+    energy_->set_sample_weights(w);
+  }
   say("reduced basis gradients at the samples: " + format_g(ms_since(t0), 4) + " ms");
 
   t0 = Clock::now();
@@ -152,6 +173,7 @@ void DeformationSolver::set_params(const DeformParams& p) {
   q.voxel_side = params_.voxel_side;
   q.safety = params_.safety;
   q.hessian_fraction = params_.hessian_fraction;
+  q.domain = params_.domain;
   params_ = q;
   if (weights_changed) {
     weights_ = {params_.lambda_p2p, params_.lambda_smooth};

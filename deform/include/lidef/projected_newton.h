@@ -40,6 +40,7 @@
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
+#include "lidef/tri_mesh.h"
 #include "lidef/types.h"
 
 namespace lidef {
@@ -96,7 +97,15 @@ class DeformationSolver {
   // samples/voxel_side, safety, hessian_fraction, threads). `log` receives one line per preprocessing stage.
   // `backend` runs the per-sample stages (compute_backend.h); nullptr = the CPU backend. The front end turns
   // params.backend ("cpu", "opencl", "auto") into one (opencl/include/lidef/opencl_backend.h).
+  //
+  // The voxels (energy samples and certificate) cover params.domain: "mesh" (domain_sampling.h: the mesh's
+  // triangles and solid; needs `mesh`) or "voxels" (the paper's grid). Without a mesh the domain is the grid,
+  // whatever params.domain says, and sampling().domain reports it ("voxels").
   DeformationSolver(const Cage& cage, const DeformParams& params,
+                    const std::string& cache_dir = default_cache_dir(),
+                    const std::function<void(const std::string&)>& log = {},
+                    std::shared_ptr<const ComputeBackend> backend = nullptr);
+  DeformationSolver(const Cage& cage, const TriMesh& mesh, const DeformParams& params,
                     const std::string& cache_dir = default_cache_dir(),
                     const std::function<void(const std::string&)>& log = {},
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
@@ -166,6 +175,9 @@ class DeformationSolver {
   CertifyParams certify_params(bool stop_on_failure, bool keep_leaves) const;
 
  private:
+  DeformationSolver(const Cage& cage, const TriMesh* mesh, const DeformParams& params, const std::string& cache_dir,
+                    const std::function<void(const std::string&)>& log,
+                    std::shared_ptr<const ComputeBackend> backend);
   void update_weights(IterationRecord& rec);
   void check_targets(const MatX3d& targets, const std::string& where) const;
   const Cage& cage_;  // as given
