@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <random>
 
+#include "lidef/deformation_energy.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
@@ -15,6 +16,7 @@
 #include "lidef/procedural_models.h"
 #include "lidef/signed_svd.h"
 #include "lidef/subspace.h"
+#include "lidef/symmetric_dirichlet.h"
 #include "test_support.h"
 
 namespace lidef {
@@ -245,6 +247,53 @@ TEST(DomainCertificate, DenseSamplingOfDAgreesWithTheVerdict) {
   EXPECT_LE(folded, 0.0);
   EXPECT_FALSE(cz.certified);
   EXPECT_TRUE(grid.certified) << "the fold was meant to lie outside the grid's union";
+}
+
+
+// The volume-weighted distortion energy (set_sample_weights) against its definition: E_dis = (1/n) Σ w̄_i
+// (E_iso(J_i) − 6) with w̄ the weights rescaled to mean 1, summed here independently, and its gradient
+// against central differences.
+TEST(DomainEnergy, VolumeWeightsMatchTheDefinitionAndTheGradient) {
+  std::mt19937 rng(21);
+  std::normal_distribution<double> N01;
+  const int n = 40, s = 6;
+  // J_i = Gᵢ y with y's first 3 rows ≈ identity and small other entries: every det J_i > 0.
+  MatXdR G = MatXdR::Zero(3 * n, s);
+  for (int i = 0; i < n; ++i)
+    for (int b = 0; b < 3; ++b) {
+      G(3 * i + b, b) = 1.0;
+      for (int k = 3; k < s; ++k) G(3 * i + b, k) = N01(rng);
+    }
+  MatS3 y = MatS3::Zero(s, 3);
+  y.topRows(3) = Mat3::Identity();
+  for (int k = 3; k < s; ++k)
+    for (int a = 0; a < 3; ++a) y(k, a) = 0.05 * N01(rng);
+  VecXd w(n);
+  for (int i = 0; i < n; ++i) w(i) = std::ldexp(1.0, -3 * (i % 4));  // leaves of levels 0..3
+  DeformationEnergy e(G, {}, VecXd::Ones(s), 10);
+  e.set_sample_weights(w);
+  EXPECT_TRUE(e.weighted());
+  const MatJT JT = e.jacobians(y);
+  double truth = 0;
+  for (int i = 0; i < n; ++i) truth += w(i) / w.mean() * (sd_energy(JT.middleRows(3 * i, 3).transpose()) - 6.0);
+  ASSERT_TRUE(std::isfinite(truth));
+  EXPECT_NEAR(e.distortion_sum(JT), truth, 1e-9 * std::abs(truth));
+  const EnergyWeights ew;
+  const MatS3 g = e.gradient(JT, y, ew);
+  const double h = 1e-6;
+  for (int k = 0; k < s; ++k)
+    for (int a = 0; a < 3; ++a) {
+      MatS3 yp = y, ym = y;
+      yp(k, a) += h;
+      ym(k, a) -= h;
+      const double fd = (e.evaluate(yp, ew).total - e.evaluate(ym, ew).total) / (2 * h);
+      EXPECT_NEAR(g(k, a), fd, 1e-6 * (1 + std::abs(fd))) << k << "," << a;
+    }
+  // Unweighted again: the plain mean.
+  e.set_sample_weights(VecXd());
+  double plain = 0;
+  for (int i = 0; i < n; ++i) plain += sd_energy(JT.middleRows(3 * i, 3).transpose()) - 6.0;
+  EXPECT_NEAR(e.distortion_sum(JT), plain, 1e-9 * std::abs(plain));
 }
 
 }  // namespace
