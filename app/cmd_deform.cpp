@@ -264,6 +264,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
       sj["min_sigma3_sampled"] = cert.min_sigma3_center;
       sj["mesh_coverage"] = report.mesh_coverage;
+      sj["domain"] = report.domain;
       sj["max_handle_error"] = max_err;
       sj["handles_reached"] = max_err <= tolerance;
       sj["handle_tolerance"] = sc.params.handle_tolerance;
@@ -295,8 +296,10 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << "  max handle error " << format_g(max_err, 3)
                 << (max_err <= tolerance ? " (reached)" : " (NOT reached)") << ", global volume ratio "
                 << format_g(vol_ratio, 5) << "\n"
-                << "  CERTIFIED locally injective on the union of " << cert.voxels
-                << " voxels, min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4)
+                << "  CERTIFIED locally injective on "
+                << (solver.sampling().domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
+                << cert.voxels << (solver.sampling().domain == "mesh" ? " voxels)" : " voxels")
+                << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4)
                 << ", mesh coverage " << format_g(100 * report.mesh_coverage, 3) << "%\n"
                 << "  wrote " << out.final_path("")
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
