@@ -217,8 +217,9 @@ TEST(DomainCertificate, DenseSamplingOfDAgreesWithTheVerdict) {
   const VoxelSampling s = sample_domain(m.cage, m.mesh.V, m.mesh.F, sp);
   const OctreeCertifier certifier(m.cage, s);
   const HarmonicBasis basis(m.cage);
-  MatX3d P(5000, 3);
-  P << points_on_triangles(m.mesh.V, m.mesh.F, 4000, 11), points_in_solid(m.mesh.V, m.mesh.F, 1000, 12);
+  // The mesh vertices (corners included), random points on the triangles and in the solid.
+  MatX3d P(m.mesh.V.rows() + 5000, 3);
+  P << m.mesh.V, points_on_triangles(m.mesh.V, m.mesh.F, 4000, 11), points_in_solid(m.mesh.V, m.mesh.F, 1000, 12);
 
   // A smooth bend (certified).
   const SpectralSubspace sub = compute_subspace(m.cage, 30);

@@ -169,14 +169,14 @@ VoxelSampling sample_domain(const Cage& cage, const MatX3d& mesh_V, const MatX3i
   } else {
     // Start from the side at which the mesh's bounding box would hold the target: the count search
     // (search_voxel_side) corrects for the part of the box outside D and for the refinement. Sides above
-    // 2 h0 are not considered (they count as empty, so the search turns back): the leaf count is not
+    // 4 h0 are not considered (they count as empty, so the search turns back): the leaf count is not
     // monotonic there — a few huge base cells refined deep toward the cage can have fewer leaves than a grid,
     // and a model whose surface runs close to its cage needs a minimum number of small leaves along it
     // whatever the base side, so a target below that minimum would otherwise send the search to one cell.
     // At most 12 evaluations (each is a full scan).
     const Vec3 ext = nV.colwise().maxCoeff() - nV.colwise().minCoeff();
     const double box = std::max(ext.prod(), 1e-3 * std::pow(ext.maxCoeff(), 3));
-    const double h0 = std::cbrt(box / p.target_count), h_max = 2 * h0;
+    const double h0 = std::cbrt(box / p.target_count), h_max = 4 * h0;
     SamplingParams sp = p;
     sp.max_search_iterations = std::min(p.max_search_iterations, 12);
     const SideSearch ss = search_voxel_side(sp, h0, [&](double h) -> long {
