@@ -235,7 +235,7 @@ TEST_F(CertifyCli, VtkFilesParseWithTheDocumentedArrays) {
   // Cell 0 is the cube of the first voxels.csv row: its volume is side³ (hexahedron corner order is right).
   double b[6];
   ug->GetCell(0)->GetBounds(b);
-  const double side = read_json(tmp / "c/certificate.json")["voxel_side"].get<double>();
+  const double side = read_csv(tmp / "c/voxels.csv", kVoxelsHeader, 9).front()[3];  // its own (mesh domain)
   EXPECT_NEAR(b[1] - b[0], side, 1e-12);
   EXPECT_NEAR(b[3] - b[2], side, 1e-12);
   EXPECT_NEAR(b[5] - b[4], side, 1e-12);
