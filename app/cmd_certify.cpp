@@ -79,7 +79,8 @@ void add_certify_command(CLI::App& app, Action& action) {
       "runs).\n"
       "All files appear together or not at all. Exit code: 0 certified, 1 not certified, 2 error.\n"
       "--domain mesh (default): the voxels cover the mesh's triangles and solid, refined toward the cage;\n"
-      "--domain voxels: the paper's grid only (certificate.json reports how many mesh vertices lie outside).\n"
+      "--domain voxels: the paper's grid only (certificate.json reports how many mesh vertices lie "
+      "outside).\n"
       "Details: docs/certificate-outputs.md.");
   sub->callback([opts, &action] {
     action = [opts] {
@@ -178,8 +179,8 @@ void add_certify_command(CLI::App& app, Action& action) {
       const char* bound = to_string(cert.bound);
       if (cert.certified && sampling.domain == "mesh")
         std::cout << "lidef certify: CERTIFIED locally injective on the whole mesh and its solid ("
-                  << cert.num_leaves << " leaves, " << report.leaves_meeting_domain << " meeting it; " << bound
-                  << "-order bound)\n";
+                  << cert.num_leaves << " leaves, " << report.leaves_meeting_domain << " meeting it; "
+                  << bound << "-order bound)\n";
       else if (cert.certified)
         std::cout << "lidef certify: CERTIFIED locally injective on the union of " << cert.voxels
                   << " voxels (" << bound << "-order bound)\n";

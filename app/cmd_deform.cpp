@@ -162,12 +162,14 @@ void add_deform_command(CLI::App& app, Action& action) {
       std::cerr << "lidef deform: " << backend_msg << "\n";
       std::unique_ptr<DeformationSolver> solver_ptr;
       try {
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, model.mesh, sc.params, cache, log, backend);
+        solver_ptr =
+            std::make_unique<DeformationSolver>(model.cage, model.mesh, sc.params, cache, log, backend);
       } catch (const OpenCLError& e) {
         // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
         if (sc.params.backend != BackendKind::kAuto) throw;
         std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, model.mesh, sc.params, cache, log, cpu_backend());
+        solver_ptr =
+            std::make_unique<DeformationSolver>(model.cage, model.mesh, sc.params, cache, log, cpu_backend());
       }
       DeformationSolver& solver = *solver_ptr;
       solver.set_handles(sc.sources, sc.targets, sc.path);
@@ -299,8 +301,8 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << "  CERTIFIED locally injective on "
                 << (solver.sampling().domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
                 << cert.voxels << (solver.sampling().domain == "mesh" ? " voxels)" : " voxels")
-                << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4)
-                << ", mesh coverage " << format_g(100 * report.mesh_coverage, 3) << "%\n"
+                << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
+                << format_g(100 * report.mesh_coverage, 3) << "%\n"
                 << "  wrote " << out.final_path("")
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"

@@ -1,5 +1,5 @@
-// The mesh domain (domain_sampling.h, issue 15): exact coverage of D = mesh triangles ∪ solid, leaves clear of
-// the cage, the certifier's clearance guard, dense sampling of certified maps inside D, determinism.
+// The mesh domain (domain_sampling.h, issue 15): exact coverage of D = mesh triangles ∪ solid, leaves clear
+// of the cage, the certifier's clearance guard, dense sampling of certified maps inside D, determinism.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -53,7 +53,8 @@ MatX3d points_in_solid(const MatX3d& V, const MatX3i& F, int count, unsigned see
   while (static_cast<int>(out.size()) < count) {
     const Vec3 p = lo + (hi - lo).cwiseProduct(Vec3(U(rng), U(rng), U(rng)));
     double w = 0;
-    for (int t = 0; t < F.rows(); ++t) w += solid_angle_fraction(V.row(F(t, 0)), V.row(F(t, 1)), V.row(F(t, 2)), p);
+    for (int t = 0; t < F.rows(); ++t)
+      w += solid_angle_fraction(V.row(F(t, 0)), V.row(F(t, 1)), V.row(F(t, 2)), p);
     if (w >= min_w) out.push_back(p);
   }
   MatX3d P(count, 3);
@@ -219,7 +220,8 @@ TEST(DomainCertificate, DenseSamplingOfDAgreesWithTheVerdict) {
   const HarmonicBasis basis(m.cage);
   // The mesh vertices (corners included), random points on the triangles and in the solid.
   MatX3d P(m.mesh.V.rows() + 5000, 3);
-  P << m.mesh.V, points_on_triangles(m.mesh.V, m.mesh.F, 4000, 11), points_in_solid(m.mesh.V, m.mesh.F, 1000, 12);
+  P << m.mesh.V, points_on_triangles(m.mesh.V, m.mesh.F, 4000, 11),
+      points_in_solid(m.mesh.V, m.mesh.F, 1000, 12);
 
   // A smooth bend (certified).
   const SpectralSubspace sub = compute_subspace(m.cage, 30);
@@ -250,7 +252,6 @@ TEST(DomainCertificate, DenseSamplingOfDAgreesWithTheVerdict) {
   EXPECT_TRUE(grid.certified) << "the fold was meant to lie outside the grid's union";
 }
 
-
 // The volume-weighted distortion energy (set_sample_weights) against its definition: E_dis = (1/n) Σ w̄_i
 // (E_iso(J_i) − 6) with w̄ the weights rescaled to mean 1, summed here independently, and its gradient
 // against central differences.
@@ -276,7 +277,8 @@ TEST(DomainEnergy, VolumeWeightsMatchTheDefinitionAndTheGradient) {
   EXPECT_TRUE(e.weighted());
   const MatJT JT = e.jacobians(y);
   double truth = 0;
-  for (int i = 0; i < n; ++i) truth += w(i) / w.mean() * (sd_energy(JT.middleRows(3 * i, 3).transpose()) - 6.0);
+  for (int i = 0; i < n; ++i)
+    truth += w(i) / w.mean() * (sd_energy(JT.middleRows(3 * i, 3).transpose()) - 6.0);
   ASSERT_TRUE(std::isfinite(truth));
   EXPECT_NEAR(e.distortion_sum(JT), truth, 1e-9 * std::abs(truth));
   const EnergyWeights ew;

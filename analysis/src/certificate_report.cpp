@@ -118,9 +118,10 @@ std::uint64_t coefficients_hash(const MatX3d& y) {
 }
 
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
-                                          const MatX3d& y, const std::string& model, const std::string& coefficients,
-                                          const SamplingParams& sampling_params, const VoxelSampling& sampling,
-                                          const CertifyParams& params) {
+                                          const MatX3d& y, const std::string& model,
+                                          const std::string& coefficients,
+                                          const SamplingParams& sampling_params,
+                                          const VoxelSampling& sampling, const CertifyParams& params) {
   CertificateReport r;
   r.cert = cert;
   r.model = model;
@@ -159,8 +160,8 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
       S(i) = sampling.side_of(static_cast<int>(i));
     }
   }
-  const std::vector<char> meets = mesh.F.rows() > 0 ? cubes_meeting_mesh_domain(mesh_V, mesh.F, C, S)
-                                                      : std::vector<char>();
+  const std::vector<char> meets =
+      mesh.F.rows() > 0 ? cubes_meeting_mesh_domain(mesh_V, mesh.F, C, S) : std::vector<char>();
   r.leaves_meeting_domain = std::count(meets.begin(), meets.end(), 1);
   return r;
 }
@@ -274,9 +275,10 @@ std::string certificate_json(const CertificateReport& r) {
   j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
   ojson d;
   d["kind"] = r.domain;
-  d["definition"] = r.domain == "mesh"
-                        ? "every point of the mesh triangles and of the solid they bound (winding number >= 1/2)"
-                        : "the union of the paper's grid voxels clear of the cage";
+  d["definition"] =
+      r.domain == "mesh"
+          ? "every point of the mesh triangles and of the solid they bound (winding number >= 1/2)"
+          : "the union of the paper's grid voxels clear of the cage";
   d["leaves_meeting_mesh_domain"] = r.leaves_meeting_domain;
   d["uncleared_voxels"] = r.uncleared_voxels;
   j["domain"] = d;

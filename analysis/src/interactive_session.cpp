@@ -496,14 +496,14 @@ void InteractiveSession::Engine::build_solver(const std::shared_ptr<const Model>
   };
   std::unique_ptr<DeformationSolver> built;
   try {
-    built = std::make_unique<DeformationSolver>(new_model->cage, new_model->mesh, new_params, default_cache_dir(), log,
-                                                new_backend);
+    built = std::make_unique<DeformationSolver>(new_model->cage, new_model->mesh, new_params,
+                                                default_cache_dir(), log, new_backend);
   } catch (const Error&) {
     // "auto" chose a device that cannot hold this problem: the CPU takes it.
     if (new_params.backend != BackendKind::kAuto || new_backend->is_cpu()) throw;
     new_backend = cpu_backend();
-    built = std::make_unique<DeformationSolver>(new_model->cage, new_model->mesh, new_params, default_cache_dir(), log,
-                                                new_backend);
+    built = std::make_unique<DeformationSolver>(new_model->cage, new_model->mesh, new_params,
+                                                default_cache_dir(), log, new_backend);
   }
   MatXd v, g;
   status = "preprocessing: mesh vertices in the subspace";

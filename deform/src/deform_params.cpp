@@ -419,9 +419,8 @@ CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure
 
 bool changes_precomputation(const DeformParams& a, const DeformParams& b) {
   return a.reduced_dof != b.reduced_dof || a.samples != b.samples || a.voxel_side != b.voxel_side ||
-         a.domain != b.domain ||
-         a.safety != b.safety || a.hessian_fraction != b.hessian_fraction || a.threads != b.threads ||
-         a.backend != b.backend || a.opencl_device != b.opencl_device ||
+         a.domain != b.domain || a.safety != b.safety || a.hessian_fraction != b.hessian_fraction ||
+         a.threads != b.threads || a.backend != b.backend || a.opencl_device != b.opencl_device ||
          a.opencl_gpu_layout != b.opencl_gpu_layout || a.test_break_kernels != b.test_break_kernels ||
          a.test_opencl_max_alloc != b.test_opencl_max_alloc;
 }

@@ -45,7 +45,8 @@ class DomainScan {
   }
   long num_cells() const { return static_cast<long>(dims_[0]) * dims_[1] * dims_[2]; }
   Vec3 center(long cell) const {
-    const long i = cell % dims_[0], j = (cell / dims_[0]) % dims_[1], k = cell / (static_cast<long>(dims_[0]) * dims_[1]);
+    const long i = cell % dims_[0], j = (cell / dims_[0]) % dims_[1],
+               k = cell / (static_cast<long>(dims_[0]) * dims_[1]);
     return cage_.bbox_min + (Vec3(i, j, k) + Vec3::Constant(0.5)) * h_;
   }
   Eigen::RowVector3i index(long cell) const {
@@ -71,7 +72,8 @@ class DomainScan {
   void crossing(const Vec3& c, double half, const std::vector<int>& from, std::vector<int>* out) const {
     out->clear();
     for (int t : from)
-      if (triangle_box_overlap(c, half, V_.row(F_(t, 0)), V_.row(F_(t, 1)), V_.row(F_(t, 2)))) out->push_back(t);
+      if (triangle_box_overlap(c, half, V_.row(F_(t, 0)), V_.row(F_(t, 1)), V_.row(F_(t, 2))))
+        out->push_back(t);
   }
   // Ball B(c, r) clear of the cage by the sampler's margin: distance > safety·r and winding number 1 (an
   // integer for the closed cage, counted exactly by WindingNumber).
@@ -79,10 +81,10 @@ class DomainScan {
     const double r = 0.5 * std::sqrt(3.0) * std::ldexp(h_, -level);
     return !cage_grid_.any_within(c, p_.safety * r) && std::abs(cage_wn_.at(c) - 1.0) < 1e-6;
   }
-  // Depth-first: a cell meeting D (with the triangles that cross it) becomes a leaf when clear, at the maximum
-  // level, or when the cell's leaf budget is spent; else its children that meet D are refined. A child that
-  // no triangle crosses lies on one side of the mesh: inside when its parent had no crossing triangle either
-  // (the parent met D), else decided at its center.
+  // Depth-first: a cell meeting D (with the triangles that cross it) becomes a leaf when clear, at the
+  // maximum level, or when the cell's leaf budget is spent; else its children that meet D are refined. A
+  // child that no triangle crosses lies on one side of the mesh: inside when its parent had no crossing
+  // triangle either (the parent met D), else decided at its center.
   void refine(const Vec3& c, int level, const std::vector<int>& tris, std::vector<Leaf>* out) const {
     const bool ok = clear(c, level);
     if (ok || level >= p_.max_domain_level || static_cast<long>(out->size()) >= p_.max_leaves_per_cell) {
@@ -150,7 +152,8 @@ VoxelSampling collect(const DomainScan& ds, const std::vector<std::vector<Leaf>>
 VoxelSampling sample_domain(const Cage& cage, const MatX3d& mesh_V, const MatX3i& mesh_F,
                             const SamplingParams& p) {
   check_sampling_params(cage, p);
-  if (mesh_F.rows() == 0 || mesh_V.rows() == 0) throw InputError(cage.source, "mesh domain: the mesh has no triangles");
+  if (mesh_F.rows() == 0 || mesh_V.rows() == 0)
+    throw InputError(cage.source, "mesh domain: the mesh has no triangles");
   if (p.max_domain_level < 0 || p.max_domain_level > 30)
     throw InputError(cage.source, "mesh domain: max_domain_level must lie in [0, 30]");
   if (mesh_F.minCoeff() < 0 || mesh_F.maxCoeff() >= mesh_V.rows())
@@ -187,7 +190,8 @@ VoxelSampling sample_domain(const Cage& cage, const MatX3d& mesh_V, const MatX3i
     ds.set_side(ss.side);
     out = collect(ds, scan(ds), ss.side);
     out.search_iterations = ss.iterations;
-    out.target_met = std::abs(out.size() - static_cast<double>(p.target_count)) <= p.count_tolerance * p.target_count;
+    out.target_met =
+        std::abs(out.size() - static_cast<double>(p.target_count)) <= p.count_tolerance * p.target_count;
   }
   out.safety = p.safety;
   out.hessian_subset = select_hessian_subset(out, p.hessian_fraction);

@@ -83,8 +83,8 @@ void TriangleGrid::candidates(const Vec3& lo, const Vec3& hi, std::vector<int>* 
 
 bool triangle_box_overlap(const Vec3& center, double half, const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 v[3] = {a - center, b - center, c - center};
-  const double scale = half + std::max({v[0].cwiseAbs().maxCoeff(), v[1].cwiseAbs().maxCoeff(),
-                                        v[2].cwiseAbs().maxCoeff()});
+  const double scale =
+      half + std::max({v[0].cwiseAbs().maxCoeff(), v[1].cwiseAbs().maxCoeff(), v[2].cwiseAbs().maxCoeff()});
   const double eps = 1e-12 * scale;
   // Separated along axis n when the triangle's projection misses the box's [−r, r] by more than eps·|n|.
   auto separated = [&](const Vec3& n) {
@@ -143,7 +143,8 @@ WindingNumber::WindingNumber(const MatX3d& V, const MatX3i& F) : V_(V), F_(F) {
 
 double WindingNumber::solid_angle_sum(const Vec3& p) const {
   double w = 0;
-  for (int t = 0; t < F_.rows(); ++t) w += solid_angle_fraction(V_.row(F_(t, 0)), V_.row(F_(t, 1)), V_.row(F_(t, 2)), p);
+  for (int t = 0; t < F_.rows(); ++t)
+    w += solid_angle_fraction(V_.row(F_(t, 0)), V_.row(F_(t, 1)), V_.row(F_(t, 2)), p);
   return w;
 }
 
@@ -170,7 +171,7 @@ double WindingNumber::at(const Vec3& p) const {
     if (!((eab > 0 && ebc > 0 && eca > 0) || (eab < 0 && ebc < 0 && eca < 0))) continue;
     const double x = (ebc * A(0) + eca * B(0) + eab * C(0)) / area2;
     if (std::abs(x - p(0)) <= tol_) return solid_angle_sum(p);  // p on (or at rounding distance of) the mesh
-    if (x > p(0)) w += area2 > 0 ? 1 : -1;  // n_x > 0: the +x ray leaves the inside here
+    if (x > p(0)) w += area2 > 0 ? 1 : -1;                      // n_x > 0: the +x ray leaves the inside here
   }
   return w;
 }

@@ -43,7 +43,8 @@ std::vector<char> balls_clear_of_cage(const Cage& cage, const VoxelSampling& s) 
   const long N = s.size();
   std::vector<char> out(N, 0);
   if (N == 0) return out;
-  const TriangleGrid grid(cage.V, cage.F, std::max(s.radius(), (cage.bbox_max - cage.bbox_min).norm() / 128.0));
+  const TriangleGrid grid(cage.V, cage.F,
+                          std::max(s.radius(), (cage.bbox_max - cage.bbox_min).norm() / 128.0));
   const WindingNumber wn(cage.V, cage.F);
   // "Clear" is strict, with a relative margin far above the rounding of the distance computation.
 #pragma omp parallel for schedule(dynamic, 256)
@@ -400,8 +401,8 @@ struct OctreeCertifier::Run {
       const double L = lipschitz(hnorm(i), T(i), r);
       const double lb = sigma3(i) - r * L;
       // Not clear of the cage: refused (the bound's argument needs the ball inside the cage's interior).
-      const double margin = im.clear[i] ? lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage)
-                                        : -kInf;
+      const double margin =
+          im.clear[i] ? lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage) : -kInf;
       base[i] = {oc.sampling_.centers.row(i).transpose(),
                  oc.sampling_.side_of(static_cast<int>(i)),
                  level(i),
@@ -483,8 +484,8 @@ struct OctreeCertifier::Run {
   // A leaf with unknown σ3 keeps the leaves a tiling of the voxel.
   void unresolved(Node& nd) {
     const long bi = failing_base[nd.fi];
-    nd.leaf = {nd.c,  nd.side, level(bi) + nd.depth, std::numeric_limits<double>::quiet_NaN(),
-               kInf, -kInf,   false,                static_cast<int>(bi)};
+    nd.leaf = {nd.c,  nd.side, level(bi) + nd.depth, std::numeric_limits<double>::quiet_NaN(), kInf,
+               -kInf, false,   static_cast<int>(bi)};
     vs[nd.fi].ok = false;
   }
   // The frontier's nodes within the budgets, in order; the others become unresolved leaves.
@@ -636,7 +637,8 @@ struct OctreeCertifier::Run {
       const Vec3 c = oc.sampling_.centers.row(i);
       return std::to_string(uncleared.size()) + " voxel(s) not clear of the cage, never certified (first: #" +
              std::to_string(i) + " at (" + std::to_string(c.x()) + ", " + std::to_string(c.y()) + ", " +
-             std::to_string(c.z()) + "), radius " + std::to_string(oc.sampling_.radius_of(static_cast<int>(i))) +
+             std::to_string(c.z()) + "), radius " +
+             std::to_string(oc.sampling_.radius_of(static_cast<int>(i))) +
              "): the domain touches or crosses the cage there";
     }
     if (resolved_nonpositive)

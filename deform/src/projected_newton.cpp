@@ -108,14 +108,17 @@ DeformationSolver::DeformationSolver(const Cage& cage, const TriMesh* mesh, cons
 
   t0 = Clock::now();
   // Laid out in frame_ (sampling.h, domain_sampling.h).
-  sampling_ = mesh && params_.domain == DomainKind::kMesh ? sample_domain(cage_, mesh->V, mesh->F, sampling_params())
-                                                          : sample_voxels(cage_, sampling_params());
+  sampling_ = mesh && params_.domain == DomainKind::kMesh
+                  ? sample_domain(cage_, mesh->V, mesh->F, sampling_params())
+                  : sample_voxels(cage_, sampling_params());
   nsampling_ = frame_.to_normalized(sampling_);
   if (sampling_.size() == 0)
     throw InputError(cage_.source, "no voxel of side " + format_g(sampling_.side, 4) +
                                        " fits inside the cage (use a smaller voxel_side or more samples)");
   say("sampling (" + sampling_.domain + " domain): " + std::to_string(sampling_.size()) + " voxels of side " +
-      format_g(sampling_.side, 4) + (sampling_.max_level() > 0 ? " refined to level " + std::to_string(sampling_.max_level()) : std::string()) +
+      format_g(sampling_.side, 4) +
+      (sampling_.max_level() > 0 ? " refined to level " + std::to_string(sampling_.max_level())
+                                 : std::string()) +
       ", " + std::to_string(sampling_.hessian_subset.size()) + " in the Hessian subset (" +
       format_g(ms_since(t0), 4) + " ms)");
 

@@ -202,13 +202,12 @@ VoxelSampling sample_voxels_here(const Cage& cage, const SamplingParams& p) {
     out = GridScan(cage, p.voxel_side, p.safety).collect();
     out.search_iterations = 1;
   } else {
-    const SideSearch ss = search_voxel_side(
-        p, std::cbrt(cage.volume / p.target_count),
-        [&](double h) { return GridScan(cage, h, p.safety).count(); });
+    const SideSearch ss = search_voxel_side(p, std::cbrt(cage.volume / p.target_count),
+                                            [&](double h) { return GridScan(cage, h, p.safety).count(); });
     out = GridScan(cage, ss.side, p.safety).collect();
     out.search_iterations = ss.iterations;
-    out.target_met = std::abs(out.size() - static_cast<double>(p.target_count)) <=
-                     p.count_tolerance * p.target_count;
+    out.target_met =
+        std::abs(out.size() - static_cast<double>(p.target_count)) <= p.count_tolerance * p.target_count;
   }
   out.safety = p.safety;
   out.hessian_subset = select_hessian_subset(out, p.hessian_fraction);

@@ -57,9 +57,10 @@ std::uint64_t coefficients_hash(const MatX3d& y);
 
 // Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
-                                          const MatX3d& y, const std::string& model, const std::string& coefficients,
-                                          const SamplingParams& sampling_params, const VoxelSampling& sampling,
-                                          const CertifyParams& params);
+                                          const MatX3d& y, const std::string& model,
+                                          const std::string& coefficients,
+                                          const SamplingParams& sampling_params,
+                                          const VoxelSampling& sampling, const CertifyParams& params);
 
 // voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified`, one row per leaf in leaf order
 // (base-voxel order, children depth-first), certified = 1/0.

@@ -92,8 +92,7 @@ struct ParamInfo {
   using Member =
       std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*, bool DeformParams::*,
                    std::string DeformParams::*, LipschitzBound DeformParams::*,
-                   HessianPrecision DeformParams::*, BackendKind DeformParams::*,
-                   DomainKind DeformParams::*>;
+                   HessianPrecision DeformParams::*, BackendKind DeformParams::*, DomainKind DeformParams::*>;
   const char* name;   // JSON key; the CLI flag is "--" + name with '_' → '-'
   const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution", "testing"
   Member member;

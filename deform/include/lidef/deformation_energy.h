@@ -6,11 +6,12 @@
 //   E_smooth = (1/|E|) ‖K Ξ ỹ‖² = (1/|E|) Σ_j μ_j ‖ỹ_j‖²  (Ξ's columns are eigenvectors of KᵀK, eigenvalues
 //   μ)
 //
-// Weighting (MATH-NOTES leaves it open): on the paper's grid all voxels have the same volume, so the mean over
-// samples is the paper's volume-weighted integral divided by the sampled volume — independent of the sampling
-// density, and 0 at rigid maps. The mesh domain's refined leaves are smaller: set_sample_weights gives each
-// its volume (see there). Like the reference code, E_smooth is divided by the number of cage edges |E| so that λ2
-// means the same on coarse and fine cages. E_P2P is a plain sum (paper) so λ1 keeps the paper's meaning.
+// Weighting (MATH-NOTES leaves it open): on the paper's grid all voxels have the same volume, so the mean
+// over samples is the paper's volume-weighted integral divided by the sampled volume — independent of the
+// sampling density, and 0 at rigid maps. The mesh domain's refined leaves are smaller: set_sample_weights
+// gives each its volume (see there). Like the reference code, E_smooth is divided by the number of cage edges
+// |E| so that λ2 means the same on coarse and fine cages. E_P2P is a plain sum (paper) so λ1 keeps the
+// paper's meaning.
 //
 // Layouts. ỹ: s by 3 (column a = coordinate a). vec(ỹ) is column-major: index j + s·a. Jacobians at the
 // samples are stored as one 3|I| by 3 matrix JT with JT(3i+b, a) = J_i(a,b) = ∂f_a/∂p_b (J_iᵀ in rows

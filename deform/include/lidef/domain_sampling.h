@@ -1,6 +1,6 @@
 // The mesh domain (issue 15): the voxels that cover D = every point of the mesh's triangles and of the solid
-// they bound (generalized winding number ≥ ½), refined toward the cage until every leaf's ball is clear of it.
-// docs/sampling-and-subspace.md and docs/certificate.md explain the construction and why it suffices.
+// they bound (generalized winding number ≥ ½), refined toward the cage until every leaf's ball is clear of
+// it. docs/sampling-and-subspace.md and docs/certificate.md explain the construction and why it suffices.
 #pragma once
 #include <string>
 #include <vector>

@@ -175,8 +175,8 @@ class DeformationSolver {
   CertifyParams certify_params(bool stop_on_failure, bool keep_leaves) const;
 
  private:
-  DeformationSolver(const Cage& cage, const TriMesh* mesh, const DeformParams& params, const std::string& cache_dir,
-                    const std::function<void(const std::string&)>& log,
+  DeformationSolver(const Cage& cage, const TriMesh* mesh, const DeformParams& params,
+                    const std::string& cache_dir, const std::function<void(const std::string&)>& log,
                     std::shared_ptr<const ComputeBackend> backend);
   void update_weights(IterationRecord& rec);
   void check_targets(const MatX3d& targets, const std::string& where) const;

@@ -45,7 +45,7 @@ struct VoxelSampling {
   // (domain_sampling.h) refines toward the cage; everything that uses a voxel's size asks side_of/radius_of.
   std::vector<int> level;
   double side_of(int i) const { return level.empty() ? side : std::ldexp(side, -level[i]); }
-  double radius_of(int i) const;    // (√3/2) side_of(i): the radius condition (6) uses
+  double radius_of(int i) const;  // (√3/2) side_of(i): the radius condition (6) uses
   double weight_of(int i) const { return level.empty() ? 1.0 : std::ldexp(1.0, -3 * level[i]); }  // 8^-k
   int max_level() const;
   std::vector<int> hessian_subset;  // ascending indices into centers (the set H)
@@ -80,7 +80,8 @@ struct SideSearch {
   double side = 0;
   int iterations = 0;
 };
-SideSearch search_voxel_side(const SamplingParams& params, double h0, const std::function<long(double)>& count);
+SideSearch search_voxel_side(const SamplingParams& params, double h0,
+                             const std::function<long(double)>& count);
 
 // The Hessian subset rule: samples ordered along a Morton (Z-order) curve of their grid indices, cut into
 // |H| = round(fraction · #I) strata of consecutive ranks, one pick per stratum at a golden-ratio offset
