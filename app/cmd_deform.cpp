@@ -162,6 +162,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       setup.cache_dir = cache;
       setup.cache_max_bytes = o.cache.max_bytes();
       setup.log = log;
+      setup.mesh = &model.mesh;  // the certified domain (params.domain "mesh": its triangles and solid)
       std::string backend_msg;
       const auto backend = select_backend(sc.params, cache, &backend_msg);
       std::cerr << "lidef deform: " << backend_msg << "\n";
@@ -215,7 +216,7 @@ void add_deform_command(CLI::App& app, Action& action) {
                              cert.reason + ")");
       const SamplingParams sp = solver.sampling_params();
       CertificateReport report =
-          make_certificate_report(cert, model.cage, model.mesh.V, y, sc.model_dir, "coefficients.txt", sp,
+          make_certificate_report(cert, model.cage, model.mesh, y, sc.model_dir, "coefficients.txt", sp,
                                   solver.sampling(), solver.certify_params(false, true));
       // Evaluated in the solver's normalized frame (a model far from the origin would otherwise lose the
       // Jacobian's digits to the cancellation of large vertex coefficients), positions mapped back.
@@ -269,6 +270,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
       sj["min_sigma3_sampled"] = cert.min_sigma3_center;
       sj["mesh_coverage"] = report.mesh_coverage;
+      sj["domain"] = report.domain;
       sj["max_handle_error"] = max_err;
       sj["handles_reached"] = max_err <= tolerance;
       sj["handle_tolerance"] = sc.params.handle_tolerance;
@@ -300,9 +302,11 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << "  max handle error " << format_g(max_err, 3)
                 << (max_err <= tolerance ? " (reached)" : " (NOT reached)") << ", global volume ratio "
                 << format_g(vol_ratio, 5) << "\n"
-                << "  CERTIFIED locally injective on the union of " << cert.voxels
-                << " voxels, min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4)
-                << ", mesh coverage " << format_g(100 * report.mesh_coverage, 3) << "%\n"
+                << "  CERTIFIED locally injective on "
+                << (solver.sampling().domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
+                << cert.voxels << (solver.sampling().domain == "mesh" ? " voxels)" : " voxels")
+                << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
+                << format_g(100 * report.mesh_coverage, 3) << "%\n"
                 << "  wrote " << out.final_path("")
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"

@@ -562,8 +562,9 @@ int main(int argc, char** argv) {
         std::cerr << "bench_deform: " << model_name << ": preprocessing (subspace "
                   << (cached ? "cached" : "not cached yet") << ")\n";
         const auto t0 = Clock::now();
-        solver = std::make_unique<DeformationSolver>(
-            model->cage, p, opt.cache_dir, [](const std::string& s) { std::cerr << "  " << s << "\n"; });
+        solver =
+            std::make_unique<DeformationSolver>(model->cage, model->mesh, p, opt.cache_dir,
+                                                [](const std::string& s) { std::cerr << "  " << s << "\n"; });
         preprocess_s = ms_since(t0) / 1000;
         solver_key = key;
         if (!cached)

@@ -170,15 +170,30 @@ TEST_F(CertifyCli, IdentityCertifiesAtDepthZeroAndIsDeterministic) {
   EXPECT_EQ(j["sampling"]["voxels"], j["voxels"]);
   EXPECT_EQ(j["coefficients"], "identity");
 
-  // voxels.csv: exact header, one row per leaf, all certified at depth 0 with the base side.
+  // The default domain is the whole mesh: every vertex covered, every leaf meeting it.
+  EXPECT_EQ(j["domain"]["kind"], "mesh");
+  EXPECT_EQ(j["mesh_coverage"].get<double>(), 1.0);
+  EXPECT_EQ(j["domain"]["leaves_meeting_mesh_domain"], j["leaves"]);
+  EXPECT_EQ(j["domain"]["uncleared_voxels"], 0);
+  // voxels.csv: exact header, one row per leaf, all certified; no refinement, so each leaf is a sampling leaf
+  // of side base side / 2^depth (the mesh domain's levels toward the cage).
   const auto rows = read_csv(tmp / "a/voxels.csv", kVoxelsHeader, 9);
   ASSERT_EQ(static_cast<long>(rows.size()), j["leaves"].get<long>());
   for (const auto& r : rows) {
-    EXPECT_EQ(r[3], j["voxel_side"].get<double>());
-    EXPECT_EQ(r[4], 0);
+    EXPECT_EQ(r[3], std::ldexp(j["voxel_side"].get<double>(), -static_cast<int>(r[4])));
+    EXPECT_GE(r[4], 0);
     EXPECT_NEAR(r[5], 1.0, 1e-6);
     EXPECT_GT(r[7], 0);
     EXPECT_EQ(r[8], 1);
+  }
+  // The paper's grid (--domain voxels): base voxels only, and the layer next to the cage uncovered.
+  ASSERT_EQ(certify(ball(), "identity", tmp / "grid", &output, "--domain voxels --grid 0"), 0) << output;
+  const nlohmann::json g = read_json(tmp / "grid/certificate.json");
+  EXPECT_EQ(g["domain"]["kind"], "voxels");
+  EXPECT_LT(g["mesh_coverage"].get<double>(), 0.5);
+  for (const auto& r : read_csv(tmp / "grid/voxels.csv", kVoxelsHeader, 9)) {
+    EXPECT_EQ(r[3], g["voxel_side"].get<double>());
+    EXPECT_EQ(r[4], 0);
   }
   EXPECT_EQ(entries(tmp / "a"), (std::vector<std::string>{"certificate.json", "field.vti", "leaves.vtu",
                                                           "timings.json", "voxels.csv"}));
@@ -220,7 +235,7 @@ TEST_F(CertifyCli, VtkFilesParseWithTheDocumentedArrays) {
   // Cell 0 is the cube of the first voxels.csv row: its volume is side³ (hexahedron corner order is right).
   double b[6];
   ug->GetCell(0)->GetBounds(b);
-  const double side = read_json(tmp / "c/certificate.json")["voxel_side"].get<double>();
+  const double side = read_csv(tmp / "c/voxels.csv", kVoxelsHeader, 9).front()[3];  // its own (mesh domain)
   EXPECT_NEAR(b[1] - b[0], side, 1e-12);
   EXPECT_NEAR(b[3] - b[2], side, 1e-12);
   EXPECT_NEAR(b[5] - b[4], side, 1e-12);
@@ -596,6 +611,7 @@ TEST_P(SharedModelCertify, IdentityIsCertified) {
   EXPECT_EQ(j["certified"], true);
   EXPECT_EQ(j["refined"], 0);
   EXPECT_EQ(j["leaves"], j["voxels"]);
+  EXPECT_EQ(j["mesh_coverage"].get<double>(), 1.0);  // issue 15: the whole mesh
   std::cout << GetParam() << ": " << j["voxels"] << " voxels, mesh coverage " << j["mesh_coverage"] << "\n"
             << output;
 }

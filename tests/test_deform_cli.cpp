@@ -165,7 +165,13 @@ TEST_F(DeformCli, WritesConsistentOutputsThatCertifyIndependently) {
   EXPECT_GT(s["min_sigma3_lower_bound"].get<double>(), 0);
   EXPECT_EQ(s["handles"], 10);
   EXPECT_EQ(s["dof"], 180);
-  EXPECT_NEAR(s["samples"].get<double>(), 4000, 800);
+  // samples = the mesh domain's leaves: the beam's surface runs 0.04 from its cage, and the leaves along it
+  // must be small enough to clear it, ~6000 of them whatever the base side, so 4000 is not reachable and the
+  // search returns its closest count (docs/sampling-and-subspace.md, "Mesh domain").
+  EXPECT_GE(s["samples"].get<double>(), 3200);
+  EXPECT_LE(s["samples"].get<double>(), 8000);
+  EXPECT_EQ(s["domain"], "mesh");
+  EXPECT_EQ(s["mesh_coverage"].get<double>(), 1.0);
   EXPECT_GT(s["global_volume_ratio"].get<double>(), 0);
   EXPECT_EQ(s["parameters"]["samples"], 4000);
   EXPECT_EQ(s["parameters"]["reduced_dof"], 60);

@@ -36,9 +36,9 @@ std::string input_error(F&& f) {
 // --- Parameter table
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
-  // Counted by hand in deform_params.h: 5 sampling + 2 energy + 11 newton (3 of them continuation) +
+  // Counted by hand in deform_params.h: 6 sampling + 2 energy + 11 newton (3 of them continuation) +
   // 5 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 40;
+  const int kFields = 41;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -56,7 +56,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "samples",
                                              "voxel_side",
                                              "safety",
-                                             "hessian_fraction",  // sampling
+                                             "hessian_fraction",
+                                             "domain",  // sampling
                                              "lambda_p2p",
                                              "lambda_smooth",  // energy
                                              "max_iterations",
@@ -100,6 +101,7 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
   EXPECT_TRUE(std::get<long DeformParams::*>(find_param("max_refined")->member) ==
               &DeformParams::max_refined);
   EXPECT_TRUE(std::get<LipschitzBound DeformParams::*>(find_param("bound")->member) == &DeformParams::bound);
+  EXPECT_TRUE(std::get<DomainKind DeformParams::*>(find_param("domain")->member) == &DeformParams::domain);
   EXPECT_EQ(find_param("lamda_p2p"), nullptr);
 }
 

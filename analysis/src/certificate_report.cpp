@@ -1,5 +1,6 @@
 #include "lidef/certificate_report.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -11,6 +12,7 @@
 #include <sstream>
 
 #include "lidef/atomic_file.h"
+#include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
@@ -115,10 +117,11 @@ std::uint64_t coefficients_hash(const MatX3d& y) {
   return fnv1a64(bytes);
 }
 
-CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const MatX3d& mesh_V,
-                                          const MatX3d& y, const std::string& model, const std::string& coefficients,
-                                          const SamplingParams& sampling_params, const VoxelSampling& sampling,
-                                          const CertifyParams& params) {
+CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
+                                          const MatX3d& y, const std::string& model,
+                                          const std::string& coefficients,
+                                          const SamplingParams& sampling_params,
+                                          const VoxelSampling& sampling, const CertifyParams& params) {
   CertificateReport r;
   r.cert = cert;
   r.model = model;
@@ -128,6 +131,7 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
   r.cage_vertices = cage.num_vertices();
   r.cage_faces = cage.num_faces();
   r.cage_edges = cage.num_edges();
+  const MatX3d& mesh_V = mesh.V;
   r.mesh_vertices = mesh_V.rows();
   const VecXi where = containing_voxel(sampling, mesh_V);
   long uncovered = 0;
@@ -141,6 +145,24 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
   r.sampling_search_iterations = sampling.search_iterations;
   r.hessian_subset = static_cast<int>(sampling.hessian_subset.size());
   r.params = params;
+  r.domain = sampling.domain;
+  r.uncleared_voxels = cert.uncleared_voxels;
+  // Leaves meeting D, exactly; without the leaves (keep_leaves off) the base voxels stand for them.
+  const bool all = cert.leaves.size() == static_cast<size_t>(cert.num_leaves) && cert.num_leaves > 0;
+  MatX3d C(all ? cert.leaves.size() : sampling.size(), 3);
+  VecXd S(C.rows());
+  for (Eigen::Index i = 0; i < C.rows(); ++i) {
+    if (all) {
+      C.row(i) = cert.leaves[i].center.transpose();
+      S(i) = cert.leaves[i].side;
+    } else {
+      C.row(i) = sampling.centers.row(i);
+      S(i) = sampling.side_of(static_cast<int>(i));
+    }
+  }
+  const std::vector<char> meets =
+      mesh.F.rows() > 0 ? cubes_meeting_mesh_domain(mesh_V, mesh.F, C, S) : std::vector<char>();
+  r.leaves_meeting_domain = std::count(meets.begin(), meets.end(), 1);
   return r;
 }
 
@@ -251,6 +273,15 @@ std::string certificate_json(const CertificateReport& r) {
   j["mesh_vertices"] = r.mesh_vertices;
   j["mesh_coverage"] = num(r.mesh_coverage);
   j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
+  ojson d;
+  d["kind"] = r.domain;
+  d["definition"] =
+      r.domain == "mesh"
+          ? "every point of the mesh triangles and of the solid they bound (winding number >= 1/2)"
+          : "the union of the paper's grid voxels clear of the cage";
+  d["leaves_meeting_mesh_domain"] = r.leaves_meeting_domain;
+  d["uncleared_voxels"] = r.uncleared_voxels;
+  j["domain"] = d;
   ojson failing = ojson::array();
   for (const CertLeaf& l : c.failing) failing.push_back(leaf_json(l));
   j["failing"] = failing;
@@ -325,6 +356,12 @@ CertificateReport read_certificate_json(const std::string& path) {
   r.mesh_vertices = rd.integer(root, "mesh_vertices");
   r.mesh_coverage = rd.number(root, "mesh_coverage");
   r.mesh_vertices_uncovered = rd.integer(root, "mesh_vertices_uncovered");
+  if (root.contains("domain")) {  // absent in certificates written before the mesh domain
+    const nlohmann::json& d = rd.at(root, "domain");
+    r.domain = rd.string(d, "kind");
+    r.leaves_meeting_domain = rd.integer(d, "leaves_meeting_mesh_domain");
+    r.uncleared_voxels = rd.integer(d, "uncleared_voxels");
+  }
   const nlohmann::json& failing = rd.at(root, "failing");
   if (!failing.is_array()) throw InputError(path, "key 'failing' is not a list");
   for (const nlohmann::json& f : failing) {

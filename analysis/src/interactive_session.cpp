@@ -605,6 +605,7 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
   setup.log = [&](const std::string& line) { status = "preprocessing: " + line; };
   setup.progress = [&](const std::string& name, double f) { on_progress(name, 0.9 * f); };
   setup.cancel = &session.cancel_;
+  setup.mesh = &new_model->mesh;  // the certified domain (params.domain "mesh": its triangles and solid)
   std::unique_ptr<DeformationSolver> built;
   try {
     built = std::make_unique<DeformationSolver>(new_model->cage, new_params, setup, new_backend);

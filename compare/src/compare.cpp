@@ -89,11 +89,13 @@ struct Shared {
 
 void run_lidef(Shared& s, MethodResult& r) {
   const auto t0 = Clock::now();
-  DeformationSolver solver(s.model.cage, s.sc.params, s.opt.cache_dir,
+  DeformationSolver solver(s.model.cage, s.model.mesh, s.sc.params, s.opt.cache_dir,
                            [&](const std::string& l) { s.say(r.method, l); });
   solver.set_handles(s.sc.sources, s.sc.targets, s.sc.path);
   r.preprocess_seconds = seconds_since(t0);
-  if (!s.sampling) s.sampling = solver.sampling();  // the same parameters give the same voxels
+  // The same parameters give the same grid; the mesh domain's leaves (several sizes, a base side set by the
+  // leaf count) are not the grid the other methods' settings derive from (fine TetGen volume, samples).
+  if (!s.sampling && solver.sampling().domain == "voxels") s.sampling = solver.sampling();
   std::ostringstream log;
   log << "iteration,energy,step,certified,min_lower_bound,max_handle_error,ms\n";
   // The same path to the targets as `lidef deform` (continuation.h): the direct solve, and the continuation

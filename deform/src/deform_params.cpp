@@ -37,6 +37,9 @@ std::vector<ParamInfo> make_table() {
       // Strictly positive: an empty Hessian subset leaves the Newton system without the distortion term.
       {"hessian_fraction", "sampling", &D::hessian_fraction, 1e-9, 1,
        "|H| / |I|: fraction of the voxels whose distortion Hessian is assembled"},
+      {"domain", "sampling", &D::domain, 0, 0,
+       "certified domain: \"mesh\" (the mesh and its solid, leaves refined toward the cage) or \"voxels\" "
+       "(the paper's grid inside the cage)"},
       // --- Energy
       {"lambda_p2p", "energy", &D::lambda_p2p, 0, 1e12,
        "lambda1: weight of the handle (point-to-point) energy"},
@@ -127,6 +130,10 @@ struct EnumNames<HessianPrecision> {
 template <>
 struct EnumNames<BackendKind> {
   static constexpr const char* names[] = {"cpu", "opencl", "auto"};
+};
+template <>
+struct EnumNames<DomainKind> {
+  static constexpr const char* names[] = {"mesh", "voxels"};
 };
 
 template <class T>
@@ -304,6 +311,10 @@ const char* to_string(BackendKind b) {
   return EnumNames<BackendKind>::names[static_cast<int>(b)];
 }
 
+const char* to_string(DomainKind d) {
+  return EnumNames<DomainKind>::names[static_cast<int>(d)];
+}
+
 std::string param_flag(const ParamInfo& p) {
   std::string flag = std::string("--") + p.name;
   std::replace(flag.begin(), flag.end(), '_', '-');
@@ -414,8 +425,8 @@ CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure
 
 bool changes_precomputation(const DeformParams& a, const DeformParams& b) {
   return a.reduced_dof != b.reduced_dof || a.samples != b.samples || a.voxel_side != b.voxel_side ||
-         a.safety != b.safety || a.hessian_fraction != b.hessian_fraction || a.threads != b.threads ||
-         a.backend != b.backend || a.opencl_device != b.opencl_device ||
+         a.domain != b.domain || a.safety != b.safety || a.hessian_fraction != b.hessian_fraction ||
+         a.threads != b.threads || a.backend != b.backend || a.opencl_device != b.opencl_device ||
          a.opencl_gpu_layout != b.opencl_gpu_layout || a.test_break_kernels != b.test_break_kernels ||
          a.test_opencl_max_alloc != b.test_opencl_max_alloc;
 }

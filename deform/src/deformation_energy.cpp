@@ -59,6 +59,16 @@ void DeformationEnergy::set_handles(const MatXd& D, const MatX3d& Q) {
   DtD_ = D_.transpose() * D_;
 }
 
+void DeformationEnergy::set_sample_weights(const VecXd& w) {
+  if (w.size() == 0) {
+    w_.resize(0);
+    return;
+  }
+  if (w.size() != num_samples() || !(w.minCoeff() > 0) || !w.allFinite())
+    throw Error("DeformationEnergy::set_sample_weights: one positive weight per sample needed");
+  w_ = w * (num_samples() / w.sum());
+}
+
 void DeformationEnergy::set_targets(const MatX3d& Q) {
   if (Q.rows() != D_.rows()) throw Error("DeformationEnergy::set_targets: one target per handle needed");
   Q_ = Q;
@@ -97,7 +107,7 @@ double DeformationEnergy::distortion_sum(const MatJT& JT) const {
   for (int c = 0; c < chunks; ++c) {
     const int b = c * kChunk, e = std::min(n, b + kChunk);
     double sum = 0;
-    for (int i = b; i < e; ++i) sum += sd_energy(jacobian_at(JT, i)) - 6.0;
+    for (int i = b; i < e; ++i) sum += (w_.size() ? w_(i) : 1.0) * (sd_energy(jacobian_at(JT, i)) - 6.0);
     partial[c] = sum;
   }
   double dis = 0;
@@ -127,7 +137,8 @@ MatS3 DeformationEnergy::distortion_gradient_sum(const MatJT& JT) const {
     const int b = c * kChunk, e = std::min(n, b + kChunk);
     // P rows 3i+b, column a = ∂E_iso/∂J_i(a,b): the same transposed layout as JT.
     MatJT P(3 * (e - b), 3);
-    for (int i = b; i < e; ++i) P.middleRows<3>(3 * (i - b)) = sd_gradient(jacobian_at(JT, i)).transpose();
+    for (int i = b; i < e; ++i)
+      P.middleRows<3>(3 * (i - b)) = (w_.size() ? w_(i) : 1.0) * sd_gradient(jacobian_at(JT, i)).transpose();
     partial[c].setZero(s, 3);
     MatXdR Gd;
     for (int bb = b; bb < e; bb += kBlock) {
@@ -152,6 +163,14 @@ MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyW
   return gradient_from(distortion_gradient_sum(JT), y, w);
 }
 
+VecXd DeformationEnergy::block_weights(const std::vector<int>& idx) const {
+  const int m = static_cast<int>(idx.size());
+  if (w_.size() == 0) return VecXd::Constant(m, 1.0 / m);
+  VecXd out(m);
+  for (int k = 0; k < m; ++k) out(k) = w_(idx[k]);
+  return out / out.sum();
+}
+
 MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_samples,
                                      bool double_precision) const {
   const std::vector<int>* idx = &subset_;
@@ -162,13 +181,13 @@ MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_s
     idx = &all;
   }
   const int m = static_cast<int>(idx->size());
-  const double weight = 1.0 / m;
+  const VecXd weight = block_weights(*idx);
   // Per-sample 9x9 blocks (weighted), in vec(J) order a + 3b.
   std::vector<Mat9> blocks(m);
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < m; ++k) {
     const Mat3 J = jacobian_at(JT, (*idx)[k]);
-    blocks[k] = weight * (projected ? sd_hessian_psd(J) : sd_hessian(J));
+    blocks[k] = weight(k) * (projected ? sd_hessian_psd(J) : sd_hessian(J));
   }
   return products(blocks, all_samples, double_precision);
 }

@@ -9,6 +9,7 @@
 #include "lidef/edge_jet.h"
 #include "lidef/errors.h"
 #include "lidef/lipschitz_bound.h"
+#include "lidef/mesh_queries.h"
 #include "lidef/signed_svd.h"
 
 namespace lidef {
@@ -59,6 +60,23 @@ void gradient_hessian_matrices(const HarmonicBasis& basis, const MatX3d& P, MatX
 
 }  // namespace
 
+std::vector<char> balls_clear_of_cage(const Cage& cage, const VoxelSampling& s) {
+  const long N = s.size();
+  std::vector<char> out(N, 0);
+  if (N == 0) return out;
+  const TriangleGrid grid(cage.V, cage.F,
+                          std::max(s.radius(), (cage.bbox_max - cage.bbox_min).norm() / 128.0));
+  const WindingNumber wn(cage.V, cage.F);
+  // "Clear" is strict, with a relative margin far above the rounding of the distance computation.
+#pragma omp parallel for schedule(dynamic, 256)
+  for (long i = 0; i < N; ++i) {
+    const Vec3 c = s.centers.row(i);
+    const double r = s.radius_of(static_cast<int>(i));
+    out[i] = c.allFinite() && !grid.any_within(c, r * (1 + 1e-9)) && std::abs(wn.at(c) - 1.0) < 1e-6;
+  }
+  return out;
+}
+
 struct OctreeCertifier::Impl {
   enum class Mode { kReduced, kFull, kOnTheFly } mode = Mode::kOnTheFly;
   const MatXd* reduction = nullptr;  // #V+#F by s
@@ -79,6 +97,9 @@ struct OctreeCertifier::Impl {
   std::unique_ptr<CertifierKernels> kernels;
   mutable bool kernels_first = false, kernels_third = false;
   std::unique_ptr<EdgeJet> edge_jet;  // per-edge evaluation of octree children (edge_jet.h)
+  // The guard: per voxel, its ball B(center, radius_of(i)) is clear of the cage (distance > radius, winding
+  // number 1). A voxel that is not is never certified, whoever built the sampling.
+  std::vector<char> clear;
 };
 
 OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling, const MatXd* reduction,
@@ -150,7 +171,11 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
 void OctreeCertifier::init_common(const MatXd* reduction) {
   if (!(sampling_.side > 0)) throw InputError("", "voxel side must be > 0");
   if (sampling_.size() == 0) throw InputError("", "no voxels to certify");
+  if (!sampling_.level.empty() && static_cast<long>(sampling_.level.size()) != sampling_.size())
+    throw InputError("", "voxel levels: " + std::to_string(sampling_.level.size()) + " for " +
+                             std::to_string(sampling_.size()) + " voxels");
   Impl& im = *impl_;
+  im.clear = balls_clear_of_cage(cage_, sampling_);
   im.reduction = reduction;
   im.edge_jet = std::make_unique<EdgeJet>(cage_);
   for (const CageEdge& e : cage_.edges) {
@@ -264,7 +289,7 @@ struct OctreeCertifier::Run {
   long yr_rows;
   const CertifyParams& p;
   const long N, E;
-  const double side, r;
+  const double side;      // base voxel side (a voxel's own: side_of(i))
   const bool third;       // ‖H(c)‖ and Σ δ Θ needed (third and combined)
   const bool combined;    // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
@@ -295,7 +320,6 @@ struct OctreeCertifier::Run {
         N(o.sampling_.size()),
         E(o.cage_.num_edges()),
         side(o.sampling_.side),
-        r(o.sampling_.radius()),
         third(params.bound != LipschitzBound::kFirstOrder),
         combined(params.bound == LipschitzBound::kCombined),
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
@@ -324,6 +348,9 @@ struct OctreeCertifier::Run {
   // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
   // within 2⁻²⁴ of the exact one, so Σ|ΔJ_ab| ≤ 2⁻²⁴·3·cmax·Σ|G| and ‖ΔH‖_F ≤ 2⁻²⁴·6·cmax·Σ|H|, and by
   // Weyl |Δσ3| ≤ ‖ΔJ‖₂ ≤ Σ|ΔJ_ab|, |Δ‖H‖| ≤ ‖ΔH‖_F.
+  // Octree level of base voxel i below the base grid (mesh domain; 0 for the paper's grid).
+  int level(long i) const { return oc.sampling_.level.empty() ? 0 : oc.sampling_.level[i]; }
+  std::vector<long> uncleared;  // base voxels refused by the guard
   static double tolerance(double sJ, double sH, double s3, double L, double rad, double storage) {
     return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
   }
@@ -448,12 +475,15 @@ struct OctreeCertifier::Run {
     const double base_storage = use_stored ? kFloatStorageRel : 0.0;
     base.resize(N);
     for (long i = 0; i < N; ++i) {
+      const double r = oc.sampling_.radius_of(static_cast<int>(i));
       const double L = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
       const double lb = sigma3(i) - r * L;
-      const double margin = lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage);
+      // Not clear of the cage: refused (the bound's argument needs the ball inside the cage's interior).
+      const double margin =
+          im.clear[i] ? lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage) : -kInf;
       base[i] = {oc.sampling_.centers.row(i).transpose(),
-                 side,
-                 0,
+                 oc.sampling_.side_of(static_cast<int>(i)),
+                 level(i),
                  sigma3(i),
                  L,
                  margin,
@@ -496,7 +526,8 @@ struct OctreeCertifier::Run {
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
         for (long e = 0; e < E; ++e) {
-          mat(i, e) = round_up(factor(im.eu[e], im.ew[e], oc.sampling_.centers.row(i).transpose(), r));
+          mat(i, e) = round_up(factor(im.eu[e], im.ew[e], oc.sampling_.centers.row(i).transpose(),
+                                      oc.sampling_.radius_of(static_cast<int>(i))));
           if (!std::isfinite(mat(i, e))) finite[i] = 0;
         }
     };
@@ -520,12 +551,13 @@ struct OctreeCertifier::Run {
     vs.resize(F);
     for (long fi = 0; fi < F; ++fi) {
       const long i = failing_base[fi];
-      if (sigma3(i) <= 0 || p.max_depth == 0) {
-        vs[fi].ok = false;  // σ3 ≤ 0 at a center: no subdivision can certify it
+      if (!im.clear[i]) uncleared.push_back(i);
+      if (!im.clear[i] || sigma3(i) <= 0 || p.max_depth == 0) {
+        vs[fi].ok = false;  // refused, or σ3 ≤ 0 at a center: no subdivision can certify it
         if (p.stop_on_failure) abort = true;
         continue;
       }
-      vs[fi].first_child = add_children(base[i].center, side, 0, T(i), combined ? T1(i) : 0.0, fi);
+      vs[fi].first_child = add_children(base[i].center, base[i].side, 0, T(i), combined ? T1(i) : 0.0, fi);
     }
     std::vector<int> batch;
     std::vector<NodeValues> vals;
@@ -552,8 +584,9 @@ struct OctreeCertifier::Run {
   }
   // A leaf with unknown σ3 keeps the leaves a tiling of the voxel.
   void unresolved(Node& nd) {
-    nd.leaf = {nd.c, nd.side, nd.depth, std::numeric_limits<double>::quiet_NaN(),
-               kInf, -kInf,   false,    static_cast<int>(failing_base[nd.fi])};
+    const long bi = failing_base[nd.fi];
+    nd.leaf = {nd.c,  nd.side, level(bi) + nd.depth, std::numeric_limits<double>::quiet_NaN(), kInf,
+               -kInf, false,   static_cast<int>(bi)};
     vs[nd.fi].ok = false;
   }
   // The frontier's nodes within the budgets, in order; the others become unresolved leaves.
@@ -650,10 +683,11 @@ struct OctreeCertifier::Run {
       const double L = lipschitz(v.hnorm, v.hnorm_op, bnd1, bnd, rad);
       const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
       const int bi = static_cast<int>(failing_base[fi]);
+      const int leaf_depth = level(bi) + depth;
       if (margin > 0) {
-        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, true, bi, v.sign_unresolved};
+        tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, true, bi, v.sign_unresolved};
       } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
-        tree[id].leaf = {c, sd, depth, v.sigma3, L, margin, false, bi, v.sign_unresolved};
+        tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, false, bi, v.sign_unresolved};
         st.ok = false;
         // σ3 ≤ 0 (or a sign not resolved, σ3 = 0) at a center settles this voxel: refining its other nodes
         // cannot change the verdict.
@@ -721,6 +755,7 @@ struct OctreeCertifier::Run {
     }
     cert.certified = all_ok;
     cert.num_leaves = leaves;
+    cert.uncleared_voxels = static_cast<long>(uncleared.size());
     if (!cert.certified) cert.reason = failure_reason();
     return std::move(cert);
   }
@@ -814,6 +849,15 @@ struct OctreeCertifier::Run {
   // A resolved σ3 ≤ 0 at an evaluated center (every such center is a leaf): the map folds there.
   bool resolved_nonpositive = false;
   std::string failure_reason() const {
+    if (!uncleared.empty()) {
+      const long i = uncleared.front();
+      const Vec3 c = oc.sampling_.centers.row(i);
+      return std::to_string(uncleared.size()) + " voxel(s) not clear of the cage, never certified (first: #" +
+             std::to_string(i) + " at (" + std::to_string(c.x()) + ", " + std::to_string(c.y()) + ", " +
+             std::to_string(c.z()) + "), radius " +
+             std::to_string(oc.sampling_.radius_of(static_cast<int>(i))) +
+             "): the domain touches or crosses the cage there";
+    }
     if (resolved_nonpositive)
       return "sigma3 <= 0 at a sampled center: the map is not locally injective there";
     if (cert.sign_unresolved_leaves > 0)

@@ -1,5 +1,7 @@
 #include "lidef/precompute_cache.h"
 
+#include "lidef/domain_sampling.h"
+
 #include <omp.h>
 
 #include <algorithm>
@@ -288,6 +290,9 @@ void write_sampling(CacheWriter& w, const VoxelSampling& s) {
   w.scalar(s.safety);
   w.scalar(s.search_iterations);
   w.scalar(static_cast<char>(s.target_met));
+  w.array(s.level.data(), s.level.size());
+  w.array(s.domain.data(), s.domain.size());
+  w.scalar(s.uncleared);
 }
 
 VoxelSampling read_sampling(CacheReader& r) {
@@ -300,22 +305,33 @@ VoxelSampling read_sampling(CacheReader& r) {
   s.safety = r.scalar<double>();
   s.search_iterations = r.scalar<int>();
   s.target_met = r.scalar<char>() != 0;
+  s.level = r.array<int>();
+  const std::vector<char> domain = r.array<char>();
+  s.domain.assign(domain.begin(), domain.end());
+  s.uncleared = r.scalar<long>();
+  if (!s.level.empty() && static_cast<long>(s.level.size()) != s.size()) throw CacheReader::Bad{};
+  for (int k : s.level)
+    if (k < 0 || k > 60) throw CacheReader::Bad{};
   for (int i : s.hessian_subset)
     if (i < 0 || i >= s.size()) throw CacheReader::Bad{};
   return s;
 }
 
-CacheKey sampling_key(const Cage& cage, const SamplingParams& p) {
+CacheKey sampling_key(const std::string& domain, const Cage& cage, const MatX3d& mesh_V, const MatX3i& mesh_F,
+                      const SamplingParams& p) {
   CacheKey k("sampling");
   k.add_matrix(cage.V).add_matrix(cage.F);
   k.add(p.target_count).add(p.count_tolerance).add(p.voxel_side).add(p.safety);
   k.add(p.hessian_fraction).add(p.max_search_iterations);
+  k.add(domain);
+  if (domain == "mesh") k.add_matrix(mesh_V).add_matrix(mesh_F).add(p.max_domain_level).add(p.max_leaves_per_cell);
   return k.add_numerics();
 }
 
-VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& params,
-                                   const PrecomputeCache& cache, CacheEvent* event) {
-  const CacheKey key = sampling_key(cage, params);
+VoxelSampling cached_sample_for_domain(const std::string& domain, const Cage& cage, const MatX3d& mesh_V,
+                                       const MatX3i& mesh_F, const SamplingParams& params,
+                                       const PrecomputeCache& cache, CacheEvent* event) {
+  const CacheKey key = sampling_key(domain, cage, mesh_V, mesh_F, params);
   std::vector<char> payload;
   CacheEvent ev;
   if (cache.load(key, payload, &ev)) {
@@ -332,7 +348,7 @@ VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& param
     fs::remove(cache.path(key), ec);
     ev.outcome = "rebuilt (malformed payload)";
   }
-  const VoxelSampling s = sample_voxels(cage, params);
+  const VoxelSampling s = sample_for_domain(domain, cage, mesh_V, mesh_F, params);
   CacheWriter w;
   write_sampling(w, s);
   CacheEvent st;

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
 
@@ -97,12 +98,20 @@ struct DeformationSolver::Precompute {
   }
 
   // Everything the sampling, the gradients and the certifier's derivatives depend on.
+  bool mesh_domain() const { return setup.mesh && S.params_.domain == DomainKind::kMesh; }
+
   CacheKey key() const {
     CacheKey k("solver");
     k.add_matrix(S.cage_.V).add_matrix(S.cage_.F);
     const SamplingParams sp = S.sampling_params();
     k.add(sp.target_count).add(sp.count_tolerance).add(sp.voxel_side).add(sp.safety);
     k.add(sp.hessian_fraction).add(sp.max_search_iterations);
+    // The domain: the grid, or the mesh's triangles and solid (its exact bytes and the refinement limits).
+    k.add(std::string(mesh_domain() ? "mesh" : "voxels"));
+    if (mesh_domain()) {
+      k.add_matrix(setup.mesh->V).add_matrix(setup.mesh->F);
+      k.add(sp.max_domain_level).add(sp.max_leaves_per_cell);
+    }
     k.add_matrix(S.subspace_.basis).add_matrix(S.subspace_.eigenvalues);
     return k.add_numerics();
   }
@@ -121,15 +130,20 @@ struct DeformationSolver::Precompute {
   void sampling() {
     enter("sampling", 0.02, 0.04);
     const auto t0 = Clock::now();
-    S.sampling_ = sample_voxels(S.cage_, S.sampling_params());  // laid out in frame_ (sampling.h)
+    // Laid out in frame_ (sampling.h, domain_sampling.h).
+    S.sampling_ = mesh_domain() ? sample_domain(S.cage_, setup.mesh->V, setup.mesh->F, S.sampling_params())
+                                : sample_voxels(S.cage_, S.sampling_params());
     S.nsampling_ = S.frame_.to_normalized(S.sampling_);
     if (S.sampling_.size() == 0)
       throw InputError(S.cage_.source,
                        "no voxel of side " + format_g(S.sampling_.side, 4) +
                            " fits inside the cage (use a smaller voxel_side or more samples)");
-    say("sampling: " + std::to_string(S.sampling_.size()) + " voxels of side " +
-        format_g(S.sampling_.side, 4) + ", " + std::to_string(S.sampling_.hessian_subset.size()) +
-        " in the Hessian subset (" + format_g(ms_since(t0), 4) + " ms)");
+    say("sampling (" + S.sampling_.domain + " domain): " + std::to_string(S.sampling_.size()) +
+        " voxels of side " + format_g(S.sampling_.side, 4) +
+        (S.sampling_.max_level() > 0 ? " refined to level " + std::to_string(S.sampling_.max_level())
+                                     : std::string()) +
+        ", " + std::to_string(S.sampling_.hessian_subset.size()) + " in the Hessian subset (" +
+        format_g(ms_since(t0), 4) + " ms)");
   }
 
   void certifier() {
@@ -241,6 +255,21 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
           }(),
           std::move(backend)) {}
 
+DeformationSolver::DeformationSolver(const Cage& cage, const TriMesh& mesh, const DeformParams& params,
+                                     const std::string& cache_dir,
+                                     const std::function<void(const std::string&)>& log,
+                                     std::shared_ptr<const ComputeBackend> backend)
+    : DeformationSolver(
+          cage, params,
+          [&] {
+            PrecomputeSetup s;
+            s.cache_dir = cache_dir;
+            s.log = log;
+            s.mesh = &mesh;
+            return s;
+          }(),
+          std::move(backend)) {}
+
 DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
                                      const PrecomputeSetup& setup,
                                      std::shared_ptr<const ComputeBackend> backend)
@@ -264,6 +293,11 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   }
   energy_ = std::make_unique<DeformationEnergy>(pc.gradients(), nsampling_.hessian_subset,
                                                 subspace_.eigenvalues, ncage_.num_edges());
+  if (nsampling_.max_level() > 0) {  // volume weights of the refined leaves (deformation_energy.h)
+    VecXd w(nsampling_.size());
+    for (int i = 0; i < nsampling_.size(); ++i) w(i) = nsampling_.weight_of(i);
+    energy_->set_sample_weights(w);
+  }
 
   pc.enter("certificate of the identity", pc.end, cached || !pc.cache.enabled() ? 1.0 : 0.93);
   auto t0 = Clock::now();
@@ -304,6 +338,7 @@ void DeformationSolver::set_params(const DeformParams& p) {
   q.voxel_side = params_.voxel_side;
   q.safety = params_.safety;
   q.hessian_fraction = params_.hessian_fraction;
+  q.domain = params_.domain;
   params_ = q;
   if (weights_changed) {
     weights_ = {params_.lambda_p2p, params_.lambda_smooth};

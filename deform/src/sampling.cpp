@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <numeric>
@@ -14,6 +15,7 @@
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
 #include "lidef/mesh_io.h"
+#include "lidef/mesh_queries.h"
 #include "lidef/normalization.h"
 
 namespace lidef {
@@ -22,85 +24,15 @@ double VoxelSampling::radius() const {
   return 0.5 * std::sqrt(3.0) * side;
 }
 
+double VoxelSampling::radius_of(int i) const {
+  return 0.5 * std::sqrt(3.0) * side_of(i);
+}
+
+int VoxelSampling::max_level() const {
+  return level.empty() ? 0 : *std::max_element(level.begin(), level.end());
+}
+
 namespace {
-
-// Uniform bucket grid of cage faces answering "is any face closer than R to p?" (the clearance test).
-// A face is registered in every cell it can touch (cell center within the cell's half-diagonal of the face),
-// so the cells overlapping the box [p − R, p + R] hold every face within R of p.
-class FaceGrid {
- public:
-  FaceGrid(const Cage& cage, double cell) : cage_(cage), cell_(cell) {
-    origin_ = cage.bbox_min - Vec3::Constant(cell);
-    for (int a = 0; a < 3; ++a)
-      dims_[a] = static_cast<int>(std::ceil((cage.bbox_max(a) - origin_(a)) / cell)) + 1;
-    const double reach2 = std::pow(0.5 * std::sqrt(3.0) * cell, 2) * (1 + 1e-9);
-    std::vector<std::pair<long, int>> pairs;
-    for (int t = 0; t < cage.num_faces(); ++t) {
-      const Vec3 a = cage.V.row(cage.F(t, 0)), b = cage.V.row(cage.F(t, 1)), c = cage.V.row(cage.F(t, 2));
-      const Vec3 lo = a.cwiseMin(b).cwiseMin(c), hi = a.cwiseMax(b).cwiseMax(c);
-      int l[3], h[3];
-      for (int k = 0; k < 3; ++k) {
-        l[k] = clampi(static_cast<int>(std::floor((lo(k) - origin_(k)) / cell)), k);
-        h[k] = clampi(static_cast<int>(std::floor((hi(k) - origin_(k)) / cell)), k);
-      }
-      for (int z = l[2]; z <= h[2]; ++z)
-        for (int y = l[1]; y <= h[1]; ++y)
-          for (int x = l[0]; x <= h[0]; ++x) {
-            const Vec3 cc = origin_ + (Vec3(x, y, z) + Vec3::Constant(0.5)) * cell;
-            if (point_triangle_dist2(cc, a, b, c) <= reach2) pairs.emplace_back(index(x, y, z), t);
-          }
-    }
-    std::sort(pairs.begin(), pairs.end());
-    start_.assign(static_cast<size_t>(dims_[0]) * dims_[1] * dims_[2] + 1, 0);
-    for (const auto& p : pairs) ++start_[p.first + 1];
-    std::partial_sum(start_.begin(), start_.end(), start_.begin());
-    faces_.resize(pairs.size());
-    for (size_t i = 0; i < pairs.size(); ++i) faces_[i] = pairs[i].second;
-  }
-
-  bool any_within(const Vec3& p, double R) const {
-    int l[3], h[3];
-    for (int k = 0; k < 3; ++k) {
-      l[k] = clampi(static_cast<int>(std::floor((p(k) - R - origin_(k)) / cell_)), k);
-      h[k] = clampi(static_cast<int>(std::floor((p(k) + R - origin_(k)) / cell_)), k);
-    }
-    const double R2 = R * R;
-    for (int z = l[2]; z <= h[2]; ++z)
-      for (int y = l[1]; y <= h[1]; ++y)
-        for (int x = l[0]; x <= h[0]; ++x) {
-          const long c = index(x, y, z);
-          for (int i = start_[c]; i < start_[c + 1]; ++i) {
-            const int t = faces_[i];
-            if (point_triangle_dist2(p, cage_.V.row(cage_.F(t, 0)), cage_.V.row(cage_.F(t, 1)),
-                                     cage_.V.row(cage_.F(t, 2))) < R2)
-              return true;
-          }
-        }
-    return false;
-  }
-
- private:
-  int clampi(int v, int axis) const { return std::min(std::max(v, 0), dims_[axis] - 1); }
-  long index(int x, int y, int z) const { return (static_cast<long>(z) * dims_[1] + y) * dims_[0] + x; }
-
-  const Cage& cage_;
-  double cell_;
-  Vec3 origin_;
-  int dims_[3];
-  std::vector<int> start_, faces_;
-};
-
-inline double cross2(double ax, double ay, double bx, double by) {
-  return ax * by - ay * bx;
-}
-
-inline double seg_dist2_2d(double px, double py, double ax, double ay, double bx, double by) {
-  const double dx = bx - ax, dy = by - ay, dd = dx * dx + dy * dy;
-  double t = dd > 0 ? ((px - ax) * dx + (py - ay) * dy) / dd : 0.0;
-  t = std::min(1.0, std::max(0.0, t));
-  const double ex = ax + t * dx - px, ey = ay + t * dy - py;
-  return ex * ex + ey * ey;
-}
 
 // The grid for one voxel side h, and the scan that classifies its cells.
 //
@@ -109,7 +41,7 @@ inline double seg_dist2_2d(double px, double py, double ax, double ay, double bx
 // enters). That is exact and O(crossings) per line instead of O(#F) per cell. A line passing within `tol_`
 // of a projected triangle edge or vertex (e.g. along a box's face diagonal) is ambiguous; its cells fall back
 // to the solid-angle winding number (Cage::winding_number, |w − 1| < 1e-6).
-// Clearance test: FaceGrid, run only on cells that are inside.
+// Clearance test: TriangleGrid, run only on cells that are inside.
 class GridScan {
  public:
   GridScan(const Cage& cage, double h, double safety)
@@ -150,7 +82,7 @@ class GridScan {
     faces_.resize(pairs.size());
     for (size_t i = 0; i < pairs.size(); ++i) faces_[i] = pairs[i].second;
     // Cells of at least R keep the clearance query to ≤ 27 cells; the floor bounds the grid's size.
-    grid_ = std::make_unique<FaceGrid>(cage, std::max(R_, ext.norm() / 128.0));
+    grid_ = std::make_unique<TriangleGrid>(cage.V, cage.F, std::max(R_, ext.norm() / 128.0));
   }
 
   Vec3 center(int i, int j, int k) const { return origin_ + (Vec3(i, j, k) + Vec3::Constant(0.5)) * h_; }
@@ -245,7 +177,7 @@ class GridScan {
   int dims_[3];
   long nlines_;
   std::vector<int> start_, faces_;
-  std::unique_ptr<FaceGrid> grid_;
+  std::unique_ptr<TriangleGrid> grid_;
 };
 
 // Interleaves the low 21 bits of x, y, z (Morton / Z-order code).
@@ -264,48 +196,18 @@ std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
 
 // sample_voxels on a cage already in its normalized frame (or any cage: the grid is aligned to its bbox).
 VoxelSampling sample_voxels_here(const Cage& cage, const SamplingParams& p) {
-  if (!(p.safety > 1.0))
-    throw InputError(cage.source, "sampling: safety factor must be > 1 (got " + std::to_string(p.safety) +
-                                      "): a voxel ball touching the cage has no finite third-order bound");
-  if (!(p.hessian_fraction >= 0 && p.hessian_fraction <= 1))
-    throw InputError(cage.source, "sampling: hessian_fraction must lie in [0,1]");
-  if (!(cage.volume > 0))
-    throw InputError(cage.source, "sampling: cage encloses non-positive volume (inward-oriented faces?)");
-
+  check_sampling_params(cage, p);
   VoxelSampling out;
   if (p.voxel_side > 0) {
     out = GridScan(cage, p.voxel_side, p.safety).collect();
     out.search_iterations = 1;
   } else {
-    if (p.target_count < 1) throw InputError(cage.source, "sampling: target_count must be >= 1");
-    if (!(p.count_tolerance >= 0)) throw InputError(cage.source, "sampling: count_tolerance must be >= 0");
-    // Count search on h. N(h) ≈ V_eff(h) / h³ (V_eff shrinks with h by the clearance layer), so the secant
-    // step in log space, h ← h (N/T)^{1/3}, converges in a few evaluations; it is safeguarded by bisection
-    // (geometric mean) inside the bracket [h with N > T, h with N < T]. N jumps as the aligned grid shifts
-    // with h, so the tolerance (±3% by default) is met by a band of h, not by a root.
-    const double T = p.target_count;
-    double h = std::cbrt(cage.volume / T);
-    double lo = 0, hi = std::numeric_limits<double>::infinity();  // N(lo) > T > N(hi)
-    double best_h = h;
-    long best_n = -1;
-    int it = 0;
-    for (; it < std::max(1, p.max_search_iterations); ++it) {
-      const long n = GridScan(cage, h, p.safety).count();
-      // Closest count wins, but an empty sampling only when nothing else was seen.
-      if (best_n <= 0 || (n > 0 && std::abs(n - T) < std::abs(best_n - T))) best_n = n, best_h = h;
-      if (std::abs(n - T) <= p.count_tolerance * T) break;
-      if (n > T)
-        lo = std::max(lo, h);
-      else
-        hi = std::min(hi, h);
-      double next = n > 0 ? h * std::cbrt(n / T) : 0.5 * h;
-      if (lo > 0 && std::isfinite(hi) && !(next > lo && next < hi)) next = std::sqrt(lo * hi);
-      if (std::isfinite(hi) && lo > 0 && hi / lo < 1 + 1e-12) break;
-      h = next;
-    }
-    out = GridScan(cage, best_h, p.safety).collect();
-    out.search_iterations = std::min(it + 1, std::max(1, p.max_search_iterations));
-    out.target_met = std::abs(out.size() - T) <= p.count_tolerance * T;
+    const SideSearch ss = search_voxel_side(p, std::cbrt(cage.volume / p.target_count),
+                                            [&](double h) { return GridScan(cage, h, p.safety).count(); });
+    out = GridScan(cage, ss.side, p.safety).collect();
+    out.search_iterations = ss.iterations;
+    out.target_met =
+        std::abs(out.size() - static_cast<double>(p.target_count)) <= p.count_tolerance * p.target_count;
   }
   out.safety = p.safety;
   out.hessian_subset = select_hessian_subset(out, p.hessian_fraction);
@@ -313,6 +215,48 @@ VoxelSampling sample_voxels_here(const Cage& cage, const SamplingParams& p) {
 }
 
 }  // namespace
+
+void check_sampling_params(const Cage& cage, const SamplingParams& p) {
+  if (!(p.safety > 1.0))
+    throw InputError(cage.source, "sampling: safety factor must be > 1 (got " + std::to_string(p.safety) +
+                                      "): a voxel ball touching the cage has no finite third-order bound");
+  if (!(p.hessian_fraction >= 0 && p.hessian_fraction <= 1))
+    throw InputError(cage.source, "sampling: hessian_fraction must lie in [0,1]");
+  if (!(cage.volume > 0))
+    throw InputError(cage.source, "sampling: cage encloses non-positive volume (inward-oriented faces?)");
+  if (!(p.voxel_side > 0)) {
+    if (p.target_count < 1) throw InputError(cage.source, "sampling: target_count must be >= 1");
+    if (!(p.count_tolerance >= 0)) throw InputError(cage.source, "sampling: count_tolerance must be >= 0");
+  }
+}
+
+SideSearch search_voxel_side(const SamplingParams& p, double h0, const std::function<long(double)>& count) {
+  // Count search on h. N(h) ≈ V_eff(h) / h³ (V_eff shrinks with h by the clearance layer), so the secant
+  // step in log space, h ← h (N/T)^{1/3}, converges in a few evaluations; it is safeguarded by bisection
+  // (geometric mean) inside the bracket [h with N > T, h with N < T]. N jumps as the aligned grid shifts
+  // with h, so the tolerance (±3% by default) is met by a band of h, not by a root.
+  const double T = p.target_count;
+  double h = h0;
+  double lo = 0, hi = std::numeric_limits<double>::infinity();  // N(lo) > T > N(hi)
+  double best_h = h;
+  long best_n = -1;
+  int it = 0;
+  for (; it < std::max(1, p.max_search_iterations); ++it) {
+    const long n = count(h);
+    // Closest count wins, but an empty sampling only when nothing else was seen.
+    if (best_n <= 0 || (n > 0 && std::abs(n - T) < std::abs(best_n - T))) best_n = n, best_h = h;
+    if (std::abs(n - T) <= p.count_tolerance * T) break;
+    if (n > T)
+      lo = std::max(lo, h);
+    else
+      hi = std::min(hi, h);
+    double next = n > 0 ? h * std::cbrt(n / T) : 0.5 * h;
+    if (lo > 0 && std::isfinite(hi) && !(next > lo && next < hi)) next = std::sqrt(lo * hi);
+    if (std::isfinite(hi) && lo > 0 && hi / lo < 1 + 1e-12) break;
+    h = next;
+  }
+  return {best_h, std::min(it + 1, std::max(1, p.max_search_iterations))};
+}
 
 // The grid is laid out and the voxel side searched in the cage's normalized frame (normalization.h), so a
 // translated or scaled copy of a model gets the same voxels up to the transform: the search starts from
@@ -353,10 +297,32 @@ std::vector<int> select_hessian_subset(const VoxelSampling& s, double fraction) 
   // at a golden-ratio offset. A fixed offset would alias with the curve's power-of-two structure (with
   // stride 20, the picks' lowest x bit is always the same).
   std::vector<int> out(m);
-  for (int k = 0; k < m; ++k) {
-    const long a = static_cast<long>(k) * n / m, b = static_cast<long>(k + 1) * n / m;
-    const double u = std::fmod(0.5 + k * 0.6180339887498949, 1.0);
-    out[k] = order[std::min(b - 1, a + static_cast<long>(u * (b - a)))];
+  if (s.level.empty()) {
+    for (int k = 0; k < m; ++k) {
+      const long a = static_cast<long>(k) * n / m, b = static_cast<long>(k + 1) * n / m;
+      const double u = std::fmod(0.5 + k * 0.6180339887498949, 1.0);
+      out[k] = order[std::min(b - 1, a + static_cast<long>(u * (b - a)))];
+    }
+  } else {
+    // Refined leaves (mesh domain): strata of equal volume, not of equal count, so that H is spread evenly in
+    // space like the energy's volume weights (a level-k leaf weighs 8^-k). Pick k = the sample whose volume
+    // interval along the curve contains (k + u_k) W / m; a sample is taken at most once.
+    std::vector<double> cum(n + 1, 0.0);
+    for (int r = 0; r < n; ++r) cum[r + 1] = cum[r] + s.weight_of(order[r]);
+    const double W = cum[n];
+    std::vector<char> taken(n, 0);
+    int got = 0;
+    for (int k = 0; k < m; ++k) {
+      const double u = std::fmod(0.5 + k * 0.6180339887498949, 1.0);
+      const double target = (k + u) * W / m;
+      long r = std::upper_bound(cum.begin() + 1, cum.end(), target) - (cum.begin() + 1);
+      r = std::min<long>(r, n - 1);
+      while (r < n - 1 && taken[r]) ++r;
+      if (taken[r]) continue;
+      taken[r] = 1;
+      out[got++] = order[r];
+    }
+    out.resize(got);
   }
   std::sort(out.begin(), out.end());
   return out;
@@ -368,7 +334,7 @@ VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
   const double h = s.side;
   if (!(h > 0)) throw InputError("", "containing_voxel: sampling has no voxel side");
   // Buckets of side h: a cube containing p has its center within h/2 of p in every coordinate, so it sits in
-  // p's bucket or one of the 26 around it.
+  // p's bucket or one of the 26 around it (a refined voxel lies in its base cell: within h of p too).
   const Vec3 o = s.centers.colwise().minCoeff().transpose();
   constexpr long kOff = 1 << 20;
   auto key = [&](long x, long y, long z) {
@@ -381,7 +347,6 @@ VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
     const Vec3 c = s.centers.row(i);
     buckets[key(cell(c, 0), cell(c, 1), cell(c, 2))].push_back(i);
   }
-  const double half = 0.5 * h;
 #pragma omp parallel for schedule(static)
   for (Eigen::Index v = 0; v < P.rows(); ++v) {
     const Vec3 p = P.row(v);
@@ -394,7 +359,7 @@ VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
           auto it = buckets.find(key(cx + dx, cy + dy, cz + dz));
           if (it == buckets.end()) continue;
           for (int i : it->second)
-            if ((p - s.centers.row(i).transpose()).cwiseAbs().maxCoeff() <= half) {
+            if ((p - s.centers.row(i).transpose()).cwiseAbs().maxCoeff() <= 0.5 * s.side_of(i)) {
               found = i;
               break;
             }

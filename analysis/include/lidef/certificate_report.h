@@ -18,6 +18,7 @@
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
+#include "lidef/tri_mesh.h"
 #include "lidef/types.h"
 
 namespace lidef {
@@ -33,6 +34,12 @@ struct CertificateReport {
   long mesh_vertices = 0;
   double mesh_coverage = 0;             // fraction of mesh vertices inside the union of the base voxels
   long mesh_vertices_uncovered = 0;
+  // The certified domain (docs/certificate.md): "mesh" (D = the mesh's triangles and solid, sample_domain)
+  // or "voxels" (the paper's grid); the leaves that meet D (exact test, cubes_meeting_mesh_domain) and the
+  // voxels the certifier refused as not clear of the cage.
+  std::string domain = "voxels";
+  long leaves_meeting_domain = 0;
+  long uncleared_voxels = 0;
   SamplingParams sampling_params;       // as requested (voxel_side 0 = searched from target_count)
   // As obtained (the VoxelSampling fields that the report needs; the centers are not stored).
   double sampling_radius = 0;
@@ -49,10 +56,11 @@ struct CertificateReport {
 std::uint64_t coefficients_hash(const MatX3d& y);
 
 // Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
-CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const MatX3d& mesh_V,
-                                          const MatX3d& y, const std::string& model, const std::string& coefficients,
-                                          const SamplingParams& sampling_params, const VoxelSampling& sampling,
-                                          const CertifyParams& params);
+CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
+                                          const MatX3d& y, const std::string& model,
+                                          const std::string& coefficients,
+                                          const SamplingParams& sampling_params,
+                                          const VoxelSampling& sampling, const CertifyParams& params);
 
 // voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified`, one row per leaf in leaf order
 // (base-voxel order, children depth-first), certified = 1/0.

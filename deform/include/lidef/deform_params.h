@@ -17,8 +17,12 @@ namespace lidef {
 enum class HessianPrecision { kSingle, kDouble };
 // Where the per-sample stages run: the CPU, an OpenCL device, or OpenCL when a device with fp64 works.
 enum class BackendKind { kCpu, kOpenCL, kAuto };
+// What the voxels (energy samples and certified leaves) cover: the mesh and its solid (domain_sampling.h), or
+// the paper's grid of cells clear of the cage (sample_voxels), kept for comparison with the paper.
+enum class DomainKind { kMesh, kVoxels };
 const char* to_string(HessianPrecision p);  // "single" / "double"
 const char* to_string(BackendKind b);       // "cpu" / "opencl" / "auto"
+const char* to_string(DomainKind d);        // "mesh" / "voxels"
 
 struct DeformParams {
   // --- Subspace and sampling
@@ -27,6 +31,7 @@ struct DeformParams {
   double voxel_side = 0;           // > 0: use this voxel side instead of searching from `samples`
   double safety = 1.5;             // voxel center to cage >= safety * voxel radius
   double hessian_fraction = 0.05;  // |H| / |I|
+  DomainKind domain = DomainKind::kMesh;  // the certified domain (samples = its leaf count)
   // --- Energy E = E_dis + λ1 E_P2P + λ2 E_smooth
   double lambda_p2p = 1e5;     // λ1
   double lambda_smooth = 0.1;  // λ2
@@ -89,7 +94,7 @@ struct ParamInfo {
   using Member =
       std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*, bool DeformParams::*,
                    std::string DeformParams::*, LipschitzBound DeformParams::*,
-                   HessianPrecision DeformParams::*, BackendKind DeformParams::*>;
+                   HessianPrecision DeformParams::*, BackendKind DeformParams::*, DomainKind DeformParams::*>;
   const char* name;   // JSON key; the CLI flag is "--" + name with '_' → '-'
   const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution", "testing"
   Member member;

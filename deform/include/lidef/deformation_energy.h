@@ -6,10 +6,12 @@
 //   E_smooth = (1/|E|) ‖K Ξ ỹ‖² = (1/|E|) Σ_j μ_j ‖ỹ_j‖²  (Ξ's columns are eigenvectors of KᵀK, eigenvalues
 //   μ)
 //
-// Weighting (MATH-NOTES leaves it open): all voxels have the same volume, so the mean over samples is the
-// paper's volume-weighted integral divided by the sampled volume — independent of the sampling density, and
-// 0 at rigid maps. Like the reference code, E_smooth is divided by the number of cage edges |E| so that λ2
-// means the same on coarse and fine cages. E_P2P is a plain sum (paper) so λ1 keeps the paper's meaning.
+// Weighting (MATH-NOTES leaves it open): on the paper's grid all voxels have the same volume, so the mean
+// over samples is the paper's volume-weighted integral divided by the sampled volume — independent of the
+// sampling density, and 0 at rigid maps. The mesh domain's refined leaves are smaller: set_sample_weights
+// gives each its volume (see there). Like the reference code, E_smooth is divided by the number of cage edges
+// |E| so that λ2 means the same on coarse and fine cages. E_P2P is a plain sum (paper) so λ1 keeps the
+// paper's meaning.
 //
 // Layouts. ỹ: s by 3 (column a = coordinate a). vec(ỹ) is column-major: index j + s·a. Jacobians at the
 // samples are stored as one 3|I| by 3 matrix JT with JT(3i+b, a) = J_i(a,b) = ∂f_a/∂p_b (J_iᵀ in rows
@@ -58,6 +60,11 @@ class DeformationEnergy {
   // D: #h by s reduced basis values at the handle sources (f(p_h) = D_h ỹ); Q: #h by 3 targets.
   void set_handles(const MatXd& D, const MatX3d& Q);
   void set_targets(const MatX3d& Q);
+  // Per-sample volume weights (#I, > 0; empty = all 1): the mesh domain's leaves of level k weigh 8^-k
+  // (VoxelSampling::weight_of). They are rescaled to mean 1, so E_dis = (1/|I|) Σ w_i (E_iso(J_i) − 6) stays
+  // the volume-weighted mean; the Hessian subset's blocks weigh w_i / Σ_H w.
+  void set_sample_weights(const VecXd& w);
+  bool weighted() const { return w_.size() > 0; }
 
   int reduced_size() const { return static_cast<int>(G_.cols()); }
   int num_samples() const { return static_cast<int>(G_.rows() / 3); }
@@ -108,6 +115,7 @@ class DeformationEnergy {
   MatXd pair_blocks(const MatJT& JT, bool projected, bool all_samples, bool double_precision) const;
   MatXd products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const;
   void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
+  VecXd block_weights(const std::vector<int>& idx) const;  // per subset sample: 1/m, or w_i / Σ w
   MatXfR G_;
   std::vector<int> subset_;
   MatXfR GH_;  // 3|H| by s, the rows of G at the subset, single precision
@@ -116,6 +124,7 @@ class DeformationEnergy {
   MatXd D_;    // #h by s
   MatX3d Q_;   // #h by 3
   MatXd DtD_;  // s by s
+  VecXd w_;    // #I sample weights with mean 1, or empty (uniform)
 };
 
 }  // namespace lidef

@@ -1,5 +1,6 @@
 // Small geometric primitives shared by the basis, the validator and the sampler.
 #pragma once
+#include <algorithm>
 #include <cmath>
 
 #include "lidef/types.h"
@@ -15,6 +16,20 @@ inline double solid_angle_fraction(const Vec3& a, const Vec3& b, const Vec3& c, 
   const double num = la.dot(lb.cross(lc));
   const double den = na * nb * nc + la.dot(lb) * nc + lb.dot(lc) * na + lc.dot(la) * nb;
   return std::atan2(num, den) / (2.0 * M_PI);
+}
+
+// z component of the 2D cross product (a × b).
+inline double cross2(double ax, double ay, double bx, double by) {
+  return ax * by - ay * bx;
+}
+
+// Squared distance from (px,py) to the closed 2D segment [(ax,ay), (bx,by)].
+inline double seg_dist2_2d(double px, double py, double ax, double ay, double bx, double by) {
+  const double dx = bx - ax, dy = by - ay, dd = dx * dx + dy * dy;
+  double t = dd > 0 ? ((px - ax) * dx + (py - ay) * dy) / dd : 0.0;
+  t = std::min(1.0, std::max(0.0, t));
+  const double ex = ax + t * dx - px, ey = ay + t * dy - py;
+  return ex * ex + ey * ey;
 }
 
 // Squared distance from p to the closed segment [a,b].

@@ -80,13 +80,22 @@ struct Certificate {
   // (false when it was not asked for, the map is not certified, or depth/budget ran out first).
   double bound_tolerance = 0;
   bool bound_tolerance_met = false;
+  // Voxels the guard refused: their ball is not clear of the cage (see OctreeCertifier). Any → not certified.
+  long uncleared_voxels = 0;
   std::vector<CertLeaf> leaves;   // when keep_leaves (in base-voxel order, children depth-first)
   std::vector<CertLeaf> failing;  // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
 
+// Per voxel i, B(center_i, radius_of(i)) must be clear of the cage: distance from the center to the cage >
+// radius and winding number 1 at the center. The bounds' argument (docs/certificate.md) needs the ball inside
+// the cage's interior; a voxel that is not clear is never certified (margin −∞, not refined, the reason names
+// it), whoever built the sampling. The cage is closed, so the winding number is an exact crossing count.
+std::vector<char> balls_clear_of_cage(const Cage& cage, const VoxelSampling& sampling);
+
 // Precomputes everything that depends only on the cage and the voxels (per-voxel per-edge bound factors,
-// basis derivatives at the centers) once; certify() then does only map-dependent work.
+// basis derivatives at the centers, the clearance guard above) once; certify() then does only map-dependent
+// work.
 class OctreeCertifier {
  public:
   // `reduction` (#V+#F by s, optional): the subspace y = Ξ ỹ in which certify_reduced() is called; the

@@ -26,7 +26,7 @@ namespace lidef {
 
 // Bump whenever the content or meaning of any entry changes (a new stage, other numerics): older entries
 // then miss instead of being trusted.
-constexpr std::uint32_t kPrecomputeFormatVersion = 1;
+constexpr std::uint32_t kPrecomputeFormatVersion = 2;  // 2: samplings carry level, domain, uncleared
 
 // $LIDEF_CACHE_MAX_MB (MiB) when set, else 4096 MiB.
 std::uint64_t default_cache_max_bytes();
@@ -187,9 +187,11 @@ class PrecomputeCache {
 void write_sampling(CacheWriter& w, const VoxelSampling& s);
 VoxelSampling read_sampling(CacheReader& r);  // throws CacheReader::Bad
 
-// sample_voxels(cage, params) through the cache (entry kind "sampling"; `lidef certify`).
-VoxelSampling cached_sample_voxels(const Cage& cage, const SamplingParams& params,
-                                   const PrecomputeCache& cache, CacheEvent* event = nullptr);
+// sample_for_domain(domain, cage, mesh_V, mesh_F, params) (domain_sampling.h) through the cache (entry kind
+// "sampling"; `lidef certify`): keyed by the cage, the parameters, the domain and, for "mesh", the mesh.
+VoxelSampling cached_sample_for_domain(const std::string& domain, const Cage& cage, const MatX3d& mesh_V,
+                                       const MatX3i& mesh_F, const SamplingParams& params,
+                                       const PrecomputeCache& cache, CacheEvent* event = nullptr);
 
 // "hit 12.3 MB in 40 ms" etc., and "cache: 3 entries, 1.2 GB of 4.0 GB" (for logs).
 std::string describe(const CacheEvent& e);

@@ -42,6 +42,7 @@
 #include "lidef/precompute_cache.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
+#include "lidef/tri_mesh.h"
 #include "lidef/types.h"
 
 namespace lidef {
@@ -63,6 +64,9 @@ struct PrecomputeSetup {
   std::function<void(const std::string& stage, double fraction)> progress;
   // Polled at every chunk of work; once set the constructor throws Cancelled.
   const std::atomic<bool>* cancel = nullptr;
+  // The model's mesh (#V by 3, #F by 3), read during construction only: with params.domain "mesh" the voxels
+  // cover its triangles and solid (domain_sampling.h); nullptr = the paper's grid.
+  const TriMesh* mesh = nullptr;
 };
 
 // One Newton iteration, as iterations.csv records it.
@@ -117,14 +121,22 @@ class DeformationSolver {
   // samples/voxel_side, safety, hessian_fraction, threads). `log` receives one line per preprocessing stage.
   // `backend` runs the per-sample stages (compute_backend.h); nullptr = the CPU backend. The front end turns
   // params.backend ("cpu", "opencl", "auto") into one (opencl/include/lidef/opencl_backend.h).
+  //
+  // The voxels (energy samples and certificate) cover params.domain: "mesh" (domain_sampling.h: the mesh's
+  // triangles and solid; needs `mesh`) or "voxels" (the paper's grid). Without a mesh the domain is the grid,
+  // whatever params.domain says, and sampling().domain reports it ("voxels").
   DeformationSolver(const Cage& cage, const DeformParams& params,
                     const std::string& cache_dir = default_cache_dir(),
                     const std::function<void(const std::string&)>& log = {},
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
-  // The same with progress, cancellation and the cache limit. The sampling, the reduced basis gradients and
-  // the certifier's derivatives come from the cache when it holds them for exactly this cage, these
-  // parameters and this subspace (else they are computed and stored): the solver is the same either way, byte
-  // for byte.
+  DeformationSolver(const Cage& cage, const TriMesh& mesh, const DeformParams& params,
+                    const std::string& cache_dir = default_cache_dir(),
+                    const std::function<void(const std::string&)>& log = {},
+                    std::shared_ptr<const ComputeBackend> backend = nullptr);
+  // The same with progress, cancellation, the cache limit and the mesh (setup.mesh). The sampling, the reduced
+  // basis gradients and the certifier's derivatives come from the cache when it holds them for exactly this
+  // cage, mesh domain, these parameters and this subspace (else they are computed and stored): the solver is
+  // the same either way, byte for byte.
   DeformationSolver(const Cage& cage, const DeformParams& params, const PrecomputeSetup& setup,
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
   ~DeformationSolver();

@@ -8,6 +8,8 @@
 // f = 2p — and the third-order bound (66)/(67) of the certificate, which needs ‖l‖ − r > 0 and grows without
 // bound as a ball nears the cage, stays finite on every voxel.
 #pragma once
+#include <cmath>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -29,18 +31,33 @@ struct SamplingParams {
   // select_hessian_subset).
   double hessian_fraction = 0.05;
   int max_search_iterations = 40;
+  // Mesh domain (domain_sampling.h): octree levels below the base grid when refining toward the cage, and the
+  // most leaves one base cell may be split into (a mesh crossing the cage would otherwise refine forever).
+  int max_domain_level = 12;
+  int max_leaves_per_cell = 4096;
 };
 
 struct VoxelSampling {
   MatX3d centers;                   // #I by 3 voxel centers, grid order (z slowest, x fastest)
-  double side = 0;                  // cube side h
-  double radius() const;            // (√3/2) h, center-to-corner: the radius condition (6) uses
+  double side = 0;                  // base cube side h (a voxel of level k has side h / 2^k)
+  double radius() const;            // (√3/2) h, center-to-corner of a base voxel
+  // Per-voxel octree level below the base grid (#I, or empty: every voxel is a base voxel). The mesh domain
+  // (domain_sampling.h) refines toward the cage; everything that uses a voxel's size asks side_of/radius_of.
+  std::vector<int> level;
+  double side_of(int i) const { return level.empty() ? side : std::ldexp(side, -level[i]); }
+  double radius_of(int i) const;  // (√3/2) side_of(i): the radius condition (6) uses
+  double weight_of(int i) const { return level.empty() ? 1.0 : std::ldexp(1.0, -3 * level[i]); }  // 8^-k
+  int max_level() const;
   std::vector<int> hessian_subset;  // ascending indices into centers (the set H)
   Vec3 origin = Vec3::Zero();       // grid origin: center of cell (i,j,k) = origin + ((i,j,k) + 0.5) h
   MatX3i grid_index;          // #I by 3 cell indices (i,j,k); empty when the centers are not on one grid
   double safety = 0;          // clearance factor the centers satisfy (0 = unknown, e.g. published samples)
   int search_iterations = 0;  // voxel-side evaluations the count search used
   bool target_met = true;     // false if the search ended without reaching the count tolerance
+  // What the voxels cover: "voxels" (sample_voxels: the grid cells clear of the cage) or "mesh"
+  // (sample_domain: every cell meeting the mesh's triangles or solid, refined until clear of the cage).
+  std::string domain = "voxels";
+  long uncleared = 0;  // mesh domain: leaves meeting D still not clear of the cage at the maximum depth
   int size() const { return static_cast<int>(centers.rows()); }
 };
 
@@ -53,6 +70,19 @@ struct VoxelSampling {
 // target_met = false. Throws InputError on bad parameters or a cage with non-positive volume.
 VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& params = SamplingParams());
 
+// Throws InputError (naming the cage) on parameters no sampler accepts, or a cage of non-positive volume.
+void check_sampling_params(const Cage& cage, const SamplingParams& params);
+
+// The voxel-side search shared by the samplers: from h0, secant steps in log space on count(h) ≈ C / h³,
+// safeguarded by bisection, until |count − target_count| ≤ count_tolerance · target_count or
+// max_search_iterations; returns the side with the closest count and the number of evaluations.
+struct SideSearch {
+  double side = 0;
+  int iterations = 0;
+};
+SideSearch search_voxel_side(const SamplingParams& params, double h0,
+                             const std::function<long(double)>& count);
+
 // The Hessian subset rule: samples ordered along a Morton (Z-order) curve of their grid indices, cut into
 // |H| = round(fraction · #I) strata of consecutive ranks, one pick per stratum at a golden-ratio offset
 // (stratified sampling along a space-filling curve). H is spread evenly in 3D without the aliasing of
@@ -61,7 +91,7 @@ VoxelSampling sample_voxels(const Cage& cage, const SamplingParams& params = Sam
 // Returns ascending indices into sampling.centers; at least one when fraction > 0 and #I > 0.
 std::vector<int> select_hessian_subset(const VoxelSampling& sampling, double fraction);
 
-// For each point (#P by 3), the index of a voxel (closed cube of side h) containing it, or -1.
+// For each point (#P by 3), the index of a voxel (closed cube of side side_of(i)) containing it, or -1.
 VecXi containing_voxel(const VoxelSampling& sampling, const MatX3d& points);
 
 // Fraction of mesh vertices (#V by 3) inside the union of the voxels (closed cubes).
