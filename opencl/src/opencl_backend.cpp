@@ -633,9 +633,18 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       d_->queue.enqueueReadBuffer(out_, CL_TRUE, 0, res.size() * sizeof(double), res.data());
       return 0;
     });
-    for (long j = 0; j < count; ++j)
-      out[j] = {res[6 * j],     res[6 * j + 1], res[6 * j + 2],
-                res[6 * j + 3], res[6 * j + 4], res[6 * j + 5] != 0};
+    // Named fields, not a braced list: NodeValues grew fields (the combined bound's, CPU only) and a positional
+    // list silently put the sign flag into one of them.
+    for (long j = 0; j < count; ++j) {
+      NodeValues& v = out[j];
+      v = NodeValues();
+      v.sigma3 = res[6 * j];
+      v.hnorm = res[6 * j + 1];
+      v.own_bound = res[6 * j + 2];
+      v.scale_J = res[6 * j + 3];
+      v.scale_H = res[6 * j + 4];
+      v.sign_unresolved = res[6 * j + 5] != 0;
+    }
   }
 
  private:
