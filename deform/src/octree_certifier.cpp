@@ -348,9 +348,6 @@ struct OctreeCertifier::Run {
   // the magnitudes summed); `storage` covers float storage of the basis derivatives: each stored value is
   // within 2⁻²⁴ of the exact one, so Σ|ΔJ_ab| ≤ 2⁻²⁴·3·cmax·Σ|G| and ‖ΔH‖_F ≤ 2⁻²⁴·6·cmax·Σ|H|, and by
   // Weyl |Δσ3| ≤ ‖ΔJ‖₂ ≤ Σ|ΔJ_ab|, |Δ‖H‖| ≤ ‖ΔH‖_F.
-  // Octree level of base voxel i below the base grid (mesh domain; 0 for the paper's grid).
-  int level(long i) const { return oc.sampling_.level.empty() ? 0 : oc.sampling_.level[i]; }
-  std::vector<long> uncleared;  // base voxels refused by the guard
   static double tolerance(double sJ, double sH, double s3, double L, double rad, double storage) {
     return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
   }
@@ -446,6 +443,10 @@ struct OctreeCertifier::Run {
     }
     cert.ms_sigma = ms_since(t0);
   }
+
+  // Octree level of base voxel i below the base grid (mesh domain; 0 for the paper's grid).
+  int level(long i) const { return oc.sampling_.level.empty() ? 0 : oc.sampling_.level[i]; }
+  std::vector<long> uncleared;  // base voxels refused by the guard
 
   // --- 3. Lipschitz constants of the base voxels: δ norms (map) times the per-voxel per-edge factors (cage
   // only), and condition (6) for each base voxel.

@@ -241,34 +241,28 @@ struct DeformationSolver::Precompute {
   }
 };
 
+namespace {
+PrecomputeSetup setup_of(const std::string& cache_dir, const std::function<void(const std::string&)>& log,
+                         const TriMesh* mesh) {
+  PrecomputeSetup s;
+  s.cache_dir = cache_dir;
+  s.log = log;
+  s.mesh = mesh;
+  return s;
+}
+}  // namespace
+
 DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
                                      const std::string& cache_dir,
                                      const std::function<void(const std::string&)>& log,
                                      std::shared_ptr<const ComputeBackend> backend)
-    : DeformationSolver(
-          cage, params,
-          [&] {
-            PrecomputeSetup s;
-            s.cache_dir = cache_dir;
-            s.log = log;
-            return s;
-          }(),
-          std::move(backend)) {}
+    : DeformationSolver(cage, params, setup_of(cache_dir, log, nullptr), std::move(backend)) {}
 
 DeformationSolver::DeformationSolver(const Cage& cage, const TriMesh& mesh, const DeformParams& params,
                                      const std::string& cache_dir,
                                      const std::function<void(const std::string&)>& log,
                                      std::shared_ptr<const ComputeBackend> backend)
-    : DeformationSolver(
-          cage, params,
-          [&] {
-            PrecomputeSetup s;
-            s.cache_dir = cache_dir;
-            s.log = log;
-            s.mesh = &mesh;
-            return s;
-          }(),
-          std::move(backend)) {}
+    : DeformationSolver(cage, params, setup_of(cache_dir, log, &mesh), std::move(backend)) {}
 
 DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& params,
                                      const PrecomputeSetup& setup,
