@@ -12,6 +12,7 @@
 #include "commands.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
+#include "lidef/coefficients.h"
 #include "lidef/compare/compare.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
@@ -82,7 +83,8 @@ void add_compare_options(CLI::App& app, Action& action) {
   sub->footer(
       "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and "
       "per\n"
-      "method METHOD.obj, METHOD.vtp (E_iso_minus_6 and detJ for the volumetric methods) and METHOD.log.\n"
+      "method METHOD.obj, METHOD.vtp (E_iso_minus_6 and detJ for the volumetric methods), METHOD.log and, for\n"
+      "the harmonic methods (lidef, vhm), METHOD.coefficients.txt.\n"
       "A failing method is reported in the table and the others still run. Exit code: 0 every method ran,\n"
       "1 some method failed (the table says why), 2 bad input. Methods and criteria: docs/compare.md.");
   sub->callback([opts, &action] {
@@ -119,8 +121,13 @@ void add_compare_options(CLI::App& app, Action& action) {
       for (const MethodResult& r : rows) {
         if (!r.ok) {
           any_failed = true;
-          for (const char* ext : {".obj", ".vtp"}) stale.push_back(r.method + ext);
+          for (const char* ext : {".obj", ".vtp", ".coefficients.txt"}) stale.push_back(r.method + ext);
         } else {
+          // The harmonic methods' maps (lidef, VHM), so that `lidef certify` / `verify` can judge them on any
+          // domain (the table's "certified" is on the paper's grid).
+          if (r.coefficients.rows() > 0)
+            write_file_atomic(out.path(r.method + ".coefficients.txt"),
+                              [&](std::ostream& s) { write_coefficients(s, r.coefficients); });
           write_file_atomic(out.path(r.method + ".obj"), [&](std::ostream& s) {
             write_obj(s, r.V, model.mesh.F, "lidef compare " + sc.name + ": " + r.method);
           });

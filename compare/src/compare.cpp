@@ -121,6 +121,7 @@ void run_lidef(Shared& s, MethodResult& r) {
   const VecXd he = solver.handle_errors();
   r.max_handle_error = he.size() ? he.maxCoeff() : 0.0;
   const MatX3d y = solver.coefficients();
+  r.coefficients = y;
   set_fields(mesh_fields(solver.basis(), y, s.model.mesh.V), r);
   const Certificate& cert = solver.certificate();
   r.certified = cert.certified ? 1 : 0;
@@ -263,6 +264,7 @@ void run_vhm(Shared& s, MethodResult& r) {
   r.stop = res.message;
   r.dof = solver.dof();
   r.max_handle_error = solver.handle_errors().maxCoeff();
+  r.coefficients = solver.coefficients();
   set_fields(mesh_fields(basis, solver.coefficients(), s.model.mesh.V), r);
   // Fig. 11: lidef's certificate on lidef's voxels judges VHM's injectivity (not part of VHM's time).
   s.say(r.method, "certifying the result");

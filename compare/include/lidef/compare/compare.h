@@ -76,6 +76,7 @@ struct MethodResult {
   // vertex.
   MatX3d V;
   VecXd e_iso, det_j;
+  MatX3d coefficients;  // harmonic methods (lidef, vhm): the map's #V+#F by 3 cage coefficients; else empty
   std::string log;  // one line per iteration
 };
 
