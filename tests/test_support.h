@@ -13,15 +13,11 @@
 
 namespace lidef::test {
 
-// ../shared/data (or $LIDEF_SHARED_DATA). Empty string when absent.
-inline std::string shared_data() {
-  if (const char* env = std::getenv("LIDEF_SHARED_DATA")) return env;
-  const std::string d = LIDEF_SHARED_DATA_DIR;
-  return std::filesystem::is_directory(d) ? d : std::string();
-}
+// ../shared/data (or $LIDEF_SHARED_DATA). Empty string when absent. (test_paths.cpp)
+std::string shared_data();
 inline std::string shared_model(const std::string& name) { return shared_data() + "/models/" + name; }
-inline std::string project_data() { return LIDEF_DATA_DIR; }
-inline std::string cli() { return LIDEF_CLI; }
+std::string project_data();  // the repository's data/
+std::string cli();           // the lidef executable of this build
 
 // Whole file as bytes ("" when unreadable).
 inline std::string read_text(const std::string& path) {
