@@ -2,7 +2,8 @@
 #   make demo   install what is missing, build, run the main job on the project's default model
 #   make test   install what is missing, build, run the whole test suite
 # CI (.ci/run) adds:
-#   make check-sanitize-ci  the readers built with ASan + UBSan (gcc): corpus, kept findings, deterministic mutants
+#   make check-sanitize-ci  clang ASan + UBSan: the sanitized subset of the unit tests, then every reader's
+#                           libFuzzer target for 20 s from the corpus and the kept findings
 # By hand (README, "Sanitizers and fuzzing"):
 #   make check-sanitize  the unit tests built with ASan + UBSan in build-asan/ (gcc), failing on any report
 #   make fuzz            every reader's libFuzzer target (clang) for FUZZ_SECONDS each, failing on any finding
@@ -46,19 +47,22 @@ check-sanitize: deps
 	@cmake --build $(ASAN_BUILD) -j $(JOBS)
 	@bash scripts/check-sanitize.sh $(ASAN_BUILD) $(JOBS)
 
-# What CI runs (.ci/run): the same ASan + UBSan flags on the readers only — the fuzz targets' replays of the seed
-# corpus and every kept finding, then LIDEF_REPLAY_MUTANTS deterministic mutants per target
-# (fuzz/replay_main.cpp). Only lidef_core, lidef_cage and the replay programs are compiled, which keeps the
-# cold build within CI's budget (README, "Sanitizers and fuzzing").
-ASAN_CI_BUILD ?= build-asan-ci
-CI_MUTANTS ?= 20000
+# What CI runs (.ci/run): one clang build with ASan + UBSan (and libFuzzer's coverage) of the libraries, compiled
+# once for both of its parts:
+#   1. the sanitized subset of the unit tests (tests/CMakeLists.txt, LIDEF_SANITIZE_TEST_SOURCES: the core's and
+#      the analysis library's tests that do not start the CLI), label "sanitize", failing on any report;
+#   2. every reader's libFuzzer target for CI_FUZZ_SECONDS each from the committed corpus and every kept finding
+#      (a kept finding that comes back fails at once), seed 1; a new finding fails CI with its input in the log.
+# -O1 and line tables: ASan's usual level, cheap to compile. README, "Sanitizers and fuzzing".
+ASAN_CI_BUILD ?= build-sanitize-ci
+CI_FUZZ_SECONDS ?= 20
 check-sanitize-ci: deps
-	@cmake -S . -B $(ASAN_CI_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Sanitize \
-	  -DCMAKE_CXX_FLAGS_SANITIZE="-O1 -g1 $(SANITIZE_FLAGS)" -DCMAKE_C_FLAGS_SANITIZE="-O1 -g1 $(SANITIZE_FLAGS)" \
-	  -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" \
-	  -DLIDEF_BUILD_STUDIO=OFF -DLIDEF_BUILD_BENCH=OFF -DLIDEF_REPLAY_MUTANTS=$(CI_MUTANTS) $(CMAKE_FLAGS) > /dev/null
-	@cmake --build $(ASAN_CI_BUILD) -j $(JOBS) --target fuzz_replays
-	@SANITIZE_SELECT='^Fuzz[.]Replay[.]' bash scripts/check-sanitize.sh $(ASAN_CI_BUILD) $(JOBS)
+	@cmake -S . -B $(ASAN_CI_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_C_COMPILER=clang \
+	  -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_CXX_FLAGS_SANITIZE="-O1" -DCMAKE_C_FLAGS_SANITIZE="-O1" \
+	  -DLIDEF_FUZZ=ON -DLIDEF_BUILD_STUDIO=OFF -DLIDEF_BUILD_BENCH=OFF $(CMAKE_FLAGS) > /dev/null
+	@cmake --build $(ASAN_CI_BUILD) -j $(JOBS) --target lidef_sanitize_tests fuzzers
+	@SANITIZE_LABEL='^sanitize$$' bash scripts/check-sanitize.sh $(ASAN_CI_BUILD) $(JOBS)
+	@FUZZ_SEED=1 bash scripts/fuzz.sh $(ASAN_CI_BUILD) $(CI_FUZZ_SECONDS) $(JOBS)
 
 # libFuzzer targets of fuzz/ (clang, ASan + UBSan), each run FUZZ_SECONDS, JOBS at a time; only the libraries
 # the readers need are built (target `fuzzers`). Findings: build-fuzz/fuzz-artifacts/ (fuzz/README.md).

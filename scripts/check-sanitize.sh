@@ -15,10 +15,16 @@ export ASAN_OPTIONS="log_path=$LOGS/asan:detect_leaks=1:strict_string_checks=1:d
 export UBSAN_OPTIONS="log_path=$LOGS/ubsan:print_stacktrace=1:halt_on_error=1"
 # Tests left out under ASan (README, "Sanitizers and fuzzing"): the slow label, as in CI, and
 # $SANITIZE_EXCLUDE (a ctest -E regex) when set.
-# $SANITIZE_SELECT (a ctest -R regex) runs only those tests (`make check-sanitize-ci`: the fuzz replays).
+# $SANITIZE_SELECT (a ctest -R regex) runs only those tests.
+# $SANITIZE_LABEL (a ctest -L regex) runs that label instead of everything but slow (`make check-sanitize-ci`:
+# sanitize, the sanitized subset of the unit tests).
 EXCLUDE=${SANITIZE_EXCLUDE:-}
 SELECT=${SANITIZE_SELECT:-}
-args=(-LE slow -j "$JOBS" --timeout 1500 --output-on-failure)
+if [ -n "${SANITIZE_LABEL:-}" ]; then
+  args=(-L "$SANITIZE_LABEL" -j "$JOBS" --timeout 1500 --output-on-failure)
+else
+  args=(-LE slow -j "$JOBS" --timeout 1500 --output-on-failure)
+fi
 if [ -n "$EXCLUDE" ]; then args+=(-E "$EXCLUDE"); fi
 if [ -n "$SELECT" ]; then args+=(-R "$SELECT"); fi
 rc=0

@@ -35,17 +35,20 @@ run_one() {
   fi
   [ -d "$SRC/fuzz/regressions/$t" ] && dirs+=("$SRC/fuzz/regressions/$t")
   local log=$BUILD/fuzz-work/$t.log
+  # FUZZ_SEED (CI: 1) fixes libFuzzer's random choices; with a time budget the number of runs still varies.
   if "$BUILD/fuzz/lidef_fuzz_$t" -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
-      -print_final_stats=1 -artifact_prefix="$ART/$t-" "${dirs[@]}" > "$log" 2>&1; then
+      -seed="${FUZZ_SEED:-0}" -print_final_stats=1 -artifact_prefix="$ART/$t-" "${dirs[@]}" > "$log" 2>&1; then
     echo "fuzz: $t: $(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$') runs, no finding"
   else
     echo "fuzz: $t: FINDING (log $log, artifacts $ART/$t-*)"
     tail -n 40 "$log"
+    # The input itself, so that a finding in CI can be reproduced from the log alone.
+    for a in "$ART/$t"-*; do [ -f "$a" ] && echo "fuzz: $a (base64):" && base64 -w 0 "$a" | head -c 8192 && echo; done
     return 1
   fi
 }
 export -f run_one
-export BUILD SRC ART SECONDS_EACH
+export BUILD SRC ART SECONDS_EACH FUZZ_SEED
 echo "fuzz: ${#targets[@]} targets, ${SECONDS_EACH} s each, $JOBS at a time"
 if printf '%s\n' "${targets[@]}" | xargs -P "$JOBS" -I{} bash -c 'run_one {}'; then
   echo "fuzz: no finding"

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs every Debian package lidef needs (libcgal-demo: real meshes in its data.tar.gz, elephant, armadillo,
 # ..., which the automatic-cage tests extract at test time). clang, libclang-rt-14-dev (libFuzzer, clang's
-# ASan/UBSan runtimes) and libomp-dev (OpenMP for clang) are for `make fuzz` only. Idempotent: returns at once
+# ASan/UBSan runtimes) and libomp-dev (OpenMP for clang) are for `make check-sanitize-ci` (CI) and `make fuzz`. Idempotent: returns at once
 # when all are present.
 set -euo pipefail
 PKGS=(

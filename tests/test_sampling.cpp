@@ -336,7 +336,6 @@ TEST(Sampling, SharedModelsDefaultSampling) {
     EXPECT_TRUE(s.target_met);
     EXPECT_LE(std::abs(s.size() - 30000), 0.03 * 30000) << s.size();
     EXPECT_EQ(static_cast<int>(s.hessian_subset.size()), static_cast<int>(std::lround(0.05 * s.size())));
-    EXPECT_LT(secs, 20.0);  // ~0.1 s measured; only a pathological regression trips this
     expect_valid_centers(m.cage, s);
 
     // Determinism: a second run is bit-identical.

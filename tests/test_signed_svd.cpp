@@ -250,7 +250,10 @@ int check_det_sign(const Mat3& J) {
   const int truth = exact_det_sign(J, &exact);
   const DetSign d = det_sign_bounded(J);
   EXPECT_EQ(d.sign, det_sign(J));
-  EXPECT_EQ(d.det, J.determinant());  // the same evaluation as Eigen's
+  // Eigen's determinant is another evaluation of the same Leibniz sum (expanded along a column), so it obeys the
+  // same bound; bit equality is not promised: whether a*b - c*d becomes an FMA depends on the compiler and the
+  // optimization level (gcc -O1 under ASan, clang's -ffp-contract=on), and the bound holds either way.
+  EXPECT_LE(std::abs(d.det - J.determinant()), 2 * d.bound) << "our determinant and Eigen's disagree";
   EXPECT_LE(std::abs(d.det - exact), d.bound * (1 + 1e-12)) << "the bound does not hold";
   if (d.sign != 0) {
     EXPECT_EQ(d.sign, truth) << "det_sign is wrong: exact det " << exact;
