@@ -261,7 +261,14 @@ TEST(ReproduceSlow, Fig6Fig7Fig8Fig9QuickOnSharedData) {
     const int rc = reproduce(tmp, name, true, &out);
     // fig6 cannot measure its claim when even the smoothed case never reaches the targets: exit 1, reported.
     ASSERT_TRUE(rc == 0 || (name == "fig6" && rc == 1)) << name << "\n" << out;
-    if (rc == 0) check_structure(tmp / ("out/" + name), name, name + ".csv", header);
+    if (rc != 0) continue;
+    const nlohmann::json s = check_structure(tmp / ("out/" + name), name, name + ".csv", header);
+    if (name == "fig9") {
+      // Fixed vs dynamic weights in one Newton solve each: the continuation must not have run.
+      EXPECT_EQ(s["data"]["continuation"], false);
+      EXPECT_NE(s["models"].get<std::string>().find("continuation off"), std::string::npos);
+      for (const char* run : {"fixed", "dynamic"}) EXPECT_TRUE(s["data"].contains(run)) << run;
+    }
   }
 }
 

@@ -1,6 +1,7 @@
 // Solver runs shared by the figures: load a scenario's model, solve from the identity, keep what the figures
 // report. The solver is lidef's (DeformationSolver, as `lidef deform` runs it), on the CPU backend.
 #include <chrono>
+#include <stdexcept>
 
 #include "lidef/cage/auto_cage.h"
 #include "lidef/number_format.h"
@@ -23,6 +24,10 @@ EnergyTerms energy_at_user_weights(const DeformationSolver& solver, const Deform
 SolveRun solve_scenario(const Context& ctx, const Model& model, const Scenario& sc,
                         const DeformParams& params, const std::string& label,
                         std::unique_ptr<DeformationSolver>* keep_solver) {
+  // DeformationSolver::solve is one Newton solve; the continuation is not run here, so a figure that asks for
+  // it would report a solve that did not happen.
+  if (params.continuation)
+    throw std::logic_error("solve_scenario runs one direct solve: " + label + " asks for the continuation");
   using Clock = std::chrono::steady_clock;
   SolveRun r;
   r.label = label;
