@@ -250,6 +250,13 @@ struct Scene::Impl {
   bool bar_in_strip = false;              // the bar has its own renderer (a strip right of the model)
   long model_version = -1;
   std::string caption;
+  // What the leaf glyphs were last built from (show_leaves_view rebuilds them only when this changes).
+  std::shared_ptr<const Certificate> glyph_leaves;
+  std::string glyph_settings;
+  const char* glyph_title = "";
+  std::pair<double, double> glyph_range{0, 0};
+  std::pair<long, long> glyph_counts{0, 0};  // leaves shown, failed
+  bool glyph_marks = false;
 
   // Stages of Scene::show.
   void hide_all();
@@ -338,7 +345,10 @@ Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make
   I.text->GetTextProperty()->SetFontSize(15);
   I.text->SetPosition(10, 10);
   I.text->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
-  I.text->SetPosition(0.01, 0.94);
+  // Anchored by its top edge just below the viewport's top: a caption of one or two lines stays whole (anchored
+  // by its bottom at 0.94, the second line pushed the first out of the view).
+  I.text->GetTextProperty()->SetVerticalJustificationToTop();
+  I.text->SetPosition(0.01, 0.985);
   for (vtkProp* p :
        std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage, I.images,
                                        I.slices, I.volume, I.leaves, I.marks, I.text}) {
@@ -519,6 +529,23 @@ LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSetti
 
 }  // namespace
 
+namespace {
+struct LeafCounts {
+  long shown, failed;
+};
+// The settings the leaf glyphs depend on (view, leaf filters, colouring and its range).
+std::string glyph_key(const ViewSettings& s) {
+  return nlohmann::json{{"view", to_string(s.view)},
+                        {"margin", s.lipschitz_margin},
+                        {"refined", s.only_refined_or_failed},
+                        {"status", s.octree_by_status},
+                        {"clip", s.clip},
+                        {"min_depth", s.min_depth},
+                        {"range", range_to_json(s.range[static_cast<int>(shown_field(s))])}}
+      .dump();
+}
+}  // namespace
+
 void Scene::Impl::hide_all() {
   for (vtkProp* p : std::initializer_list<vtkProp*>{mesh_actor, context_mesh, rest_cage, def_cage, images,
                                                     slices, volume, leaves, marks, bar})
@@ -546,6 +573,7 @@ void Scene::Impl::adopt_model(const SessionFrame& f) {
   static_cast<vtkPolyDataMapper*>(rest_cage->GetMapper())->SetInputData(rest_cage_pd);
   static_cast<vtkPolyDataMapper*>(def_cage->GetMapper())->SetInputData(def_cage_pd);
   volume_version = -2;
+  glyph_leaves.reset();
 }
 
 // Deformed mesh geometry and its field (always: the handles are picked on it), and the deformed cage.
@@ -708,28 +736,43 @@ std::string Scene::Impl::show_leaves_view(const SessionFrame& f, const ViewSetti
           : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
   if (!f.leaves) return what + " (computing...)";
   const Certificate& c = *f.leaves;
-  LeafGlyphs L = leaf_glyphs(c, *f.model, s);
-  auto pd = Ptr<vtkPolyData>::New();
-  pd->SetPoints(L.pts);
-  pd->GetPointData()->AddArray(L.side);
-  pd->GetPointData()->AddArray(L.value);
-  leaves_mapper->SetInputData(pd);
-  leaves_mapper->SelectColorArray("value");
-  const auto [lo, hi] = color_range(L.finite, s.range[static_cast<int>(shown_field(s))]);
-  const char* title = color_leaves(c, s, lo, hi);
-  leaves_mapper->SetScalarRange(leaves_lut->GetTableRange());
-  if (lip) range = {leaves_lut->GetTableRange()[0], leaves_lut->GetTableRange()[1]};
+  // The glyph inputs are rebuilt only when the leaves or what the view draws of them changed: a new input
+  // makes the glyph mapper rebuild its per-instance buffers, and the leaves arrive far less often (once the
+  // solver rests, or every second while dragging) than the frames of the mesh and handles.
+  const std::string key = glyph_key(s);
+  if (f.leaves != glyph_leaves || key != glyph_settings) {
+    glyph_leaves = f.leaves;
+    glyph_settings = key;
+    LeafGlyphs L = leaf_glyphs(c, *f.model, s);
+    auto pd = Ptr<vtkPolyData>::New();
+    pd->SetPoints(L.pts);
+    pd->GetPointData()->AddArray(L.side);
+    pd->GetPointData()->AddArray(L.value);
+    leaves_mapper->SetInputData(pd);
+    leaves_mapper->SelectColorArray("value");
+    const auto [lo, hi] = color_range(L.finite, s.range[static_cast<int>(shown_field(s))]);
+    glyph_title = color_leaves(c, s, lo, hi);
+    leaves_mapper->SetScalarRange(leaves_lut->GetTableRange());
+    glyph_range =
+        lip ? std::pair<double, double>{leaves_lut->GetTableRange()[0], leaves_lut->GetTableRange()[1]}
+            : std::pair<double, double>{0, 0};
+    glyph_marks = lip && L.mark_pts->GetNumberOfPoints() > 0;
+    if (glyph_marks) {
+      auto mpd = Ptr<vtkPolyData>::New();
+      mpd->SetPoints(L.mark_pts);
+      mpd->GetPointData()->AddArray(L.mark_side);
+      mpd->GetPointData()->AddArray(L.mark_failed);
+      marks_mapper->SetInputData(mpd);
+    }
+    glyph_counts = {L.shown, L.failed};
+  }
+  range = glyph_range;
   leaves->GetProperty()->SetEdgeVisibility(!lip);
   leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
   leaves->VisibilityOn();
-  if (lip && L.mark_pts->GetNumberOfPoints() > 0) {
-    auto mpd = Ptr<vtkPolyData>::New();
-    mpd->SetPoints(L.mark_pts);
-    mpd->GetPointData()->AddArray(L.mark_side);
-    mpd->GetPointData()->AddArray(L.mark_failed);
-    marks_mapper->SetInputData(mpd);
-    marks->VisibilityOn();
-  }
+  marks->SetVisibility(glyph_marks);
+  const char* title = glyph_title;
+  const LeafCounts L{glyph_counts.first, glyph_counts.second};
   show_bar(leaves_lut, title);
   what += ": " + std::to_string(L.shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
           std::to_string(c.refined) + " voxels refined, " + std::to_string(L.failed) + " failed";

@@ -9,6 +9,7 @@
 #include <vtkHandleWidget.h>
 #include <vtkInteractorStyleTrackballCamera.h>
 #include <vtkObjectFactory.h>
+#include <vtkOpenGLRenderer.h>
 #include <vtkPNGWriter.h>
 #include <vtkPropPicker.h>
 #include <vtkProperty.h>
@@ -81,15 +82,31 @@
 
 namespace lidef::studio {
 
+// A renderer that draws translucent geometry with plain alpha blending instead of vtkOpenGLRenderer's
+// order-independent transparency (extra full-viewport passes; ~9% of a Lipschitz-view frame under Mesa's
+// software renderer, docs/benchmarks.md "Studio"). The only translucent prop is the faint context mesh: one
+// colour at one opacity, for which the blending order changes little.
+// clang-format off
+class PlainBlendRenderer : public vtkOpenGLRenderer {
+ public:
+  static PlainBlendRenderer* New();
+  vtkTypeMacro(PlainBlendRenderer, vtkOpenGLRenderer)
+  void DeviceRenderTranslucentPolygonalGeometry(vtkFrameBufferObjectBase* fbo) override {
+    vtkRenderer::DeviceRenderTranslucentPolygonalGeometry(fbo);  // UpdateTranslucentPolygonalGeometry()
+  }
+};
+vtkStandardNewMacro(PlainBlendRenderer)
+
 // The camera style with the studio's clicks: a left click (press and release within 3 pixels) adds a handle,
 // a right press on a target deletes it instead of zooming. It lives in the style because the style grabs the
 // interactor's focus on a press, so observers of the interactor never see the matching release.
 class StudioStyle : public vtkInteractorStyleTrackballCamera {
+  // clang-format on
  public:
   static StudioStyle* New();
   vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera)
       std::function<void(int, int, bool)> on_click;  // x, y, Ctrl held
-  std::function<bool(int, int)> on_right_press;  // true = consumed
+  std::function<bool(int, int)> on_right_press;      // true = consumed
   void OnLeftButtonDown() override {
     this->Interactor->GetEventPosition(press_);
     vtkInteractorStyleTrackballCamera::OnLeftButtonDown();
@@ -158,7 +175,7 @@ void StudioWindow::build_ui() {
   // No MSAA while interacting: under Mesa's software renderer (Xvfb, this 2-core machine) 4x MSAA doubles the
   // render time and the renderer shares the cores with the solver (docs/benchmarks.md, "Studio").
   window_->SetMultiSamples(0);
-  auto ren = vtkSmartPointer<vtkRenderer>::New();
+  auto ren = vtkSmartPointer<PlainBlendRenderer>::New();
   ren->SetBackground(1, 1, 1);
   ren->SetBackground2(0.86, 0.89, 0.94);
   ren->GradientBackgroundOn();
