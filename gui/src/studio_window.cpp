@@ -107,6 +107,7 @@ class StudioStyle : public vtkInteractorStyleTrackballCamera {
   vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera)
       std::function<void(int, int, bool)> on_click;  // x, y, Ctrl held
   std::function<bool(int, int)> on_right_press;      // true = consumed
+  std::function<void(int, int)> on_hover;            // x, y of a move with no button held
   void OnLeftButtonDown() override {
     this->Interactor->GetEventPosition(press_);
     vtkInteractorStyleTrackballCamera::OnLeftButtonDown();
@@ -117,6 +118,14 @@ class StudioStyle : public vtkInteractorStyleTrackballCamera {
     this->Interactor->GetEventPosition(xy);
     if (std::abs(xy[0] - press_[0]) <= 3 && std::abs(xy[1] - press_[1]) <= 3 && on_click)
       on_click(xy[0], xy[1], this->Interactor->GetControlKey() != 0);
+  }
+  // Mouse moves with no button held (the style is not rotating, panning or zooming) are hover positions.
+  void OnMouseMove() override {
+    vtkInteractorStyleTrackballCamera::OnMouseMove();
+    if (this->State != VTKIS_NONE || !on_hover) return;
+    int xy[2];
+    this->Interactor->GetEventPosition(xy);
+    on_hover(xy[0], xy[1]);
   }
   void OnRightButtonDown() override {
     int xy[2];
@@ -206,6 +215,20 @@ void StudioWindow::build_ui() {
       pick_at_display(x, y);
   };
   style->on_right_press = [this](int x, int y) { return delete_handle_at_display(x, y); };
+  // Hover: the newest position is picked at most once per kHoverMs, from the event loop (never inside the
+  // mouse event, never while a handle is dragged), so moving the mouse does not hold up rendering.
+  hover_timer_ = new QTimer(this);
+  hover_timer_->setSingleShot(true);
+  hover_timer_->setInterval(kHoverMs);
+  connect(hover_timer_, &QTimer::timeout, this, [this] {
+    if (hover_enabled_ && dragging_ < 0) hover_at_display(hover_xy_[0], hover_xy_[1]);
+  });
+  style->on_hover = [this](int x, int y) {
+    if (!hover_enabled_) return;
+    hover_xy_[0] = x;
+    hover_xy_[1] = y;
+    if (!hover_timer_->isActive()) hover_timer_->start();
+  };
   window_->GetInteractor()->SetInteractorStyle(style);
 
   // Menus and tool bar.
@@ -339,7 +362,18 @@ void StudioWindow::build_ui() {
   picked_label_->setWordWrap(true);
   picked_label_->setAlignment(Qt::AlignTop | Qt::AlignLeft);
   picked_label_->setMargin(4);
-  auto* picked_dock = dock("Picked values", picked_label_);
+  auto* picked_box = new QWidget;
+  auto* picked_layout = new QVBoxLayout(picked_box);
+  picked_layout->setContentsMargins(0, 0, 0, 0);
+  hover_check_ = new QCheckBox("Values under the cursor (hover)");
+  hover_check_->setObjectName("hover");
+  hover_check_->setChecked(hover_enabled_);
+  hover_check_->setToolTip(
+      "Show the values at the point under the mouse as it moves (click or Ctrl+click picks)");
+  connect(hover_check_, &QCheckBox::toggled, this, [this](bool on) { set_hover(on); });
+  picked_layout->addWidget(hover_check_);
+  picked_layout->addWidget(picked_label_, 1);
+  auto* picked_dock = dock("Picked values", picked_box);
   plots_ = new PlotsPanel(this);
   auto* plots_dock = dock("Plots", plots_);
   // The σ3 counterexample explorer (docs/explorer.md): its own map and view, beside the plots.
@@ -747,6 +781,8 @@ std::string StudioWindow::cheat_sheet() {
          "  left click on the mesh (mesh view)   add a handle\n"
          "  Ctrl+left click (mesh view)          pick: sigma1, sigma3, det J, E_iso there\n"
          "  left click (sigma3, Lipschitz, octree views)  pick (with the leaf's depth, L, margin, status)\n"
+         "  move the mouse (no button)           hover: the same values under the cursor (Picked values\n"
+         "                                       panel; its checkbox turns hover off)\n"
          "  drag a cyan sphere                   move that handle's target\n"
          "  right click on a cyan sphere         delete the handle\n"
          "  left drag / middle drag / wheel      rotate / pan / zoom\n"
@@ -960,15 +996,46 @@ QWidget* StudioWindow::build_range_controls() {
 }
 
 bool StudioWindow::pick_at_display(int x, int y) {
+  Vec3 rest;
+  std::string where;
+  if (!rest_point_at_display(x, y, rest, where, false)) return false;
+  picked_ = picked_values(*shown_, rest, where);
+  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  status_->setText(QString::fromStdString("picked " + where));
+  return picked_.valid;
+}
+
+bool StudioWindow::hover_at_display(int x, int y) {
+  Vec3 rest;
+  std::string where;
+  // Nothing under the cursor: the panel keeps the last values.
+  if (!rest_point_at_display(x, y, rest, where, true)) return false;
+  const PickedValues v = picked_values(*shown_, rest, "hover: " + where);
+  if (!v.valid) return false;
+  picked_ = v;
+  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  return true;
+}
+
+void StudioWindow::set_hover(bool on) {
+  hover_enabled_ = on;
+  if (!on) hover_timer_->stop();
+  if (hover_check_ && hover_check_->isChecked() != on) {
+    const QSignalBlocker block(hover_check_);
+    hover_check_->setChecked(on);
+  }
+}
+
+bool StudioWindow::rest_point_at_display(int x, int y, Vec3& rest, std::string& where, bool quiet) {
   if (!shown_ || !shown_->model) return false;
   vtkActor* actor = nullptr;
-  std::string where;
   if (settings_.view == View::kMesh) {
     actor = scene_->mesh_actor();
     where = "mesh surface";
   } else if (settings_.view == View::kSigma3) {
     if (settings_.sigma_deformed_space) {
-      status_->setText("picking on sigma3 slices works in rest space only (untick \"Deformed space\")");
+      if (!quiet)
+        status_->setText("picking on sigma3 slices works in rest space only (untick \"Deformed space\")");
       return false;
     }
     actor = scene_->slices_actor();
@@ -977,7 +1044,6 @@ bool StudioWindow::pick_at_display(int x, int y) {
     actor = scene_->leaves_actor();
     where = "leaf voxel";
   }
-  Vec3 rest;
   if (settings_.view == View::kMesh) {
     // The deformed mesh: the picked point pulled back to rest space (the same barycentric combination of the
     // rest triangle), as a handle's source.
@@ -1026,10 +1092,7 @@ bool StudioWindow::pick_at_display(int x, int y) {
     if (!std::isfinite(best)) return false;
     rest = o + best * d;  // on a drawn cube: strictly inside that leaf's voxel
   }
-  picked_ = picked_values(*shown_, rest, where);
-  picked_label_->setText(QString::fromStdString(to_text(picked_)));
-  status_->setText(QString::fromStdString("picked " + where));
-  return picked_.valid;
+  return true;
 }
 
 bool StudioWindow::open_comparison(const std::string& dir) {

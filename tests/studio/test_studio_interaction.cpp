@@ -16,6 +16,7 @@
 
 #include <QAction>
 #include <QApplication>
+#include <QCheckBox>
 #include <QClipboard>
 #include <QDockWidget>
 #include <QMessageBox>
@@ -460,6 +461,31 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
             (l.center == on_leaf.leaf.center && l.L == on_leaf.leaf.L && l.margin == on_leaf.leaf.margin);
   EXPECT_TRUE(found) << "the picked leaf is not one of the certificate's";
 
+  // Hover: scripted mouse moves (no button) over another leaf; the throttled pick fills the same panel.
+  ASSERT_TRUE(win.hover_enabled());
+  auto move_to = [&](const Vec3& p) {
+    double m[2];
+    display_of(win, p, m);
+    iren->SetEventInformation(static_cast<int>(m[0]), static_cast<int>(m[1]), 0, 0, 0, 0);
+    iren->InvokeEvent(vtkCommand::MouseMoveEvent, nullptr);
+  };
+  move_to(Vec3(-0.5, 0.02, 0.0));
+  move_to(Vec3(0.6, 0.02, 0.0));  // the newest position is the one picked
+  ASSERT_TRUE(pump_until([&] { return win.picked().where.rfind("hover", 0) == 0; }, 5)) << win.picked().where;
+  const studio::PickedValues on_hover = win.picked();
+  ASSERT_TRUE(on_hover.has_leaf);
+  EXPECT_GT(on_hover.rest.x(), 0.3) << "not the newest hover position";
+  EXPECT_LE((on_hover.rest - on_hover.leaf.center).cwiseAbs().maxCoeff(),
+            0.5 * on_hover.leaf.side * (1 + 1e-6));
+  // Turned off (the panel's checkbox), moves no longer change the panel.
+  auto* hover_box = win.findChild<QCheckBox*>("hover");
+  ASSERT_NE(hover_box, nullptr);
+  hover_box->setChecked(false);
+  EXPECT_FALSE(win.hover_enabled());
+  move_to(Vec3(-0.3, 0.02, 0.0));
+  pump_until([] { return false; }, 0.3);
+  EXPECT_EQ(win.picked().rest, on_hover.rest) << "hover is off";
+
   // Export the map as the CLI writes it, and evaluate both points with lidef eval.
   TempDir dir;
   ASSERT_TRUE(win.export_current(dir / "export"));
@@ -468,7 +494,7 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
   {
     std::ofstream pts(dir / "p.xyz");
     pts.precision(17);
-    for (const auto* v : {&on_mesh, &on_leaf})
+    for (const auto* v : {&on_mesh, &on_leaf, &on_hover})
       pts << v->rest.x() << " " << v->rest.y() << " " << v->rest.z() << "\n";
   }
   std::string log;
@@ -479,9 +505,9 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
             0)
       << log;
   const auto rows = read_eval_csv(dir / "e.csv");
-  ASSERT_EQ(rows.size(), 2u);
+  ASSERT_EQ(rows.size(), 3u);
   int k = 0;
-  for (const auto* v : {&on_mesh, &on_leaf}) {
+  for (const auto* v : {&on_mesh, &on_leaf, &on_hover}) {
     const auto& row = rows[k++];
     ASSERT_EQ(row.size(), 19u);
     // x,y,z,fx,fy,fz,J00..J22,s1,s2,s3,detJ
