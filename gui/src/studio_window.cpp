@@ -68,6 +68,7 @@
 #include "explorer_panel.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
+#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_export.h"
@@ -916,9 +917,15 @@ bool StudioWindow::export_current(const std::string& dir) {
     write_mesh_vtp((d / "deformed.vtp").string(), mf.V, f->model->mesh.F,
                    {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
     std::string also;
-    if (f->leaves && f->leaves_version == f->map_version) {
+    if (f->leaves && f->leaves_version == f->map_version && f->leaves_sampling) {
+      // certificate.json and voxels.csv as lidef deform writes them for its map (certificate_report.h): the
+      // leaves are the solver's certify_current(true) of this map, as there.
+      CertificateReport report = make_certificate_report(
+          *f->leaves, f->model->cage, f->model->mesh, f->coefficients, session_->scenario().model_dir,
+          "coefficients.txt", f->leaves_sampling_params, *f->leaves_sampling, f->leaves_certify_params);
+      write_certificate_files(dir, report);
       write_leaves_vtu((d / "leaves.vtu").string(), f->leaves->leaves);
-      also += ", leaves.vtu";
+      also += ", certificate.json, voxels.csv, leaves.vtu";
     }
     if (f->field && f->field_version == f->map_version) {
       write_field_vti((d / "field.vti").string(), *f->field);
@@ -926,7 +933,7 @@ bool StudioWindow::export_current(const std::string& dir) {
     }
     status_->setText(QString::fromStdString("exported coefficients.txt, deformed.vtp" + also + " to " + dir +
                                             (also.empty() ? " (show the Lipschitz/octree or sigma3 view "
-                                                            "for leaves.vtu / field.vti)"
+                                                            "for the certificate files / field.vti)"
                                                           : "")));
   } catch (const std::exception& e) {
     report_error("Cannot export", e.what());
