@@ -1139,6 +1139,7 @@ void StudioWindow::render_pending() {
   }
   if (!f) return;
   const auto t0 = std::chrono::steady_clock::now();
+  scene_->set_certified_domain(session_->scenario().params.domain);
   scene_->show(*f, settings_);
   if (f->model && f->mesh_V.rows() > 0 && f->model_version != shown_model_version_) {
     shown_model_version_ = f->model_version;
