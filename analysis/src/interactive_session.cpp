@@ -69,6 +69,10 @@ struct InteractiveSession::Engine {
   ExtrasRequest extras;
   long serial = 0, map_version = 0, model_version = 0;
   std::shared_ptr<const Certificate> leaves;
+  std::shared_ptr<const VoxelSampling> leaves_sampling;  // the solver's sampling, as of leaves_sampling_model
+  long leaves_sampling_model = -1;
+  SamplingParams leaves_sampling_params;
+  CertifyParams leaves_certify_params;
   long leaves_version = -1;
   std::shared_ptr<const FieldGrid> field;
   std::shared_ptr<const std::vector<float>> field_deformed;
@@ -716,6 +720,12 @@ bool InteractiveSession::Engine::compute_extras(bool resting) {
 void InteractiveSession::Engine::compute_leaves() {
   leaves = std::make_shared<const Certificate>(solver->certify_current(true));
   leaves_version = map_version;
+  if (!leaves_sampling || leaves_sampling_model != model_version) {  // copied once per solver
+    leaves_sampling = std::make_shared<const VoxelSampling>(solver->sampling());
+    leaves_sampling_model = model_version;
+  }
+  leaves_sampling_params = solver->sampling_params();
+  leaves_certify_params = solver->certify_params(false, true);
 }
 
 // σ3 on a grid, and f at the grid points inside the cage (the deformed-space view); NaN elsewhere.
@@ -781,6 +791,9 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
   f->targets = targets;
   f->leaves = leaves;
   f->leaves_version = leaves_version;
+  f->leaves_sampling = leaves_sampling;
+  f->leaves_sampling_params = leaves_sampling_params;
+  f->leaves_certify_params = leaves_certify_params;
   f->field = field;
   f->field_deformed = field_deformed;
   f->field_version = field_version;

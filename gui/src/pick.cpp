@@ -40,7 +40,7 @@ PickedValues picked_values(const SessionFrame& f, const Vec3& p, const std::stri
 }
 
 std::string to_text(const PickedValues& v) {
-  if (!v.valid) return "nothing picked (Ctrl+click in the mesh view, click in the other views)";
+  if (!v.valid) return "nothing picked (hover, Ctrl+click in the mesh view, click in the other views)";
   auto xyz = [](const Vec3& x) {
     return "(" + format_g(x(0), 5) + ", " + format_g(x(1), 5) + ", " + format_g(x(2), 5) + ")";
   };

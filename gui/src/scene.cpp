@@ -228,6 +228,10 @@ struct Scene::Impl {
   Ptr<vtkActor> context_mesh = Ptr<vtkActor>::New();  // faint mesh in the σ3/leaf views
   Ptr<vtkPolyDataMapper> context_mapper = Ptr<vtkPolyDataMapper>::New();
   Ptr<vtkPolyData> rest_mesh;  // the model's mesh in rest space (context of the rest-space views)
+  // σ3 view: the mesh surface where it crosses the slices (the certified domain's boundary, domain "mesh").
+  Ptr<vtkActor> outline = Ptr<vtkActor>::New();
+  Ptr<vtkPolyDataMapper> outline_mapper = Ptr<vtkPolyDataMapper>::New();
+  DomainKind domain = DomainKind::kMesh;
   // σ3 view.
   Ptr<vtkActor> slices = Ptr<vtkActor>::New();
   Ptr<vtkPolyDataMapper> slices_mapper = Ptr<vtkPolyDataMapper>::New();
@@ -250,6 +254,13 @@ struct Scene::Impl {
   bool bar_in_strip = false;              // the bar has its own renderer (a strip right of the model)
   long model_version = -1;
   std::string caption;
+  // What the leaf glyphs were last built from (show_leaves_view rebuilds them only when this changes).
+  std::shared_ptr<const Certificate> glyph_leaves;
+  std::string glyph_settings;
+  const char* glyph_title = "";
+  std::pair<double, double> glyph_range{0, 0};
+  std::pair<long, long> glyph_counts{0, 0};  // leaves shown, failed
+  bool glyph_marks = false;
 
   // Stages of Scene::show.
   void hide_all();
@@ -326,6 +337,11 @@ Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make
   I.marks->GetProperty()->SetRepresentationToWireframe();
   I.marks->GetProperty()->LightingOff();
   I.marks->GetProperty()->SetLineWidth(1.5);
+  I.outline->SetMapper(I.outline_mapper);
+  I.outline->GetProperty()->SetColor(0.05, 0.05, 0.05);
+  I.outline->GetProperty()->SetLineWidth(2);
+  I.outline->GetProperty()->LightingOff();
+  I.outline->PickableOff();
   I.marks->PickableOff();
   style_scalar_bar(I.bar, 0.8);
   I.bar_in_strip = bar_renderer != nullptr;
@@ -338,10 +354,13 @@ Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make
   I.text->GetTextProperty()->SetFontSize(15);
   I.text->SetPosition(10, 10);
   I.text->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
-  I.text->SetPosition(0.01, 0.94);
+  // Anchored by its top edge just below the viewport's top: a caption of one or two lines stays whole
+  // (anchored by its bottom at 0.94, the second line pushed the first out of the view).
+  I.text->GetTextProperty()->SetVerticalJustificationToTop();
+  I.text->SetPosition(0.01, 0.985);
   for (vtkProp* p :
        std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage, I.images,
-                                       I.slices, I.volume, I.leaves, I.marks, I.text}) {
+                                       I.slices, I.volume, I.leaves, I.marks, I.outline, I.text}) {
     p->VisibilityOff();
     renderer->AddViewProp(p);
   }
@@ -362,6 +381,9 @@ std::string Scene::caption() const {
 }
 std::pair<double, double> Scene::shown_range() const {
   return impl_->range;
+}
+void Scene::set_certified_domain(DomainKind d) {
+  impl_->domain = d;
 }
 vtkActor* Scene::leaves_actor() const {
   return impl_->leaves;
@@ -519,9 +541,26 @@ LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSetti
 
 }  // namespace
 
+namespace {
+struct LeafCounts {
+  long shown, failed;
+};
+// The settings the leaf glyphs depend on (view, leaf filters, colouring and its range).
+std::string glyph_key(const ViewSettings& s) {
+  return nlohmann::json{{"view", to_string(s.view)},
+                        {"margin", s.lipschitz_margin},
+                        {"refined", s.only_refined_or_failed},
+                        {"status", s.octree_by_status},
+                        {"clip", s.clip},
+                        {"min_depth", s.min_depth},
+                        {"range", range_to_json(s.range[static_cast<int>(shown_field(s))])}}
+      .dump();
+}
+}  // namespace
+
 void Scene::Impl::hide_all() {
   for (vtkProp* p : std::initializer_list<vtkProp*>{mesh_actor, context_mesh, rest_cage, def_cage, images,
-                                                    slices, volume, leaves, marks, bar})
+                                                    slices, volume, leaves, marks, outline, bar})
     p->VisibilityOff();
   bar->SetNumberOfLabels(5);
   range = {0, 0};
@@ -546,6 +585,7 @@ void Scene::Impl::adopt_model(const SessionFrame& f) {
   static_cast<vtkPolyDataMapper*>(rest_cage->GetMapper())->SetInputData(rest_cage_pd);
   static_cast<vtkPolyDataMapper*>(def_cage->GetMapper())->SetInputData(def_cage_pd);
   volume_version = -2;
+  glyph_leaves.reset();
 }
 
 // Deformed mesh geometry and its field (always: the handles are picked on it), and the deformed cage.
@@ -636,6 +676,47 @@ std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSetting
 }
 
 // σ3 view: slices (and in rest space optionally a volume rendering) of the field grid, over a faint mesh.
+namespace {
+// Where the mesh surface crosses the shown σ3 slices (planes x_a = const of the field grid), as line
+// segments: the boundary of the certified domain D (the mesh and its solid) on each slice. Each triangle
+// crossing a plane gives one segment between its two edge crossings (a vertex on the plane counts as above
+// it, so every crossing is found once); in deformed space the same crossings are mapped by the same edge
+// interpolation of the deformed vertices, i.e. the image of the rest-space curve under the piecewise-linear
+// deformed mesh.
+Ptr<vtkPolyData> domain_outline_on_slices(const SessionFrame& f, const ViewSettings& s) {
+  const FieldGrid& g = *f.field;
+  const MatX3d& V = f.model->mesh.V;
+  const MatX3i& F = f.model->mesh.F;
+  const bool def = s.sigma_deformed_space && f.mesh_V.rows() == V.rows();
+  const MatX3d& W = def ? f.mesh_V : V;
+  auto pts = Ptr<vtkPoints>::New();
+  auto lines = Ptr<vtkCellArray>::New();
+  for (int a = 0; a < 3; ++a) {
+    if (!s.slice[a]) continue;
+    const int k =
+        std::clamp(static_cast<int>(std::lround(s.slice_pos[a] * (g.dims[a] - 1))), 0, g.dims[a] - 1);
+    const double c = g.origin(a) + g.spacing * k;
+    for (Eigen::Index t = 0; t < F.rows(); ++t) {
+      vtkIdType ids[2];
+      int n = 0;
+      for (int e = 0; e < 3 && n < 2; ++e) {
+        const int i = F(t, e), j = F(t, (e + 1) % 3);
+        const double di = V(i, a) - c, dj = V(j, a) - c;
+        if ((di >= 0) == (dj >= 0)) continue;
+        const double u = di / (di - dj);
+        const Vec3 p = (1 - u) * W.row(i).transpose() + u * W.row(j).transpose();
+        ids[n++] = pts->InsertNextPoint(p.x(), p.y(), p.z());
+      }
+      if (n == 2) lines->InsertNextCell(2, ids);
+    }
+  }
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  pd->SetLines(lines);
+  return pd;
+}
+}  // namespace
+
 std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSettings& s) {
   context_mapper->SetInputData(s.sigma_deformed_space ? mesh.Get() : rest_mesh.Get());
   context_mesh->VisibilityOn();
@@ -650,11 +731,17 @@ std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSetti
   slices_mapper->SetInputData(sigma3_slices(f, s));
   slices_mapper->SetScalarRange(lo, hi);
   slices->VisibilityOn();
+  if (domain == DomainKind::kMesh) {
+    outline_mapper->SetInputData(domain_outline_on_slices(f, s));
+    outline->VisibilityOn();
+  }
   if (s.sigma_volume && !s.sigma_deformed_space) show_sigma3_volume(f, s, lo, hi);
   show_bar(sigma_colors, "sigma3");
   what += std::string(s.sigma_whole_cage ? " (whole cage interior; certified only inside the voxels)"
                                          : " (inside the voxels)") +
           ", colours " + format_g(lo, 3) + " to " + format_g(hi, 3);
+  if (domain == DomainKind::kMesh)
+    what += "\nblack lines: the mesh surface, boundary of the certified domain";
   if (f.field_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
   return what;
 }
@@ -708,28 +795,43 @@ std::string Scene::Impl::show_leaves_view(const SessionFrame& f, const ViewSetti
           : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
   if (!f.leaves) return what + " (computing...)";
   const Certificate& c = *f.leaves;
-  LeafGlyphs L = leaf_glyphs(c, *f.model, s);
-  auto pd = Ptr<vtkPolyData>::New();
-  pd->SetPoints(L.pts);
-  pd->GetPointData()->AddArray(L.side);
-  pd->GetPointData()->AddArray(L.value);
-  leaves_mapper->SetInputData(pd);
-  leaves_mapper->SelectColorArray("value");
-  const auto [lo, hi] = color_range(L.finite, s.range[static_cast<int>(shown_field(s))]);
-  const char* title = color_leaves(c, s, lo, hi);
-  leaves_mapper->SetScalarRange(leaves_lut->GetTableRange());
-  if (lip) range = {leaves_lut->GetTableRange()[0], leaves_lut->GetTableRange()[1]};
+  // The glyph inputs are rebuilt only when the leaves or what the view draws of them changed: a new input
+  // makes the glyph mapper rebuild its per-instance buffers, and the leaves arrive far less often (once the
+  // solver rests, or every second while dragging) than the frames of the mesh and handles.
+  const std::string key = glyph_key(s);
+  if (f.leaves != glyph_leaves || key != glyph_settings) {
+    glyph_leaves = f.leaves;
+    glyph_settings = key;
+    LeafGlyphs L = leaf_glyphs(c, *f.model, s);
+    auto pd = Ptr<vtkPolyData>::New();
+    pd->SetPoints(L.pts);
+    pd->GetPointData()->AddArray(L.side);
+    pd->GetPointData()->AddArray(L.value);
+    leaves_mapper->SetInputData(pd);
+    leaves_mapper->SelectColorArray("value");
+    const auto [lo, hi] = color_range(L.finite, s.range[static_cast<int>(shown_field(s))]);
+    glyph_title = color_leaves(c, s, lo, hi);
+    leaves_mapper->SetScalarRange(leaves_lut->GetTableRange());
+    glyph_range =
+        lip ? std::pair<double, double>{leaves_lut->GetTableRange()[0], leaves_lut->GetTableRange()[1]}
+            : std::pair<double, double>{0, 0};
+    glyph_marks = lip && L.mark_pts->GetNumberOfPoints() > 0;
+    if (glyph_marks) {
+      auto mpd = Ptr<vtkPolyData>::New();
+      mpd->SetPoints(L.mark_pts);
+      mpd->GetPointData()->AddArray(L.mark_side);
+      mpd->GetPointData()->AddArray(L.mark_failed);
+      marks_mapper->SetInputData(mpd);
+    }
+    glyph_counts = {L.shown, L.failed};
+  }
+  range = glyph_range;
   leaves->GetProperty()->SetEdgeVisibility(!lip);
   leaves->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
   leaves->VisibilityOn();
-  if (lip && L.mark_pts->GetNumberOfPoints() > 0) {
-    auto mpd = Ptr<vtkPolyData>::New();
-    mpd->SetPoints(L.mark_pts);
-    mpd->GetPointData()->AddArray(L.mark_side);
-    mpd->GetPointData()->AddArray(L.mark_failed);
-    marks_mapper->SetInputData(mpd);
-    marks->VisibilityOn();
-  }
+  marks->SetVisibility(glyph_marks);
+  const char* title = glyph_title;
+  const LeafCounts L{glyph_counts.first, glyph_counts.second};
   show_bar(leaves_lut, title);
   what += ": " + std::to_string(L.shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
           std::to_string(c.refined) + " voxels refined, " + std::to_string(L.failed) + " failed";

@@ -75,6 +75,9 @@ class Scene {
   std::string caption() const;
   // The colour-bar range of the last shown view ({0, 0} before a map is shown or in the octree view).
   std::pair<double, double> shown_range() const;
+  // The certified domain of the session's parameters: with kMesh (the mesh and its solid) the σ3 view draws
+  // the mesh surface where it crosses the slices, the domain's boundary.
+  void set_certified_domain(DomainKind d);
   // The leaves glyph actor (Lipschitz/octree views) and the σ3 slices, for picking.
   vtkActor* leaves_actor() const;
   vtkActor* slices_actor() const;

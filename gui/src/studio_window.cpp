@@ -9,6 +9,7 @@
 #include <vtkHandleWidget.h>
 #include <vtkInteractorStyleTrackballCamera.h>
 #include <vtkObjectFactory.h>
+#include <vtkOpenGLRenderer.h>
 #include <vtkPNGWriter.h>
 #include <vtkPropPicker.h>
 #include <vtkProperty.h>
@@ -67,6 +68,7 @@
 #include "explorer_panel.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
+#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_export.h"
@@ -81,15 +83,32 @@
 
 namespace lidef::studio {
 
+// A renderer that draws translucent geometry with plain alpha blending instead of vtkOpenGLRenderer's
+// order-independent transparency (extra full-viewport passes; ~9% of a Lipschitz-view frame under Mesa's
+// software renderer, docs/benchmarks.md "Studio"). The only translucent prop is the faint context mesh: one
+// colour at one opacity, for which the blending order changes little.
+// clang-format off
+class PlainBlendRenderer : public vtkOpenGLRenderer {
+ public:
+  static PlainBlendRenderer* New();
+  vtkTypeMacro(PlainBlendRenderer, vtkOpenGLRenderer)
+  void DeviceRenderTranslucentPolygonalGeometry(vtkFrameBufferObjectBase* fbo) override {
+    vtkRenderer::DeviceRenderTranslucentPolygonalGeometry(fbo);  // UpdateTranslucentPolygonalGeometry()
+  }
+};
+vtkStandardNewMacro(PlainBlendRenderer)
+
 // The camera style with the studio's clicks: a left click (press and release within 3 pixels) adds a handle,
 // a right press on a target deletes it instead of zooming. It lives in the style because the style grabs the
 // interactor's focus on a press, so observers of the interactor never see the matching release.
 class StudioStyle : public vtkInteractorStyleTrackballCamera {
+  // clang-format on
  public:
   static StudioStyle* New();
   vtkTypeMacro(StudioStyle, vtkInteractorStyleTrackballCamera)
       std::function<void(int, int, bool)> on_click;  // x, y, Ctrl held
-  std::function<bool(int, int)> on_right_press;  // true = consumed
+  std::function<bool(int, int)> on_right_press;      // true = consumed
+  std::function<void(int, int)> on_hover;            // x, y of a move with no button held
   void OnLeftButtonDown() override {
     this->Interactor->GetEventPosition(press_);
     vtkInteractorStyleTrackballCamera::OnLeftButtonDown();
@@ -100,6 +119,14 @@ class StudioStyle : public vtkInteractorStyleTrackballCamera {
     this->Interactor->GetEventPosition(xy);
     if (std::abs(xy[0] - press_[0]) <= 3 && std::abs(xy[1] - press_[1]) <= 3 && on_click)
       on_click(xy[0], xy[1], this->Interactor->GetControlKey() != 0);
+  }
+  // Mouse moves with no button held (the style is not rotating, panning or zooming) are hover positions.
+  void OnMouseMove() override {
+    vtkInteractorStyleTrackballCamera::OnMouseMove();
+    if (this->State != VTKIS_NONE || !on_hover) return;
+    int xy[2];
+    this->Interactor->GetEventPosition(xy);
+    on_hover(xy[0], xy[1]);
   }
   void OnRightButtonDown() override {
     int xy[2];
@@ -158,7 +185,7 @@ void StudioWindow::build_ui() {
   // No MSAA while interacting: under Mesa's software renderer (Xvfb, this 2-core machine) 4x MSAA doubles the
   // render time and the renderer shares the cores with the solver (docs/benchmarks.md, "Studio").
   window_->SetMultiSamples(0);
-  auto ren = vtkSmartPointer<vtkRenderer>::New();
+  auto ren = vtkSmartPointer<PlainBlendRenderer>::New();
   ren->SetBackground(1, 1, 1);
   ren->SetBackground2(0.86, 0.89, 0.94);
   ren->GradientBackgroundOn();
@@ -189,6 +216,20 @@ void StudioWindow::build_ui() {
       pick_at_display(x, y);
   };
   style->on_right_press = [this](int x, int y) { return delete_handle_at_display(x, y); };
+  // Hover: the newest position is picked at most once per kHoverMs, from the event loop (never inside the
+  // mouse event, never while a handle is dragged), so moving the mouse does not hold up rendering.
+  hover_timer_ = new QTimer(this);
+  hover_timer_->setSingleShot(true);
+  hover_timer_->setInterval(kHoverMs);
+  connect(hover_timer_, &QTimer::timeout, this, [this] {
+    if (hover_enabled_ && dragging_ < 0) hover_at_display(hover_xy_[0], hover_xy_[1]);
+  });
+  style->on_hover = [this](int x, int y) {
+    if (!hover_enabled_) return;
+    hover_xy_[0] = x;
+    hover_xy_[1] = y;
+    if (!hover_timer_->isActive()) hover_timer_->start();
+  };
   window_->GetInteractor()->SetInteractorStyle(style);
 
   // Menus and tool bar.
@@ -322,7 +363,18 @@ void StudioWindow::build_ui() {
   picked_label_->setWordWrap(true);
   picked_label_->setAlignment(Qt::AlignTop | Qt::AlignLeft);
   picked_label_->setMargin(4);
-  auto* picked_dock = dock("Picked values", picked_label_);
+  auto* picked_box = new QWidget;
+  auto* picked_layout = new QVBoxLayout(picked_box);
+  picked_layout->setContentsMargins(0, 0, 0, 0);
+  hover_check_ = new QCheckBox("Values under the cursor (hover)");
+  hover_check_->setObjectName("hover");
+  hover_check_->setChecked(hover_enabled_);
+  hover_check_->setToolTip(
+      "Show the values at the point under the mouse as it moves (click or Ctrl+click picks)");
+  connect(hover_check_, &QCheckBox::toggled, this, [this](bool on) { set_hover(on); });
+  picked_layout->addWidget(hover_check_);
+  picked_layout->addWidget(picked_label_, 1);
+  auto* picked_dock = dock("Picked values", picked_box);
   plots_ = new PlotsPanel(this);
   auto* plots_dock = dock("Plots", plots_);
   // The σ3 counterexample explorer (docs/explorer.md): its own map and view, beside the plots.
@@ -730,6 +782,8 @@ std::string StudioWindow::cheat_sheet() {
          "  left click on the mesh (mesh view)   add a handle\n"
          "  Ctrl+left click (mesh view)          pick: sigma1, sigma3, det J, E_iso there\n"
          "  left click (sigma3, Lipschitz, octree views)  pick (with the leaf's depth, L, margin, status)\n"
+         "  move the mouse (no button)           hover: the same values under the cursor (Picked values\n"
+         "                                       panel; its checkbox turns hover off)\n"
          "  drag a cyan sphere                   move that handle's target\n"
          "  right click on a cyan sphere         delete the handle\n"
          "  left drag / middle drag / wheel      rotate / pan / zoom\n"
@@ -863,9 +917,15 @@ bool StudioWindow::export_current(const std::string& dir) {
     write_mesh_vtp((d / "deformed.vtp").string(), mf.V, f->model->mesh.F,
                    {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
     std::string also;
-    if (f->leaves && f->leaves_version == f->map_version) {
+    if (f->leaves && f->leaves_version == f->map_version && f->leaves_sampling) {
+      // certificate.json and voxels.csv as lidef deform writes them for its map (certificate_report.h): the
+      // leaves are the solver's certify_current(true) of this map, as there.
+      CertificateReport report = make_certificate_report(
+          *f->leaves, f->model->cage, f->model->mesh, f->coefficients, session_->scenario().model_dir,
+          "coefficients.txt", f->leaves_sampling_params, *f->leaves_sampling, f->leaves_certify_params);
+      write_certificate_files(dir, report);
       write_leaves_vtu((d / "leaves.vtu").string(), f->leaves->leaves);
-      also += ", leaves.vtu";
+      also += ", certificate.json, voxels.csv, leaves.vtu";
     }
     if (f->field && f->field_version == f->map_version) {
       write_field_vti((d / "field.vti").string(), *f->field);
@@ -873,7 +933,7 @@ bool StudioWindow::export_current(const std::string& dir) {
     }
     status_->setText(QString::fromStdString("exported coefficients.txt, deformed.vtp" + also + " to " + dir +
                                             (also.empty() ? " (show the Lipschitz/octree or sigma3 view "
-                                                            "for leaves.vtu / field.vti)"
+                                                            "for the certificate files / field.vti)"
                                                           : "")));
   } catch (const std::exception& e) {
     report_error("Cannot export", e.what());
@@ -943,15 +1003,46 @@ QWidget* StudioWindow::build_range_controls() {
 }
 
 bool StudioWindow::pick_at_display(int x, int y) {
+  Vec3 rest;
+  std::string where;
+  if (!rest_point_at_display(x, y, rest, where, false)) return false;
+  picked_ = picked_values(*shown_, rest, where);
+  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  status_->setText(QString::fromStdString("picked " + where));
+  return picked_.valid;
+}
+
+bool StudioWindow::hover_at_display(int x, int y) {
+  Vec3 rest;
+  std::string where;
+  // Nothing under the cursor: the panel keeps the last values.
+  if (!rest_point_at_display(x, y, rest, where, true)) return false;
+  const PickedValues v = picked_values(*shown_, rest, "hover: " + where);
+  if (!v.valid) return false;
+  picked_ = v;
+  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  return true;
+}
+
+void StudioWindow::set_hover(bool on) {
+  hover_enabled_ = on;
+  if (!on) hover_timer_->stop();
+  if (hover_check_ && hover_check_->isChecked() != on) {
+    const QSignalBlocker block(hover_check_);
+    hover_check_->setChecked(on);
+  }
+}
+
+bool StudioWindow::rest_point_at_display(int x, int y, Vec3& rest, std::string& where, bool quiet) {
   if (!shown_ || !shown_->model) return false;
   vtkActor* actor = nullptr;
-  std::string where;
   if (settings_.view == View::kMesh) {
     actor = scene_->mesh_actor();
     where = "mesh surface";
   } else if (settings_.view == View::kSigma3) {
     if (settings_.sigma_deformed_space) {
-      status_->setText("picking on sigma3 slices works in rest space only (untick \"Deformed space\")");
+      if (!quiet)
+        status_->setText("picking on sigma3 slices works in rest space only (untick \"Deformed space\")");
       return false;
     }
     actor = scene_->slices_actor();
@@ -960,7 +1051,6 @@ bool StudioWindow::pick_at_display(int x, int y) {
     actor = scene_->leaves_actor();
     where = "leaf voxel";
   }
-  Vec3 rest;
   if (settings_.view == View::kMesh) {
     // The deformed mesh: the picked point pulled back to rest space (the same barycentric combination of the
     // rest triangle), as a handle's source.
@@ -1009,10 +1099,7 @@ bool StudioWindow::pick_at_display(int x, int y) {
     if (!std::isfinite(best)) return false;
     rest = o + best * d;  // on a drawn cube: strictly inside that leaf's voxel
   }
-  picked_ = picked_values(*shown_, rest, where);
-  picked_label_->setText(QString::fromStdString(to_text(picked_)));
-  status_->setText(QString::fromStdString("picked " + where));
-  return picked_.valid;
+  return true;
 }
 
 bool StudioWindow::open_comparison(const std::string& dir) {
@@ -1052,6 +1139,7 @@ void StudioWindow::render_pending() {
   }
   if (!f) return;
   const auto t0 = std::chrono::steady_clock::now();
+  scene_->set_certified_domain(session_->scenario().params.domain);
   scene_->show(*f, settings_);
   if (f->model && f->mesh_V.rows() > 0 && f->model_version != shown_model_version_) {
     shown_model_version_ = f->model_version;

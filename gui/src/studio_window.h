@@ -13,7 +13,9 @@
 #include "pick.h"
 #include "scene.h"
 
+class QCheckBox;
 class QLabel;
+class QTimer;
 class QDockWidget;
 class QProgressBar;
 class QPushButton;
@@ -84,6 +86,13 @@ class StudioWindow : public QMainWindow {
   // space, leaf voxels); fills the Picked panel. False when nothing is there.
   bool pick_at_display(int x, int y);
   const PickedValues& picked() const { return picked_; }
+  // Hover: mouse moves with no button held pick the point under the cursor (throttled to one pick per
+  // kHoverMs, run from the event loop) into the same panel, "hover: " before `where`; nothing under the
+  // cursor keeps the last values. On by default; the panel's checkbox turns it off.
+  static constexpr int kHoverMs = 60;
+  void set_hover(bool on);
+  bool hover_enabled() const { return hover_enabled_; }
+  bool hover_at_display(int x, int y);
 
   void set_settings(const ViewSettings& s);
   // The solver parameters (panel and engine); used for models opened without a scenario.
@@ -165,6 +174,13 @@ class StudioWindow : public QMainWindow {
   std::string model_note_;
   QLabel *badge_ = nullptr, *status_ = nullptr, *picked_label_ = nullptr;
   PickedValues picked_;
+  // The rest-space point under display position (x, y) in the current view and what it lies on; `quiet`:
+  // no status message when the view cannot pick.
+  bool rest_point_at_display(int x, int y, Vec3& rest, std::string& where, bool quiet);
+  bool hover_enabled_ = true;
+  QTimer* hover_timer_ = nullptr;
+  QCheckBox* hover_check_ = nullptr;
+  int hover_xy_[2] = {0, 0};
   // Preprocessing of an opened model: stage and percent, and Cancel (shown only while preparing).
   QProgressBar* prepare_bar_ = nullptr;
   QPushButton* prepare_cancel_ = nullptr;

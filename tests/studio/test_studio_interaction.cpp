@@ -16,6 +16,7 @@
 
 #include <QAction>
 #include <QApplication>
+#include <QCheckBox>
 #include <QClipboard>
 #include <QDockWidget>
 #include <QMessageBox>
@@ -30,6 +31,7 @@
 #include <sstream>
 #include <thread>
 
+#include "lidef/certificate_report.h"
 #include "lidef/scenario.h"
 #include "studio_window.h"
 #include "test_support.h"
@@ -460,15 +462,89 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
             (l.center == on_leaf.leaf.center && l.L == on_leaf.leaf.L && l.margin == on_leaf.leaf.margin);
   EXPECT_TRUE(found) << "the picked leaf is not one of the certificate's";
 
+  // Hover: scripted mouse moves (no button) over another leaf; the throttled pick fills the same panel.
+  ASSERT_TRUE(win.hover_enabled());
+  auto move_to = [&](const Vec3& p) {
+    double m[2];
+    display_of(win, p, m);
+    iren->SetEventInformation(static_cast<int>(m[0]), static_cast<int>(m[1]), 0, 0, 0, 0);
+    iren->InvokeEvent(vtkCommand::MouseMoveEvent, nullptr);
+  };
+  move_to(Vec3(-0.5, 0.02, 0.0));
+  move_to(Vec3(0.6, 0.02, 0.0));  // the newest position is the one picked
+  ASSERT_TRUE(pump_until([&] { return win.picked().where.rfind("hover", 0) == 0; }, 5)) << win.picked().where;
+  const studio::PickedValues on_hover = win.picked();
+  ASSERT_TRUE(on_hover.has_leaf);
+  EXPECT_GT(on_hover.rest.x(), 0.3) << "not the newest hover position";
+  EXPECT_LE((on_hover.rest - on_hover.leaf.center).cwiseAbs().maxCoeff(),
+            0.5 * on_hover.leaf.side * (1 + 1e-6));
+  // Turned off (the panel's checkbox), moves no longer change the panel.
+  auto* hover_box = win.findChild<QCheckBox*>("hover");
+  ASSERT_NE(hover_box, nullptr);
+  hover_box->setChecked(false);
+  EXPECT_FALSE(win.hover_enabled());
+  move_to(Vec3(-0.3, 0.02, 0.0));
+  pump_until([] { return false; }, 0.3);
+  EXPECT_EQ(win.picked().rest, on_hover.rest) << "hover is off";
+
   // Export the map as the CLI writes it, and evaluate both points with lidef eval.
   TempDir dir;
   ASSERT_TRUE(win.export_current(dir / "export"));
-  for (const char* name : {"coefficients.txt", "deformed.vtp", "leaves.vtu"})
+  for (const char* name :
+       {"coefficients.txt", "deformed.vtp", "leaves.vtu", "certificate.json", "voxels.csv"})
     EXPECT_TRUE(std::filesystem::exists(std::filesystem::path(dir / "export") / name)) << name;
+  // The exported certificate is what lidef deform writes for its map (the solver's certificate of it, the
+  // same writers). lidef certify of the exported coefficients (same sampling and certifier parameters) must
+  // agree: the same voxels, leaves and verdicts. The numbers differ slightly because deform's solver
+  // certifies from the reduced coordinates (certify_reduced) and certify from the full coefficients (measured
+  // here: σ3 at the centers within 1.3e-7, L within 2.3e-6 relative); both L are upper bounds of the same
+  // map's constant.
+  {
+    std::string clog;
+    ASSERT_EQ(
+        run_command(cli() + " certify " + project_data() + "/models/beam --coeffs " +
+                        (dir / "export/coefficients.txt") + " --samples 4000 --grid 0 --out " + (dir / "cli"),
+                    &clog),
+        0)
+        << clog;
+    const auto a = read_voxels_csv(dir / "export/voxels.csv"), b = read_voxels_csv(dir / "cli/voxels.csv");
+    ASSERT_EQ(a.size(), b.size());
+    ASSERT_GT(a.size(), 1000u);
+    double worst_l = 0, worst_s = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      ASSERT_EQ(a[i].center, b[i].center) << "leaf " << i;
+      ASSERT_EQ(a[i].side, b[i].side) << "leaf " << i;
+      ASSERT_EQ(a[i].depth, b[i].depth) << "leaf " << i;
+      ASSERT_EQ(a[i].certified, b[i].certified) << "leaf " << i;
+      worst_s = std::max(worst_s, std::abs(a[i].sigma3 - b[i].sigma3));
+      worst_l = std::max(worst_l, std::abs(a[i].L - b[i].L) / b[i].L);
+    }
+    EXPECT_LT(worst_s, 1e-6) << "sigma3 at the leaf centers";
+    EXPECT_LT(worst_l, 1e-4) << "Lipschitz bounds of the two certifiers";
+    std::printf(
+        "export vs lidef certify: %zu leaves, max |sigma3 difference| %.3g, max relative L difference "
+        "%.3g\n",
+        a.size(), worst_s, worst_l);
+    auto slurp = [](const std::string& path) {
+      std::ifstream in(path);
+      return nlohmann::json::parse(in);
+    };
+    auto studio_json = slurp(dir / "export/certificate.json"), cli_json = slurp(dir / "cli/certificate.json");
+    EXPECT_NEAR(studio_json.at("min_lower_bound").get<double>(), cli_json.at("min_lower_bound").get<double>(),
+                1e-4);
+    // Input paths, the L-dependent minima and the CSV's hash aside, certificate.json is the same.
+    for (auto* j : {&studio_json, &cli_json})
+      for (const char* k : {"model", "coefficients", "min_lower_bound", "min_margin", "min_sigma3_center",
+                            "voxels_csv_fnv1a64"}) {
+        EXPECT_TRUE(j->contains(k)) << k;
+        j->erase(k);
+      }
+    EXPECT_EQ(studio_json, cli_json);
+  }
   {
     std::ofstream pts(dir / "p.xyz");
     pts.precision(17);
-    for (const auto* v : {&on_mesh, &on_leaf})
+    for (const auto* v : {&on_mesh, &on_leaf, &on_hover})
       pts << v->rest.x() << " " << v->rest.y() << " " << v->rest.z() << "\n";
   }
   std::string log;
@@ -479,9 +555,9 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
             0)
       << log;
   const auto rows = read_eval_csv(dir / "e.csv");
-  ASSERT_EQ(rows.size(), 2u);
+  ASSERT_EQ(rows.size(), 3u);
   int k = 0;
-  for (const auto* v : {&on_mesh, &on_leaf}) {
+  for (const auto* v : {&on_mesh, &on_leaf, &on_hover}) {
     const auto& row = rows[k++];
     ASSERT_EQ(row.size(), 19u);
     // x,y,z,fx,fy,fz,J00..J22,s1,s2,s3,detJ

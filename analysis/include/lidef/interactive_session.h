@@ -71,6 +71,11 @@ struct SessionFrame {
   // iterating, always when resting. Each carries the map_version it belongs to (it may lag the frame's).
   std::shared_ptr<const Certificate> leaves;  // certificate with leaves (keep_leaves = true)
   long leaves_version = -1;
+  // How `leaves` was computed, for writing it as lidef deform writes its certificate
+  // (make_certificate_report): the solver's sampling (model units) and certifier parameters.
+  std::shared_ptr<const VoxelSampling> leaves_sampling;
+  SamplingParams leaves_sampling_params;
+  CertifyParams leaves_certify_params;
   std::shared_ptr<const FieldGrid> field;                    // σ3 etc. on a grid in rest space
   std::shared_ptr<const std::vector<float>> field_deformed;  // 3 per grid point: f(p) (NaN outside the cage)
   long field_version = -1;
