@@ -177,6 +177,7 @@ struct PathRun {
   SolveResult result;
   PathSolveReport report;
   int accepted = 0, fully_certified = 0;
+  int local_global_accepted = 0, local_global_certified = 0;  // maps the local/global strategy set
 };
 
 // solve_to_targets from the identity; every accepted iterate certified again in the callback by a full-space
@@ -199,7 +200,17 @@ std::unique_ptr<PathRun> path_run(const DeformParams& p, const MatX3d& sources,
         }
         return true;
       },
-      nullptr, [&](const std::string& line) { stages.push_back(line); }, &r->report);
+      nullptr,
+      [&](const std::string& line) {
+        stages.push_back(line);
+        // A map set by the local/global strategy (not a Newton iterate): certified again, independently.
+        if (line.rfind("local/global: accepted", 0) == 0) {
+          ++r->local_global_accepted;
+          if (full.certify(s.coefficients(), s.certify_params(false, false)).certified)
+            ++r->local_global_certified;
+        }
+      },
+      &r->report);
   std::printf("%s: %s after %d iterations (%s), max handle error %.3e\n", name.c_str(),
               to_string(r->result.reason), r->result.iterations, r->result.message.c_str(),
               s.handle_errors().maxCoeff());
