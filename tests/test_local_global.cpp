@@ -120,7 +120,8 @@ TEST(LocalGlobal, ReproducesARigidMotionOfTheTargets) {
 TEST(LocalGlobal, EnergyNeverIncreases) {
   DeformationSolver s(beam().model.cage, small(), beam().cache.str());
   MatX3d tgt = ends();
-  for (int i = 5; i < 10; ++i) tgt.row(i) = (rotation(150, Vec3(1, 0, 0)) * ends().row(i).transpose()).transpose();
+  for (int i = 5; i < 10; ++i)
+    tgt.row(i) = (rotation(150, Vec3(1, 0, 0)) * ends().row(i).transpose()).transpose();
   s.set_handles(ends(), tgt);
   const LocalGlobalSolver lg(s.energy_function(), {1e5, 0.1});
   const MatX3d Q = s.frame().points_to_normalized(tgt);

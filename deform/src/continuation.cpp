@@ -112,8 +112,9 @@ struct Runner {
     const MatX3d Q = solver.frame().points_to_normalized(targets);
     SolveResult r;
     r.reason = StopReason::kBlocked;
-    r.message = "blocked by the certificate: no local/global map toward the targets nor a blend of one was "
-                "certified";
+    r.message =
+        "blocked by the certificate: no local/global map toward the targets nor a blend of one was "
+        "certified";
     for (int round = 0; round < kLocalGlobalRounds; ++round) {
       const double before = max_error();
       bool accepted = false;
@@ -121,8 +122,8 @@ struct Runner {
       if (round == 0 && (entry - solver.reduced_coefficients()).norm() > 0) starts.push_back(entry);
       for (size_t k = 0; k < starts.size() && !accepted; ++k) {
         const LocalGlobalResult c = lg.solve(starts[k], Q, kLocalGlobalIterations);
-        const double err =
-            (solver.energy_function().handle_matrix() * c.y - Q).rowwise().norm().maxCoeff() * solver.frame().scale;
+        const double err = (solver.energy_function().handle_matrix() * c.y - Q).rowwise().norm().maxCoeff() *
+                           solver.frame().scale;
         const std::string from = k == 0 ? "the current map" : "the starting map";
         std::string why;
         if (solver.set_reduced_map(c.y, &why)) {
@@ -151,8 +152,11 @@ struct Runner {
       const int polish = std::min(budget(), std::max(1, p.continuation_stage_iterations));
       say("local/global: Newton from the accepted map to the targets (at most " + std::to_string(polish) +
           " iterations)");
+      solver.set_targets(targets, "targets");  // the errors below are against the user's targets
       const bool was_reached = reached();
       r = run(targets, polish);
+      if (r.reason == StopReason::kMaxIterations)
+        r.message = "the " + std::to_string(polish) + " polish iterations ran (Newton did not converge)";
       if (reached() && r.reason != StopReason::kConverged && r.reason != StopReason::kInterrupted)
         r.message = "targets reached by a certified local/global map" +
                     std::string(was_reached ? "" : " and Newton") + "; Newton afterwards: " + r.message;

@@ -82,8 +82,7 @@ MatS3 LocalGlobalSolver::global_step(const MatJT& T, const MatX3d& Q) const {
       MatJT Tb = T.middleRows(3 * static_cast<Eigen::Index>(i0), 3 * m);
       if (sw.size())
         for (int k = 0; k < m; ++k) Tb.middleRows<3>(3 * k) *= sw(i0 + k);
-      rhs.noalias() +=
-          G.middleRows(3 * static_cast<Eigen::Index>(i0), 3 * m).cast<double>().transpose() * Tb;
+      rhs.noalias() += G.middleRows(3 * static_cast<Eigen::Index>(i0), 3 * m).cast<double>().transpose() * Tb;
     }
     rhs *= rigidity_ / n;
   }

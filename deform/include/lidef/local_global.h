@@ -26,9 +26,9 @@ namespace lidef {
 Mat3 closest_rotation(const Mat3& M);
 
 struct LocalGlobalResult {
-  MatS3 y;              // s by 3 reduced coefficients (normalized frame)
-  int iterations = 0;   // local/global iterations run
-  double energy = 0;    // E_LG at y with its best rotations
+  MatS3 y;                 // s by 3 reduced coefficients (normalized frame)
+  int iterations = 0;      // local/global iterations run
+  double energy = 0;       // E_LG at y with its best rotations
   bool converged = false;  // relative energy decrease below the tolerance
 };
 
