@@ -1,7 +1,6 @@
 #include "lidef/compare/sr_arap.h"
 
 #include <Eigen/CholmodSupport>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,6 +9,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
+#include "lidef/local_global.h"
 
 namespace lidef {
 
@@ -136,11 +136,8 @@ void SrArapSolver::local_step() {
       const Vec3 e = (mesh_.V.row(i) - mesh_.V.row(j)).transpose(), ed = (X_.row(i) - X_.row(j)).transpose();
       S += wij * e * ed.transpose() + 2 * params_.alpha * area_ * wij * R_[j].transpose();
     }
-    // argmax tr(R S) over rotations: S = U Σ Vᵀ → R = V Uᵀ (flip the weakest direction if that reflects).
-    Eigen::JacobiSVD<Mat3> svd(S, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Mat3 V = svd.matrixV();
-    if ((V * svd.matrixU().transpose()).determinant() < 0) V.col(2) *= -1;
-    R_[i] = V * svd.matrixU().transpose();
+    // argmax tr(R S) over rotations = the rotation closest to Sᵀ (S = U Σ Vᵀ → R = V Uᵀ).
+    R_[i] = closest_rotation(S.transpose());
   }
 }
 

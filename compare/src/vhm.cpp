@@ -1,27 +1,15 @@
 #include "lidef/compare/vhm.h"
 
-#include <Eigen/SVD>
 #include <chrono>
 #include <cmath>
 
 #include "lidef/errors.h"
+#include "lidef/local_global.h"
 
 namespace lidef {
 
 // Energies below this (E is 0 at the rest shape) count as converged: relative decreases of rounding noise.
 constexpr double kEnergyFloor = 1e-14;
-
-namespace {
-// The rotation closest to M in the Frobenius norm (polar decomposition; a reflection is turned into a
-// rotation by flipping the smallest singular direction).
-Mat3 closest_rotation(const Mat3& M) {
-  Eigen::JacobiSVD<Mat3> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Mat3 U = svd.matrixU();
-  const Mat3 V = svd.matrixV();
-  if ((U * V.transpose()).determinant() < 0) U.col(2) *= -1;
-  return U * V.transpose();
-}
-}  // namespace
 
 VhmSolver::VhmSolver(const Cage& cage, const HarmonicBasis& basis, const MatX3d& anchors,
                      const MatX3d& boundary, const VhmParams& params, const std::string& where)

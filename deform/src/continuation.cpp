@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "lidef/local_global.h"
 #include "lidef/number_format.h"
 #include "lidef/target_path.h"
 
@@ -20,6 +21,12 @@ constexpr int kMaxStageHalvings = 6;
 constexpr double kStageSlack = 0.1;
 
 constexpr double kPi = 3.14159265358979323846;
+// The local/global warm start: iterations per solve, and blends t = 1/2, 1/4, ... 1/2^kMaxBlendHalvings of a
+// local/global map that is not certified whole.
+constexpr int kLocalGlobalIterations = 500;
+constexpr int kMaxBlendHalvings = 6;
+// Rounds of (local/global map, certified blend, Newton) while the handle error keeps dropping.
+constexpr int kLocalGlobalRounds = 4;
 
 // Runs the solver against target sets while counting the iterations of all of them against max_iterations.
 struct Runner {
@@ -94,6 +101,70 @@ struct Runner {
       r.message += " [strategies: " + tried + "; " + std::to_string(report.stages) +
                    " intermediate stages, " + std::to_string(report.stage_retries) + " shortened]";
     return r;
+  }
+
+  // Strategy 4 (docs/solver.md): local/global maps toward `targets` from the current map and from `entry`
+  // (the map solve_to_targets started from), each accepted only through the solver's certificate — whole, or
+  // the largest certified blend y + t (y_lg − y) — then Newton from the accepted map to the targets.
+  SolveResult local_global(const MatX3d& targets, const MatS3& entry) {
+    const DeformParams& p = solver.params();
+    const LocalGlobalSolver lg(solver.energy_function(), {p.lambda_p2p, p.lambda_smooth});
+    const MatX3d Q = solver.frame().points_to_normalized(targets);
+    SolveResult r;
+    r.reason = StopReason::kBlocked;
+    r.message =
+        "blocked by the certificate: no local/global map toward the targets nor a blend of one was "
+        "certified";
+    for (int round = 0; round < kLocalGlobalRounds; ++round) {
+      const double before = max_error();
+      bool accepted = false;
+      std::vector<MatS3> starts{solver.reduced_coefficients()};
+      if (round == 0 && (entry - solver.reduced_coefficients()).norm() > 0) starts.push_back(entry);
+      for (size_t k = 0; k < starts.size() && !accepted; ++k) {
+        const LocalGlobalResult c = lg.solve(starts[k], Q, kLocalGlobalIterations);
+        const double err = (solver.energy_function().handle_matrix() * c.y - Q).rowwise().norm().maxCoeff() *
+                           solver.frame().scale;
+        const std::string from = k == 0 ? "the current map" : "the starting map";
+        std::string why;
+        if (solver.set_reduced_map(c.y, &why)) {
+          accepted = true;
+          say("local/global: accepted the map from " + from + " (" + std::to_string(c.iterations) +
+              " iterations, max handle error " + format_g(err, 3) + "), certified");
+          break;
+        }
+        say("local/global: the map from " + from + " (" + std::to_string(c.iterations) +
+            " iterations, max handle error " + format_g(err, 3) + ") is not certified (" + why +
+            "): trying blends");
+        const MatS3 y0 = solver.reduced_coefficients();
+        for (int h = 1; h <= kMaxBlendHalvings && !accepted; ++h) {
+          const double t = std::ldexp(1.0, -h);
+          if (solver.set_reduced_map(y0 + t * (c.y - y0))) {
+            accepted = true;
+            say("local/global: accepted a blend t = " + format_g(t, 3) + " toward the map from " + from +
+                " (max handle error " + format_g(max_error(), 3) + "), certified");
+          }
+        }
+      }
+      if (!accepted) break;
+      // Newton polish, briefly: a local/global map lies close to the boundary of what the line search's
+      // certificate (with its refinement budget) proves, and measured on beam_pull_through every trial step
+      // from it was rejected — iterations there cost many certificates and gain nothing.
+      const int polish = std::min(budget(), std::max(1, p.continuation_stage_iterations));
+      say("local/global: Newton from the accepted map to the targets (at most " + std::to_string(polish) +
+          " iterations)");
+      solver.set_targets(targets, "targets");  // the errors below are against the user's targets
+      const bool was_reached = reached();
+      r = run(targets, polish);
+      if (r.reason == StopReason::kMaxIterations)
+        r.message = "the " + std::to_string(polish) + " polish iterations ran (Newton did not converge)";
+      if (reached() && r.reason != StopReason::kConverged && r.reason != StopReason::kInterrupted)
+        r.message = "targets reached by a certified local/global map" +
+                    std::string(was_reached ? "" : " and Newton") + "; Newton afterwards: " + r.message;
+      if (r.reason == StopReason::kInterrupted || reached() || budget() == 0) break;
+      if (max_error() > (1 - 1e-3) * before) break;  // no progress this round
+    }
+    report.path_reached = reached() ? report.segments : report.path_reached;
+    return finish(r);
   }
 
   // Follows `path` stage by stage (planned[k] stages in segment k), then solves to its end.
@@ -173,6 +244,7 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
   const std::vector<int> groups =
       groups_in.empty() ? group_handles(solver.handle_sources(), kGroupLink * diag) : groups_in;
 
+  const MatS3 entry = solver.reduced_coefficients();
   std::vector<MatX3d> keyframes{solver.handle_positions()};
   keyframes.insert(keyframes.end(), waypoints.begin(), waypoints.end());
   keyframes.push_back(targets);
@@ -221,6 +293,16 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
                std::to_string(path.segments()) + " path segment(s), largest group rotation " +
                format_fixed(report.max_angle_deg, 1) + " degrees");
     result = runner.staged(path, planned);
+  }
+  // Strategy 4: where the others stopped short, a local/global map (rotation-aware, like VHM) through the
+  // same certificate.
+  if (params.continuation && result.reason != StopReason::kInterrupted && !runner.reached()) {
+    report.strategies.push_back("local/global warm start after the continuation stopped short (" +
+                                std::string(to_string(result.reason)) + ")");
+    runner.say("the continuation stopped short of the targets (" + result.message +
+               "): trying local/global maps toward them");
+    runner.phase_used = 0;
+    result = runner.local_global(targets, entry);
   }
   // Whatever stage the run stopped in, the solver's targets (and so its reported handle errors) are the
   // user's.

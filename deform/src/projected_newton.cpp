@@ -374,16 +374,29 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
                                 " coefficients per coordinate; relative residual " + format_g(residual, 4) +
                                 "): projecting it would change the map. A coefficients.txt written by "
                                 "'lidef deform' with the same reduced_dof is in it.");
-  const Certificate c = certifier_->certify_reduced(yr, certify_params(false, false));
-  if (!c.certified)
-    throw InputError(where, "the initial map is not certified locally injective on this sampling (" +
-                                c.reason + "); lidef deform only starts from certified maps");
-  y_ = yr;
-  kernels_->set_current(y_);
-  cert_ = frame_.from_normalized(c);
+  std::string why;
+  if (!set_reduced_map(yr, &why))
+    throw InputError(where, "the initial map is not certified locally injective on this sampling (" + why +
+                                "); lidef deform only starts from certified maps");
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
   history_.clear();
+}
+
+bool DeformationSolver::set_reduced_map(const MatS3& y, std::string* reason) {
+  if (y.rows() != subspace_.size() || !y.allFinite()) {
+    if (reason) *reason = "not " + std::to_string(subspace_.size()) + " finite reduced coefficient rows";
+    return false;
+  }
+  const Certificate c = certifier_->certify_reduced(y, certify_params(false, false));
+  if (!c.certified) {
+    if (reason) *reason = c.reason;
+    return false;
+  }
+  y_ = y;
+  kernels_->set_current(y_);
+  cert_ = frame_.from_normalized(c);
+  return true;
 }
 
 std::string handle_source_problem(const Cage& cage, const Vec3& p) {

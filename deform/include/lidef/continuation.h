@@ -11,10 +11,14 @@
 //                    `continuation_stage_iterations` Newton iterations, then the final solve.
 //   3. fallback    — a direct solve that stops with the handles not reached (blocked, no certified step,
 //                    converged short of them, iteration limit) is followed by stages from where it stopped.
+//   4. local/global — after 2 or 3 ended with the handles not reached: local/global (ARAP-like) maps toward
+//                    the targets (local_global.h) from the current and the starting map, accepted only if the
+//                    solver's certificate certifies them (else the largest certified blend toward one), then
+//                    a short Newton polish; up to 4 rounds while the handle error drops.
 // A stage whose targets are not reached (max handle error above max(handle_tolerance, 10% of the stage's
 // largest handle move)) is retried with half the step along the path (a reached one doubles it again, up to
-// the planned step); below 1/64 of a planned stage the path is given up and the result says "blocked by the
-// certificate", with the strategies tried.
+// the planned step); below 1/64 of a planned stage the path is given up (then strategy 4; if it fails too, the
+// result says "blocked by the certificate", with the strategies tried).
 // `continuation = false` keeps strategy 1 only (waypoints are still visited, one full solve each).
 #pragma once
 #include <atomic>
@@ -29,7 +33,8 @@ namespace lidef {
 
 struct PathSolveReport {
   std::vector<std::string> strategies;  // tried, in order: "direct", "planned continuation", "continuation
-                                        // after the direct solve stopped short"
+                                        // after the direct solve stopped short", "local/global warm start
+                                        // after the continuation stopped short"
   int stages = 0;                       // intermediate target sets solved (the final solve not counted)
   int stage_retries = 0;                // stages shortened because their targets were not reached
   double max_angle_deg = 0;             // largest rotation of a handle group along the path

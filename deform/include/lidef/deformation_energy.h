@@ -71,6 +71,11 @@ class DeformationEnergy {
   int num_handles() const { return static_cast<int>(D_.rows()); }
   const MatXfR& gradient_matrix() const { return G_; }  // rounded to float (see above)
   const std::vector<int>& hessian_subset() const { return subset_; }
+  const MatXd& handle_matrix() const { return D_; }        // D: #h by s
+  const MatX3d& targets() const { return Q_; }             // Q: #h by 3 (normalized frame)
+  const VecXd& smooth_eigenvalues() const { return mu_; }  // μ: s
+  int num_edges() const { return num_edges_; }             // |E|
+  const VecXd& sample_weights() const { return w_; }       // #I with mean 1, or empty (uniform)
 
   // JT = G ỹ (3|I| by 3).
   MatJT jacobians(const MatS3& y) const;

@@ -160,6 +160,10 @@ class DeformationSolver {
   // when the map is not certified locally injective on this sampling. Keeps the weights at their defaults and
   // clears the history.
   void set_initial_map(const MatX3d& y, const std::string& where);
+  // Makes ỹ (s by 3, normalized frame, as reduced_coefficients()) the current map if the solver's certificate
+  // certifies it; otherwise returns false with the certificate's reason and keeps the map. Weights and
+  // history are kept (the continuation's local/global warm start, continuation.h).
+  bool set_reduced_map(const MatS3& y, std::string* reason = nullptr);
 
   // Newton iterations until a stop criterion. `on_iteration` is called after every iteration; returning false
   // stops (kInterrupted). `stop` (optional) is polled between line-search trials too (Ctrl-C): an iteration
