@@ -55,17 +55,23 @@ struct Runner {
   // With `done_within` >= 0 the solve ends after the first accepted iteration that brings every handle within
   // that distance of its target (an intermediate stage needs the handles there, not a polished energy).
   // `user_stopped` tells an early end of ours from the caller's callback or stop flag.
-  SolveResult run(const MatX3d& targets, int max_iterations, double done_within = -1) {
+  // With `until_rejected` the solve also ends at the first iteration that accepts no step (the local/global
+  // polish: another iteration from the same map costs as many certificates and gains nothing).
+  SolveResult run(const MatX3d& targets, int max_iterations, double done_within = -1, bool until_rejected = false) {
     DeformParams p = solver.params();
     const int saved = p.max_iterations;
     p.max_iterations = std::min(max_iterations, budget());
     solver.set_params(p);
     solver.set_targets(targets, "continuation targets");
     solver.reset_weights();
-    bool user_stopped = false;
+    bool user_stopped = false, rejected = false;
     auto callback = [&](const IterationRecord& rec) {
       if (on_iteration && !on_iteration(rec)) {
         user_stopped = true;
+        return false;
+      }
+      if (until_rejected && !rec.accepted) {
+        rejected = true;
         return false;
       }
       return !(done_within >= 0 && rec.accepted && rec.max_handle_error <= done_within);
@@ -85,7 +91,10 @@ struct Runner {
     seconds += r.seconds;
     if (r.reason == StopReason::kMaxIterations)  // the solver names the stage's share; say the real limit
       r.message = "iteration limit (" + std::to_string(saved) + " per strategy) reached";
-    if (r.reason == StopReason::kInterrupted && !user_stopped && !(stop && stop->load())) {
+    if (r.reason == StopReason::kInterrupted && rejected && !user_stopped && !(stop && stop->load())) {
+      r.reason = StopReason::kBlocked;
+      r.message = "no certified Newton step from this map";
+    } else if (r.reason == StopReason::kInterrupted && !user_stopped && !(stop && stop->load())) {
       r.reason = StopReason::kConverged;
       r.message = "stage targets reached";
     }
@@ -148,13 +157,14 @@ struct Runner {
       if (!accepted) break;
       // Newton polish, briefly: a local/global map lies close to the boundary of what the line search's
       // certificate (with its refinement budget) proves, and measured on beam_pull_through every trial step
-      // from it was rejected — iterations there cost many certificates and gain nothing.
+      // from it was rejected — iterations there cost many certificates and gain nothing, so the polish also
+      // ends at its first iteration without an accepted step.
       const int polish = std::min(budget(), std::max(1, p.continuation_stage_iterations));
       say("local/global: Newton from the accepted map to the targets (at most " + std::to_string(polish) +
           " iterations)");
       solver.set_targets(targets, "targets");  // the errors below are against the user's targets
       const bool was_reached = reached();
-      r = run(targets, polish);
+      r = run(targets, polish, -1, /*until_rejected=*/true);
       if (r.reason == StopReason::kMaxIterations)
         r.message = "the " + std::to_string(polish) + " polish iterations ran (Newton did not converge)";
       if (reached() && r.reason != StopReason::kConverged && r.reason != StopReason::kInterrupted)
