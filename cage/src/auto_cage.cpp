@@ -124,12 +124,23 @@ void check_ply_header(const std::string& path, std::uintmax_t file_size) {
   }
 }
 
-// "OFF BINARY" (or [ST][C][N]OFF BINARY) on the first line: CGAL's binary OFF path reads it.
+// "OFF BINARY" (or [ST][C][N]OFF BINARY) on the first line.
 bool is_binary_off(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::string first;
   std::getline(in, first);
   return first.find("BINARY") != std::string::npos;
+}
+
+// Binary OFF is refused, with a reason, before CGAL sees it. CGAL 5.5's binary OFF reader (1) multiplies the
+// header's counts as int without checking them — undefined behaviour for a negative count, found by CI's
+// libFuzzer run (fuzz/regressions/cgal_off/) — and (2) does not read the per-face colour count of Geomview's
+// binary format, so a standard file comes back with faces missing (measured: a tetrahedron written per the
+// format read back with 2 of its 4 faces) — a wrong mesh without an error.
+void refuse_binary_off(const std::string& path) {
+  throw InputError(path,
+                   "binary OFF ('OFF BINARY') is not supported: CGAL 5.5's reader drops faces of standard binary "
+                   "OFF files; convert the mesh to ASCII OFF, OBJ, PLY or STL");
 }
 
 }  // namespace
@@ -143,6 +154,7 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
     throw InputError(path, "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply or .stl)");
   if (fs::file_size(path, ec) == 0 && !ec) throw InputError(path, "file is empty");
   if (ext == "ply") check_ply_header(path, fs::file_size(path, ec));
+  if (ext == "off" && is_binary_off(path)) refuse_binary_off(path);
   MeshReadInfo inf;
   inf.format = ext;
   inf.file_hash = file_hash(path);
