@@ -16,6 +16,7 @@
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
 #include "lidef/target_path.h"
+#include "test_beam.h"
 #include "test_support.h"
 
 using namespace lidef;
@@ -153,15 +154,7 @@ TEST(Scenario, BadHandlePathsAndGroupsAreRefusedWithAReason) {
 
 namespace {
 
-struct Beam {
-  Beam() : model(load_model(lidef::test::project_data() + "/models/beam")) {}
-  Model model;
-  lidef::test::TempDir cache;
-};
-const Beam& beam() {
-  static const Beam b;
-  return b;
-}
+using lidef::test::beam;
 
 // Small: ~2000 voxels, 40 reduced coefficients per coordinate (unit label); the slow tests use 4000 and 60.
 DeformParams small_params(bool slow) {

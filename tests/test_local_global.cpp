@@ -11,21 +11,14 @@
 #include "lidef/local_global.h"
 #include "lidef/model_check.h"
 #include "lidef/projected_newton.h"
+#include "test_beam.h"
 #include "test_support.h"
 
 using namespace lidef;
 
 namespace {
 
-struct Beam {
-  Beam() : model(load_model(lidef::test::project_data() + "/models/beam")) {}
-  Model model;
-  lidef::test::TempDir cache;
-};
-const Beam& beam() {
-  static const Beam b;
-  return b;
-}
+using lidef::test::beam;
 
 DeformParams small() {
   DeformParams p;
