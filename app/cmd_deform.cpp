@@ -116,9 +116,11 @@ void add_deform_command(CLI::App& app, Action& action) {
       "summary.json,\n"
       "scenario.json (the scenario with the parameters used). Ctrl-C stops after the current line-search "
       "trial\n"
-      "and writes the last certified map. Exit code: 0 converged, 1 stopped early (the output is still the "
-      "last\n"
-      "certified map), 2 error. Parameters: docs/parameters.md; solver: docs/solver.md.");
+      "and writes the last certified map. Exit code: 0 targets reached (stop reason converged, or\n"
+      "reached_not_converged: handles within tolerance, Newton stopped before its convergence test), 1 "
+      "stopped\n"
+      "early (the output is still the last certified map), 2 error. Parameters: docs/parameters.md; solver:\n"
+      "docs/solver.md.");
   sub->callback([opts, &action] {
     action = [opts]() -> int {
       const Opts& o = *opts;
@@ -311,7 +313,7 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"
                 << (o.grid > 0 ? ", field.vti" : "") << "}\n";
-      return res.converged() ? kOk : kStoppedEarly;
+      return res.targets_met() ? kOk : kStoppedEarly;
     };
   });
 }

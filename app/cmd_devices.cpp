@@ -1,9 +1,10 @@
 // lidef devices: the OpenCL platforms and devices lidef can use (--backend opencl|auto), with the one `auto`
-// would choose.
+// would choose, and the OpenBLAS kernels of the CPU backend.
 #include <iostream>
 #include <memory>
 
 #include "commands.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/subspace.h"
 #include "param_flags.h"
@@ -35,6 +36,11 @@ void add_devices_command(CLI::App& app, Action& action) {
       select_backend(params, default_cache_dir(), &msg);
       std::cout << "--backend auto -> " << msg.substr(msg.find(':') + 2) << "\n";
       if (!params.opencl_device.empty()) std::cout << "(--opencl-device '" << params.opencl_device << "')\n";
+      // The CPU backend's dense products run on OpenBLAS; which kernels it chose decides their speed.
+      const BlasKernelInfo blas = blas_kernel_info();
+      std::cout << "CPU backend: OpenBLAS kernels " << blas.core
+                << (blas.forced ? " (OPENBLAS_CORETYPE)" : " (chosen by OpenBLAS)")
+                << (blas.recommended.empty() ? "" : "; this CPU supports " + blas.recommended) << "\n";
       return kOk;
     };
   });

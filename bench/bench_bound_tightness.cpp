@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/edge_jet.h"
 #include "lidef/errors.h"
 #include "lidef/lipschitz_bound.h"
@@ -92,6 +93,7 @@ LeafTightness measure(const EdgeJet& ej, const EdgeJet::MapData& md, const Vec3&
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   Options opt;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];

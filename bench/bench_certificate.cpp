@@ -58,6 +58,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/cage.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
@@ -283,6 +284,7 @@ void usage() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   Options opt;
   if (const char* env = std::getenv("LIDEF_SHARED_DATA")) opt.data = env;
   if (opt.data.empty()) opt.data = LIDEF_SHARED_DATA_DIR;

@@ -28,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "lidef/blas_kernel.h"
 #include "lidef/compare/compare.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
@@ -52,6 +53,7 @@ std::string g(double x, int p = 3) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   std::string data, cache = "/tmp/lidef-bench-cache";
   std::vector<std::string> only;
   lidef::CompareOptions opt;

@@ -60,6 +60,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/cage.h"
 #include "lidef/deform_params.h"
 #include "lidef/deformation_energy.h"
@@ -370,6 +371,7 @@ void print_iterations(const RunResult& r) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   Options opt;
   if (const char* env = std::getenv("LIDEF_SHARED_DATA"); env && *env) opt.data = env;
   if (opt.data.empty()) opt.data = LIDEF_SHARED_DATA_DIR;

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/interactive_session.h"
 #include "lidef/precompute_cache.h"
 
@@ -79,6 +80,7 @@ std::string stages_text(const Timing& t) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   if (argc < 2) {
     std::fprintf(stderr, "usage: bench_open DATA_DIR [MODEL...] [--threads T]\n");
     return 2;

@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
 #include "lidef/opencl_backend.h"
@@ -117,6 +118,7 @@ StageMeans means(const std::vector<IterationRecord>& h) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   std::string data_dir, only, cache_dir = "/tmp/lidef-bench-cache";
   int iterations = 0, cap = 8, reps = 5, threads = 0;
   for (int i = 1; i < argc; ++i) {

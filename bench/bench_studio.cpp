@@ -164,7 +164,7 @@ int main(int argc, char** argv) {
     std::perror("bench_studio: xvfb-run");
     return 2;
   }
-  ensure_passive_omp_wait(
+  ensure_studio_environment(
       argv);  // as lidef-studio does (omp_wait.h); OMP_WAIT_POLICY=ACTIVE measures the default
   const std::string data = argv[1];
   double seconds = 10;

@@ -280,7 +280,7 @@ TEST(DeformSlow, ContinuationFullTurnFollowsItsWaypoints) {
   EXPECT_EQ(run->report.segments, 3);
   // Reached, not necessarily converged: the final stage polishes a strongly twisted map slowly (measured: the
   // energy still decreasing after 100 iterations, handles within 1.5e-6 from the 6th on).
-  EXPECT_TRUE(run->result.converged() || run->result.reason == StopReason::kMaxIterations)
+  EXPECT_TRUE(run->result.targets_met() || run->result.reason == StopReason::kMaxIterations)
       << run->result.message;
   EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance * s.frame().scale);
   EXPECT_EQ(run->fully_certified, run->accepted);
@@ -291,9 +291,9 @@ TEST(DeformSlow, ContinuationFullTurnFollowsItsWaypoints) {
 }
 
 TEST(DeformSlow, ContinuationPullThroughAFixedHandleIsReachedByALocalGlobalMap) {
-  // A handle pulled through a fixed one 0.1 away. Newton and the stage continuation stop short (blocked by the
-  // certificate); the local/global strategy finds the map VHM finds (a local rotation of the middle segment)
-  // and the solver's certificate accepts it. Every map set along the way — Newton iterates and the
+  // A handle pulled through a fixed one 0.1 away. Newton and the stage continuation stop short (blocked by
+  // the certificate); the local/global strategy finds the map VHM finds (a local rotation of the middle
+  // segment) and the solver's certificate accepts it. Every map set along the way — Newton iterates and the
   // local/global map — is certified again by an independent full-space certifier; the handles are reached.
   const Scenario sc = read_scenario(lidef::test::project_data() + "/scenarios/beam_pull_through.json");
   const auto run = path_run(small_params(true), sc.sources, sc.waypoints, sc.targets, "pull through");
@@ -307,6 +307,10 @@ TEST(DeformSlow, ContinuationPullThroughAFixedHandleIsReachedByALocalGlobalMap) 
   EXPECT_EQ(run->local_global_certified, run->local_global_accepted);
   EXPECT_EQ(run->fully_certified, run->accepted);
   EXPECT_LE(s.handle_errors().maxCoeff(), s.params().handle_tolerance * s.frame().scale);
+  // Reached is said as reached: converged, or reached_not_converged when the polish from the local/global map
+  // finds no certified Newton step (measured: the latter) — never "blocked" with the handles at their
+  // targets.
+  EXPECT_TRUE(run->result.targets_met()) << to_string(run->result.reason) << ": " << run->result.message;
   // The moved handle really went through: from z = 0.1 to z = -0.1, past the fixed centre.
   EXPECT_LT(s.handle_positions()(11, 2), -0.099);
 }

@@ -57,7 +57,8 @@ struct Runner {
   // `user_stopped` tells an early end of ours from the caller's callback or stop flag.
   // With `until_rejected` the solve also ends at the first iteration that accepts no step (the local/global
   // polish: another iteration from the same map costs as many certificates and gains nothing).
-  SolveResult run(const MatX3d& targets, int max_iterations, double done_within = -1, bool until_rejected = false) {
+  SolveResult run(const MatX3d& targets, int max_iterations, double done_within = -1,
+                  bool until_rejected = false) {
     DeformParams p = solver.params();
     const int saved = p.max_iterations;
     p.max_iterations = std::min(max_iterations, budget());
@@ -317,6 +318,18 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
   // Whatever stage the run stopped in, the solver's targets (and so its reported handle errors) are the
   // user's.
   solver.set_targets(targets, "targets");
+  // The targets met with a certified map although Newton stopped before its convergence test (typically the
+  // local/global map's polish finding no certified step, or its short polish budget running out): the honest
+  // label is "reached", not "blocked". The user's own iteration limit stays max_iterations (more iterations
+  // would still lower the energy; the caller asked for fewer).
+  const bool internal_limit = result.reason == StopReason::kMaxIterations && runner.budget() > 0;
+  if (runner.reached() && (result.reason == StopReason::kBlocked ||
+                           result.reason == StopReason::kNoCertifiedStep || internal_limit)) {
+    result.message = "max handle error " + format_g(runner.max_error(), 3) +
+                     " within the tolerance; Newton ended " + std::string(to_string(result.reason)) + ": " +
+                     result.message;
+    result.reason = StopReason::kReached;
+  }
   if (report_out) *report_out = report;
   return result;
 }

@@ -65,6 +65,8 @@ const char* to_string(StopReason r) {
       return "no_certified_step";
     case StopReason::kInterrupted:
       return "interrupted";
+    case StopReason::kReached:
+      return "reached_not_converged";
   }
   return "?";
 }

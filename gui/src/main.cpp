@@ -21,7 +21,7 @@
 int main(int argc, char** argv) {
   using namespace lidef;
   using namespace lidef::studio;
-  ensure_passive_omp_wait(argv);
+  ensure_studio_environment(argv);
   CLI::App app{
       "lidef-studio: drag handles, watch the certified deformation, inspect sigma3, Lipschitz bounds and "
       "the octree"};

@@ -2,18 +2,17 @@
 // default (active, spinning) wait policy a parallel region stalls whenever the UI thread holds one of the
 // cores: dragging on the bar ran 14 Newton steps/s instead of 26 (docs/benchmarks.md, "Studio"). libgomp
 // reads OMP_WAIT_POLICY when it is loaded, before main(), so the process re-executes itself once with it set
-// (unless the user set it).
+// (unless the user set it) — together with the OpenBLAS kernel choice (lidef/blas_kernel.h), one exec for
+// both.
 #pragma once
-#include <unistd.h>
-
-#include <cstdlib>
+#include "lidef/blas_kernel.h"
 
 namespace lidef::studio {
 
-inline void ensure_passive_omp_wait(char** argv) {
-  if (std::getenv("OMP_WAIT_POLICY")) return;
-  setenv("OMP_WAIT_POLICY", "PASSIVE", 1);
-  execv("/proc/self/exe", argv);  // returns only on failure: then run on with the default policy
+inline void ensure_studio_environment(char** argv) {
+  auto env = blas_environment();
+  env.emplace_back("OMP_WAIT_POLICY", "PASSIVE");
+  reexec_with_environment(argv, env);
 }
 
 }  // namespace lidef::studio

@@ -98,6 +98,10 @@ enum class StopReason {
   kBlocked,          // the certificate shortened the step to below the tolerance: at the injectivity boundary
   kNoCertifiedStep,  // no step length in max_halvings halvings was both decreasing and certified
   kInterrupted,      // the callback or the stop flag asked to stop
+  kReached,  // solve_to_targets only: every handle within handle_tolerance of its target with a certified
+             // map, but Newton stopped before its convergence test (blocked, no certified step, or an
+             // internal polish limit — not the user's max_iterations): the targets are met, the energy is not
+             // stationary (the message says why)
 };
 const char* to_string(StopReason r);
 
@@ -106,6 +110,8 @@ struct SolveResult {
   std::string message;
   int iterations = 0;  // accepted or attempted Newton iterations run by this solve()
   bool converged() const { return reason == StopReason::kConverged; }
+  // The handles are at their targets: converged, or kReached. What the CLI's exit status reports.
+  bool targets_met() const { return reason == StopReason::kConverged || reason == StopReason::kReached; }
   double seconds = 0;
 };
 
@@ -133,10 +139,10 @@ class DeformationSolver {
                     const std::string& cache_dir = default_cache_dir(),
                     const std::function<void(const std::string&)>& log = {},
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
-  // The same with progress, cancellation, the cache limit and the mesh (setup.mesh). The sampling, the reduced
-  // basis gradients and the certifier's derivatives come from the cache when it holds them for exactly this
-  // cage, mesh domain, these parameters and this subspace (else they are computed and stored): the solver is
-  // the same either way, byte for byte.
+  // The same with progress, cancellation, the cache limit and the mesh (setup.mesh). The sampling, the
+  // reduced basis gradients and the certifier's derivatives come from the cache when it holds them for
+  // exactly this cage, mesh domain, these parameters and this subspace (else they are computed and stored):
+  // the solver is the same either way, byte for byte.
   DeformationSolver(const Cage& cage, const DeformParams& params, const PrecomputeSetup& setup,
                     std::shared_ptr<const ComputeBackend> backend = nullptr);
   ~DeformationSolver();

@@ -1,0 +1,34 @@
+// Which OpenBLAS kernels the process runs, and a fix for CPUs OpenBLAS does not know.
+//
+// Debian 12's OpenBLAS 0.3.21 (DYNAMIC_ARCH) picks its kernels from the CPU model number; a model newer than
+// the library (seen: family 6 model 207, a 2-core Xeon VM) falls back to "Prescott", its SSE3 kernels,
+// although the CPU has AVX-512. The reduced Hessian's sgemm then runs 2-4x slower (bar_bend: 312 instead of
+// 151 ms per Newton iteration; docs/benchmarks.md, "OpenBLAS kernels"). OpenBLAS chooses once, when it is
+// loaded, before main(), reading OPENBLAS_CORETYPE: so a program re-executes itself once with that variable
+// set.
+#pragma once
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace lidef {
+
+struct BlasKernelInfo {
+  std::string core;  // openblas_get_corename() of this process, e.g. "Cooperlake", "Haswell", "Prescott"
+  std::string
+      recommended;      // the core this CPU's features support, when `core` is OpenBLAS's fallback; else ""
+  bool forced = false;  // OPENBLAS_CORETYPE is set in this process's environment
+};
+BlasKernelInfo blas_kernel_info();
+
+// The environment a re-executed process should have so that OpenBLAS uses the kernels the CPU supports:
+// {"OPENBLAS_CORETYPE", core} when OpenBLAS fell back to Prescott on a CPU with AVX2/FMA (Haswell), AVX-512
+// (SkylakeX) or AVX-512 BF16 (Cooperlake) and the user did not set OPENBLAS_CORETYPE; else nothing.
+std::vector<std::pair<std::string, std::string>> blas_environment();
+
+// Sets each variable of `env` that is not already set and, when one was set, re-executes /proc/self/exe with
+// `argv` (returns only when there was nothing to set, or when exec failed: the program then runs as it is).
+// Call first thing in main(), before any thread starts.
+void reexec_with_environment(char** argv, const std::vector<std::pair<std::string, std::string>>& env);
+
+}  // namespace lidef

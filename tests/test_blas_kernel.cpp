@@ -1,0 +1,36 @@
+// The OpenBLAS kernel choice (lidef/blas_kernel.h): every program of the project re-executes itself once so
+// that OpenBLAS does not run its SSE3 fallback on a CPU it does not know.
+#include <gtest/gtest.h>
+
+#include "lidef/blas_kernel.h"
+#include "test_support.h"
+
+namespace {
+
+TEST(BlasKernel, TheTestProcessRunsKernelsItsCpuSupports) {
+  // test_main.cpp re-executes like every main(): were the re-exec missing or ignored on a CPU model OpenBLAS
+  // does not know, the core would be the fallback "Prescott" and `recommended` would name a better one.
+  const lidef::BlasKernelInfo info = lidef::blas_kernel_info();
+  EXPECT_FALSE(info.core.empty());
+  EXPECT_TRUE(info.recommended.empty()) << "OpenBLAS runs " << info.core << " on a CPU that supports "
+                                        << info.recommended;
+  // Nothing left to set: a second call finds the variable set (and so never loops).
+  EXPECT_TRUE(lidef::blas_environment().empty());
+}
+
+TEST(BlasKernel, TheCliReportsItsKernelsAndKeepsTheUsersChoice) {
+  std::string out;
+  ASSERT_EQ(lidef::test::run_command("env -u OPENBLAS_CORETYPE " + lidef::test::cli() + " devices", &out), 0)
+      << out;
+  EXPECT_NE(out.find("CPU backend: OpenBLAS kernels "), std::string::npos) << out;
+  EXPECT_EQ(out.find("this CPU supports"), std::string::npos) << out;  // the fallback was replaced
+  EXPECT_EQ(out.find("kernels Prescott"), std::string::npos) << out;
+  // A user's OPENBLAS_CORETYPE is kept as it is (Haswell's kernels run on every x86-64 CPU with AVX2).
+  __builtin_cpu_init();
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) GTEST_SKIP() << "no AVX2/FMA";
+  ASSERT_EQ(lidef::test::run_command("OPENBLAS_CORETYPE=Haswell " + lidef::test::cli() + " devices", &out), 0)
+      << out;
+  EXPECT_NE(out.find("CPU backend: OpenBLAS kernels Haswell (OPENBLAS_CORETYPE)"), std::string::npos) << out;
+}
+
+}  // namespace
