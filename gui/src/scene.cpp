@@ -275,6 +275,7 @@ struct Scene::Impl {
   const char* color_leaves(const Certificate& c, const ViewSettings& s, double lo, double hi);
   void show_bar(vtkScalarsToColors* colors, const char* title);
   void set_caption(const std::string& what, const SessionFrame& f);
+  void set_caption_text(const std::string& c);  // wrapped to the view's width
 };
 
 Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make_unique<Impl>()) {
@@ -567,8 +568,7 @@ void Scene::Impl::hide_all() {
 }
 
 void Scene::Impl::show_no_model(const SessionFrame& f) {
-  caption = f.status.empty() ? "no model: File > Open (a model folder or a scenario)" : f.status;
-  text->SetInput(caption.c_str());
+  set_caption_text(f.status.empty() ? "no model: File > Open (a model folder or a scenario)" : f.status);
 }
 
 // Polydata that change with the model only (mesh and cage connectivity, rest-space cage and mesh).
@@ -899,11 +899,50 @@ const char* Scene::Impl::color_leaves(const Certificate& c, const ViewSettings& 
   return "depth";
 }
 
+// Breaks each line of `text` after ", " where it would pass `max_chars` characters (a part longer than that
+// stays whole).
+static std::string wrap_caption(const std::string& text, size_t max_chars) {
+  std::string out, line;
+  auto flush = [&] {
+    out += (out.empty() ? "" : "\n") + line;
+    line.clear();
+  };
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t nl = text.find('\n', start);
+    const std::string src = text.substr(start, nl == std::string::npos ? std::string::npos : nl - start);
+    size_t p = 0;
+    while (p < src.size()) {
+      const size_t comma = src.find(", ", p);
+      const std::string part = src.substr(p, comma == std::string::npos ? std::string::npos : comma + 2 - p);
+      if (!line.empty() && line.size() + part.size() > max_chars) {
+        while (!line.empty() && line.back() == ' ') line.pop_back();
+        flush();
+      }
+      line += part;
+      p = comma == std::string::npos ? src.size() : comma + 2;
+    }
+    flush();
+    if (nl == std::string::npos) break;
+    start = nl + 1;
+  }
+  return out;
+}
+
+// The caption is drawn at 15 px (about 8 px per character) from the left edge; without its own strip the
+// colour bar takes the right ~12% of the view.
+void Scene::Impl::set_caption_text(const std::string& c) {
+  const int* size = ren ? ren->GetSize() : nullptr;
+  const double width = size && size[0] > 0 ? size[0] : 640;
+  const double usable = width * (bar_in_strip ? 0.97 : 0.86);
+  caption = wrap_caption(c, static_cast<size_t>(std::max(30.0, usable / 8.0)));
+  text->SetInput(caption.c_str());
+}
+
 void Scene::Impl::set_caption(const std::string& what, const SessionFrame& f) {
   const std::string cert = f.certified ? "certified" : "NOT certified";
-  caption = what + "\n" + cert + ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) +
-            ", iteration " + std::to_string(f.history.size());
-  text->SetInput(caption.c_str());
+  set_caption_text(what + "\n" + cert + ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) +
+                   ", iteration " + std::to_string(f.history.size()));
 }
 
 void Scene::show(const SessionFrame& f, const ViewSettings& s) {
