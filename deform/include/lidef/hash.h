@@ -7,7 +7,8 @@
 
 namespace lidef {
 
-constexpr std::uint64_t kFnv1a64Offset = 1469598103934665603ull;
+// The FNV-1a 64 offset basis (the standard's: fnv1a64("") = cbf29ce484222325, fnv1a64("a") = af63dc4c8601ec8c).
+constexpr std::uint64_t kFnv1a64Offset = 14695981039346656037ull;
 
 // Continues the hash `h` over `bytes` bytes at `data`.
 inline std::uint64_t fnv1a64(const void* data, std::size_t bytes, std::uint64_t h = kFnv1a64Offset) {
