@@ -524,6 +524,9 @@ TEST(ExploreCli, BadInputsFailWithoutOutput) {
       {"nan.json", nan, "malformed JSON"},
       {"big.json", big, "number overflow"},
       {"type.json", "{\"format\": \"lidef-explorer-map\", \"type\": \"spline\"}", "\"type\" must be"},
+      // Members of the wrong JSON type get a message, not the JSON library's type error.
+      {"format_number.json", "{\"format\": 3, \"type\": \"cage\"}", "\"format\" must be a string"},
+      {"type_array.json", "{\"format\": \"lidef-explorer-map\", \"type\": [1]}", "\"type\" must be a string"},
   };
   for (const Case& c : cases) {
     lidef::test::write_text(tmp / c.name, c.text);

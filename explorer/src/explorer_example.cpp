@@ -39,10 +39,17 @@ ExplorerExample read_explorer_example(const std::string& path) {
     return Vec3(number(v[0], what), number(v[1], what), number(v[2], what));
   };
   if (!j.is_object()) throw InputError(path, "the map file must hold a JSON object");
-  if (j.value("format", "") != "lidef-explorer-map")
+  // An optional string member ("" when absent); a member of another type is an input error, not
+  // nlohmann's type_error (which json::value() throws).
+  auto text = [&](const char* key) -> std::string {
+    if (!j.contains(key)) return "";
+    if (!j[key].is_string()) throw InputError(path, std::string("\"") + key + "\" must be a string");
+    return j[key].get<std::string>();
+  };
+  if (text("format") != "lidef-explorer-map")
     throw InputError(path, "not a lidef explorer map (\"format\": \"lidef-explorer-map\" missing)");
   ExplorerExample ex;
-  ex.kind = j.value("type", "");
+  ex.kind = text("type");
   if (j.contains("note")) {
     if (!j["note"].is_string()) throw InputError(path, "\"note\" must be a string");
     ex.note = j["note"].get<std::string>();
