@@ -127,31 +127,49 @@ TEST_P(OpenCLEnergy, KernelsMatchCpu) {
   if (GetParam()) {
     backend = as_gpu_backend(cache.str());
   }
-  const RandomEnergy r = random_energy(1500, 24, 3, 0.02);
-  auto cpu = cpu_backend()->energy_kernels(*r.energy);
-  auto gpu = backend->energy_kernels(*r.energy);
-  for (auto* k : {cpu.get(), gpu.get()}) {
-    k->set_current(r.y);
-    k->set_direction(r.d);
+  RandomEnergy r = random_energy(1500, 24, 3, 0.02);
+  // Uniform samples (the paper's grid), then volume weights as the mesh domain's refined leaves have them
+  // (8^-level, here random levels 0..2): the device must weigh the energy, gradient and Hessian blocks as the
+  // CPU does.
+  for (const bool weighted : {false, true}) {
+    SCOPED_TRACE(weighted ? "volume-weighted samples" : "uniform samples");
+    if (weighted) {
+      VecXd w(r.energy->num_samples());
+      for (int i = 0; i < w.size(); ++i) w(i) = std::pow(8.0, -((i * 7) % 3));
+      r.energy->set_sample_weights(w);
+    }
+    auto cpu = cpu_backend()->energy_kernels(*r.energy);
+    auto gpu = backend->energy_kernels(*r.energy);
+    for (auto* k : {cpu.get(), gpu.get()}) {
+      k->set_current(r.y);
+      k->set_direction(r.d);
+    }
+    const MatJT Jc = cpu->current_jacobians(), Jg = gpu->current_jacobians();
+    EXPECT_LT((Jc - Jg).cwiseAbs().maxCoeff(), 1e-13 * Jc.cwiseAbs().maxCoeff());
+    const double e0c = cpu->distortion_sum(0), e0g = gpu->distortion_sum(0);
+    ASSERT_TRUE(std::isfinite(e0c));
+    EXPECT_LT(rel(e0c, e0g), 1e-11) << e0c << " vs " << e0g;
+    EXPECT_LT(rel(cpu->distortion_sum(0.7), gpu->distortion_sum(0.7)), 1e-11);
+    const MatS3 gc = cpu->distortion_gradient_sum(), gg = gpu->distortion_gradient_sum();
+    EXPECT_LT((gc - gg).norm(), 1e-11 * gc.norm());
+    const MatXd Bc = cpu->distortion_pair_blocks(true), Bg = gpu->distortion_pair_blocks(true);
+    ASSERT_EQ(Bc.rows(), Bg.rows());
+    EXPECT_LT((Bc - Bg).norm(), 1e-11 * Bc.norm());
+    const MatXd Bcf = cpu->distortion_pair_blocks(false), Bgf = gpu->distortion_pair_blocks(false);
+    EXPECT_LT((Bcf - Bgf).norm(), 1e-5 * Bcf.norm());  // single precision products, different order
+    EXPECT_LT((Bcf - Bc).norm(), 1e-5 * Bc.norm());
+    // The accepted step.
+    cpu->accept(0.5);
+    gpu->accept(0.5);
+    EXPECT_LT(rel(cpu->distortion_sum(0), gpu->distortion_sum(0)), 1e-11);
   }
-  const MatJT Jc = cpu->current_jacobians(), Jg = gpu->current_jacobians();
-  EXPECT_LT((Jc - Jg).cwiseAbs().maxCoeff(), 1e-13 * Jc.cwiseAbs().maxCoeff());
-  const double e0c = cpu->distortion_sum(0), e0g = gpu->distortion_sum(0);
-  ASSERT_TRUE(std::isfinite(e0c));
-  EXPECT_LT(rel(e0c, e0g), 1e-11) << e0c << " vs " << e0g;
-  EXPECT_LT(rel(cpu->distortion_sum(0.7), gpu->distortion_sum(0.7)), 1e-11);
-  const MatS3 gc = cpu->distortion_gradient_sum(), gg = gpu->distortion_gradient_sum();
-  EXPECT_LT((gc - gg).norm(), 1e-11 * gc.norm());
-  const MatXd Bc = cpu->distortion_pair_blocks(true), Bg = gpu->distortion_pair_blocks(true);
-  ASSERT_EQ(Bc.rows(), Bg.rows());
-  EXPECT_LT((Bc - Bg).norm(), 1e-11 * Bc.norm());
-  const MatXd Bcf = cpu->distortion_pair_blocks(false), Bgf = gpu->distortion_pair_blocks(false);
-  EXPECT_LT((Bcf - Bgf).norm(), 1e-5 * Bcf.norm());  // single precision products, different order
-  EXPECT_LT((Bcf - Bc).norm(), 1e-5 * Bc.norm());
-  // The accepted step.
-  cpu->accept(0.5);
-  gpu->accept(0.5);
-  EXPECT_LT(rel(cpu->distortion_sum(0), gpu->distortion_sum(0)), 1e-11);
+  // The weights matter (else the weighted comparison above would prove nothing).
+  const RandomEnergy uniform = random_energy(1500, 24, 3, 0.02);  // the same G, no weights
+  auto plain = cpu_backend()->energy_kernels(*uniform.energy);
+  auto weighted = cpu_backend()->energy_kernels(*r.energy);
+  plain->set_current(r.y);
+  weighted->set_current(r.y);
+  EXPECT_GT(rel(plain->distortion_sum(0), weighted->distortion_sum(0)), 1e-3);
 }
 
 INSTANTIATE_TEST_SUITE_P(HostAndDeviceProduct, OpenCLEnergy, ::testing::Values(false, true));

@@ -212,16 +212,17 @@ __kernel void jacobians_rows(__global const float* G, long R, int s, __global co
   Jout[3 * r + 2] = o[2];
 }
 
-// Work-group sums of E_iso(J_i + t dJ_i) − 6 (fixed tree order: deterministic); partial[group].
+// Work-group sums of w_i (E_iso(J_i + t dJ_i) − 6) (fixed tree order: deterministic); partial[group]. w: the
+// per-sample volume weights (all 1 when the sampling is uniform: the products are then exact).
 __kernel void sd_sum(__global const double* Jc, __global const double* dJ, double t, int use_dJ, long n,
-                     __global double* partial, __local double* scratch) {
+                     __global const double* w, __global double* partial, __local double* scratch) {
   const long i = get_global_id(0);
   const int lid = get_local_id(0), ls = get_local_size(0);
   double e = 0;
   if (i < n) {
     double J[9], Jinv[9];
     load_J(Jc, use_dJ ? dJ : 0, t, i, J);
-    e = sd_energy(J, Jinv) - 6.0;
+    e = w[i] * (sd_energy(J, Jinv) - 6.0);
   }
   scratch[lid] = e;
   barrier(CLK_LOCAL_MEM_FENCE);
@@ -232,8 +233,8 @@ __kernel void sd_sum(__global const double* Jc, __global const double* dJ, doubl
   if (lid == 0) partial[get_group_id(0)] = scratch[0];
 }
 
-// P_i = ∂E_iso/∂J_i = 2J − 2 J⁻ᵀ J⁻¹ J⁻ᵀ, stored in the JT layout. NaN where det J ≤ 0 (as the CPU).
-__kernel void sd_gradient(__global const double* Jc, long n, __global double* P) {
+// P_i = w_i ∂E_iso/∂J_i = w_i (2J − 2 J⁻ᵀ J⁻¹ J⁻ᵀ), stored in the JT layout. NaN where det J ≤ 0 (as the CPU).
+__kernel void sd_gradient(__global const double* Jc, long n, __global const double* w, __global double* P) {
   const long i = get_global_id(0);
   if (i >= n) return;
   double J[9], Ji[9];
@@ -257,8 +258,9 @@ __kernel void sd_gradient(__global const double* Jc, long n, __global double* P)
       for (int c = 0; c < 3; ++c) v += T1[3 * a + c] * Ji[3 * b + c];  // (T1 J⁻ᵀ)(a,b)
       M[3 * a + b] = v;
     }
+  const double wi = w[i];
   for (int b = 0; b < 3; ++b)
-    for (int a = 0; a < 3; ++a) P[9 * i + 3 * b + a] = 2.0 * J[3 * a + b] - 2.0 * M[3 * a + b];
+    for (int a = 0; a < 3; ++a) P[9 * i + 3 * b + a] = wi * (2.0 * J[3 * a + b] - 2.0 * M[3 * a + b]);
 }
 
 // out(k, a) = Σ_r G(r, k) P(r, a): one work-group per k, fixed-order tree reduction (deterministic).
@@ -329,12 +331,13 @@ __kernel void axpy_J(__global double* Jc, __global const double* dJ, double t, l
   if (q < len) Jc[q] = Jc[q] + t * dJ[q];
 }
 
-// PSD-projected 9x9 SD Hessian of subset sample k, times `weight` (sd_hessian_psd), column-major vec(J)
-// index a + 3b, stored as blocks[81k + 9 row + col].
-__kernel void psd_blocks(__global const double* Jc, __global const int* subset, int m, double weight,
-                         __global double* blocks) {
+// PSD-projected 9x9 SD Hessian of subset sample k, times its block weight (sd_hessian_psd;
+// DeformationEnergy::subset_block_weights), column-major vec(J) index a + 3b, stored as blocks[81k + 9 row + col].
+__kernel void psd_blocks(__global const double* Jc, __global const int* subset, int m,
+                         __global const double* block_weight, __global double* blocks) {
   const int k = get_global_id(0);
   if (k >= m) return;
+  const double weight = block_weight[k];
   double J[9];
   load_J(Jc, 0, 0.0, subset[k], J);
   __global double* H = blocks + 81L * k;

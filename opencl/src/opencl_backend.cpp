@@ -246,6 +246,14 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     GHf_ = make_buffer<float>(*d_, GH.size(), "uploading the Hessian subset", CL_MEM_READ_ONLY, GH.data());
     subset_ =
         make_buffer<int>(*d_, subset.size(), "uploading the Hessian subset", CL_MEM_READ_ONLY, subset.data());
+    // Volume weights (the mesh domain's refined leaves weigh less): per sample, and per Hessian block as the
+    // CPU path forms them; all 1 and 1/|H| on a uniform sampling, which reproduces the unweighted sums
+    // exactly.
+    const VecXd w = e.weighted() ? e.sample_weights() : VecXd::Ones(n_);
+    const VecXd bw = e.subset_block_weights();
+    w_ = make_buffer<double>(*d_, w.size(), "uploading the sample weights", CL_MEM_READ_ONLY, w.data());
+    bw_ = make_buffer<double>(*d_, bw.size(), "uploading the Hessian block weights", CL_MEM_READ_ONLY,
+                              bw.data());
     y_ = make_buffer<double>(*d_, 3 * s_, "allocating coefficients");
     J_ = make_buffer<double>(*d_, 3 * R_, "allocating Jacobians");
     dJ_ = make_buffer<double>(*d_, 3 * R_, "allocating Jacobians");
@@ -292,7 +300,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     k_psd_.setArg(0, J_);
     k_psd_.setArg(1, subset_);
     k_psd_.setArg(2, m_);
-    k_psd_.setArg(3, 1.0 / m_);
+    k_psd_.setArg(3, bw_);
     k_psd_.setArg(4, blocks_);
     d_->queue.enqueueNDRangeKernel(k_psd_, cl::NullRange, cl::NDRange(round_up(m_, 64)), cl::NDRange(64));
   }
@@ -309,8 +317,9 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_sum_.setArg(2, t);
       k_sum_.setArg(3, t != 0 ? 1 : 0);
       k_sum_.setArg(4, static_cast<cl_long>(n_));
-      k_sum_.setArg(5, partial_);
-      k_sum_.setArg(6, cl::Local(ls_ * sizeof(double)));
+      k_sum_.setArg(5, w_);
+      k_sum_.setArg(6, partial_);
+      k_sum_.setArg(7, cl::Local(ls_ * sizeof(double)));
       d_->queue.enqueueNDRangeKernel(k_sum_, cl::NullRange, cl::NDRange(groups_ * ls_), cl::NDRange(ls_));
       d_->queue.enqueueReadBuffer(partial_, CL_TRUE, 0, groups_ * sizeof(double), part.data());
       return 0;
@@ -340,7 +349,8 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     guarded(d_->label, "energy gradient", [&] {
       k_grad_.setArg(0, J_);
       k_grad_.setArg(1, static_cast<cl_long>(n_));
-      k_grad_.setArg(2, P_);
+      k_grad_.setArg(2, w_);
+      k_grad_.setArg(3, P_);
       d_->queue.enqueueNDRangeKernel(k_grad_, cl::NullRange, cl::NDRange(round_up(n_, 64)), cl::NDRange(64));
       if (d_->cpu_device) {
         k_gpart_.setArg(0, Grow_);
@@ -472,7 +482,8 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   static constexpr int kRowsPerChunk = 96;  // 32 samples per partial sum (CPU devices)
   long chunks_ = 0;
   cl::Buffer partial_g_;
-  cl::Buffer Gt_, Grow_, GHf_, GHd_, subset_, y_, J_, dJ_, P_, g_, partial_, blocks_, Wf_, Wd_, Bf_, Bd_;
+  cl::Buffer Gt_, Grow_, GHf_, GHd_, subset_, y_, J_, dJ_, P_, g_, partial_, blocks_, w_, bw_, Wf_, Wd_, Bf_,
+      Bd_;
   cl::Kernel k_gpart_, k_gsum_;
   cl::Kernel k_jac_, k_sum_, k_grad_, k_red_, k_axpy_, k_psd_, k_wf_, k_wd_;
 };
@@ -633,8 +644,8 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       d_->queue.enqueueReadBuffer(out_, CL_TRUE, 0, res.size() * sizeof(double), res.data());
       return 0;
     });
-    // Named fields, not a braced list: NodeValues grew fields (the combined bound's, CPU only) and a positional
-    // list silently put the sign flag into one of them.
+    // Named fields, not a braced list: NodeValues grew fields (the combined bound's, CPU only) and a
+    // positional list silently put the sign flag into one of them.
     for (long j = 0; j < count; ++j) {
       NodeValues& v = out[j];
       v = NodeValues();
@@ -662,9 +673,6 @@ class OpenCLBackend final : public ComputeBackend {
       : d_(std::move(d)), build_(std::move(build)) {}
   std::string name() const override { return "opencl (" + d_->label + ")"; }
   std::unique_ptr<EnergyKernels> energy_kernels(const DeformationEnergy& energy) const override {
-    // The device kernels sum unweighted samples; the mesh domain's volume weights run on the host (not yet
-    // on the device: docs/opencl.md).
-    if (energy.weighted()) return cpu_backend()->energy_kernels(energy);
     return std::make_unique<OpenCLEnergyKernels>(d_, energy);
   }
   std::unique_ptr<CertifierKernels> certifier_kernels(const CertifierData& data) const override {

@@ -76,6 +76,8 @@ class DeformationEnergy {
   const VecXd& smooth_eigenvalues() const { return mu_; }  // μ: s
   int num_edges() const { return num_edges_; }             // |E|
   const VecXd& sample_weights() const { return w_; }       // #I with mean 1, or empty (uniform)
+  // The Hessian subset's block weights (#H, summing to 1): 1/|H|, or w_i / Σ_H w when weighted.
+  VecXd subset_block_weights() const { return block_weights(subset_); }
 
   // JT = G ỹ (3|I| by 3).
   MatJT jacobians(const MatS3& y) const;
