@@ -14,10 +14,10 @@
 // Bounds: first, third and combined (docs/certificate.md Step 3b). The deformed map (the only one that
 // refines) is certified with each evaluation of the children (CertifyParams::refinement: per-face, per-edge,
 // batched — docs/certificate.md Steps 4b, 4c) side by side in the same run, and the three must agree on the
-// verdict, the refined and the leaf counts; "µs per child" = refine ms / (8 × subdivided nodes). Each (map, bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default
-// 10); the per-stage times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported
-// as median and minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends
-// on it).
+// verdict, the refined and the leaf counts; "µs per child" = refine ms / (8 × subdivided nodes). Each (map,
+// bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default 10); the per-stage
+// times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported as median and
+// minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends on it).
 //
 // Memory traffic: one certification streams the precomputed reduced matrices (3|I| by s gradient rows and
 // 6|I| by s Hessian rows) and the |I| by #E bound-factor matrix of the bound used. Their element size is not
@@ -545,10 +545,12 @@ int main(int argc, char** argv) {
         // The three evaluations of the children must take the same decisions (same thread count).
         for (const Row& o : rows)
           if (o.model == name && o.map == mapname && o.bound == row.bound && o.threads == th &&
-              (o.r.certified != row.r.certified || o.r.refined != row.r.refined || o.r.leaves != row.r.leaves))
-            fail(name + ", " + mapname + ", " + row.bound + ": refinement " + row.refine + " and " + o.refine +
-                 " disagree (refined " + std::to_string(row.r.refined) + " vs " + std::to_string(o.r.refined) +
-                 ", leaves " + std::to_string(row.r.leaves) + " vs " + std::to_string(o.r.leaves) + ")");
+              (o.r.certified != row.r.certified || o.r.refined != row.r.refined ||
+               o.r.leaves != row.r.leaves))
+            fail(name + ", " + mapname + ", " + row.bound + ": refinement " + row.refine + " and " +
+                 o.refine + " disagree (refined " + std::to_string(row.r.refined) + " vs " +
+                 std::to_string(o.r.refined) + ", leaves " + std::to_string(row.r.leaves) + " vs " +
+                 std::to_string(o.r.leaves) + ")");
         rows.push_back(row);
         std::cerr << "  " << mapname << ", " << row.bound << ", " << row.refine << ", " << th
                   << " thread(s): " << fmt(median(row.st.tot), 1) << " ms\n";

@@ -62,7 +62,8 @@ TEST(LaneMath, LogRatioWithinSixRoundingUnits) {
     // log1p keeps the relative accuracy near n/d = 1 (n − d exact there); elsewhere logl(n) − logl(d).
     const long double q = static_cast<long double>(n) / d;
     const long double ref = std::fabs(q - 1) < 0.5L ? std::log1p((static_cast<long double>(n) - d) / d)
-                                                    : std::log(static_cast<long double>(n)) - std::log(static_cast<long double>(d));
+                                                    : std::log(static_cast<long double>(n)) -
+                                                          std::log(static_cast<long double>(d));
     const double got = lane_math::lane_log_ratio(n, d);
     const double err = static_cast<double>(std::fabs(static_cast<long double>(got) - ref));
     const double rel = err / (kU * static_cast<double>(std::fabs(ref)));
@@ -101,7 +102,8 @@ TEST(LaneMath, Atan2WithinStatedBound) {
         y = std::copysign(std::fabs(x) * (1 + 1e-3 * U(rng)), y);  // near the diagonals
         break;
       case 4:
-        y = std::copysign(std::fabs(x) * (0.41421356237309503 + 1e-9 * U(rng)), y);  // near the reduction switch
+        y = std::copysign(std::fabs(x) * (0.41421356237309503 + 1e-9 * U(rng)),
+                          y);  // near the reduction switch
         break;
     }
     const double s = std::exp2(std::round(300 * U(rng)));
@@ -143,7 +145,8 @@ TEST(EdgeJet, LanesMatchOnePointEvaluation) {
   std::uniform_real_distribution<double> U(0, 1);
   int infinite = 0, compared = 0;
   for (double margin : {0.002, 0.02, 0.1}) {
-    const MatX3d P = lidef::test::interior_points(cage, 48, margin, 13 + static_cast<unsigned>(1000 * margin));
+    const MatX3d P =
+        lidef::test::interior_points(cage, 48, margin, 13 + static_cast<unsigned>(1000 * margin));
     std::vector<Vec3> pts;
     std::vector<double> rad;
     std::vector<char> near_touch;  // radius 0.999 of the clearance
@@ -182,8 +185,8 @@ TEST(EdgeJet, LanesMatchOnePointEvaluation) {
               ++infinite;
               EXPECT_TRUE(std::isinf(got));
             } else {
-              // A ball that nearly touches an edge has h² − d² ≪ h²: both codes' rounding of h is amplified by
-              // h²/(h² − d²) in that edge's factor (Step 4c), so those are compared to 10⁻⁷ only.
+              // A ball that nearly touches an edge has h² − d² ≪ h²: both codes' rounding of h is amplified
+              // by h²/(h² − d²) in that edge's factor (Step 4c), so those are compared to 10⁻⁷ only.
               EXPECT_NEAR(got, ref, (near_touch[i0 + k] ? 1e-7 : 1e-12) * ref);
             }
           }

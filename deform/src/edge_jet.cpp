@@ -152,8 +152,8 @@ void EdgeJet::evaluate(const MapData& md, const Vec3& p, double r, bool hessian,
 // (2 AVX2 registers per row). Same formulas as evaluate(), with these changes, each within a few rounding
 // units of the term it replaces (docs/certificate.md, Step 4c): lane_atan2 / lane_log_ratio for std::atan2 /
 // std::log((m+d)²/(m²−d²)); α and β from 1/(m²−d²) and the per-vertex 1/|l| (one division per edge);
-// dist(p, line uw) = |l_u × l_w| · (1/d); the third-order factor as sqrt(n² + 2.5h²d²)/(π n (h²−d²)) and, with
-// both bounds, the first-order one from the same reciprocal. Returns false when an argument leaves the
+// dist(p, line uw) = |l_u × l_w| · (1/d); the third-order factor as sqrt(n² + 2.5h²d²)/(π n (h²−d²)) and,
+// with both bounds, the first-order one from the same reciprocal. Returns false when an argument leaves the
 // domain of lane_math (a point on a face's plane inside it, or at a vertex): the caller then evaluates the
 // points one by one.
 template <bool kHessian, bool kFirst, bool kThird>
@@ -193,8 +193,8 @@ bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const
       const double x1 = b1[k], y1 = b1[W + k], z1 = b1[2 * W + k], L1 = b1[3 * W + k];
       const double x2 = b2[k], y2 = b2[W + k], z2 = b2[2 * W + k], L2 = b2[3 * W + k];
       const double triple = x0 * (y1 * z2 - z1 * y2) + y0 * (z1 * x2 - x1 * z2) + z0 * (x1 * y2 - y1 * x2);
-      const double den = L0 * L1 * L2 + (x0 * x1 + y0 * y1 + z0 * z1) * L2 + (x1 * x2 + y1 * y2 + z1 * z2) * L0 +
-                         (x2 * x0 + y2 * y0 + z2 * z0) * L1;
+      const double den = L0 * L1 * L2 + (x0 * x1 + y0 * y1 + z0 * z1) * L2 +
+                         (x1 * x2 + y1 * y2 + z1 * z2) * L0 + (x2 * x0 + y2 * y0 + z2 * z0) * L1;
       bad |= !atan2_in_domain(triple, den);
       omega[k] = lane_atan2(triple, den) * kInv2Pi;
     }
@@ -234,7 +234,8 @@ bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const
         const double imdd = 1.0 / mdd;
         const double ca = m * kInv2Pi * imdd * (iu * iw), cb = d * kInv2Pi * imdd;
         const double ax = ca * cx, ay = ca * cy, az = ca * cz;
-        const double bx = cb * (ux * iu + wx * iw), by = cb * (uy * iu + wy * iw), bz = cb * (uz * iu + wz * iw);
+        const double bx = cb * (ux * iu + wx * iw), by = cb * (uy * iu + wy * iw),
+                     bz = cb * (uz * iu + wz * iw);
         // Written out (kSymIdx order) so that every index is a constant and the loop vectorizes.
         for (int a2 = 0; a2 < 3; ++a2) {
           double* Ha = &H[6 * a2][0];
@@ -306,18 +307,15 @@ void EdgeJet::evaluate_lanes(const MapData& md, const Vec3* p, const double* r, 
     pz[k] = p[q].z();
     pr[k] = r[q];
   }
-  bool ok;
-  const int which = (hessian ? 4 : 0) + (want_first ? 2 : 0) + (want_third ? 1 : 0);
-  switch (which) {
-    case 0: ok = lanes<false, false, false>(md, px, py, pz, pr, out, n); break;
-    case 1: ok = lanes<false, false, true>(md, px, py, pz, pr, out, n); break;
-    case 2: ok = lanes<false, true, false>(md, px, py, pz, pr, out, n); break;
-    case 3: ok = lanes<false, true, true>(md, px, py, pz, pr, out, n); break;
-    case 4: ok = lanes<true, false, false>(md, px, py, pz, pr, out, n); break;
-    case 5: ok = lanes<true, false, true>(md, px, py, pz, pr, out, n); break;
-    case 6: ok = lanes<true, true, false>(md, px, py, pz, pr, out, n); break;
-    default: ok = lanes<true, true, true>(md, px, py, pz, pr, out, n); break;
-  }
+  using Lanes = bool (EdgeJet::*)(const MapData&, const double*, const double*, const double*, const double*,
+                                  Values*, int) const;
+  static constexpr Lanes kByFlags[8] = {
+      &EdgeJet::lanes<false, false, false>, &EdgeJet::lanes<false, false, true>,
+      &EdgeJet::lanes<false, true, false>,  &EdgeJet::lanes<false, true, true>,
+      &EdgeJet::lanes<true, false, false>,  &EdgeJet::lanes<true, false, true>,
+      &EdgeJet::lanes<true, true, false>,   &EdgeJet::lanes<true, true, true>};
+  const bool ok = (this->*kByFlags[(hessian ? 4 : 0) + (want_first ? 2 : 0) + (want_third ? 1 : 0)])(
+      md, px, py, pz, pr, out, n);
   if (!ok)
     for (int k = 0; k < n; ++k) evaluate(md, p[k], r[k], hessian, want_first, want_third, out[k]);
 }

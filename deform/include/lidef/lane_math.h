@@ -30,7 +30,8 @@ inline std::uint64_t to_bits(double d) {
 // significant bits) plus k·ln2_lo.
 inline bool log_ratio_in_domain(double n, double d) {
   // `&`, not `&&`: no branches inside SIMD loops.
-  return (n >= 0x1p-1022) & (n <= 0x1.fffffffffffffp+1023) & (d >= 0x1p-1022) & (d <= 0x1.fffffffffffffp+1023);
+  return (n >= 0x1p-1022) & (n <= 0x1.fffffffffffffp+1023) & (d >= 0x1p-1022) &
+         (d <= 0x1.fffffffffffffp+1023);
 }
 inline double lane_log_ratio(double n, double d) {
   constexpr std::uint64_t kMant = (std::uint64_t{1} << 52) - 1, kOne = 0x3ff0000000000000ull,
@@ -97,9 +98,9 @@ inline double lane_atan2(double y, double x) {
   q = q * w + 1.0 / 5;
   q = q * w - 1.0 / 3;
   constexpr double kPi4 = 0x1.921fb54442d18p-1, kPi2 = 0x1.921fb54442d18p+0, kPi = 0x1.921fb54442d18p+1;
-  double t = z + z * w * q;    // atan z
-  t = big ? kPi4 + t : t;      // atan(mn/mx) ∈ [0, π/4]
-  t = b > a ? kPi2 - t : t;    // atan(b/a)   ∈ [0, π/2]
+  double t = z + z * w * q;                     // atan z
+  t = big ? kPi4 + t : t;                       // atan(mn/mx) ∈ [0, π/4]
+  t = b > a ? kPi2 - t : t;                     // atan(b/a)   ∈ [0, π/2]
   t = std::copysign(1.0, x) < 0 ? kPi - t : t;  // x < 0 or x = −0 (std::atan2's rule)
   return std::copysign(t, y);
 }
