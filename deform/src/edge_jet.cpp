@@ -239,14 +239,14 @@ bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const
         // Written out (kSymIdx order) so that every index is a constant and the loop vectorizes.
         for (int a2 = 0; a2 < 3; ++a2) {
           double* Ha = &H[6 * a2][0];
-          const double d0 = D[a2], d1 = D[3 + a2], d2 = D[6 + a2];
-          const double x0 = DX[a2], x1 = DX[3 + a2], x2 = DX[6 + a2];
-          Ha[0 * W + k] -= d0 * ax + x0 * bx;  // (b, c) = (0, 0)
-          Ha[1 * W + k] -= d0 * ay + x0 * by;  // (0, 1)
-          Ha[2 * W + k] -= d0 * az + x0 * bz;  // (0, 2)
-          Ha[3 * W + k] -= d1 * ay + x1 * by;  // (1, 1)
-          Ha[4 * W + k] -= d1 * az + x1 * bz;  // (1, 2)
-          Ha[5 * W + k] -= d2 * az + x2 * bz;  // (2, 2)
+          const double g0 = D[a2], g1 = D[3 + a2], g2 = D[6 + a2];     // δ(a, b), b = 0, 1, 2
+          const double h0 = DX[a2], h1 = DX[3 + a2], h2 = DX[6 + a2];  // (δ[d̂]×)(a, b)
+          Ha[0 * W + k] -= g0 * ax + h0 * bx;                          // (b, c) = (0, 0)
+          Ha[1 * W + k] -= g0 * ay + h0 * by;                          // (0, 1)
+          Ha[2 * W + k] -= g0 * az + h0 * bz;                          // (0, 2)
+          Ha[3 * W + k] -= g1 * ay + h1 * by;                          // (1, 1)
+          Ha[4 * W + k] -= g1 * az + h1 * bz;                          // (1, 2)
+          Ha[5 * W + k] -= g2 * az + h2 * bz;                          // (2, 2)
         }
         sH[k] += sa * (std::abs(ax) + std::abs(ay) + std::abs(az)) +
                  sad * (std::abs(bx) + std::abs(by) + std::abs(bz));
