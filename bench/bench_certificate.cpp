@@ -12,12 +12,12 @@
 //             bisection so that min σ3 over the base centers is --sigma-target (default 0.45): certified,
 //             with some refinement.
 // Bounds: first, third and combined (docs/certificate.md Step 3b). The deformed map (the only one that
-// refines) is also certified with the previous per-face refinement (CertifyParams::per_edge_refinement =
-// false) next to the per-edge one (edge_jet.h), in the same run; "µs per child" = refine ms / (8 × subdivided
-// nodes). Each (map, bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default
-// 10); the per-stage times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported
-// as median and minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends
-// on it).
+// refines) is certified with each evaluation of the children (CertifyParams::refinement: per-face, per-edge,
+// batched — docs/certificate.md Steps 4b, 4c) side by side in the same run, and the three must agree on the
+// verdict, the refined and the leaf counts; "µs per child" = refine ms / (8 × subdivided nodes). Each (map,
+// bound, refinement, threads) is run 2 times untimed (warm-up), then --reps times (default 10); the per-stage
+// times of Certificate (ms_jacobian, ms_sigma, ms_bound, ms_refine, ms_total) are reported as median and
+// minimum over the timed runs. keep_leaves = false in the timed runs (the verdict never depends on it).
 //
 // Memory traffic: one certification streams the precomputed reduced matrices (3|I| by s gradient rows and
 // 6|I| by s Hessian rows) and the |I| by #E bound-factor matrix of the bound used. Their element size is not
@@ -208,7 +208,7 @@ struct Stages {
 
 struct Row {
   std::string model, map, bound;
-  std::string refine = "per-edge";  // refinement path: per-edge (edge_jet.h) or per-face (the previous code)
+  std::string refine = "batched";  // CertifyParams::refinement (to_string)
   int threads = 1;
   RunResult r;
   Stages st;
@@ -489,21 +489,24 @@ int main(int argc, char** argv) {
     }
 
     elem_f["combined"] = elem_f["third"];  // both factor matrices, each of the same element type
-    // Timed runs: every bound on both maps with the per-edge refinement; on the deformed map (the only one
-    // that refines) also the previous per-face refinement, side by side in the same run.
+    // Timed runs: every bound on both maps with the default (batched) refinement; on the deformed map (the
+    // only one that refines) also the per-face and the one-child-at-a-time per-edge evaluation, side by side.
     struct Config {
       std::string map;
       const MatX3dCol* yr;
       LipschitzBound bound;
-      bool per_edge;
+      RefinementEval refinement;
     };
     std::vector<Config> configs;
     for (const auto& [mapname, yr] : {std::pair<std::string, const MatX3dCol*>{"identity", &yr_id},
                                       std::pair<std::string, const MatX3dCol*>{"deformed", &yr_def}})
       for (const LipschitzBound b :
            {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
-        if (mapname == "deformed") configs.push_back({mapname, yr, b, false});
-        configs.push_back({mapname, yr, b, true});
+        if (mapname == "deformed") {
+          configs.push_back({mapname, yr, b, RefinementEval::kPerFace});
+          configs.push_back({mapname, yr, b, RefinementEval::kPerEdge});
+        }
+        configs.push_back({mapname, yr, b, RefinementEval::kPerEdgeBatched});
       }
     for (const Config& cfg : configs)
       for (const int th : thread_counts) {
@@ -512,12 +515,12 @@ int main(int argc, char** argv) {
         omp_set_num_threads(th);
         CertifyParams p = timed;
         p.bound = cfg.bound;
-        p.per_edge_refinement = cfg.per_edge;
+        p.refinement = cfg.refinement;
         Row row;
         row.model = name;
         row.map = mapname;
         row.bound = to_string(cfg.bound);
-        row.refine = cfg.per_edge ? "per-edge" : "per-face";
+        row.refine = to_string(cfg.refinement);
         row.threads = th;
         for (int k = 0; k < opt.warmup; ++k) row.r = summarize(cert.certify_reduced(*yr, p));
         for (int k = 0; k < opt.reps; ++k) {
@@ -539,6 +542,15 @@ int main(int argc, char** argv) {
           notes.push_back(name + ", " + row.bound + " bound: the deformed map needed no refinement");
         row.bytes = 9.0 * N * s * elem_gh + (row.bound == "combined" ? 2.0 : 1.0) * N * E * elem_f[row.bound];
         row.flops = 2.0 * 9 * N * s * 3;
+        // The three evaluations of the children must take the same decisions (same thread count).
+        for (const Row& o : rows)
+          if (o.model == name && o.map == mapname && o.bound == row.bound && o.threads == th &&
+              (o.r.certified != row.r.certified || o.r.refined != row.r.refined ||
+               o.r.leaves != row.r.leaves))
+            fail(name + ", " + mapname + ", " + row.bound + ": refinement " + row.refine + " and " +
+                 o.refine + " disagree (refined " + std::to_string(row.r.refined) + " vs " +
+                 std::to_string(o.r.refined) + ", leaves " + std::to_string(row.r.leaves) + " vs " +
+                 std::to_string(o.r.leaves) + ")");
         rows.push_back(row);
         std::cerr << "  " << mapname << ", " << row.bound << ", " << row.refine << ", " << th
                   << " thread(s): " << fmt(median(row.st.tot), 1) << " ms\n";
@@ -618,8 +630,9 @@ int main(int argc, char** argv) {
   std::cout
       << "\nStage columns: medians of Certificate::ms_jacobian / ms_sigma / ms_bound / ms_refine; total = "
          "ms_total (median / min); µs per child = refine ms / (8 x refined), with refined = nodes subdivided "
-         "(each evaluates 8 children), at the given thread count; refinement = per-edge (edge_jet.h) or "
-         "per-face (the previous HarmonicBasis::differential_jet path), same map and run; wall = wall clock "
+         "(each evaluates 8 children), at the given thread count; refinement = CertifyParams::refinement: "
+         "per-face (HarmonicBasis::differential_jet), per-edge (EdgeJet::evaluate, one child at a time) or "
+         "batched (EdgeJet::evaluate_lanes, 8 children in SIMD lanes), same map and run; wall = wall clock "
          "around certify_reduced (includes y = Xi yr); CPU = "
          "process CPU time of the call (all threads). MB read = 9|I|s + |I|#E entries at the stored "
          "element sizes; GB/s = MB read / (jacobian + bound ms); GFlop/s = 2 * 9|I| * s * 3 / jacobian ms; "

@@ -187,7 +187,7 @@ TEST(EdgeJet, RefinementAgreesWithPerFaceEvaluation) {
     p.bound = b;
     p.max_depth = 3;
     const Certificate a = cert.certify(y, p);
-    p.per_edge_refinement = false;
+    p.refinement = RefinementEval::kPerFace;
     const Certificate o = cert.certify(y, p);
     EXPECT_GT(a.refined, 0) << to_string(b);
     EXPECT_EQ(a.certified, o.certified);

@@ -430,7 +430,7 @@ TEST(OpenCL, CertificatesMatchCpu) {
       // path does; the CPU's default per-edge path (edge_jet.h) sums other magnitudes into its rounding
       // allowance τ, so its margins differ by ~1e-9 of those sums: it is compared by verdicts only.
       CertifyParams per_face = cp;
-      per_face.per_edge_refinement = false;
+      per_face.refinement = RefinementEval::kPerFace;
       const Certificate c = cpu.certify(bent(a), per_face), g = gpu.certify(bent(a), cp),
                         g2 = gpu_layout.certify(bent(a), cp), ce = cpu.certify(bent(a), cp);
       SCOPED_TRACE("a = " + std::to_string(a) + " bound " + to_string(bound));

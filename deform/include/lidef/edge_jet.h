@@ -47,6 +47,14 @@ class EdgeJet {
   void evaluate(const MapData& md, const Vec3& p, double r, bool hessian, bool want_first, bool want_third,
                 Values& out) const;
 
+  // The same values at n ≤ kLanes points at once (p[0..n), radii r[0..n) → out[0..n)), each point in its own
+  // SIMD lane: one pass over the vertices, faces and edges for all of them, with the vectorizable log and
+  // atan2 of lane_math.h (docs/certificate.md, Step 4c). Each lane's result depends only on its own point
+  // (not on n or on the other points). Equal to evaluate() up to rounding.
+  static constexpr int kLanes = 8;
+  void evaluate_lanes(const MapData& md, const Vec3* p, const double* r, int n, bool hessian, bool want_first,
+                      bool want_third, Values* out) const;
+
  private:
   std::vector<Vec3> x_;                    // #V vertex positions
   std::vector<std::array<int, 3>> faces_;  // #F
@@ -58,6 +66,9 @@ class EdgeJet {
     double d;
   };
   std::vector<EdgeConst> edges_;
+  template <bool kHessian, bool kFirst, bool kThird>
+  bool lanes(const MapData& md, const double* px, const double* py, const double* pz, const double* r,
+             Values* out, int n) const;
 };
 
 }  // namespace lidef

@@ -26,6 +26,13 @@
 
 namespace lidef {
 
+// How the CPU refinement evaluates octree children (docs/certificate.md, Steps 4b and 4c; the benchmarks
+// compare them in one run): per face (HarmonicBasis::differential_jet, the first code), per edge one child at
+// a time (EdgeJet::evaluate), or per edge with 8 children at once in SIMD lanes (EdgeJet::evaluate_lanes).
+// All three give the same values up to rounding, covered by the allowance τ.
+enum class RefinementEval { kPerFace, kPerEdge, kPerEdgeBatched };
+const char* to_string(RefinementEval r);  // "per-face" / "per-edge" / "batched"
+
 struct CertifyParams {
   LipschitzBound bound = LipschitzBound::kThirdOrder;
   int max_depth = 6;                 // subdivision levels below the base voxels
@@ -34,9 +41,7 @@ struct CertifyParams {
       4096;                      // budget per base voxel (a full depth-4 subtree); exhausted = not certified
   bool stop_on_failure = false;  // return as soon as the verdict is "not certified" (line search)
   bool keep_leaves = true;       // fill Certificate::leaves (reports); the verdict never depends on it
-  // CPU refinement through the per-edge representation (edge_jet.h: one pass per child for J, H and the
-  // bound); false: the previous per-face evaluation (benchmarks compare the two in one run).
-  bool per_edge_refinement = true;
+  RefinementEval refinement = RefinementEval::kPerEdgeBatched;  // CPU evaluation of octree children
   int max_failing_reported = 20;
   // Above 0 (a fraction, 0.1 = 10%): once the map is certified, keep refining the leaves whose bound is
   // loosest until min_lower_bound ≥ (1 − bound_tolerance) · min_sigma3_center, so the lower bound says how
