@@ -142,7 +142,7 @@ void HarmonicBasis::lanes(const double* px, const double* py, const double* pz, 
         const double m = L[u] + L[w];
         const double md = 2.0 * (L[u] * L[w] + (l[u][0] * l[w][0] + l[u][1] * l[w][1] + l[u][2] * l[w][2]));
         const double d = fc.dlen[k], inv_md = 1.0 / md;
-        if (kNeedP) C[k] = kInv4Pi * lane_log((m + d) * (m + d) * inv_md);
+        if (kNeedP) C[k] = kInv4Pi * lane_log((m + d) * (m + d) / md);
         if (Hess) {
           const double sa = (m * kInv2Pi) * inv_md * (invL[u] * invL[w]), sb = (d * kInv2Pi) * inv_md;
 #pragma GCC unroll 6
