@@ -2,7 +2,10 @@
 // that OpenBLAS does not run its SSE3 fallback on a CPU it does not know.
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include "lidef/blas_kernel.h"
+#include "lidef/errors.h"
 #include "test_support.h"
 
 namespace {
@@ -12,8 +15,8 @@ TEST(BlasKernel, TheTestProcessRunsKernelsItsCpuSupports) {
   // does not know, the core would be the fallback "Prescott" and `recommended` would name a better one.
   const lidef::BlasKernelInfo info = lidef::blas_kernel_info();
   EXPECT_FALSE(info.core.empty());
-  EXPECT_TRUE(info.recommended.empty()) << "OpenBLAS runs " << info.core << " on a CPU that supports "
-                                        << info.recommended;
+  EXPECT_TRUE(info.recommended.empty())
+      << "OpenBLAS runs " << info.core << " on a CPU that supports " << info.recommended;
   // Nothing left to set: a second call finds the variable set (and so never loops).
   EXPECT_TRUE(lidef::blas_environment().empty());
 }
@@ -31,6 +34,24 @@ TEST(BlasKernel, TheCliReportsItsKernelsAndKeepsTheUsersChoice) {
   ASSERT_EQ(lidef::test::run_command("OPENBLAS_CORETYPE=Haswell " + lidef::test::cli() + " devices", &out), 0)
       << out;
   EXPECT_NE(out.find("CPU backend: OpenBLAS kernels Haswell (OPENBLAS_CORETYPE)"), std::string::npos) << out;
+}
+
+TEST(BlasKernel, ProductOfRowMajorAndColumnMajorMatchesEigen) {
+  // blas_product (the precomputation's basis derivatives times Ξ) against Eigen's product, with shapes that
+  // are not multiples of any kernel's block.
+  std::mt19937 rng(3);
+  std::normal_distribution<double> N01;
+  lidef::MatXdR A(37, 53), C;
+  lidef::MatXd B(53, 11);
+  for (Eigen::Index i = 0; i < A.size(); ++i) A.data()[i] = N01(rng);
+  for (Eigen::Index i = 0; i < B.size(); ++i) B.data()[i] = N01(rng);
+  lidef::blas_product(A, B, C);
+  const lidef::MatXd ref = A * B;
+  ASSERT_EQ(C.rows(), 37);
+  ASSERT_EQ(C.cols(), 11);
+  EXPECT_LT((C - ref).cwiseAbs().maxCoeff(), 1e-12 * (A.cwiseAbs() * B.cwiseAbs()).maxCoeff());
+  EXPECT_THROW(lidef::blas_product(A, lidef::MatXd(52, 11), C), lidef::Error);
+  EXPECT_NE(lidef::blas_numerics().find('/'), std::string::npos);
 }
 
 }  // namespace

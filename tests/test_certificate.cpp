@@ -2,6 +2,7 @@
 // representation of H against the basis Hessians, and whole certificates against dense sampling.
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <random>
 
 #include "lidef/certificate_verification.h"
@@ -99,6 +100,50 @@ TEST(CertificateBounds, VoxelBoundsHoldOnSampledPointsOfRandomBalls) {
     }
   }
   EXPECT_GT(finite, 100);
+}
+
+TEST(CertificateBounds, FactorRowIsTheEdgeFactorsRoundedUpToFloat) {
+  // The certifier's factor matrices are built a row (voxel) at a time, vectorized over the edges
+  // (factor_row); each entry must be the scalar factor rounded up to a float (an upper bound stays one), and
+  // +∞ exactly where the scalar factor is. Balls near and far from the edges of a small cage.
+  const Cage cage(lidef::test::icosphere(1, 0.2, 3));
+  std::vector<Vec3> u, w;
+  for (const CageEdge& e : cage.edges) {
+    u.push_back(cage.V.row(e.v0));
+    w.push_back(cage.V.row(e.v1));
+  }
+  const EdgeArrays edges(u, w);
+  ASSERT_EQ(edges.size(), cage.num_edges());
+  auto rng = rng_for(21);
+  std::uniform_real_distribution<double> U(0, 1);
+  std::vector<float> row(edges.size());
+  int infinite = 0, finite = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const Vec3 p = 1.3 * U(rng) * random_unit(rng);
+    const double r = 0.01 + 0.3 * U(rng);
+    for (bool third : {true, false}) {
+      const bool all_finite = factor_row(edges, third, p, r, row.data());
+      bool expect_all = true;
+      for (long e = 0; e < edges.size(); ++e) {
+        const double f =
+            third ? third_order_edge_factor(u[e], w[e], p, r) : first_order_edge_factor(u[e], w[e], p, r);
+        if (!std::isfinite(f)) {
+          EXPECT_EQ(row[e], std::numeric_limits<float>::infinity());
+          expect_all = false;
+          ++infinite;
+          continue;
+        }
+        ++finite;
+        // ≥ the scalar factor up to the double rounding of the (possibly differently contracted) vector
+        // arithmetic, and at most one float step above it.
+        EXPECT_GE(static_cast<double>(row[e]), f * (1 - 1e-15));
+        EXPECT_LE(static_cast<double>(row[e]), f * (1 + 1.2e-7));
+      }
+      EXPECT_EQ(all_finite, expect_all);
+    }
+  }
+  EXPECT_GT(infinite, 100);
+  EXPECT_GT(finite, 10000);
 }
 
 TEST(CertificateBounds, DifferentialRepresentationEqualsMinusBasisHessian) {

@@ -2,10 +2,12 @@
 // central finite differences, identity/affine reproduction, harmonicity.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/lane_math.h"
 #include "test_cages.h"
 #include "test_support.h"
 
@@ -258,4 +260,84 @@ TEST(GreenCoordinates, DifferentialJetEqualsBasisJet) {
       B.differential_jet(B.face_matrices(cage.affine_coefficients(A, Vec3(1, 2, 3))), P.row(0), 2);
   EXPECT_LT((c.J - A).norm(), 1e-12 * A.norm());
   EXPECT_LT(c.hessian_norm(), 1e-12 * A.norm());
+}
+
+namespace {
+// |a − ref| in units of the last place of ref (ref rounded to double from a long double reference).
+double ulps(double a, long double ref) {
+  const double r = static_cast<double>(ref);
+  if (a == r) return 0;
+  const double ulp = std::nextafter(std::abs(r), INFINITY) - std::abs(r);
+  return static_cast<double>(std::abs(static_cast<long double>(a) - ref) / ulp);
+}
+}  // namespace
+
+TEST(LaneMath, LogAndAtan2AreWithinTwoUlpOfALongDoubleReference) {
+  // The SIMD kernel's log and atan2 (lane_math.h) against logl/atan2l (64-bit mantissa): over many
+  // magnitudes, near 1 (where log is small), and the kernel's own argument (m+d)²/(m²−d²) > 1.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> U(-1, 1);
+  double worst_log = 0, worst_atan2 = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const double x =
+        i % 3 == 0 ? std::exp(700 * U(rng)) : (i % 3 == 1 ? 1 + 0.3 * U(rng) : 1 + std::exp(30 * U(rng)));
+    worst_log = std::max(worst_log, ulps(lane_log(x), logl(static_cast<long double>(x))));
+    const double y = U(rng) * std::exp(20 * U(rng)), z = U(rng) * std::exp(20 * U(rng));
+    worst_atan2 = std::max(worst_atan2, ulps(lane_atan2(y, z), atan2l(static_cast<long double>(y), z)));
+  }
+  EXPECT_LE(worst_log, 2.0);
+  EXPECT_LE(worst_atan2, 2.0);
+  // Subnormals, the axes, and what std::log gives outside the domain.
+  EXPECT_LE(ulps(lane_log(1e-310), logl(1e-310L)), 2.0);
+  EXPECT_EQ(lane_log(1.0), 0.0);
+  EXPECT_EQ(lane_log(0.0), -INFINITY);
+  EXPECT_EQ(lane_log(INFINITY), INFINITY);
+  EXPECT_TRUE(std::isnan(lane_log(-1.0)));
+  EXPECT_TRUE(std::isnan(lane_log(NAN)));
+  EXPECT_EQ(lane_atan2(0, 0), 0.0);
+  EXPECT_EQ(lane_atan2(0, 2), 0.0);
+  EXPECT_EQ(lane_atan2(2, 0), std::atan2(2.0, 0.0));
+  EXPECT_EQ(lane_atan2(0, -2), std::atan2(0.0, -2.0));
+  EXPECT_EQ(lane_atan2(-3, -3), std::atan2(-3.0, -3.0));
+}
+
+TEST(GreenCoordinates, EvaluateRowsMatchesPointwiseAndNotItsBatch) {
+  const Cage cage = test_cage();
+  const HarmonicBasis B(cage);
+  const int n = B.size();
+  MatX3d P = interior_points(cage, 11, 0.05);  // not a multiple of kLanes: a partial last batch
+  ASSERT_NE(P.rows() % HarmonicBasis::kLanes, 0);
+  MatXdR all, vg, h;
+  B.evaluate_rows(P, true, true, true, all);
+  B.evaluate_rows(P, true, true, false, vg);
+  B.evaluate_rows(P, false, false, true, h);
+  ASSERT_EQ(all.rows(), 10 * P.rows());
+  ASSERT_EQ(all.cols(), n);
+  for (int i = 0; i < P.rows(); ++i) {
+    const Eval e = eval(B, P.row(i));
+    // The pointwise evaluate() runs the same kernel one lane wide; the compiler may contract the vector and
+    // the scalar code's multiply-adds differently, so agreement is to rounding.
+    const double tv = 1e-14 * e.val.cwiseAbs().maxCoeff(), tg = 1e-14 * e.grad.cwiseAbs().maxCoeff(),
+                 th = 1e-14 * e.hess.cwiseAbs().maxCoeff();
+    EXPECT_LE((all.row(10 * i).transpose() - e.val).cwiseAbs().maxCoeff(), tv);
+    for (int b = 0; b < 3; ++b)
+      EXPECT_LE((all.row(10 * i + 1 + b).transpose() - e.grad.col(b)).cwiseAbs().maxCoeff(), tg);
+    for (int q = 0; q < kSym; ++q)
+      EXPECT_LE((all.row(10 * i + 4 + q).transpose() - e.hess.col(q)).cwiseAbs().maxCoeff(), th);
+    // The kernel for a subset of the outputs (another instantiation: contracted differently, so to rounding).
+    EXPECT_LE((vg.row(4 * i).transpose() - e.val).cwiseAbs().maxCoeff(), tv);
+    for (int b = 0; b < 3; ++b)
+      EXPECT_LE((vg.row(4 * i + 1 + b).transpose() - e.grad.col(b)).cwiseAbs().maxCoeff(), tg);
+    for (int q = 0; q < kSym; ++q)
+      EXPECT_LE((h.row(kSym * i + q).transpose() - e.hess.col(q)).cwiseAbs().maxCoeff(), th);
+  }
+  // A point's numbers do not depend on the points it shares a batch with, nor on its lane.
+  MatX3d Q = P.colwise().reverse();
+  Q.row(0) = P.row(3);
+  MatXdR other;
+  B.evaluate_rows(Q, true, true, true, other);
+  for (int i = 0; i < Q.rows(); ++i) {
+    const int src = i == 0 ? 3 : static_cast<int>(P.rows()) - 1 - i;
+    EXPECT_TRUE(other.middleRows(10 * i, 10) == all.middleRows(10 * src, 10)) << i;
+  }
 }

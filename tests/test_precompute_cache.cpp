@@ -191,12 +191,14 @@ struct SolveRun {
   MatX3d coefficients;
   std::vector<double> energies;
   double min_lower_bound = 0;
+  std::string stored;  // outcome of a background store
 };
 
-SolveRun solve_beam(const std::string& cache_dir, const DeformParams& p) {
+SolveRun solve_beam(const std::string& cache_dir, const DeformParams& p, bool background_store = false) {
   const Model model = load_model(project_data() + "/models/beam");
   PrecomputeSetup setup;
   setup.cache_dir = cache_dir;
+  setup.background_store = background_store;
   DeformationSolver s(model.cage, p, setup);
   MatX3d S(2, 3), T(2, 3);
   S << -0.95, 0, 0, 0.95, 0, 0;
@@ -211,6 +213,7 @@ SolveRun solve_beam(const std::string& cache_dir, const DeformParams& p) {
   });
   r.coefficients = s.coefficients();
   r.min_lower_bound = s.certificate().min_lower_bound;
+  if (s.cache_store().valid()) r.stored = s.cache_store().get();
   return r;
 }
 
@@ -253,6 +256,27 @@ TEST(PrecomputeCache, SolverIsByteIdenticalFromTheCacheAndRebuildsCorruptedOrSta
   q = p;
   q.lambda_smooth = 0.2;
   EXPECT_EQ(solve_beam(dir.str(), q).outcome, "hit");
+}
+
+TEST(PrecomputeCache, BackgroundStoreWritesTheSameEntry) {
+  // The studio's solver writes its entry on a thread of its own while it already solves: the entry is the
+  // same bytes as a synchronous store's, and a solver built from it gives the same results.
+  TempDir sync_dir, bg_dir;
+  const DeformParams p = small_params();
+  const SolveRun sync = solve_beam(sync_dir.str(), p);
+  EXPECT_EQ(sync.stored, "");  // stored by the constructor
+  const SolveRun bg = solve_beam(bg_dir.str(), p, true);
+  EXPECT_EQ(bg.outcome, "miss");
+  EXPECT_NE(bg.stored.find(": stored"), std::string::npos) << bg.stored;
+  expect_same(sync, bg);
+  ASSERT_EQ(entries(sync_dir.str(), "solver-").size(), 1u);
+  ASSERT_EQ(entries(bg_dir.str(), "solver-").size(), 1u);
+  EXPECT_EQ(read_bytes(entries(sync_dir.str(), "solver-")[0]),
+            read_bytes(entries(bg_dir.str(), "solver-")[0]));
+  const SolveRun again = solve_beam(bg_dir.str(), p, true);
+  EXPECT_EQ(again.outcome, "hit");
+  EXPECT_EQ(again.stored, "");  // nothing computed, nothing written
+  expect_same(sync, again);
 }
 
 TEST(PrecomputeCache, SolverConstructionCanBeCancelledAndReportsProgress) {
@@ -336,7 +360,10 @@ TEST(PrecomputeCache, SessionReopensFromTheCacheWithTheSameFrames) {
     ASSERT_TRUE(fr.all.front()->model);
     EXPECT_EQ(fr.all.front()->mesh_V.rows(), fr.all.front()->model->mesh.V.rows());
     (round == 0 ? first : second) = fr.all.back();
+    // The entries are written in the background while the session rests.
+    const std::string stored = session.wait_for_cache_store();
     if (round == 0) {
+      EXPECT_NE(stored.find("stored"), std::string::npos) << stored;
       EXPECT_EQ(entries(dir.str(), "solver-").size(), 1u);
       EXPECT_EQ(entries(dir.str(), "mesh-").size(), 1u);
       // The second opening reads the mesh entry: corrupt it and check that it is rebuilt, not trusted.

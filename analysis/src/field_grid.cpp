@@ -59,8 +59,13 @@ FieldGrid compute_field_grid(const Cage& cage, const HarmonicBasis& basis, const
       const Vec3 p = P.row(i).transpose();
       const double w = cage.winding_number(p);
       if (!(w >= 0.5)) continue;
-      g.inside_cage[i] = 1;
       basis.evaluate(p, 1, nullptr, gb.data(), nullptr);
+      // A grid point on the cage itself (its winding number is rounding there) has no finite basis: f is not
+      // defined, so it is not inside.
+      bool finite = true;
+      for (double v : gb) finite = finite && std::isfinite(v);
+      if (!finite) continue;
+      g.inside_cage[i] = 1;
       Mat3 J = Mat3::Zero();
       for (int k = 0; k < n; ++k)
         J.noalias() += y.row(k).transpose() * Eigen::Map<const Eigen::RowVector3d>(&gb[3 * k]);

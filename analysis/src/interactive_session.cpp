@@ -5,8 +5,10 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <future>
 #include <limits>
 
+#include "lidef/blas_kernel.h"
 #include "lidef/continuation.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
@@ -276,6 +278,17 @@ void InteractiveSession::set_cache(const std::string& dir, std::uint64_t max_byt
   cache_max_bytes_ = max_bytes;
 }
 
+std::string InteractiveSession::wait_for_cache_store() const {
+  std::vector<std::shared_future<std::string>> fs;
+  {
+    std::lock_guard<std::mutex> lk(mutex_);
+    fs = cache_stores_;
+  }
+  std::string out;
+  for (const auto& f : fs) out += (out.empty() ? "" : "; ") + f.get();
+  return out;
+}
+
 void InteractiveSession::cancel_preparation() {
   cancel_.store(true);
 }
@@ -323,32 +336,15 @@ SessionState InteractiveSession::state() const {
 
 namespace {
 
-// HarmonicBasis::value_matrix(P) and gradient_matrix(P) (the same numbers, bit for bit) from one evaluation
-// per point, which shares the per-face work between the two.
-void value_gradient_matrices(const HarmonicBasis& basis, const MatX3d& P, MatXd& val, MatXd& grad) {
-  const int n = basis.size();
-  val.resize(P.rows(), n);
-  grad.resize(3 * P.rows(), n);
-#pragma omp parallel
-  {
-    std::vector<double> v(n), g(3 * static_cast<size_t>(n));
-#pragma omp for schedule(static)
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      basis.evaluate(P.row(i).transpose(), 1, v.data(), g.data(), nullptr);
-      for (int k = 0; k < n; ++k) {
-        val(i, k) = v[k];
-        for (int b = 0; b < 3; ++b) grad(3 * i + b, k) = g[3 * k + b];
-      }
-    }
-  }
-}
-
 // Mesh vertices in the reduced space, in blocks so that the full-space matrices (#Vm by #Vc+#Fc) never
 // exist at once (the animal's would take 1.4 GB): Mv = (basis values at the mesh vertices) Ξ (#Vm by s),
 // Mg = (basis gradients) Ξ (3#Vm by s), in the solver's normalized frame. From the cache when it holds them
-// for this cage, mesh and subspace. `tick` gets the fraction done (and may throw Cancelled).
-void reduced_mesh_matrices(const DeformationSolver& S, const MatX3d& mesh_V, const PrecomputeCache& cache,
-                           const std::function<void(double)>& tick, MatXd& Mv, MatXd& Mg) {
+// for this cage, mesh and subspace; else computed, and stored in the background (the returned future; invalid
+// after a hit). `tick` gets the fraction done (and may throw Cancelled).
+std::shared_future<std::string> reduced_mesh_matrices(const DeformationSolver& S, const MatX3d& mesh_V,
+                                                      const PrecomputeCache& cache,
+                                                      const std::function<void(double)>& tick, MatXd& Mv,
+                                                      MatXd& Mg) {
   CacheKey key("mesh");
   key.add_matrix(S.cage().V).add_matrix(S.cage().F).add_matrix(mesh_V).add_matrix(S.subspace().basis);
   key.add_numerics();
@@ -359,7 +355,7 @@ void reduced_mesh_matrices(const DeformationSolver& S, const MatX3d& mesh_V, con
       CacheReader r(std::move(payload));
       r.matrix(Mv, n, s);
       r.matrix(Mg, 3 * n, s);
-      if (r.at_end()) return;
+      if (r.at_end()) return {};
     } catch (const CacheReader::Bad&) {
     }
     std::error_code ec;
@@ -370,18 +366,31 @@ void reduced_mesh_matrices(const DeformationSolver& S, const MatX3d& mesh_V, con
   const MatX3d V = S.frame().points_to_normalized(mesh_V);
   Mv.resize(n, s);
   Mg.resize(3 * n, s);
+  MatXdR D, R;  // per block: 4 rows per vertex (value, ∂x, ∂y, ∂z) by #V+#F, then times Ξ
   for (Eigen::Index b = 0; b < n; b += block) {
     const Eigen::Index m = std::min(block, n - b);
-    MatXd val, grad;
-    value_gradient_matrices(basis, V.middleRows(b, m), val, grad);
-    Mv.middleRows(b, m).noalias() = val * Xi;
-    Mg.middleRows(3 * b, 3 * m).noalias() = grad * Xi;
+    basis.evaluate_rows(V.middleRows(b, m), true, true, false, D);
+    blas_product(D, Xi, R);
+    for (Eigen::Index i = 0; i < m; ++i) {
+      Mv.row(b + i) = R.row(4 * i);
+      Mg.middleRows(3 * (b + i), 3) = R.middleRows(4 * i + 1, 3);
+    }
     tick(static_cast<double>(b + m) / static_cast<double>(n));
   }
-  CacheWriter w;
-  w.matrix(Mv);
-  w.matrix(Mg);
-  cache.store(key, w);
+  if (!cache.enabled()) return {};
+  // Copies: the session's matrices may be replaced while the entry is written.
+  auto mats = std::make_shared<const std::pair<MatXd, MatXd>>(Mv, Mg);
+  return std::async(std::launch::async,
+                    [cache, key, mats] {
+                      omp_set_num_threads(1);  // the engine goes on computing on all cores meanwhile
+                      CacheWriter w;
+                      w.matrix(mats->first);
+                      w.matrix(mats->second);
+                      CacheEvent ev;
+                      cache.store(key, w, &ev);
+                      return describe(ev);
+                    })
+      .share();
 }
 
 }  // namespace
@@ -610,6 +619,9 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
   setup.progress = [&](const std::string& name, double f) { on_progress(name, 0.9 * f); };
   setup.cancel = &session.cancel_;
   setup.mesh = &new_model->mesh;  // the certified domain (params.domain "mesh": its triangles and solid)
+  // A computed entry is written while the mesh matrices are computed and the session rests (the solver's
+  // destructor waits for it).
+  setup.background_store = true;
   std::unique_ptr<DeformationSolver> built;
   try {
     built = std::make_unique<DeformationSolver>(new_model->cage, new_params, setup, new_backend);
@@ -621,12 +633,20 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
     new_backend = cpu_backend();
     built = std::make_unique<DeformationSolver>(new_model->cage, new_params, setup, new_backend);
   }
+  if (built->cache_store().valid()) {
+    std::lock_guard<std::mutex> lk(session.mutex_);
+    session.cache_stores_.push_back(built->cache_store());
+  }
   MatXd v, g;
   const PrecomputeCache cache(setup.cache_dir, setup.cache_max_bytes);
   status = "preprocessing: mesh vertices in the subspace";
-  reduced_mesh_matrices(
+  auto mesh_store = reduced_mesh_matrices(
       *built, new_model->mesh.V, cache,
       [&](double f) { on_progress("mesh vertices in the subspace", 0.9 + 0.1 * f); }, v, g);
+  if (mesh_store.valid()) {
+    std::lock_guard<std::mutex> lk(session.mutex_);
+    session.cache_stores_.push_back(mesh_store);
+  }
   // Committed only now: a failure above leaves the previous session as it was.
   solver = std::move(built);
   backend = new_backend;

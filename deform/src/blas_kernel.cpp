@@ -1,10 +1,14 @@
 #include "lidef/blas_kernel.h"
 
+#include <cblas.h>
 #include <unistd.h>
 
 #include <cstdlib>
 
+#include "lidef/errors.h"
+
 extern "C" char* openblas_get_corename(void);
+extern "C" int openblas_get_num_threads(void);
 
 namespace lidef {
 
@@ -53,6 +57,27 @@ void reexec_with_environment(char** argv, const std::vector<std::pair<std::strin
   }
   // Each variable is now set, so the re-executed process finds nothing to change and runs on.
   if (changed) execv("/proc/self/exe", argv);
+}
+
+void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C) {
+  if (A.cols() != B.rows())
+    throw Error("blas_product: " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()) + " times " +
+                std::to_string(B.rows()) + "x" + std::to_string(B.cols()));
+  C.resize(A.rows(), B.cols());
+  if (C.size() == 0) return;
+  if (A.cols() == 0) {
+    C.setZero();
+    return;
+  }
+  // Row-major C = A B is column-major Cᵀ = Bᵀ Aᵀ, and a column-major B is a row-major Bᵀ: so Cᵀ (n by m) is
+  // the column-major product of B transposed (lda = k) and A read as the column-major Aᵀ (k by m).
+  cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, static_cast<int>(B.cols()), static_cast<int>(A.rows()),
+              static_cast<int>(A.cols()), 1.0, B.data(), static_cast<int>(B.rows()), A.data(),
+              static_cast<int>(A.cols()), 0.0, C.data(), static_cast<int>(B.cols()));
+}
+
+std::string blas_numerics() {
+  return blas_kernel_info().core + "/" + std::to_string(openblas_get_num_threads());
 }
 
 }  // namespace lidef

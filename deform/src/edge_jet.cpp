@@ -196,7 +196,7 @@ bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const
       const double den = L0 * L1 * L2 + (x0 * x1 + y0 * y1 + z0 * z1) * L2 +
                          (x1 * x2 + y1 * y2 + z1 * z2) * L0 + (x2 * x0 + y2 * y0 + z2 * z0) * L1;
       bad |= !atan2_in_domain(triple, den);
-      omega[k] = lane_atan2(triple, den) * kInv2Pi;
+      omega[k] = lane_math::lane_atan2(triple, den) * kInv2Pi;
     }
     if (bad) return false;
     const double* A = md.A[t].data();  // column-major, as J

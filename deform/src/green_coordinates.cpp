@@ -1,25 +1,17 @@
 #include "lidef/green_coordinates.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
 #include "lidef/geometry.h"
+#include "lidef/lane_math.h"
 
 namespace lidef {
 namespace {
 
 constexpr double kInv4Pi = 1.0 / (4.0 * M_PI);
 constexpr double kInv2Pi = 1.0 / (2.0 * M_PI);
-
-// Adds the symmetric part of M (3x3) into a 6-entry row (xx,xy,xz,yy,yz,zz) with weight s.
-inline void add_sym(double* h, const Mat3& M, double s) {
-  h[0] += s * M(0, 0);
-  h[1] += s * 0.5 * (M(0, 1) + M(1, 0));
-  h[2] += s * 0.5 * (M(0, 2) + M(2, 0));
-  h[3] += s * M(1, 1);
-  h[4] += s * 0.5 * (M(1, 2) + M(2, 1));
-  h[5] += s * M(2, 2);
-}
 
 inline Mat3 cross_matrix(const Vec3& d) {
   Mat3 m;
@@ -96,55 +88,217 @@ void HarmonicBasis::face_at_point(int t, const Vec3& p, bool with_alpha_beta, Fa
   }
 }
 
-void HarmonicBasis::evaluate(const Vec3& p, int order, double* value, double* grad, double* hess) const {
-  const int n = size();
-  if (value) std::memset(value, 0, sizeof(double) * n);
-  if (grad) std::memset(grad, 0, sizeof(double) * 3 * n);
-  if (hess) std::memset(hess, 0, sizeof(double) * kSym * n);
-  const bool want_val = value != nullptr;
-  const bool want_grad = order >= 1 && grad != nullptr;
-  const bool want_hess = order >= 2 && hess != nullptr;
-
-  FaceAtPoint fp;
+// The basis kernel: for each face, the quantities of face_at_point() and their contributions to the face's
+// function and its 3 vertex functions, for W points at once (the loop over the points vectorizes; the
+// per-face constants are loaded once for all of them). Face functions are assigned, vertex functions
+// accumulate over their faces (zeroed first). Formulas as in face_at_point(), with lane_log/lane_atan2
+// (lane_math.h) for the C library's log/atan2.
+template <int W, bool Val, bool Grad, bool Hess>
+void HarmonicBasis::lanes(const double* px, const double* py, const double* pz, const LaneOut& vo,
+                          const LaneOut& go, const LaneOut& ho) const {
+  constexpr bool kNeedP = Val || Grad;  // P_t needs the solid angle and the edge logarithms
+  for (int v = 0; v < nv_; ++v) {
+    for (int j = 0; j < W; ++j) {
+      if (Val) vo.data[v * vo.ld + j] = 0;
+      if (Grad)
+        for (int c = 0; c < 3; ++c) go.data[v * go.ld + c * go.stride + j] = 0;
+      if (Hess)
+        for (int c = 0; c < kSym; ++c) ho.data[v * ho.ld + c * ho.stride + j] = 0;
+    }
+  }
   for (int t = 0; t < nf_; ++t) {
     const Face& fc = faces_[t];
-    face_at_point(t, p, want_hess, fp);
-    const double omega = fp.omega, triple = fp.triple;
-    const double* C = fp.C;
-    const Vec3* luxlw = fp.luxlw;
-    const Vec3* alpha = fp.alpha;
-    const Vec3* beta = fp.beta;
-    // P_t = n × Σ_k d̂_k C_k − ω n;  ∇ψ_t = −P_t.
-    const Vec3 P = fc.n.cross(C[0] * fc.dhat[0] + C[1] * fc.dhat[1] + C[2] * fc.dhat[2]) - omega * fc.n;
+    const long ft = nv_ + t;
     const double inv2s = 1.0 / fc.two_area;
-    const int ft = nv_ + t;
-
-    if (want_val) {
-      // ψ_t = −Σ_k C_k/|d_k| (l_u × l_w)·n − (3/s) ω vol_t, vol_t = l0·(l1×l2)/6.
-      double psi = -(3.0 * 2.0 * inv2s) * omega * (triple / 6.0);
-      for (int k = 0; k < 3; ++k) psi -= C[k] / fc.dlen[k] * luxlw[k].dot(fc.n);
-      value[ft] = psi;
-      // φ_v gets 1/(2s) (l_u × l_w)·P_t from each face around v.
-      for (int k = 0; k < 3; ++k) value[fc.vid[k]] += inv2s * luxlw[k].dot(P);
+    double* vf = Val ? vo.data + ft * vo.ld : nullptr;
+    double* gf = Grad ? go.data + ft * go.ld : nullptr;
+    double* hf = Hess ? ho.data + ft * ho.ld : nullptr;
+    double *vv[3], *gv[3], *hv[3];
+    for (int k = 0; k < 3; ++k) {
+      vv[k] = Val ? vo.data + fc.vid[k] * vo.ld : nullptr;
+      gv[k] = Grad ? go.data + fc.vid[k] * go.ld : nullptr;
+      hv[k] = Hess ? ho.data + fc.vid[k] * ho.ld : nullptr;
     }
-    if (want_grad) {
-      for (int b = 0; b < 3; ++b) grad[3 * ft + b] = -P(b);
+    const long gs = go.stride, hs = ho.stride;
+#pragma omp simd
+    for (int j = 0; j < W; ++j) {
+      const double p[3] = {px[j], py[j], pz[j]};
+      // Reciprocals once, multiplications after: the divider is what limits this loop.
+      double l[3][3], L[3], invL[3];
+#pragma GCC unroll 6
       for (int k = 0; k < 3; ++k) {
-        const Vec3 g = inv2s * P.cross(fc.d[k]);
-        double* gv = grad + 3 * fc.vid[k];
-        gv[0] += g(0);
-        gv[1] += g(1);
-        gv[2] += g(2);
+#pragma GCC unroll 6
+        for (int c = 0; c < 3; ++c) l[k][c] = fc.x[k](c) - p[c];
+        L[k] = std::sqrt(l[k][0] * l[k][0] + l[k][1] * l[k][1] + l[k][2] * l[k][2]);
+        invL[k] = 1.0 / L[k];
+      }
+      double luxlw[3][3], C[3] = {0, 0, 0}, alpha[3][3], beta[3][3];
+#pragma GCC unroll 6
+      for (int k = 0; k < 3; ++k) {
+        const int u = (k + 2) % 3, w = (k + 1) % 3;
+        luxlw[k][0] = l[u][1] * l[w][2] - l[u][2] * l[w][1];
+        luxlw[k][1] = l[u][2] * l[w][0] - l[u][0] * l[w][2];
+        luxlw[k][2] = l[u][0] * l[w][1] - l[u][1] * l[w][0];
+        const double m = L[u] + L[w];
+        const double md = 2.0 * (L[u] * L[w] + (l[u][0] * l[w][0] + l[u][1] * l[w][1] + l[u][2] * l[w][2]));
+        const double d = fc.dlen[k], inv_md = 1.0 / md;
+        if (kNeedP) C[k] = kInv4Pi * lane_log((m + d) * (m + d) / md);
+        if (Hess) {
+          const double sa = (m * kInv2Pi) * inv_md * (invL[u] * invL[w]), sb = (d * kInv2Pi) * inv_md;
+#pragma GCC unroll 6
+          for (int c = 0; c < 3; ++c) {
+            alpha[k][c] = sa * luxlw[k][c];
+            beta[k][c] = sb * (l[u][c] * invL[u] + l[w][c] * invL[w]);
+          }
+        }
+      }
+      if (kNeedP) {
+        // Signed solid angle / 4π (van Oosterom & Strackee); l1 × l2 = −luxlw[0] (l2 × l1).
+        const double triple = -(l[0][0] * luxlw[0][0] + l[0][1] * luxlw[0][1] + l[0][2] * luxlw[0][2]);
+        const double d01 = l[0][0] * l[1][0] + l[0][1] * l[1][1] + l[0][2] * l[1][2];
+        const double d12 = l[1][0] * l[2][0] + l[1][1] * l[2][1] + l[1][2] * l[2][2];
+        const double d20 = l[2][0] * l[0][0] + l[2][1] * l[0][1] + l[2][2] * l[0][2];
+        const double den = L[0] * L[1] * L[2] + d01 * L[2] + d12 * L[0] + d20 * L[1];
+        const double omega = lane_atan2(triple, den) * (2.0 * kInv4Pi);
+        // P_t = n × Σ_k d̂_k C_k − ω n;  ∇ψ_t = −P_t.
+        double s[3], P[3];
+#pragma GCC unroll 6
+        for (int c = 0; c < 3; ++c) s[c] = C[0] * fc.dhat[0](c) + C[1] * fc.dhat[1](c) + C[2] * fc.dhat[2](c);
+        const Vec3& n = fc.n;
+        P[0] = n(1) * s[2] - n(2) * s[1] - omega * n(0);
+        P[1] = n(2) * s[0] - n(0) * s[2] - omega * n(1);
+        P[2] = n(0) * s[1] - n(1) * s[0] - omega * n(2);
+        if (Val) {
+          // ψ_t = −Σ_k C_k/|d_k| (l_u × l_w)·n − (3/s) ω vol_t, vol_t = l0·(l1×l2)/6.
+          double psi = -(3.0 * 2.0 * inv2s) * omega * (triple / 6.0);
+#pragma GCC unroll 6
+          for (int k = 0; k < 3; ++k)
+            psi -= C[k] / fc.dlen[k] * (luxlw[k][0] * n(0) + luxlw[k][1] * n(1) + luxlw[k][2] * n(2));
+          vf[j] = psi;
+          // φ_v gets 1/(2s) (l_u × l_w)·P_t from each face around v.
+#pragma GCC unroll 6
+          for (int k = 0; k < 3; ++k)
+            vv[k][j] += inv2s * (luxlw[k][0] * P[0] + luxlw[k][1] * P[1] + luxlw[k][2] * P[2]);
+        }
+        if (Grad) {
+#pragma GCC unroll 6
+          for (int c = 0; c < 3; ++c) gf[c * gs + j] = -P[c];
+#pragma GCC unroll 6
+          for (int k = 0; k < 3; ++k) {
+            const Vec3& dk = fc.d[k];
+            gv[k][j] += inv2s * (P[1] * dk(2) - P[2] * dk(1));
+            gv[k][gs + j] += inv2s * (P[2] * dk(0) - P[0] * dk(2));
+            gv[k][2 * gs + j] += inv2s * (P[0] * dk(1) - P[1] * dk(0));
+          }
+        }
+      }
+      if (Hess) {
+        // J(P_t) = Σ_k (n × d̂_k) β_kᵀ + n α_kᵀ  (rows: components of P, columns: ∂/∂p).
+        double JP[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+#pragma GCC unroll 6
+        for (int k = 0; k < 3; ++k)
+#pragma GCC unroll 6
+          for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 6
+            for (int c = 0; c < 3; ++c) JP[r][c] += fc.n_x_dhat[k](r) * beta[k][c] + fc.n(r) * alpha[k][c];
+        // ∇ψ_t = −P_t: the symmetric part of −J(P).
+        hf[j] = -JP[0][0];
+        hf[hs + j] = -0.5 * (JP[0][1] + JP[1][0]);
+        hf[2 * hs + j] = -0.5 * (JP[0][2] + JP[2][0]);
+        hf[3 * hs + j] = -JP[1][1];
+        hf[4 * hs + j] = -0.5 * (JP[1][2] + JP[2][1]);
+        hf[5 * hs + j] = -JP[2][2];
+        // ∇φ_v ∋ (1/2s) P × d_k = −(1/2s) [d_k]× P  ⇒  Hessian contribution −(1/2s) [d_k]× J(P).
+#pragma GCC unroll 6
+        for (int k = 0; k < 3; ++k) {
+          const double dx = fc.d[k](0), dy = fc.d[k](1), dz = fc.d[k](2);
+          double M[3][3];
+#pragma GCC unroll 6
+          for (int c = 0; c < 3; ++c) {
+            M[0][c] = dy * JP[2][c] - dz * JP[1][c];
+            M[1][c] = dz * JP[0][c] - dx * JP[2][c];
+            M[2][c] = dx * JP[1][c] - dy * JP[0][c];
+          }
+          const double s1 = -inv2s, s2 = -inv2s * 0.5;
+          double* h = hv[k];
+          h[j] += s1 * M[0][0];
+          h[hs + j] += s2 * (M[0][1] + M[1][0]);
+          h[2 * hs + j] += s2 * (M[0][2] + M[2][0]);
+          h[3 * hs + j] += s1 * M[1][1];
+          h[4 * hs + j] += s2 * (M[1][2] + M[2][1]);
+          h[5 * hs + j] += s1 * M[2][2];
+        }
       }
     }
-    if (want_hess) {
-      // J(P_t) = Σ_k (n × d̂_k) β_kᵀ + n α_kᵀ  (rows: components of P, columns: ∂/∂p).
-      Mat3 JP = Mat3::Zero();
-      for (int k = 0; k < 3; ++k)
-        JP.noalias() += fc.n_x_dhat[k] * beta[k].transpose() + fc.n * alpha[k].transpose();
-      add_sym(hess + kSym * ft, JP, -1.0);
-      // ∇φ_v ∋ (1/2s) P × d_k = −(1/2s) [d_k]× P  ⇒  Hessian contribution −(1/2s) [d_k]× J(P).
-      for (int k = 0; k < 3; ++k) add_sym(hess + kSym * fc.vid[k], cross_matrix(fc.d[k]) * JP, -inv2s);
+  }
+}
+
+template <int W>
+void HarmonicBasis::run_lanes(const double* px, const double* py, const double* pz, const LaneOut& v,
+                              const LaneOut& g, const LaneOut& h) const {
+  const int what = (v.data ? 1 : 0) | (g.data ? 2 : 0) | (h.data ? 4 : 0);
+  switch (what) {
+    case 1:
+      return lanes<W, true, false, false>(px, py, pz, v, g, h);
+    case 2:
+      return lanes<W, false, true, false>(px, py, pz, v, g, h);
+    case 3:
+      return lanes<W, true, true, false>(px, py, pz, v, g, h);
+    case 4:
+      return lanes<W, false, false, true>(px, py, pz, v, g, h);
+    case 5:
+      return lanes<W, true, false, true>(px, py, pz, v, g, h);
+    case 6:
+      return lanes<W, false, true, true>(px, py, pz, v, g, h);
+    case 7:
+      return lanes<W, true, true, true>(px, py, pz, v, g, h);
+    default:
+      return;
+  }
+}
+
+void HarmonicBasis::evaluate(const Vec3& p, int order, double* value, double* grad, double* hess) const {
+  const int n = size();
+  const bool want_grad = order >= 1 && grad != nullptr;
+  const bool want_hess = order >= 2 && hess != nullptr;
+  if (grad && !want_grad) std::memset(grad, 0, sizeof(double) * 3 * n);
+  if (hess && !want_hess) std::memset(hess, 0, sizeof(double) * kSym * n);
+  // One lane: the layouts (#V+#F) by 3 and by 6 row-major are the lane layout with W = 1.
+  run_lanes<1>(&p(0), &p(1), &p(2), {value, 1, 0}, {want_grad ? grad : nullptr, 3, 1},
+               {want_hess ? hess : nullptr, kSym, 1});
+}
+
+void HarmonicBasis::evaluate_rows(const MatX3d& P, bool values, bool gradients, bool hessians,
+                                  MatXdR& out) const {
+  const long n = size(), rows = P.rows();
+  const int r = (values ? 1 : 0) + (gradients ? 3 : 0) + (hessians ? kSym : 0);
+  out.resize(r * rows, n);
+  if (rows == 0 || r == 0) return;
+  const int rg = values ? 1 : 0, rh = rg + (gradients ? 3 : 0);  // first gradient / Hessian row
+#pragma omp parallel
+  {
+    // The kernel's output for one batch, row c of the block by function by lane: the lanes' entries are
+    // contiguous (vector stores), and copying a row out reads it in order.
+    std::vector<double> buf(static_cast<size_t>(r) * n * kLanes);
+    const long nW = n * kLanes;
+#pragma omp for schedule(static)
+    for (long i0 = 0; i0 < rows; i0 += kLanes) {
+      alignas(64) double px[kLanes], py[kLanes], pz[kLanes];
+      for (int j = 0; j < kLanes; ++j) {
+        const long i = std::min(i0 + j, rows - 1);  // a last, partial batch repeats its last point
+        px[j] = P(i, 0);
+        py[j] = P(i, 1);
+        pz[j] = P(i, 2);
+      }
+      run_lanes<kLanes>(px, py, pz, {values ? buf.data() : nullptr, kLanes, nW},
+                        {gradients ? buf.data() + rg * nW : nullptr, kLanes, nW},
+                        {hessians ? buf.data() + rh * nW : nullptr, kLanes, nW});
+      for (long j = 0; j < std::min<long>(kLanes, rows - i0); ++j)
+        for (int c = 0; c < r; ++c) {
+          const double* src = buf.data() + c * nW + j;
+          double* dst = out.data() + ((i0 + j) * r + c) * n;
+          for (long k = 0; k < n; ++k) dst[k] = src[k * kLanes];
+        }
     }
   }
 }
@@ -221,44 +375,21 @@ MapJet HarmonicBasis::differential_jet(const FaceMatrices& fm, const Vec3& p, in
 }
 
 MatXd HarmonicBasis::value_matrix(const MatX3d& P) const {
-  const int n = size();
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> D(P.rows(), n);
-#pragma omp parallel for schedule(static)
-  for (Eigen::Index i = 0; i < P.rows(); ++i)
-    evaluate(P.row(i).transpose(), 0, D.row(i).data(), nullptr, nullptr);
-  return D;
+  MatXdR M;
+  evaluate_rows(P, true, false, false, M);
+  return M;
 }
 
 MatXd HarmonicBasis::gradient_matrix(const MatX3d& P) const {
-  const int n = size();
-  MatXd G(3 * P.rows(), n);
-#pragma omp parallel
-  {
-    std::vector<double> grad(3 * n);
-#pragma omp for schedule(static)
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      evaluate(P.row(i).transpose(), 1, nullptr, grad.data(), nullptr);
-      for (int k = 0; k < n; ++k)
-        for (int b = 0; b < 3; ++b) G(3 * i + b, k) = grad[3 * k + b];
-    }
-  }
-  return G;
+  MatXdR M;
+  evaluate_rows(P, false, true, false, M);
+  return M;
 }
 
 MatXd HarmonicBasis::hessian_matrix(const MatX3d& P) const {
-  const int n = size();
-  MatXd Hm(kSym * P.rows(), n);
-#pragma omp parallel
-  {
-    std::vector<double> hess(kSym * n);
-#pragma omp for schedule(static)
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      evaluate(P.row(i).transpose(), 2, nullptr, nullptr, hess.data());
-      for (int k = 0; k < n; ++k)
-        for (int b = 0; b < kSym; ++b) Hm(kSym * i + b, k) = hess[kSym * k + b];
-    }
-  }
-  return Hm;
+  MatXdR M;
+  evaluate_rows(P, false, false, true, M);
+  return M;
 }
 
 MatX3d HarmonicBasis::map_values(const MatX3d& y, const MatX3d& P) const {

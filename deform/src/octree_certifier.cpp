@@ -7,6 +7,7 @@
 #include <limits>
 #include <mutex>
 
+#include "lidef/blas_kernel.h"
 #include "lidef/edge_jet.h"
 #include "lidef/errors.h"
 #include "lidef/lipschitz_bound.h"
@@ -22,13 +23,6 @@ double ms_since(Clock::time_point t0) {
 }
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// The smallest float ≥ x (upper bounds stay upper bounds when stored as float).
-inline float round_up(double x) {
-  float f = static_cast<float>(x);
-  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
-
 // Full 27-entry Frobenius norm of a Hessian tensor given as 3 symmetric 6-entry rows (xx,xy,xz,yy,yz,zz).
 inline double hessian_norm_sym(const double* h0, int stride_a) {
   double s = 0;
@@ -37,26 +31,6 @@ inline double hessian_norm_sym(const double* h0, int stride_a) {
     s += h[0] * h[0] + h[3] * h[3] + h[5] * h[5] + 2 * (h[1] * h[1] + h[2] * h[2] + h[4] * h[4]);
   }
   return std::sqrt(s);
-}
-
-// HarmonicBasis::gradient_matrix(P) and hessian_matrix(P) (the same numbers, bit for bit) from one evaluation
-// per point: order 2 computes the gradients on the way, which halves the cost of this precomputation.
-void gradient_hessian_matrices(const HarmonicBasis& basis, const MatX3d& P, MatXd& G, MatXd& H) {
-  const int n = basis.size();
-  G.resize(3 * P.rows(), n);
-  H.resize(kSym * P.rows(), n);
-#pragma omp parallel
-  {
-    std::vector<double> grad(3 * static_cast<size_t>(n)), hess(kSym * static_cast<size_t>(n));
-#pragma omp for schedule(static)
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      basis.evaluate(P.row(i).transpose(), 2, nullptr, grad.data(), hess.data());
-      for (int k = 0; k < n; ++k) {
-        for (int b = 0; b < 3; ++b) G(3 * i + b, k) = grad[3 * k + b];
-        for (int b = 0; b < kSym; ++b) H(kSym * i + b, k) = hess[kSym * k + b];
-      }
-    }
-  }
 }
 
 }  // namespace
@@ -121,26 +95,26 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
     im.GH.resize(static_cast<size_t>(9 * N * m));
     im.scale_J.resize(N);
     im.scale_H.resize(N);
+    // Per chunk of centers: the basis gradients and Hessians, one block of 9 rows per center (3 gradient
+    // rows, 6 Hessian rows: the layout of GH), times Ξ (OpenBLAS), rounded to float. The buffers keep their
+    // memory from chunk to chunk.
     const long chunk = 1024;
+    MatXdR D, R;
     for (long s = 0; s < N; s += chunk) {
       const long c = std::min(chunk, N - s);
-      const MatX3d P = sampling.centers.middleRows(s, c);
-      MatXd Gc, Hc;
-      gradient_hessian_matrices(basis_, P, Gc, Hc);
-      if (reduction) {
-        Gc = Gc * (*reduction);
-        Hc = Hc * (*reduction);
-      }
+      basis_.evaluate_rows(sampling.centers.middleRows(s, c), false, true, true, D);
+      if (reduction) blas_product(D, *reduction, R);
+      const MatXdR& F = reduction ? R : D;  // 9c by m
 #pragma omp parallel for schedule(static)
       for (long j = 0; j < c; ++j) {
         float* blk = im.GH.data() + static_cast<size_t>((s + j) * 9 * m);
+        const double* src = F.data() + static_cast<size_t>(9 * j * m);
         double sj = 0, sh = 0;
-        for (int row = 0; row < 9; ++row)
-          for (long k = 0; k < m; ++k) {
-            const float v = static_cast<float>(row < 3 ? Gc(3 * j + row, k) : Hc(6 * j + row - 3, k));
-            blk[row * m + k] = v;
-            (row < 3 ? sj : sh) += std::abs(static_cast<double>(v));
-          }
+        for (long q = 0; q < 9 * m; ++q) {
+          const float v = static_cast<float>(src[q]);
+          blk[q] = v;
+          (q < 3 * m ? sj : sh) += std::abs(static_cast<double>(v));
+        }
         im.scale_J(s + j) = sj;
         im.scale_H(s + j) = sh;
       }
@@ -270,8 +244,8 @@ struct OctreeCertifier::Run {
     int depth;
     double bound;        // third, combined: Σ δ Θ over the node's ball; first: L over the node's ball
     double bound_first;  // combined: Σ δ Γ over the node's ball (first-order L)
-    long fi;          // index into failing_base
-    int first_child;  // index of the first of its 8 children in `tree` (−1: a leaf)
+    long fi;             // index into failing_base
+    int first_child;     // index of the first of its 8 children in `tree` (−1: a leaf)
     CertLeaf leaf;
   };
   // The refinement of one failing base voxel.
@@ -446,7 +420,9 @@ struct OctreeCertifier::Run {
   }
 
   // Octree level of base voxel i below the base grid (mesh domain; 0 for the paper's grid).
-  int level(long i) const { return oc.sampling_.level.empty() ? 0 : oc.sampling_.level[i]; }
+  int level(long i) const {
+    return oc.sampling_.level.empty() ? 0 : oc.sampling_.level[i];
+  }
   std::vector<long> uncleared;  // base voxels refused by the guard
 
   // --- 3. Lipschitz constants of the base voxels: δ norms (map) times the per-voxel per-edge factors (cage
@@ -521,23 +497,21 @@ struct OctreeCertifier::Run {
   // cage and the voxels).
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix(
       bool third_kind) const {
-    auto build = [&](auto& mat, std::vector<char>& finite,
-                     double (*factor)(const Vec3&, const Vec3&, const Vec3&, double)) {
+    // One row per voxel, vectorized over the edges (lipschitz_bound.h, factor_row).
+    auto build = [&](auto& mat, std::vector<char>& finite, bool third) {
+      const EdgeArrays edges(im.eu, im.ew);
       mat.resize(N, E);
       finite.assign(N, 1);
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
-        for (long e = 0; e < E; ++e) {
-          mat(i, e) = round_up(factor(im.eu[e], im.ew[e], oc.sampling_.centers.row(i).transpose(),
-                                      oc.sampling_.radius_of(static_cast<int>(i))));
-          if (!std::isfinite(mat(i, e))) finite[i] = 0;
-        }
+        finite[i] = factor_row(edges, third, oc.sampling_.centers.row(i).transpose(),
+                               oc.sampling_.radius_of(static_cast<int>(i)), mat.row(i).data());
     };
     if (third_kind) {
-      std::call_once(im.third_once, [&] { build(im.third, im.third_finite, &third_order_edge_factor); });
+      std::call_once(im.third_once, [&] { build(im.third, im.third_finite, true); });
       return im.third;
     }
-    std::call_once(im.first_once, [&] { build(im.first, im.first_finite, &first_order_edge_factor); });
+    std::call_once(im.first_once, [&] { build(im.first, im.first_finite, false); });
     return im.first;
   }
 

@@ -1,7 +1,5 @@
 #include "lidef/precompute_cache.h"
 
-#include "lidef/domain_sampling.h"
-
 #include <omp.h>
 
 #include <algorithm>
@@ -14,6 +12,8 @@
 #include <system_error>
 
 #include "lidef/atomic_file.h"
+#include "lidef/blas_kernel.h"
+#include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
 
@@ -117,7 +117,7 @@ CacheKey& CacheKey::add_bytes(const void* data, std::size_t bytes) {
 }
 
 CacheKey& CacheKey::add_numerics() {
-  add(omp_get_max_threads()).add(std::string(__VERSION__));
+  add(omp_get_max_threads()).add(std::string(__VERSION__)).add(blas_numerics());
   return add(EIGEN_WORLD_VERSION).add(EIGEN_MAJOR_VERSION).add(EIGEN_MINOR_VERSION);
 }
 
@@ -324,7 +324,8 @@ CacheKey sampling_key(const std::string& domain, const Cage& cage, const MatX3d&
   k.add(p.target_count).add(p.count_tolerance).add(p.voxel_side).add(p.safety);
   k.add(p.hessian_fraction).add(p.max_search_iterations);
   k.add(domain);
-  if (domain == "mesh") k.add_matrix(mesh_V).add_matrix(mesh_F).add(p.max_domain_level).add(p.max_leaves_per_cell);
+  if (domain == "mesh")
+    k.add_matrix(mesh_V).add_matrix(mesh_F).add(p.max_domain_level).add(p.max_leaves_per_cell);
   return k.add_numerics();
 }
 

@@ -223,13 +223,18 @@ struct DeformationSolver::Precompute {
   // first-order one: then the entry has none).
   void store(const CacheKey& k) {
     if (!cache.enabled()) return;
-    const auto d = S.certifier_->reduced_derivatives();
+    const CacheEvent ev = store_entry(cache, k, S.sampling_, *S.certifier_);
+    say("precomputation " + describe(ev) + "; " + describe(cache.usage()));
+  }
+  static CacheEvent store_entry(const PrecomputeCache& cache, const CacheKey& k,
+                                const VoxelSampling& sampling, const OctreeCertifier& certifier) {
+    const auto d = certifier.reduced_derivatives();
     const std::vector<char>* finite = nullptr;
-    const OctreeCertifier::FactorMatrix* third = S.certifier_->third_factors(&finite);
+    const OctreeCertifier::FactorMatrix* third = certifier.third_factors(&finite);
     const OctreeCertifier::FactorMatrix none;
     const std::vector<char> no_finite;
     CacheWriter w;
-    write_sampling(w, S.sampling_);
+    write_sampling(w, sampling);
     w.array(d.GH->data(), d.GH->size());
     w.scalar(d.m);
     w.matrix(*d.scale_J);
@@ -239,7 +244,7 @@ struct DeformationSolver::Precompute {
     w.array(f.data(), f.size());
     CacheEvent ev;
     cache.store(k, w, &ev);
-    say("precomputation " + describe(ev) + "; " + describe(cache.usage()));
+    return ev;
   }
 };
 
@@ -306,15 +311,25 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   t0 = Clock::now();
   reset();
   pc.say("certificate of the identity: " + format_g(ms_since(t0), 4) + " ms");
-  if (!cached && pc.cache.enabled()) {
+  if (!cached && pc.cache.enabled() && !setup.background_store) {
     pc.enter("writing the cache", pc.end, 1.0);
     pc.store(key);
   }
   pc.tick(1);
   preprocess_seconds_ = ms_since(t_all) / 1000;
+  if (!cached && pc.cache.enabled() && setup.background_store) {
+    // One thread for the checksum too: the caller goes on computing on all cores meanwhile.
+    cache_store_ = std::async(std::launch::async, [this, key, cache = pc.cache] {
+                     omp_set_num_threads(1);
+                     return describe(Precompute::store_entry(cache, key, sampling_, *certifier_));
+                   }).share();
+  }
 }
 
-DeformationSolver::~DeformationSolver() = default;
+DeformationSolver::~DeformationSolver() {
+  // The store reads this solver's arrays.
+  if (cache_store_.valid()) cache_store_.wait();
+}
 
 SamplingParams DeformationSolver::sampling_params() const {
   return sampling_params_of(params_);

@@ -18,6 +18,7 @@
 #include <condition_variable>
 #include <filesystem>
 #include <functional>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -133,6 +134,11 @@ class InteractiveSession {
   // --- Preprocessing. The solver's precomputation (and the mesh matrices) is cached on disk
   // (precompute_cache.h) in `dir` ("" = no cache; default_cache_dir() until set) up to `max_bytes`.
   void set_cache(const std::string& dir, std::uint64_t max_bytes = default_cache_max_bytes());
+  // Computed cache entries (the solver's precomputation, the mesh matrices) are written in the background
+  // while the session rests (PrecomputeSetup::background_store). Waits for every one started so far and
+  // returns their outcomes ("" when there was none); tests and benchmarks call it before looking at the cache
+  // folder. The destructor waits for them too.
+  std::string wait_for_cache_store() const;
   // Stops a running preprocessing (a load or a parameter change) at its next chunk of work: the model and map
   // before it stay (or the session stays empty), the frame's status says "cancelled". No effect otherwise.
   void cancel_preparation();
@@ -177,6 +183,9 @@ class InteractiveSession {
   std::shared_ptr<const Model> model_;
   Scenario scenario_;      // handles and parameters as last set (guarded by mutex_)
   std::string cache_dir_;  // guarded by mutex_
+  // Background stores of cache entries (guarded by mutex_). Declared before thread_, so destroyed after the
+  // engine thread is joined: the destruction of the last copy of an async future waits for its write.
+  std::vector<std::shared_future<std::string>> cache_stores_;
   std::uint64_t cache_max_bytes_ = 0;
   std::thread thread_;
 };

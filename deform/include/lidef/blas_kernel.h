@@ -11,6 +11,8 @@
 #include <utility>
 #include <vector>
 
+#include "lidef/types.h"
+
 namespace lidef {
 
 struct BlasKernelInfo {
@@ -30,5 +32,13 @@ std::vector<std::pair<std::string, std::string>> blas_environment();
 // `argv` (returns only when there was nothing to set, or when exec failed: the program then runs as it is).
 // Call first thing in main(), before any thread starts.
 void reexec_with_environment(char** argv, const std::vector<std::pair<std::string, std::string>>& env);
+
+// C = A B for a row-major A (m by k) and a column-major B (k by n), into a row-major C (m by n; resized, its
+// memory reused when the shape is the same), with OpenBLAS's dgemm: the precomputation's products of basis
+// derivatives with the subspace Ξ, about twice Eigen's product with OpenBLAS's AVX-512 kernels
+// (docs/benchmarks.md). Its rounding depends on OpenBLAS's kernels and thread count: blas_numerics().
+void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C);
+// "<core>/<threads>" of OpenBLAS in this process, for the keys of cached results of blas_product.
+std::string blas_numerics();
 
 }  // namespace lidef

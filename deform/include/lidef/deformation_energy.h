@@ -33,9 +33,6 @@
 
 namespace lidef {
 
-using MatXdR = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-using MatXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
 struct EnergyWeights {
   double p2p = 1e5;     // λ1
   double smooth = 0.1;  // λ2

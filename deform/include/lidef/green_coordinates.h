@@ -48,6 +48,17 @@ class HarmonicBasis {
   //   value #V+#F;  grad (#V+#F) by 3 row-major;  hess (#V+#F) by 6 row-major (xx,xy,xz,yy,yz,zz).
   void evaluate(const Vec3& p, int order, double* value, double* grad, double* hess) const;
 
+  // Points one kernel call evaluates together (SIMD lanes; AVX2 holds 4 doubles).
+  static constexpr int kLanes = 4;
+  // Basis values, gradients and/or Hessians at many points P (#P by 3), kLanes points at a time (the per-face
+  // work shared by the points and vectorized over them), in parallel, into `out` (resized; its memory is
+  // reused when the shape is the same). Row-major, one block of r rows per point, r = (values ? 1 : 0) +
+  // (gradients ? 3 : 0) + (hessians ? 6 : 0): rows r·i .. r·i + r − 1 hold the values at p_i, then ∂/∂p_x,
+  // ∂/∂p_y, ∂/∂p_z, then the symmetric Hessian entries xx, xy, xz, yy, yz, zz (#V+#F columns). The numbers
+  // are evaluate()'s at each point (the same arithmetic; a point's numbers do not depend on the other points
+  // of its batch), to the compiler's contraction of multiply-adds.
+  void evaluate_rows(const MatX3d& P, bool values, bool gradients, bool hessians, MatXdR& out) const;
+
   // Map jet for coefficients y (#V+#F by 3) at p; order as in evaluate().
   MapJet map_jet(const MatX3d& y, const Vec3& p, int order = 2) const;
 
@@ -82,6 +93,19 @@ class HarmonicBasis {
   struct FaceAtPoint;  // per-face quantities at a point (green_coordinates.cpp)
   // Fills `out` for face t at p; α, β only when asked.
   void face_at_point(int t, const Vec3& p, bool with_alpha_beta, FaceAtPoint& out) const;
+  // The basis kernel for W points (px, py, pz: W coordinates each), writing point j's entry of function k,
+  // component c at data + k·ld + c·stride + j (green_coordinates.cpp).
+  struct LaneOut {
+    double* data = nullptr;
+    long ld = 0, stride = 0;
+  };
+  template <int W, bool Val, bool Grad, bool Hess>
+  void lanes(const double* px, const double* py, const double* pz, const LaneOut& val, const LaneOut& grad,
+             const LaneOut& hess) const;
+  // lanes<W, ...> for the outputs that are wanted (their data non-null).
+  template <int W>
+  void run_lanes(const double* px, const double* py, const double* pz, const LaneOut& val,
+                 const LaneOut& grad, const LaneOut& hess) const;
 
   struct Face {
     int vid[3];

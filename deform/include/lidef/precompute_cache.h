@@ -10,7 +10,7 @@
 // time) are removed until the total fits the limit. docs/parameters.md (cache) says how to set dir and limit.
 //
 // Results never depend on the cache: an entry holds exactly the bytes the computation produced, and the key
-// holds the thread count, since the dense products' rounding depends on it.
+// holds the thread counts and OpenBLAS's kernels, since the dense products' rounding depends on them.
 #pragma once
 #include <cstdint>
 #include <cstring>
@@ -26,7 +26,8 @@ namespace lidef {
 
 // Bump whenever the content or meaning of any entry changes (a new stage, other numerics): older entries
 // then miss instead of being trusted.
-constexpr std::uint32_t kPrecomputeFormatVersion = 2;  // 2: samplings carry level, domain, uncleared
+constexpr std::uint32_t kPrecomputeFormatVersion = 3;  // 2: samplings carry level, domain, uncleared;
+                                                       // 3: SIMD basis kernel and OpenBLAS products
 
 // $LIDEF_CACHE_MAX_MB (MiB) when set, else 4096 MiB.
 std::uint64_t default_cache_max_bytes();
@@ -48,7 +49,8 @@ class CacheKey {
     add(static_cast<std::int64_t>(m.cols()));
     return add_bytes(m.data(), sizeof(typename M::Scalar) * static_cast<std::size_t>(m.size()));
   }
-  // The thread count and the build (compiler, Eigen version): the rounding of dense products depends on them.
+  // The thread counts, OpenBLAS's kernels and the build (compiler, Eigen version): the rounding of dense
+  // products depends on them.
   CacheKey& add_numerics();
   const std::string& kind() const { return kind_; }
   std::uint64_t value() const { return h_; }

@@ -27,6 +27,7 @@
 #pragma once
 #include <atomic>
 #include <functional>
+#include <future>
 #include <memory>
 #include <string>
 #include <vector>
@@ -67,6 +68,11 @@ struct PrecomputeSetup {
   // The model's mesh (#V by 3, #F by 3), read during construction only: with params.domain "mesh" the voxels
   // cover its triangles and solid (domain_sampling.h); nullptr = the paper's grid.
   const TriMesh* mesh = nullptr;
+  // Write a computed entry on a thread of its own once the constructor is done (the studio: the session can
+  // rest while it is written), instead of as the constructor's last stage. The entry's arrays do not change
+  // after construction; cache_store() says when it is done, the destructor waits for it. `log` is not called
+  // for it.
+  bool background_store = false;
 };
 
 // One Newton iteration, as iterations.csv records it.
@@ -213,6 +219,10 @@ class DeformationSolver {
   double preprocess_seconds() const { return preprocess_seconds_; }
   // What the precomputation cache did ("hit", "miss", "rebuilt (...)", "disabled"; precompute_cache.h).
   const std::string& cache_outcome() const { return cache_outcome_; }
+  // A background store (PrecomputeSetup::background_store): its outcome once written ("stored ...", "not
+  // stored (...)"); invalid when there was none. Copies may outlive the solver (whose destructor waits for
+  // it).
+  std::shared_future<std::string> cache_store() const { return cache_store_; }
   SamplingParams sampling_params() const;
   CertifyParams certify_params(bool stop_on_failure, bool keep_leaves) const;
 
@@ -241,7 +251,8 @@ class DeformationSolver {
   std::vector<IterationRecord> history_;
   double preprocess_seconds_ = 0;
   std::string cache_outcome_;
-  struct Precompute;  // the stages of the constructor (projected_newton.cpp)
+  std::shared_future<std::string> cache_store_;  // the background store, if any
+  struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
 };
 
 }  // namespace lidef

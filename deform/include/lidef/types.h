@@ -7,6 +7,8 @@ namespace lidef {
 using MatX3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;  // one point per row
 using MatX3i = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;     // one triangle per row
 using MatXd = Eigen::MatrixXd;
+using MatXdR = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using MatXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using VecXd = Eigen::VectorXd;
 using VecXi = Eigen::VectorXi;
 using Vec3 = Eigen::Vector3d;
