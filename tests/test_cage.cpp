@@ -152,8 +152,8 @@ std::string stl_ascii(const Poly& p) {
   return s + "endsolid test\n";
 }
 
-// Binary OFF (Geomview): "OFF BINARY", three big-endian int32 counts, big-endian float32 coordinates, faces as
-// int32 n, n indices, int32 colour count (0).
+// Binary OFF (Geomview): "OFF BINARY", three big-endian int32 counts, big-endian float32 coordinates, faces
+// as int32 n, n indices, int32 colour count (0).
 std::string off_binary(const Poly& p) {
   std::string out = "OFF BINARY\n";
   auto be32 = [&](std::uint32_t u) {
@@ -277,7 +277,8 @@ TEST_F(Cage, ReadsEveryFormatToTheSameTriangles) {
   write_text(tmp / "tb.stl", stl_binary(p));
   // Binary OFF is refused (CGAL 5.5 dropped 2 of a tetrahedron's 4 faces of a file written per the format).
   write_text(tmp / "tb.off", off_binary(p));
-  EXPECT_NE(input_error_message([&] { read_any_mesh(tmp / "tb.off"); }).find("binary OFF"), std::string::npos);
+  EXPECT_NE(input_error_message([&] { read_any_mesh(tmp / "tb.off"); }).find("binary OFF"),
+            std::string::npos);
   MeshReadInfo info;
   const TriMesh obj = read_any_mesh(tmp / "t.obj", &info);
   EXPECT_EQ(info.format, "obj");
@@ -308,8 +309,8 @@ TEST_F(Cage, BadInputsNameTheFile) {
   const std::vector<Bad> bad = {
       {"empty.obj", "", "file is empty"},
       {"empty.stl", "", "file is empty"},
-      {"garbage.ply", garbage, "cannot read"},
-      {"garbage.off", garbage, "binary data"},  // lidef's own OFF parser (auto_cage.cpp)
+      {"garbage.ply", garbage, "not printable"},  // refused at its first header line
+      {"garbage.off", garbage, "binary data"},    // lidef's own OFF parser (auto_cage.cpp)
       {"garbage.stl", garbage, "cannot read"},
       {"garbage.obj", garbage, ""},  // CGAL's OBJ reader skips unknown lines; any error naming the file
       {"nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n", ""},
@@ -319,6 +320,15 @@ TEST_F(Cage, BadInputsNameTheFile) {
       {"mesh.xyz", "0 0 0\n", "unsupported mesh format"},
       // CGAL's binary OFF header multiplied a negative count (UB; fuzz/regressions/cgal_off/): refused first.
       {"negative.off", std::string("OFF BINARY\n\xff\xff\xff\xfe\0\0\0\1\0\0\0\0", 23), "not supported"},
+      // A NUL in a PLY header line made CGAL read a face list of ~10^9 entries (out of memory; CI's libFuzzer
+      // run, fuzz/regressions/cgal_ply/oom_list_count_garbled_header.ply): the header is refused.
+      {"nul.ply", std::string("ply\nformat ascii 1.0\nelement vert\0ex 3\nend_header\n", 50),
+       "not printable"},
+      // A list count larger than the rest of the file (CGAL resizes to it before reading).
+      {"list.ply",
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1 0\n200 0 1 2\n",
+       "a list of 200 items"},
   };
   for (const Bad& b : bad) {
     write_text(tmp / b.name, b.bytes);
