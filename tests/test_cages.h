@@ -8,12 +8,22 @@
 
 namespace lidef::test {
 
+// A map with a bent, non-affine Jacobian (#V+#F by 3): the cage's identity coefficients plus N(0, amp²)
+// perturbations of every coefficient (seeded).
+inline MatX3d perturbed_map(const Cage& cage, double amp, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  for (int i = 0; i < y.rows(); ++i) y.row(i) += amp * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
+  return y;
+}
+
 // Icosphere of radius 1 (subdivided `levels` times), each vertex radially scaled by a factor in
 // [1 − bump, 1 + bump] (seeded) so the cage is star-shaped but not convex. CCW seen from outside.
 inline TriMesh icosphere(int levels, double bump = 0.0, unsigned seed = 1) {
   const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  std::vector<Vec3> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<Vec3> v = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
   std::vector<std::array<int, 3>> f = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                                        {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
                                        {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},

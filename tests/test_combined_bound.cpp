@@ -15,21 +15,13 @@
 #include "test_cages.h"
 
 using namespace lidef;
+using lidef::test::perturbed_map;
 
 namespace {
 
 Vec3 random_unit(std::mt19937& rng) {
   std::normal_distribution<double> N01;
   return Vec3(N01(rng), N01(rng), N01(rng)).normalized();
-}
-
-// A map with a bent, non-affine Jacobian: identity plus random perturbations of every coefficient.
-MatX3d perturbed_map(const Cage& cage, double amp, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> N01;
-  MatX3d y = cage.identity_coefficients();
-  for (int i = 0; i < y.rows(); ++i) y.row(i) += amp * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
-  return y;
 }
 
 }  // namespace

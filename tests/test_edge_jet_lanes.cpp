@@ -16,18 +16,11 @@
 #include "test_cages.h"
 
 using namespace lidef;
+using lidef::test::perturbed_map;
 
 namespace {
 
 constexpr double kU = 0x1p-53;  // unit roundoff
-
-MatX3d perturbed_map(const Cage& cage, double amp, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> N01;
-  MatX3d y = cage.identity_coefficients();
-  for (int i = 0; i < y.rows(); ++i) y.row(i) += amp * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
-  return y;
-}
 
 double frob(const std::array<Mat3, 3>& H) {
   return std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
