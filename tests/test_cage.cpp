@@ -329,6 +329,37 @@ TEST_F(Cage, BadInputsNameTheFile) {
        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
        "element face 1\nproperty list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1 0\n200 0 1 2\n",
        "a list of 200 items"},
+      // No end_header: CGAL read the elements from a failed stream into an uninitialized list count (out of
+      // memory under CI's libFuzzer run, fuzz/regressions/cgal_ply/oom_no_end_header.ply).
+      {"noend.ply", "ply\nformat ascii 1.0\nelement v 2\nproperty list uint double y\n0 1\n3 0 1 2\n",
+       "no 'end_header'"},
+      // A body that ends where a list count belongs (ASCII and binary): CGAL's count would be uninitialized.
+      {"short.ply",
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1 0\n",
+       "the file ends inside this entry"},
+      {"shortb.ply",
+       std::string(
+           "ply\nformat binary_little_endian 1.0\nelement face 2\nproperty list int int vertex_index\n"
+           "end_header\n\1\0\0\0\0\0\0\0\0\0",
+           107),
+       "entry 2 of 2: the file ends inside this entry"},
+      // A negative count in a signed binary count type (CGAL casts it to size_t) and a value out of its
+      // type's range in ASCII (CGAL would read a different count than the file says).
+      {"negb.ply",
+       std::string(
+           "ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list char int vertex_index\n"
+           "end_header\n\xff\0\0\0\0",
+           103),
+       "a negative list count (-1)"},
+      {"range.ply",
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1 0\n300 0 1 2\n",
+       "'300' is not an integer in the range"},
+      {"token.ply",
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1.5x 0\n3 0 1 2\n",
+       "'1.5x' is not a number"},
   };
   for (const Bad& b : bad) {
     write_text(tmp / b.name, b.bytes);

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "auto_cage_cgal.h"
+#include "ply_check.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
@@ -89,149 +90,6 @@ std::string count_str(long n) {
   return s;
 }
 
-// CGAL's PLY reader loops over the element counts of the header even when the data ends early or a property
-// line is garbled: a 77-byte file declaring 4000000000 vertices kept `lidef cage` busy indefinitely (found by
-// fuzzing, fuzz/regressions/cgal_ply/). An element takes at least one byte of data, so a count larger than
-// the file is refused here, before CGAL reads the file. Only `element NAME COUNT` lines of the header are
-// read.
-// The bytes of a PLY scalar type (0: not a type this check knows; the walk below then stops).
-int ply_type_bytes(const std::string& t) {
-  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
-  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-  if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32") return 4;
-  if (t == "double" || t == "float64") return 8;
-  return 0;
-}
-
-struct PlyProperty {
-  bool list = false;
-  int count_bytes = 0, item_bytes = 0;  // a list's count and item types; a scalar's size in item_bytes
-};
-struct PlyElement {
-  std::string name;
-  unsigned long long count = 0;
-  std::vector<PlyProperty> props;
-};
-
-// Walks the body as the header describes it and refuses a list whose count is larger than what is left of
-// the file (each ASCII entry takes at least one byte, a binary one its type's size): CGAL 5.5 resizes a
-// vector to that count before reading (an out-of-memory found by CI's libFuzzer run, fuzz/regressions/
-// cgal_ply/). Anything else this walk does not understand ends it silently: CGAL then decides.
-void check_ply_lists(const std::string& path, std::istream& in, const std::string& format,
-                     const std::vector<PlyElement>& elements, std::uintmax_t file_size) {
-  const bool ascii = format == "ascii";
-  const bool little = format == "binary_little_endian";
-  if (!ascii && !little && format != "binary_big_endian") return;
-  auto left = [&]() -> std::uintmax_t {
-    const std::streamoff at = in.tellg();
-    return at < 0 || static_cast<std::uintmax_t>(at) > file_size
-               ? 0
-               : file_size - static_cast<std::uintmax_t>(at);
-  };
-  auto read_count = [&](int bytes, unsigned long long* n) -> bool {
-    if (ascii) {
-      std::string tok;
-      if (!(in >> tok)) return false;
-      char* end = nullptr;
-      *n = std::strtoull(tok.c_str(), &end, 10);
-      return end != tok.c_str();
-    }
-    unsigned char b[8] = {0};
-    if (!in.read(reinterpret_cast<char*>(b), bytes)) return false;
-    unsigned long long v = 0;
-    for (int k = 0; k < bytes; ++k)
-      v |= static_cast<unsigned long long>(b[little ? k : bytes - 1 - k]) << (8 * k);
-    *n = v;
-    return true;
-  };
-  for (const PlyElement& e : elements)
-    for (unsigned long long i = 0; i < e.count; ++i)
-      for (const PlyProperty& p : e.props) {
-        if (p.list) {
-          unsigned long long n = 0;
-          if (!read_count(p.count_bytes, &n)) return;
-          if (n > left() / (ascii ? 1 : p.item_bytes))
-            throw InputError(path, "element '" + e.name + "' entry " + std::to_string(i + 1) +
-                                       ": a list of " + std::to_string(n) +
-                                       " items, more than the rest of the file holds");
-          if (ascii) {
-            std::string tok;
-            for (unsigned long long k = 0; k < n; ++k)
-              if (!(in >> tok)) return;
-          } else if (!in.seekg(static_cast<std::streamoff>(n * p.item_bytes), std::ios::cur)) {
-            return;
-          }
-        } else if (ascii) {
-          std::string tok;
-          if (!(in >> tok)) return;
-        } else if (!in.seekg(p.item_bytes, std::ios::cur)) {
-          return;
-        }
-      }
-}
-
-// What CGAL 5.5's PLY reader does not check before it trusts the header: element counts larger than the
-// file (it did not return on 4000000000 vertices, fuzz/regressions/cgal_ply/), a `property` line before
-// any `element` line (it appends the property to an element that does not exist: a crash, found by
-// the deterministic mutants of fuzz/replay_main.cpp), and list counts larger than the file
-// (check_ply_lists).
-void check_ply_header(const std::string& path, std::uintmax_t file_size) {
-  std::ifstream in(path, std::ios::binary);
-  std::string line, format;
-  std::vector<PlyElement> elements;
-  bool known = true;  // every property type is one check_ply_lists can walk
-  for (long ln = 1; std::getline(in, line); ++ln) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line == "end_header") {
-      if (known) check_ply_lists(path, in, format, elements, file_size);
-      return;
-    }
-    // A PLY header is ASCII text. CGAL tokenizes a line with NULs and high bytes its own way and then read a
-    // face list's count of ~10^9 from such a file (out of memory under CI's libFuzzer run, kept in
-    // fuzz/regressions/cgal_ply/): refuse the header instead of guessing what CGAL makes of it.
-    for (const char c : line)
-      if ((static_cast<unsigned char>(c) < 0x20 && c != '\t') || static_cast<unsigned char>(c) >= 0x7f)
-        throw InputError(path, "header: a byte that is not printable ASCII (a PLY header is text)", ln);
-    std::istringstream words(line);
-    std::string keyword, name, count;
-    words >> keyword;
-    if (keyword == "property" && elements.empty())
-      throw InputError(path, "header: 'property' before any 'element' line", ln);
-    if (keyword == "format") words >> format;
-    if (keyword == "property") {
-      std::string type;
-      words >> type;
-      PlyProperty p;
-      if (type == "list") {
-        std::string ct, it;
-        words >> ct >> it;
-        p.list = true;
-        p.count_bytes = ply_type_bytes(ct);
-        p.item_bytes = ply_type_bytes(it);
-        known = known && p.count_bytes > 0 && p.item_bytes > 0;
-      } else {
-        p.item_bytes = ply_type_bytes(type);
-        known = known && p.item_bytes > 0;
-      }
-      elements.back().props.push_back(p);
-    }
-    if (keyword == "element") elements.emplace_back();
-    if (!(words >> name >> count) || keyword != "element") continue;
-    char* end = nullptr;
-    const unsigned long long n = std::strtoull(count.c_str(), &end, 10);
-    // CGAL reads the count with operator>>, which takes the leading digits of "4000000000\"property" too
-    // (a 32 s loop, found by the deterministic mutants): judge the same prefix.
-    if (end != count.c_str() && n > file_size)
-      throw InputError(path,
-                       "element '" + name + "' declares " + count + " entries, more than the file's " +
-                           std::to_string(file_size) + " bytes can hold",
-                       ln);
-    elements.back().name = name;
-    elements.back().count = end != count.c_str() ? n : 0;
-    if (end == count.c_str()) known = false;
-  }
-}
-
 // "OFF BINARY" (or [ST][C][N]OFF BINARY) on the first line.
 bool is_binary_off(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -262,7 +120,7 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
   if (!supported_format(ext))
     throw InputError(path, "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply or .stl)");
   if (fs::file_size(path, ec) == 0 && !ec) throw InputError(path, "file is empty");
-  if (ext == "ply") check_ply_header(path, fs::file_size(path, ec));
+  if (ext == "ply") check_ply_before_cgal(path, fs::file_size(path, ec));
   if (ext == "off" && is_binary_off(path)) refuse_binary_off(path);
   MeshReadInfo inf;
   inf.format = ext;
