@@ -129,7 +129,12 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
     const CacheUsage u = PrecomputeCache(cache).usage();
-    std::printf("| %s | cache size | | | | %s | | | |\n", name.c_str(), describe(u).c_str());
+    std::string files;  // per entry: which stage's data takes the space
+    for (const auto& f : std::filesystem::directory_iterator(cache))
+      files += (files.empty() ? "" : ", ") + f.path().filename().string().substr(0, 8) + " " +
+               bench::fixed(static_cast<double>(f.file_size()) / 1e6, 1) + " MB";
+    std::printf("| %s | cache size | | | | %s (%s) | | | |\n", name.c_str(), describe(u).c_str(),
+                files.c_str());
   }
   std::filesystem::remove_all(cache);
   std::printf("\n- load average at end: %s\n", bench::load_average().c_str());

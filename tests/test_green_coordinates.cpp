@@ -301,6 +301,30 @@ TEST(LaneMath, LogAndAtan2AreWithinTwoUlpOfALongDoubleReference) {
   EXPECT_EQ(lane_atan2(-3, -3), std::atan2(-3.0, -3.0));
 }
 
+// The certifier's precomputation takes 5 Hessian rows and stores zz = −xx − yy (docs/certificate.md, Step 5):
+// the rows are the full call's, and the computed basis is harmonic to rounding, entry by entry.
+TEST(GreenCoordinates, EvaluateRowsWithoutZzAndTheLaplacianResidual) {
+  const Cage cage = test_cage();
+  const HarmonicBasis B(cage);
+  const MatX3d P = interior_points(cage, 40, 0.01);
+  MatXdR full, five;
+  B.evaluate_rows(P, false, true, true, full);
+  B.evaluate_rows(P, false, true, true, five, /*drop_zz=*/true);
+  ASSERT_EQ(full.rows(), 9 * P.rows());
+  ASSERT_EQ(five.rows(), 8 * P.rows());
+  double worst = 0;
+  for (int i = 0; i < P.rows(); ++i) {
+    EXPECT_TRUE(five.middleRows(8 * i, 8) == full.middleRows(9 * i, 8)) << i;
+    for (int k = 0; k < B.size(); ++k) {
+      const double xx = full(9 * i + 3, k), yy = full(9 * i + 6, k), zz = full(9 * i + 8, k);
+      worst = std::max(worst, std::abs(xx + yy + zz) / (std::abs(xx) + std::abs(yy) + std::abs(zz)));
+    }
+  }
+  // Relative to the entries, far below the float storage's 2^-24 ≈ 6e-8 that the certificate accounts for.
+  EXPECT_LT(worst, 1e-10);
+  std::printf("largest |xx + yy + zz| / (|xx| + |yy| + |zz|): %.3g\n", worst);
+}
+
 TEST(GreenCoordinates, EvaluateRowsMatchesPointwiseAndNotItsBatch) {
   const Cage cage = test_cage();
   const HarmonicBasis B(cage);

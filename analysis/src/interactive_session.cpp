@@ -383,6 +383,7 @@ std::shared_future<std::string> reduced_mesh_matrices(const DeformationSolver& S
   return std::async(std::launch::async,
                     [cache, key, mats] {
                       omp_set_num_threads(1);  // the engine goes on computing on all cores meanwhile
+                      lower_calling_thread_priority();
                       CacheWriter w;
                       w.matrix(mats->first);
                       w.matrix(mats->second);

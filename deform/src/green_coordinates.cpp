@@ -268,11 +268,12 @@ void HarmonicBasis::evaluate(const Vec3& p, int order, double* value, double* gr
                {want_hess ? hess : nullptr, kSym, 1});
 }
 
-void HarmonicBasis::evaluate_rows(const MatX3d& P, bool values, bool gradients, bool hessians,
-                                  MatXdR& out) const {
+void HarmonicBasis::evaluate_rows(const MatX3d& P, bool values, bool gradients, bool hessians, MatXdR& out,
+                                  bool drop_zz) const {
   const long n = size(), rows = P.rows();
   const int r = (values ? 1 : 0) + (gradients ? 3 : 0) + (hessians ? kSym : 0);
-  out.resize(r * rows, n);
+  const int r_out = r - (hessians && drop_zz ? 1 : 0);  // zz is the last row of the block
+  out.resize(r_out * rows, n);
   if (rows == 0 || r == 0) return;
   const int rg = values ? 1 : 0, rh = rg + (gradients ? 3 : 0);  // first gradient / Hessian row
 #pragma omp parallel
@@ -294,9 +295,9 @@ void HarmonicBasis::evaluate_rows(const MatX3d& P, bool values, bool gradients, 
                         {gradients ? buf.data() + rg * nW : nullptr, kLanes, nW},
                         {hessians ? buf.data() + rh * nW : nullptr, kLanes, nW});
       for (long j = 0; j < std::min<long>(kLanes, rows - i0); ++j)
-        for (int c = 0; c < r; ++c) {
+        for (int c = 0; c < r_out; ++c) {
           const double* src = buf.data() + c * nW + j;
-          double* dst = out.data() + ((i0 + j) * r + c) * n;
+          double* dst = out.data() + ((i0 + j) * r_out + c) * n;
           for (long k = 0; k < n; ++k) dst[k] = src[k * kLanes];
         }
     }

@@ -95,23 +95,25 @@ OctreeCertifier::OctreeCertifier(const Cage& cage, const VoxelSampling& sampling
     im.GH.resize(static_cast<size_t>(9 * N * m));
     im.scale_J.resize(N);
     im.scale_H.resize(N);
-    // Per chunk of centers: the basis gradients and Hessians, one block of 9 rows per center (3 gradient
-    // rows, 6 Hessian rows: the layout of GH), times Ξ (OpenBLAS), rounded to float. The buffers keep their
-    // memory from chunk to chunk.
+    // Per chunk of centers: the basis gradients and Hessians, one block of 8 rows per center (3 gradient
+    // rows, the Hessian's xx, xy, xz, yy, yz), times Ξ (OpenBLAS), then GH's 9-row block rounded to float,
+    // its zz row = −xx − yy in double (the basis is harmonic: an identity, docs/certificate.md Step 5; the
+    // product is a ninth smaller). The buffers keep their memory from chunk to chunk.
     const long chunk = 1024;
     MatXdR D, R;
     for (long s = 0; s < N; s += chunk) {
       const long c = std::min(chunk, N - s);
-      basis_.evaluate_rows(sampling.centers.middleRows(s, c), false, true, true, D);
+      basis_.evaluate_rows(sampling.centers.middleRows(s, c), false, true, true, D, /*drop_zz=*/true);
       if (reduction) blas_product(D, *reduction, R);
-      const MatXdR& F = reduction ? R : D;  // 9c by m
+      const MatXdR& F = reduction ? R : D;  // 8c by m
 #pragma omp parallel for schedule(static)
       for (long j = 0; j < c; ++j) {
         float* blk = im.GH.data() + static_cast<size_t>((s + j) * 9 * m);
-        const double* src = F.data() + static_cast<size_t>(9 * j * m);
+        const double* src = F.data() + static_cast<size_t>(8 * j * m);
         double sj = 0, sh = 0;
         for (long q = 0; q < 9 * m; ++q) {
-          const float v = static_cast<float>(src[q]);
+          const double exact = q < 8 * m ? src[q] : -(src[q - 5 * m] + src[q - 2 * m]);  // zz = −xx − yy
+          const float v = static_cast<float>(exact);
           blk[q] = v;
           (q < 3 * m ? sj : sh) += std::abs(static_cast<double>(v));
         }

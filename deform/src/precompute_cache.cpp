@@ -1,11 +1,15 @@
 #include "lidef/precompute_cache.h"
 
 #include <omp.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <numeric>
@@ -127,6 +131,54 @@ std::uint64_t CacheWriter::bytes() const {
   return b;
 }
 
+void lower_calling_thread_priority() {
+  // setpriority on a thread id changes that thread only (Linux; setpriority(2), NOTES). Nice 10, not
+  // SCHED_IDLE: an idle-class thread gets ~0.3% of a core when other processes keep the cores busy (ctest
+  // -j2), and the solver's destructor waits for this write.
+  setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+}
+
+namespace {
+// The checksum of one block, fed in pieces: four independent lanes over 8-byte words (8x faster than FNV-1a's
+// byte-serial chain: 781 MB took 0.92 s on one core, the animal's first opening), the piece boundaries not
+// mattering (a carry of up to 32 bytes), the lanes and the tail folded with FNV-1a 64 at the end.
+class BlockChecksum {
+ public:
+  void feed(const unsigned char* p, std::size_t n) {
+    bytes_ += n;
+    while (n > 0 && fill_ > 0) {
+      carry_[fill_++] = *p++;
+      --n;
+      if (fill_ == 32) {
+        mix(carry_);
+        fill_ = 0;
+      }
+    }
+    for (; n >= 32; p += 32, n -= 32) mix(p);
+    for (; n > 0; --n) carry_[fill_++] = *p++;
+  }
+  std::uint64_t finish() const {
+    std::uint64_t h = fnv1a64(lane_, sizeof lane_);
+    h = fnv1a64(carry_, fill_, h);
+    return fnv1a64(&bytes_, sizeof bytes_, h);
+  }
+
+ private:
+  void mix(const unsigned char* p) {
+    for (int k = 0; k < 4; ++k) {
+      std::uint64_t w;
+      std::memcpy(&w, p + 8 * k, 8);
+      std::uint64_t x = (lane_[k] ^ w) * 0x100000001b3ULL;  // the FNV prime
+      lane_[k] = x ^ (x >> 29);  // a multiply only carries upwards: fold the high bits back down
+    }
+  }
+  std::uint64_t lane_[4] = {kFnv1a64Offset, kFnv1a64Offset ^ 1, kFnv1a64Offset ^ 2, kFnv1a64Offset ^ 3};
+  unsigned char carry_[32] = {};
+  std::size_t fill_ = 0;
+  std::uint64_t bytes_ = 0;
+};
+}  // namespace
+
 std::uint64_t payload_checksum(const std::vector<const void*>& data, const std::vector<std::size_t>& bytes) {
   // Blocks of the concatenation, so the result does not depend on how the payload is split into arrays.
   struct Piece {
@@ -148,16 +200,19 @@ std::uint64_t payload_checksum(const std::vector<const void*>& data, const std::
       }
     }
   const std::size_t blocks = block + (fill > 0 ? 1 : 0);
-  std::vector<std::uint64_t> h(blocks, kFnv1a64Offset);
+  std::vector<std::uint64_t> h(blocks, 0);
   // Pieces of one block are consecutive; each thread takes whole blocks.
   std::vector<std::size_t> first(blocks + 1, pieces.size());
   for (std::size_t i = pieces.size(); i-- > 0;) first[block_of_piece[i]] = i;
 #pragma omp parallel for schedule(static)
-  for (long b = 0; b < static_cast<long>(blocks); ++b)
+  for (long b = 0; b < static_cast<long>(blocks); ++b) {
+    BlockChecksum c;
     for (std::size_t i = first[b]; i < first[b + 1]; ++i) {
       const Piece& p = pieces[i];
-      h[b] = fnv1a64(static_cast<const char*>(data[p.span]) + p.offset, p.bytes, h[b]);
+      c.feed(static_cast<const unsigned char*>(data[p.span]) + p.offset, p.bytes);
     }
+    h[b] = c.finish();
+  }
   const std::uint64_t total = std::accumulate(bytes.begin(), bytes.end(), std::uint64_t(0));
   return fnv1a64(h.data(), sizeof(std::uint64_t) * h.size(), fnv1a64(&total, sizeof total));
 }

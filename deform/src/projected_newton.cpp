@@ -321,6 +321,7 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
     // One thread for the checksum too: the caller goes on computing on all cores meanwhile.
     cache_store_ = std::async(std::launch::async, [this, key, cache = pc.cache] {
                      omp_set_num_threads(1);
+                     lower_calling_thread_priority();
                      return describe(Precompute::store_entry(cache, key, sampling_, *certifier_));
                    }).share();
   }

@@ -56,8 +56,11 @@ class HarmonicBasis {
   // (gradients ? 3 : 0) + (hessians ? 6 : 0): rows r·i .. r·i + r − 1 hold the values at p_i, then ∂/∂p_x,
   // ∂/∂p_y, ∂/∂p_z, then the symmetric Hessian entries xx, xy, xz, yy, yz, zz (#V+#F columns). The numbers
   // are evaluate()'s at each point (the same arithmetic; a point's numbers do not depend on the other points
-  // of its batch), to the compiler's contraction of multiply-adds.
-  void evaluate_rows(const MatX3d& P, bool values, bool gradients, bool hessians, MatXdR& out) const;
+  // of its batch), to the compiler's contraction of multiply-adds. `drop_zz`: the Hessian block has 5 rows
+  // (no zz): the basis functions are harmonic, so zz = −xx − yy, and a caller that multiplies the rows by a
+  // matrix saves a ninth of the product (the certifier's precomputation).
+  void evaluate_rows(const MatX3d& P, bool values, bool gradients, bool hessians, MatXdR& out,
+                     bool drop_zz = false) const;
 
   // Map jet for coefficients y (#V+#F by 3) at p; order as in evaluate().
   MapJet map_jet(const MatX3d& y, const Vec3& p, int order = 2) const;

@@ -26,8 +26,9 @@ namespace lidef {
 
 // Bump whenever the content or meaning of any entry changes (a new stage, other numerics): older entries
 // then miss instead of being trusted.
-constexpr std::uint32_t kPrecomputeFormatVersion = 3;  // 2: samplings carry level, domain, uncleared;
-                                                       // 3: SIMD basis kernel and OpenBLAS products
+constexpr std::uint32_t kPrecomputeFormatVersion = 4;  // 2: samplings carry level, domain, uncleared;
+                                                       // 3: SIMD basis kernel and OpenBLAS products;
+                                                       // 4: the word-wise payload checksum
 
 // $LIDEF_CACHE_MAX_MB (MiB) when set, else 4096 MiB.
 std::uint64_t default_cache_max_bytes();
@@ -154,9 +155,15 @@ struct CacheUsage {
   std::uint64_t bytes = 0, limit = 0;
 };
 
-// Checksum of an entry's payload: FNV-1a 64 of each 1 MiB block (in parallel), then FNV-1a 64 of the block
-// hashes. Deterministic whatever the thread count.
+// Checksum of an entry's payload (it catches corrupted or truncated files, not tampering): of each 1 MiB
+// block of the concatenated arrays (in parallel) four multiply-xor lanes over 8-byte words, folded with
+// FNV-1a 64, then FNV-1a 64 of the block checksums. Deterministic whatever the thread count and however the
+// payload is split into arrays.
 std::uint64_t payload_checksum(const std::vector<const void*>& data, const std::vector<std::size_t>& bytes);
+
+// Lowers the calling thread's priority (nice 10, Linux) for the rest of its life: a cache entry written in
+// the background while the caller computes on all cores should take little from that computation.
+void lower_calling_thread_priority();
 
 class PrecomputeCache {
  public:
