@@ -163,12 +163,20 @@ MatS3 DeformationEnergy::gradient(const MatJT& JT, const MatS3& y, const EnergyW
   return gradient_from(distortion_gradient_sum(JT), y, w);
 }
 
-VecXd DeformationEnergy::block_weights(const std::vector<int>& idx) const {
-  const int m = static_cast<int>(idx.size());
-  if (w_.size() == 0) return VecXd::Constant(m, 1.0 / m);
-  VecXd out(m);
-  for (int k = 0; k < m; ++k) out(k) = w_(idx[k]);
-  return out / out.sum();
+VecXd DeformationEnergy::subset_block_weights() const {
+  // select_hessian_subset picks one sample per stratum of equal volume (equal count on the uniform grid), a
+  // sample with a probability proportional to its volume: each pick stands for the same volume W/m, so the
+  // estimate of Σ_i w_i H_i / Σ_i w_i is the plain mean of the picks' blocks. Weighing the picks by w_i as
+  // well counted the volume twice (a level-0 leaf's block weighed 512 times a level-3 leaf's): on the refined
+  // beam its relative error was 0.72 against 0.09 (DomainEnergy.HessianSubsetOfARefinedDomainEstimates...).
+  const int m = static_cast<int>(subset_.size());
+  return VecXd::Constant(m, 1.0 / m);
+}
+
+VecXd DeformationEnergy::all_block_weights() const {
+  const int n = num_samples();
+  if (w_.size() == 0) return VecXd::Constant(n, 1.0 / n);
+  return w_ / w_.sum();
 }
 
 MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_samples,
@@ -181,7 +189,7 @@ MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_s
     idx = &all;
   }
   const int m = static_cast<int>(idx->size());
-  const VecXd weight = block_weights(*idx);
+  const VecXd weight = all_samples ? all_block_weights() : subset_block_weights();
   // Per-sample 9x9 blocks (weighted), in vec(J) order a + 3b.
   std::vector<Mat9> blocks(m);
 #pragma omp parallel for schedule(static)

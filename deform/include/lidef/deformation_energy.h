@@ -73,8 +73,9 @@ class DeformationEnergy {
   const VecXd& smooth_eigenvalues() const { return mu_; }  // μ: s
   int num_edges() const { return num_edges_; }             // |E|
   const VecXd& sample_weights() const { return w_; }       // #I with mean 1, or empty (uniform)
-  // The Hessian subset's block weights (#H, summing to 1): 1/|H|, or w_i / Σ_H w when weighted.
-  VecXd subset_block_weights() const { return block_weights(subset_); }
+  // The Hessian subset's block weights (#H, summing to 1): 1/|H| each, weighted or not (the subset is
+  // stratified by volume, so each pick stands for the same volume; see the .cpp).
+  VecXd subset_block_weights() const;
 
   // JT = G ỹ (3|I| by 3).
   MatJT jacobians(const MatS3& y) const;
@@ -119,7 +120,7 @@ class DeformationEnergy {
   MatXd pair_blocks(const MatJT& JT, bool projected, bool all_samples, bool double_precision) const;
   MatXd products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const;
   void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
-  VecXd block_weights(const std::vector<int>& idx) const;  // per subset sample: 1/m, or w_i / Σ w
+  VecXd all_block_weights() const;  // #samples: w_i / Σ w (1/n without weights)
   MatXfR G_;
   std::vector<int> subset_;
   MatXfR GH_;  // 3|H| by s, the rows of G at the subset, single precision
