@@ -260,7 +260,8 @@ TEST_F(MalformedInputs, EachExitsWith2NamingTheFileAndWritesNothing) {
   };
   const std::string ply_lies = file("lies.ply", ply("8", "12", "0 0 0\n1 0 0\n0 1 0\n"));
   const std::string stl_short = file("short.stl", binary_stl(100, 150));
-  add_cage("ply_header_lies_about_counts", ply_lies, {"cannot read the file as ply"});
+  add_cage("ply_header_lies_about_counts", ply_lies,
+           {"element 'vertex' entry 4 of 8: the file ends inside this entry"});
   add_cage("binary_stl_truncated", stl_short, {"cannot read the file as stl"});
   add_cage("empty_stl", file("empty.stl", ""), {"file is empty"});
   add_cage("ascii_stl_vertex_with_two_coordinates",
@@ -274,7 +275,7 @@ TEST_F(MalformedInputs, EachExitsWith2NamingTheFileAndWritesNothing) {
   add_deform("mesh", "scenario_model_ply_header_lies",
              scenario(
                  "mply.json", [](json&) {}, ply_lies),
-             {"cannot read the file as ply"}, ply_lies);
+             {"element 'vertex' entry 4 of 8: the file ends inside this entry"}, ply_lies);
   add_deform("mesh", "scenario_model_stl_truncated",
              scenario(
                  "mstl.json", [](json&) {}, stl_short),
