@@ -52,6 +52,15 @@ TEST(BlasKernel, ProductOfRowMajorAndColumnMajorMatchesEigen) {
   EXPECT_LT((C - ref).cwiseAbs().maxCoeff(), 1e-12 * (A.cwiseAbs() * B.cwiseAbs()).maxCoeff());
   EXPECT_THROW(lidef::blas_product(A, lidef::MatXd(52, 11), C), lidef::Error);
   EXPECT_NE(lidef::blas_numerics().find('/'), std::string::npos);
+  // All column-major (the studio's mesh matrices times ỹ: a tall A, 3 columns).
+  const lidef::MatXd Ac = lidef::MatXd(A).replicate(40, 1);  // 1480 by 53
+  lidef::MatXd Cc;
+  lidef::blas_product(Ac, B.leftCols(3), Cc);
+  const lidef::MatXd refc = Ac * B.leftCols(3);
+  ASSERT_EQ(Cc.rows(), 1480);
+  ASSERT_EQ(Cc.cols(), 3);
+  EXPECT_LT((Cc - refc).cwiseAbs().maxCoeff(), 1e-12 * (Ac.cwiseAbs() * B.leftCols(3).cwiseAbs()).maxCoeff());
+  EXPECT_THROW(lidef::blas_product(Ac, lidef::MatXd(52, 3), Cc), lidef::Error);
 }
 
 }  // namespace

@@ -59,21 +59,34 @@ void reexec_with_environment(char** argv, const std::vector<std::pair<std::strin
   if (changed) execv("/proc/self/exe", argv);
 }
 
-void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C) {
+namespace {
+// Checks the shapes and sizes C; false when there is nothing for dgemm to do (C empty, or zero when k = 0).
+template <class MA, class MC>
+bool prepare_product(const MA& A, const MatXd& B, MC& C) {
   if (A.cols() != B.rows())
     throw Error("blas_product: " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()) + " times " +
                 std::to_string(B.rows()) + "x" + std::to_string(B.cols()));
   C.resize(A.rows(), B.cols());
-  if (C.size() == 0) return;
-  if (A.cols() == 0) {
-    C.setZero();
-    return;
-  }
+  if (A.cols() == 0) C.setZero();
+  return C.size() > 0 && A.cols() > 0;
+}
+}  // namespace
+
+void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C) {
+  if (!prepare_product(A, B, C)) return;
   // Row-major C = A B is column-major Cᵀ = Bᵀ Aᵀ, and a column-major B is a row-major Bᵀ: so Cᵀ (n by m) is
   // the column-major product of B transposed (lda = k) and A read as the column-major Aᵀ (k by m).
   cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, static_cast<int>(B.cols()), static_cast<int>(A.rows()),
               static_cast<int>(A.cols()), 1.0, B.data(), static_cast<int>(B.rows()), A.data(),
               static_cast<int>(A.cols()), 0.0, C.data(), static_cast<int>(B.cols()));
+}
+
+void blas_product(const MatXd& A, const MatXd& B, MatXd& C) {
+  if (!prepare_product(A, B, C)) return;
+  cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, static_cast<int>(A.rows()),
+              static_cast<int>(B.cols()), static_cast<int>(A.cols()), 1.0, A.data(),
+              static_cast<int>(A.rows()), B.data(), static_cast<int>(B.rows()), 0.0, C.data(),
+              static_cast<int>(C.rows()));
 }
 
 std::string blas_numerics() {

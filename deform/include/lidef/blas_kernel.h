@@ -38,6 +38,9 @@ void reexec_with_environment(char** argv, const std::vector<std::pair<std::strin
 // derivatives with the subspace Ξ, about twice Eigen's product with OpenBLAS's AVX-512 kernels
 // (docs/benchmarks.md). Its rounding depends on OpenBLAS's kernels and thread count: blas_numerics().
 void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C);
+// C = A B, all column-major (C resized): the studio's per-frame products of the mesh matrices (#V and 3#V by
+// s) with ỹ (s by 3), 3.8 ms against Eigen's 15.3 for the bar's 94 MB (docs/benchmarks.md, bench_studio).
+void blas_product(const MatXd& A, const MatXd& B, MatXd& C);
 // "<core>/<threads>" of OpenBLAS in this process, for the keys of cached results of blas_product.
 std::string blas_numerics();
 
