@@ -273,6 +273,9 @@ TEST_F(Cage, ReadsEveryFormatToTheSameTriangles) {
   }
   write_text(tmp / "t.ply", ply_ascii(p));
   write_text(tmp / "tb.ply", ply_binary(p));
+  std::string crlf;  // the ASCII PLY with Windows line ends
+  for (const char c : ply_ascii(p)) crlf += c == '\n' ? std::string("\r\n") : std::string(1, c);
+  write_text(tmp / "tcrlf.ply", crlf);
   write_text(tmp / "t.stl", stl_ascii(p));
   write_text(tmp / "tb.stl", stl_binary(p));
   // Binary OFF is refused (CGAL 5.5 dropped 2 of a tetrahedron's 4 faces of a file written per the format).
@@ -287,7 +290,7 @@ TEST_F(Cage, ReadsEveryFormatToTheSameTriangles) {
   EXPECT_EQ(info.fan_triangles, 96);
   EXPECT_EQ(obj.F.row(0), Eigen::RowVector3i(0, 8, 9));
   EXPECT_EQ(obj.F.row(1), Eigen::RowVector3i(0, 9, 1));
-  for (const char* name : {"t.OFF", "t.ply", "tb.ply"}) {
+  for (const char* name : {"t.OFF", "t.ply", "tb.ply", "tcrlf.ply"}) {
     const TriMesh m = read_any_mesh(tmp / name);
     EXPECT_EQ(m.F, obj.F) << name;
     EXPECT_LT((m.V - obj.V).cwiseAbs().maxCoeff(), 1e-6) << name;  // tb.ply holds floats

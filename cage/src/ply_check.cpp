@@ -78,6 +78,8 @@ PlyHeader read_header(const std::string& path, std::istream& in, std::uintmax_t 
   PlyHeader h;
   std::string line;
   for (long ln = 1; std::getline(in, line); ++ln) {
+    // A file saved with CRLF line ends: CGAL's word reads take the '\r' as white space, and so does this.
+    if (!line.empty() && line.back() == '\r') line.pop_back();
     require_printable(path, line, ln);
     std::istringstream words(line);
     std::string keyword;
