@@ -308,9 +308,13 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
   const int n = 3 * s, k = 9 * m;
   std::vector<float> M(static_cast<size_t>(k) * n), C(static_cast<size_t>(n) * n);
   for (float& x : M) x = U(rng);
+  // SYRK has no split over OpenMP's threads: OpenBLAS's own threads run it, then the library's setting (one
+  // BLAS thread, blas_kernel.h) is restored.
+  openblas_set_num_threads(omp_get_max_threads());
   row.syrk = time_reps(reps, [&] {
     cblas_ssyrk(CblasColMajor, CblasUpper, CblasTrans, n, k, 1.0f, M.data(), k, 0.0f, C.data(), n);
   });
+  openblas_set_num_threads(1);
   row.syrk_flops = double(n) * (n + 1) * k;  // one triangle: n(n+1)/2 dot products of length k, 2 flops each
   // Kronecker block: s x s = (s x 3|H|)(3|H| x s); A column-major s x 3|H| (GHᵀ), B = Aᵀ-shaped 3|H| x s.
   const int kb = 3 * m;
@@ -319,14 +323,12 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
   for (float& x : A) x = U(rng);
   for (float& x : B) x = U(rng);
   row.block = time_reps(reps, [&] {
-    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, s, s, kb, 1.0f, A.data(), s, B.data(), kb, 0.0f,
-                Cb.data(), s);
+    lidef::gemm_parallel(false, false, s, s, kb, A.data(), s, B.data(), kb, Cb.data(), s);
   });
   row.block_flops = 2.0 * s * s * kb;
   // The six blocks as one product (the implementation's call shape): s x 6s = (s x 3|H|)(3|H| x 6s).
   row.fused = time_reps(reps, [&] {
-    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, s, 6 * s, kb, 1.0f, A.data(), s, B.data(), kb,
-                0.0f, Cb.data(), s);
+    lidef::gemm_parallel(false, false, s, 6 * s, kb, A.data(), s, B.data(), kb, Cb.data(), s);
   });
   row.fused_flops = 2.0 * s * 6.0 * s * kb;
   row.hess_flops = row.fused_flops;  // the products only; the 9x9 projections and W are extra
@@ -428,8 +430,7 @@ int main(int argc, char** argv) {
     opt.reps = 5;
   }
   if (opt.threads > 0) {
-    omp_set_num_threads(opt.threads);
-    openblas_set_num_threads(opt.threads);
+    omp_set_num_threads(opt.threads);  // the products split over OpenMP's threads (blas_kernel.h)
   }
   const auto t_program = Clock::now();
 
@@ -498,6 +499,7 @@ int main(int argc, char** argv) {
             << (opt.threads > 0 ? " (--threads " + std::to_string(opt.threads) + ")"
                                 : std::string(" (all cores)"))
             << "\n";
+  lidef::use_blas_in_calling_thread();
   const int par = openblas_get_parallel();
   std::cout << "- OpenBLAS: " << openblas_get_config() << " (core " << openblas_get_corename() << "), "
             << openblas_get_num_threads() << " threads, "
@@ -505,7 +507,7 @@ int main(int argc, char** argv) {
                 : par == 1 ? "pthreads"
                 : par == 2 ? "OpenMP"
                            : "unknown")
-            << " build" << (opt.threads > 0 ? " (openblas_set_num_threads(--threads))" : "") << "\n";
+            << " build; the library calls it in one thread per OpenMP thread (blas_kernel.h)\n";
   std::cout << "- compiler: GCC-compatible " << __VERSION__ << "; projected_newton.cpp compiled with "
             << compile_flags("/deform/src/projected_newton.cpp") << "\n";
   {

@@ -2,6 +2,8 @@
 // that OpenBLAS does not run its SSE3 fallback on a CPU it does not know.
 #include <gtest/gtest.h>
 
+#include <omp.h>
+
 #include <random>
 
 #include "lidef/blas_kernel.h"
@@ -61,6 +63,44 @@ TEST(BlasKernel, ProductOfRowMajorAndColumnMajorMatchesEigen) {
   ASSERT_EQ(Cc.cols(), 3);
   EXPECT_LT((Cc - refc).cwiseAbs().maxCoeff(), 1e-12 * (Ac.cwiseAbs() * B.leftCols(3).cwiseAbs()).maxCoeff());
   EXPECT_THROW(lidef::blas_product(Ac, lidef::MatXd(52, 3), Cc), lidef::Error);
+}
+
+// gemm_parallel splits C's columns (or rows, for few columns) over OpenMP's threads, OpenBLAS running in each
+// calling thread: every transpose combination, both precisions and both split directions against Eigen, and
+// the same result with 1 and 2 threads (each element is still one call's sum over the whole k).
+TEST(BlasKernel, ParallelGemmMatchesEigenInEverySplit) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1, 1);
+  auto random = [&](int r, int c) {
+    lidef::MatXd M(r, c);
+    for (Eigen::Index i = 0; i < M.size(); ++i) M.data()[i] = U(rng);
+    return M;
+  };
+  const int k = 77;
+  for (const auto& [m, n] : {std::pair{301, 95}, std::pair{1200, 3}, std::pair{5, 5}}) {
+    for (const bool ta : {false, true})
+      for (const bool tb : {false, true}) {
+        const lidef::MatXd A = ta ? random(k, m) : random(m, k), B = tb ? random(n, k) : random(k, n);
+        const lidef::MatXd ref = (ta ? lidef::MatXd(A.transpose()) : A) * (tb ? lidef::MatXd(B.transpose()) : B);
+        const double scale = static_cast<double>(k);  // |entries| ≤ 1
+        lidef::MatXd C1(m, n), C2(m, n);
+        const int saved = omp_get_max_threads();
+        omp_set_num_threads(1);
+        lidef::gemm_parallel(ta, tb, m, n, k, A.data(), static_cast<int>(A.rows()), B.data(),
+                             static_cast<int>(B.rows()), C1.data(), m);
+        omp_set_num_threads(2);
+        lidef::gemm_parallel(ta, tb, m, n, k, A.data(), static_cast<int>(A.rows()), B.data(),
+                             static_cast<int>(B.rows()), C2.data(), m);
+        omp_set_num_threads(saved);
+        EXPECT_LT((C1 - ref).cwiseAbs().maxCoeff(), 1e-13 * scale) << m << "x" << n << " " << ta << tb;
+        EXPECT_LT((C2 - C1).cwiseAbs().maxCoeff(), 1e-13 * scale) << m << "x" << n << " " << ta << tb;
+        const Eigen::MatrixXf Af = A.cast<float>(), Bf = B.cast<float>();
+        Eigen::MatrixXf Cf(m, n);
+        lidef::gemm_parallel(ta, tb, m, n, k, Af.data(), static_cast<int>(Af.rows()), Bf.data(),
+                             static_cast<int>(Bf.rows()), Cf.data(), m);
+        EXPECT_LT((Cf.cast<double>() - ref).cwiseAbs().maxCoeff(), 1e-5 * scale) << m << "x" << n;
+      }
+  }
 }
 
 }  // namespace

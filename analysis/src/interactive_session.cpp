@@ -491,6 +491,7 @@ void InteractiveSession::Engine::apply_load(const Command& c) {
 
 void InteractiveSession::Engine::apply_handles(const Command& c) {
   if (solver && c.sources.rows() > 0) solver->set_handles(c.sources, c.targets, "handles");
+  if (solver) solver->set_dragging(false);
   sources = c.sources;
   targets = c.targets;
   scenario.sources = c.sources;
@@ -504,6 +505,7 @@ void InteractiveSession::Engine::apply_handles(const Command& c) {
 void InteractiveSession::Engine::apply_targets(const Command& c, bool superseded) {
   if (superseded || !solver || c.targets.rows() != sources.rows()) return;
   solver->set_targets(c.targets, "targets");
+  solver->set_dragging(true);  // until an explicit solve, new handles or a reset (drag_hessian_reuse)
   targets = c.targets;
   scenario.targets = c.targets;
   scenario.waypoints.clear();
@@ -528,6 +530,7 @@ void InteractiveSession::Engine::apply_params(const Command& c) {
 }
 
 void InteractiveSession::Engine::apply_solve() {
+  if (solver) solver->set_dragging(false);  // an explicit solve converges with a fresh Hessian every step
   want_iterate = solver && sources.rows() > 0;
 }
 
@@ -538,6 +541,7 @@ void InteractiveSession::Engine::apply_stop() {
 
 void InteractiveSession::Engine::apply_reset() {
   if (solver) {
+    solver->set_dragging(false);
     solver->reset();
     ++map_version;
     publish_state(SessionState::kResting, "reset to the identity");

@@ -3,12 +3,17 @@
 #include <cblas.h>
 #include <unistd.h>
 
+#include <omp.h>
+
+#include <algorithm>
 #include <cstdlib>
+#include <mutex>
+#include <type_traits>
 
 #include "lidef/errors.h"
 
 extern "C" char* openblas_get_corename(void);
-extern "C" int openblas_get_num_threads(void);
+extern "C" void openblas_set_num_threads(int);
 
 namespace lidef {
 
@@ -72,25 +77,74 @@ bool prepare_product(const MA& A, const MatXd& B, MC& C) {
 }
 }  // namespace
 
+void use_blas_in_calling_thread() {
+  static std::once_flag once;
+  std::call_once(once, [] { openblas_set_num_threads(1); });
+}
+
+namespace {
+template <class T>
+void gemm_one(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const T* B, int ldb, T* C, int ldc) {
+  const auto opa = ta ? CblasTrans : CblasNoTrans, opb = tb ? CblasTrans : CblasNoTrans;
+  if constexpr (std::is_same_v<T, float>)
+    cblas_sgemm(CblasColMajor, opa, opb, m, n, k, 1.0f, A, lda, B, ldb, 0.0f, C, ldc);
+  else
+    cblas_dgemm(CblasColMajor, opa, opb, m, n, k, 1.0, A, lda, B, ldb, 0.0, C, ldc);
+}
+
+// Slices of C: columns j0..j1 take B's columns (rows of Bᵀ) j0..j1; rows i0..i1 take A's rows (columns of Aᵀ).
+template <class T>
+void gemm_split(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const T* B, int ldb, T* C, int ldc) {
+  use_blas_in_calling_thread();
+  if (m <= 0 || n <= 0) return;
+  const int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
+  const bool by_columns = n >= 2 * threads || n >= m;
+  const int len = by_columns ? n : m;
+  const int parts = std::max(1, std::min(threads, len / 16));
+#pragma omp parallel for schedule(static) num_threads(parts) if (parts > 1)
+  for (int p = 0; p < parts; ++p) {
+    const int b = static_cast<int>(static_cast<long>(len) * p / parts);
+    const int e = static_cast<int>(static_cast<long>(len) * (p + 1) / parts);
+    if (e <= b) continue;
+    if (by_columns) {
+      const T* Bp = tb ? B + b : B + static_cast<long>(b) * ldb;
+      gemm_one(ta, tb, m, e - b, k, A, lda, Bp, ldb, C + static_cast<long>(b) * ldc, ldc);
+    } else {
+      const T* Ap = ta ? A + static_cast<long>(b) * lda : A + b;
+      gemm_one(ta, tb, e - b, n, k, Ap, lda, B, ldb, C + b, ldc);
+    }
+  }
+}
+}  // namespace
+
+void gemm_parallel(bool trans_a, bool trans_b, int m, int n, int k, const float* A, int lda, const float* B,
+                   int ldb, float* C, int ldc) {
+  gemm_split(trans_a, trans_b, m, n, k, A, lda, B, ldb, C, ldc);
+}
+void gemm_parallel(bool trans_a, bool trans_b, int m, int n, int k, const double* A, int lda, const double* B,
+                   int ldb, double* C, int ldc) {
+  gemm_split(trans_a, trans_b, m, n, k, A, lda, B, ldb, C, ldc);
+}
+
 void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C) {
   if (!prepare_product(A, B, C)) return;
   // Row-major C = A B is column-major Cᵀ = Bᵀ Aᵀ, and a column-major B is a row-major Bᵀ: so Cᵀ (n by m) is
   // the column-major product of B transposed (lda = k) and A read as the column-major Aᵀ (k by m).
-  cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, static_cast<int>(B.cols()), static_cast<int>(A.rows()),
-              static_cast<int>(A.cols()), 1.0, B.data(), static_cast<int>(B.rows()), A.data(),
-              static_cast<int>(A.cols()), 0.0, C.data(), static_cast<int>(B.cols()));
+  gemm_parallel(true, false, static_cast<int>(B.cols()), static_cast<int>(A.rows()), static_cast<int>(A.cols()),
+                B.data(), static_cast<int>(B.rows()), A.data(), static_cast<int>(A.cols()), C.data(),
+                static_cast<int>(B.cols()));
 }
 
 void blas_product(const MatXd& A, const MatXd& B, MatXd& C) {
   if (!prepare_product(A, B, C)) return;
-  cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, static_cast<int>(A.rows()),
-              static_cast<int>(B.cols()), static_cast<int>(A.cols()), 1.0, A.data(),
-              static_cast<int>(A.rows()), B.data(), static_cast<int>(B.rows()), 0.0, C.data(),
-              static_cast<int>(C.rows()));
+  gemm_parallel(false, false, static_cast<int>(A.rows()), static_cast<int>(B.cols()), static_cast<int>(A.cols()),
+                A.data(), static_cast<int>(A.rows()), B.data(), static_cast<int>(B.rows()), C.data(),
+                static_cast<int>(C.rows()));
 }
 
 std::string blas_numerics() {
-  return blas_kernel_info().core + "/" + std::to_string(openblas_get_num_threads());
+  use_blas_in_calling_thread();
+  return blas_kernel_info().core + "/" + std::to_string(omp_get_max_threads());
 }
 
 }  // namespace lidef

@@ -54,6 +54,9 @@ std::vector<ParamInfo> make_table() {
       {"max_halvings", "newton", &D::max_halvings, 0, 200,
        "line-search halvings before giving up with \"no certified step\""},
       {"diagonal_shift", "newton", &D::diagonal_shift, 0, 1e6, "added to the reduced Hessian's diagonal"},
+      {"drag_hessian_reuse", "newton", &D::drag_hessian_reuse, 0, 1000,
+       "while handles are dragged (studio): Newton steps in a row that may reuse the previous step's Hessian "
+       "factor (0 = never)"},
       {"hessian_precision", "newton", &D::hessian_precision, 0, 0,
        "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,

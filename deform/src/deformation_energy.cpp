@@ -1,12 +1,12 @@
 #include "lidef/deformation_energy.h"
 
-#include <cblas.h>
 #include <omp.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
+#include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
 #include "lidef/symmetric_dirichlet.h"
 
@@ -236,8 +236,7 @@ MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samp
           W.block(3 * k + b, q * s, 1, s) =
               Ht(b, 0) * Gd.row(3 * k) + Ht(b, 1) * Gd.row(3 * k + 1) + Ht(b, 2) * Gd.row(3 * k + 2);
       }
-    cblas_dgemm(CblasColMajor, CblasNoTrans, CblasTrans, s, 6 * s, 3 * m, 1.0, Gd.data(), s, W.data(), 6 * s,
-                0.0, Ball.data(), s);
+    gemm_parallel(false, true, s, 6 * s, 3 * m, Gd.data(), s, W.data(), 6 * s, Ball.data(), s);
   } else {
     MatXfR W(3 * static_cast<Eigen::Index>(m), 6 * s);  // row-major: the rows written below are contiguous
 #pragma omp parallel for schedule(static)
@@ -253,8 +252,7 @@ MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samp
       }
     Eigen::MatrixXf Bf(s, 6 * s);
     // Row-major GH (3m x s) is column-major GHᵀ (s x 3m); row-major W is column-major Wᵀ.
-    cblas_sgemm(CblasColMajor, CblasNoTrans, CblasTrans, s, 6 * s, 3 * m, 1.0f, GH_.data(), s, W.data(),
-                6 * s, 0.0f, Bf.data(), s);
+    gemm_parallel(false, true, s, 6 * s, 3 * m, GH_.data(), s, W.data(), 6 * s, Bf.data(), s);
     Ball = Bf.cast<double>();
   }
   return Ball;

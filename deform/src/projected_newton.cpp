@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "lidef/blas_kernel.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
@@ -25,13 +26,21 @@ namespace lidef {
 namespace {
 
 // Solves H x = b for symmetric positive definite H (overwritten by its factor). false if H is not SPD.
-bool cholesky_solve(MatXd& H, VecXd& b) {
-  const int n = static_cast<int>(H.rows()), one = 1;
+// b <- L⁻ᵀ L⁻¹ b for dpotrf's lower factor L (n by n).
+bool cholesky_solve_factored(const MatXd& L, VecXd& b) {
+  const int n = static_cast<int>(L.rows()), one = 1;
   int info = 0;
+  dpotrs_("L", &n, &one, L.data(), &n, b.data(), &n, &info);
+  return info == 0;
+}
+
+bool cholesky_solve(MatXd& H, VecXd& b) {
+  const int n = static_cast<int>(H.rows());
+  int info = 0;
+  use_blas_in_calling_thread();  // 5-8 ms for the 900x900 factor; a threaded one stalls beside the studio
   dpotrf_("L", &n, H.data(), &n, &info);
   if (info != 0) return false;
-  dpotrs_("L", &n, &one, H.data(), &n, b.data(), &n, &info);
-  return info == 0;
+  return cholesky_solve_factored(H, b);
 }
 
 using Clock = std::chrono::steady_clock;
@@ -351,6 +360,9 @@ void DeformationSolver::set_params(const DeformParams& p) {
   q.safety = params_.safety;
   q.hessian_fraction = params_.hessian_fraction;
   q.domain = params_.domain;
+  // A kept Hessian factor stays valid unless what it was assembled with changed (weights are compared at use).
+  if (q.diagonal_shift != params_.diagonal_shift || q.hessian_precision != params_.hessian_precision)
+    factor_ = {};
   params_ = q;
   if (weights_changed) {
     weights_ = {params_.lambda_p2p, params_.lambda_smooth};
@@ -368,6 +380,7 @@ void DeformationSolver::reset() {
   y_ = subspace_.basis.transpose() *
        yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
   kernels_->set_current(y_);
+  factor_ = {};
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
   history_.clear();
@@ -413,6 +426,7 @@ bool DeformationSolver::set_reduced_map(const MatS3& y, std::string* reason) {
   }
   y_ = y;
   kernels_->set_current(y_);
+  factor_ = {};  // the map jumped
   cert_ = frame_.from_normalized(c);
   return true;
 }
@@ -447,6 +461,8 @@ void DeformationSolver::set_handles(const MatX3d& sources, const MatX3d& targets
   }
   const MatXd D = nbasis_.value_matrix(frame_.points_to_normalized(sources)) * subspace_.basis;
   energy_->set_handles(D, frame_.points_to_normalized(targets));
+  factor_ = {};  // the handle term's Hessian depends on the sources
+  ++targets_version_;
 }
 
 // Targets that no map can meet sensibly are refused with a reason instead of being run: a target so far away
@@ -480,6 +496,7 @@ void DeformationSolver::set_targets(const MatX3d& targets, const std::string& wh
   if (targets.rows() != energy_->num_handles()) throw InputError(where, "one target per handle is needed");
   check_targets(targets, where);
   energy_->set_targets(frame_.points_to_normalized(targets));
+  ++targets_version_;  // (the Hessian does not depend on the targets: a kept factor stays valid)
 }
 
 MatX3d DeformationSolver::coefficients() const {
@@ -515,6 +532,9 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   const double p2p_far = params_.e0 * bbox_diag2_;
   const EnergyWeights weights_at_start = weights_;  // restored if the iteration is interrupted
   const int max_attempts = params_.dynamic_weighting ? 1 + params_.direction_retries : 1;
+  // Dragging: the first step after new targets may reuse the previous step's factor (set_dragging).
+  bool may_reuse = dragging_ && params_.drag_hessian_reuse > 0 && targets_version_ != stepped_targets_version_;
+  stepped_targets_version_ = targets_version_;
   for (int attempt = 0; attempt < max_attempts && !interrupted; ++attempt) {
     rec.lambda_p2p = weights_.p2p;
     rec.lambda_smooth = weights_.smooth;
@@ -527,16 +547,25 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     rec.gradient_norm = g.norm();
     rec.ms_gradient += ms_since(t0);
 
-    t0 = Clock::now();
-    MatXd H = energy_->hessian_from(
-        kernels_->distortion_pair_blocks(params_.hessian_precision == HessianPrecision::kDouble), weights_);
-    H.diagonal().array() += params_.diagonal_shift;
-    rec.ms_hessian += ms_since(t0);
-
-    t0 = Clock::now();
     const VecXd gvec = Eigen::Map<const VecXd>(g.data(), 3 * s);
     VecXd dvec = -gvec;
-    {
+    const bool reuse = may_reuse && factor_.L.size() > 0 && factor_.reuses < params_.drag_hessian_reuse &&
+                       factor_.weights.p2p == weights_.p2p && factor_.weights.smooth == weights_.smooth;
+    rec.hessian_reused = reuse;
+    if (reuse) {
+      t0 = Clock::now();
+      if (!cholesky_solve_factored(factor_.L, dvec))
+        throw NumericalError("projected Newton: solving with the kept Hessian factor failed");
+      ++factor_.reuses;
+      rec.ms_solve += ms_since(t0);
+    } else {
+      t0 = Clock::now();
+      MatXd H = energy_->hessian_from(
+          kernels_->distortion_pair_blocks(params_.hessian_precision == HessianPrecision::kDouble), weights_);
+      H.diagonal().array() += params_.diagonal_shift;
+      rec.ms_hessian += ms_since(t0);
+
+      t0 = Clock::now();
       MatXd F = H;
       bool ok = cholesky_solve(F, dvec);
       for (double extra = 1e-6; !ok && extra < 1e6; extra *= 100) {
@@ -548,10 +577,14 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
         ok = cholesky_solve(F, dvec);
       }
       if (!ok) throw NumericalError("projected Newton: the reduced Hessian is not positive definite");
+      if (dragging_ && params_.drag_hessian_reuse > 0)
+        factor_ = {std::move(F), weights_, 0};
+      else
+        factor_ = {};
+      rec.ms_solve += ms_since(t0);
     }
     const MatS3 delta = Eigen::Map<const MatS3>(dvec.data(), s, 3);
     rec.newton_decrement = -gvec.dot(dvec);
-    rec.ms_solve += ms_since(t0);
 
     t0 = Clock::now();
     kernels_->set_direction(delta);
@@ -600,6 +633,13 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     }
     rec.ms_line_search += ms_since(t0);
     if (!rec.accepted) rec.terms = e0;
+    if (reuse && !rec.accepted && !retry && !interrupted) {
+      // The kept factor's direction found no certified decrease: this iteration assembles its own.
+      may_reuse = false;
+      factor_ = {};
+      --attempt;
+      continue;
+    }
     if (!retry) break;
     weights_.p2p = std::max(params_.min_p2p_factor * params_.lambda_p2p, weights_.p2p * params_.kappa1);
     weights_.smooth =

@@ -33,6 +33,21 @@ std::vector<std::pair<std::string, std::string>> blas_environment();
 // Call first thing in main(), before any thread starts.
 void reexec_with_environment(char** argv, const std::vector<std::pair<std::string, std::string>>& env);
 
+// OpenBLAS runs in the calling thread (openblas_set_num_threads(1), set once by the first call of any function
+// below); the products split their output over OpenMP's threads instead. Why: Debian's OpenBLAS is the pthread
+// build, whose workers spin ~0.1 s after each call; on two cores they then take a core from the OpenMP stages
+// that follow and from the studio's renderer (bench_studio at the defaults: a 900x900 Cholesky 8 ms alone,
+// 63 ms beside the window; 3.1 -> 4.8 view updates/s with one BLAS thread; docs/benchmarks.md). One pool, one
+// wait policy (OMP_WAIT_POLICY, gui/src/omp_wait.h).
+void use_blas_in_calling_thread();
+// Column-major C (m by n) = op(A) op(B), op = transpose when the flag is set, as cblas_?gemm with alpha 1 and
+// beta 0, the columns of C (or its rows when n < 2 × threads) split over OpenMP's threads. Each element of C
+// sums over the whole k in one call, as a single call would.
+void gemm_parallel(bool trans_a, bool trans_b, int m, int n, int k, const float* A, int lda, const float* B,
+                   int ldb, float* C, int ldc);
+void gemm_parallel(bool trans_a, bool trans_b, int m, int n, int k, const double* A, int lda, const double* B,
+                   int ldb, double* C, int ldc);
+
 // C = A B for a row-major A (m by k) and a column-major B (k by n), into a row-major C (m by n; resized, its
 // memory reused when the shape is the same), with OpenBLAS's dgemm: the precomputation's products of basis
 // derivatives with the subspace Ξ, about twice Eigen's product with OpenBLAS's AVX-512 kernels
@@ -41,7 +56,8 @@ void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C);
 // C = A B, all column-major (C resized): the studio's per-frame products of the mesh matrices (#V and 3#V by
 // s) with ỹ (s by 3), 3.8 ms against Eigen's 15.3 for the bar's 94 MB (docs/benchmarks.md, bench_studio).
 void blas_product(const MatXd& A, const MatXd& B, MatXd& C);
-// "<core>/<threads>" of OpenBLAS in this process, for the keys of cached results of blas_product.
+// "<core>/<threads>" of OpenBLAS in this process (threads: OpenMP's, over which the products split), for the
+// keys of cached results of blas_product.
 std::string blas_numerics();
 
 }  // namespace lidef

@@ -94,6 +94,7 @@ struct IterationRecord {
   long refined = 0;             // voxels the certificate subdivided
   double max_handle_error = 0;  // max ‖f(p_h) − q_h‖ at the current map
   std::string weight_action;    // what dynamic weighting did after this step ("", "smooth*", "p2p*", "reset")
+  bool hessian_reused = false;  // the direction came from an earlier step's factor (set_dragging)
   double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, ms_certificate = 0, ms_total = 0;
 };
 
@@ -184,6 +185,12 @@ class DeformationSolver {
                     const std::atomic<bool>* stop = nullptr);
   // One Newton iteration (the studio's unit of work).
   IterationRecord step(const std::atomic<bool>* stop = nullptr);
+  // While on, the first step after new targets may take its direction from the previous step's Hessian factor
+  // (at most params().drag_hessian_reuse steps in a row; same weights; a direction that finds no certified
+  // decrease is replaced by a fresh one in the same iteration). What is accepted is certified as always; only
+  // the direction changes. Off by default; the studio turns it on while the handles are dragged.
+  void set_dragging(bool on) { dragging_ = on; }
+  bool dragging() const { return dragging_; }
 
   // The current (last certified) map. Reduced coefficients ỹ are in the normalized frame: Ξ ỹ are the
   // normalized cage's coefficients (frame().coefficients_from_normalized maps them to coefficients()).
@@ -252,6 +259,14 @@ class DeformationSolver {
   double preprocess_seconds_ = 0;
   std::string cache_outcome_;
   std::shared_future<std::string> cache_store_;  // the background store, if any
+  // The last assembled Newton system's Cholesky factor, kept only while dragging (set_dragging).
+  struct HessianFactor {
+    MatXd L;                // dpotrf's lower factor of H + shift (3s by 3s); empty: none
+    EnergyWeights weights;  // the weights it was assembled with
+    int reuses = 0;         // steps that took it after the one that assembled it
+  } factor_;
+  bool dragging_ = false;
+  long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
   struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
 };
 
