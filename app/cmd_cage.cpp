@@ -94,7 +94,7 @@ void add_cage_command(CLI::App& app, Action& action) {
       "the wrap by edge collapses to about --faces triangles, refusing every collapse that would bring the\n"
       "cage closer than --clearance to the mesh, and keeps the cage only when lidef's model checks pass\n"
       "(closed, manifold, outward, no self-intersection, every mesh vertex strictly inside). A failed check\n"
-      "retries with 1.5 x the offset and 1.5 x the faces (at most 2000).\n"
+      "retries with 1.5 x the offset and 1.5 x the faces (at most 4000).\n"
       "Writes MODEL_DIR/cage.obj, mesh.obj (the input's vertices unchanged) and model.json, all or nothing\n"
       "(also on Ctrl-C). Deterministic: the same mesh and options give the same cage.obj.\n"
       "A mesh file also works wherever a model folder is expected (lidef deform's scenario \"model\",\n"
@@ -104,7 +104,7 @@ void add_cage_command(CLI::App& app, Action& action) {
   sub->add_option("--out", opt->out, "Model folder to write (created if missing)")
       ->required()
       ->type_name("MODEL_DIR");
-  sub->add_option("--faces", opt->cage.faces, "Target number of cage triangles (4..2000)")
+  sub->add_option("--faces", opt->cage.faces, "Target number of cage triangles (4..4000)")
       ->capture_default_str();
   sub->add_option("--clearance", opt->cage.clearance,
                   "Minimum distance cage -> mesh during simplification, x bounding-box diagonal")

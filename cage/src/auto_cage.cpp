@@ -34,7 +34,7 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-constexpr int kMaxFaces = 2000;
+constexpr int kMaxFaces = 4000;
 constexpr const char* kFormats[] = {"obj", "off", "ply", "stl"};
 
 std::string lower_extension(const std::string& path) {

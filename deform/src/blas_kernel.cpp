@@ -144,7 +144,9 @@ void blas_product(const MatXd& A, const MatXd& B, MatXd& C) {
 
 std::string blas_numerics() {
   use_blas_in_calling_thread();
-  return blas_kernel_info().core + "/" + std::to_string(omp_get_max_threads());
+  // "split": the products are split over OpenMP's threads, one BLAS thread each (entries cached by the code
+  // before, with OpenBLAS's own threads, carry "<core>/<threads>" and are not taken for these).
+  return blas_kernel_info().core + "/" + std::to_string(omp_get_max_threads()) + " split";
 }
 
 }  // namespace lidef
