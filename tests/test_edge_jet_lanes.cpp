@@ -208,7 +208,8 @@ TEST(EdgeJet, BatchedRefinementAgreesWithPerEdgeAndPerFace) {
   const OctreeCertifier cert(cage, sample_voxels(cage, sp));
   const MatX3d y = perturbed_map(cage, 0.012, 21);
   for (LipschitzBound b :
-       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
+       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined,
+          LipschitzBound::kSpectral}) {
     CertifyParams p;
     p.bound = b;
     p.max_depth = 3;
@@ -254,7 +255,7 @@ TEST(EdgeJet, BatchedRefinedCertificatesHoldUnderDenseSampling) {
   const OctreeCertifier cert(cage, sample_voxels(cage, sp));
   int refined_certified = 0;
   for (double amp : {0.008, 0.012})
-    for (LipschitzBound b : {LipschitzBound::kThirdOrder, LipschitzBound::kCombined}) {
+    for (LipschitzBound b : {LipschitzBound::kThirdOrder, LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
       const MatX3d y = perturbed_map(cage, amp, 21);
       CertifyParams p;
       p.bound = b;

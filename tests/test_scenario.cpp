@@ -168,7 +168,7 @@ TEST(DeformParams, SetParamRefusesWrongTypes) {
   m = input_error([&] { set_param(p, "bound", json(3), "f"); });
   EXPECT_NE(m.find("expected a string"), std::string::npos) << m;
   m = input_error([&] { set_param(p, "bound", json("second"), "f"); });
-  EXPECT_NE(m.find("\"first\", \"third\" or \"combined\""), std::string::npos) << m;
+  EXPECT_NE(m.find("\"first\", \"third\", \"combined\" or \"spectral\""), std::string::npos) << m;
   m = input_error([&] { set_param(p, "lambda_smooth", json(nullptr), "f"); });
   EXPECT_NE(m.find("null"), std::string::npos) << m;
   m = input_error([&] { set_param(p, "lambda_p2p", json(std::numeric_limits<double>::infinity()), "f"); });

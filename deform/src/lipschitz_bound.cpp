@@ -128,6 +128,65 @@ double hessian_operator_norm(const std::array<Mat3, 3>& H) {
   return std::sqrt(std::min(tr, std::max(lmax, 0.0) + 1e-12 * tr));
 }
 
+namespace {
+// λmax of the symmetric 2x2 [[a, b], [b, c]] (closed form).
+double lambda_max_2x2(double a, double b, double c) {
+  return 0.5 * (a + c) + std::hypot(0.5 * (a - c), b);
+}
+}  // namespace
+
+// Step 3c of docs/certificate.md, in its notation: x the unit eigenvector of M = JᵀJ for its smallest
+// eigenvalue, Z an orthonormal basis of x⊥; every unit y is a x + Z b with a² + |b|² = 1 and
+//   yᵀ(M + F)y ≥ a²(μ1 + f11) − 2|a||b|(ρ + p) + |b|²(μ2 + φ)
+// with μ1 = xᵀMx, ρ = |ZᵀMx|, μ2 = λmin(ZᵀMZ), f11 = xᵀF x = 2 wᵀv, p = |ZᵀF x| = |ZᵀK v|, φ ≥ −‖F‖₂ ≥
+// −2‖J‖₂ r ‖H‖_op; the right side is ≥ (μ1 + f11) + λmin([[0, −q], [−q, D]]), q = ρ + p, D = μ2 + φ − μ1 − f11,
+// increasing in f11 and φ and decreasing in p, so their worst values over |v| ≤ r give the bound.
+double taylor_sigma3_lower_bound(const Mat3& J, const std::array<Mat3, 3>& H, double r) {
+  constexpr double kNone = -std::numeric_limits<double>::infinity();
+  if (!(r >= 0) || !J.allFinite() || !H[0].allFinite() || !H[1].allFinite() || !H[2].allFinite()) return kNone;
+  if (!(J.determinant() > 0)) return kNone;
+  const Mat3 M = J.transpose() * J;
+  const double nJ2 = M.trace();  // ‖J‖_F²
+  if (!(nJ2 > 0)) return kNone;
+  // Rounding allowance of the quadratic forms of M and F: ~10⁴ times their double-precision rounding (the
+  // eigensolver is backward stable, the products are short sums; docs/certificate.md Step 3c).
+  const double hF = std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
+  const double epsM = 1e-12 * nJ2, epsF = 1e-12 * std::sqrt(nJ2) * hF;
+  const Eigen::SelfAdjointEigenSolver<Mat3> es(M);
+  const Vec3 x = es.eigenvectors().col(0).normalized();
+  Vec3 z1 = es.eigenvectors().col(1);
+  z1 = (z1 - x * x.dot(z1)).normalized();
+  const Vec3 z2 = x.cross(z1).normalized();
+  const Vec3 Mx = M * x;
+  const double mu1 = x.dot(Mx) - epsM;
+  const double rho = std::hypot(z1.dot(Mx), z2.dot(Mx)) + epsM;
+  const double m11 = z1.dot(M * z1), m12 = z1.dot(M * z2), m22 = z2.dot(M * z2);
+  const double mu2 = 0.5 * (m11 + m22) - std::hypot(0.5 * (m11 - m22), m12) - epsM;
+  // Linear in v: f11(v) = 2 wᵀv with w = Σ_a (Jx)_a H[a] x; F(v)x = K v with K = Jᵀ K1 + K2,
+  // K1 = rows (H[a] x)ᵀ, K2 = Σ_a (Jx)_a H[a].
+  const Vec3 Jx = J * x;
+  Vec3 w = Vec3::Zero();
+  Mat3 K1, K2 = Mat3::Zero();
+  for (int a = 0; a < 3; ++a) {
+    const Vec3 Hx = H[a] * x;
+    w += Jx(a) * Hx;
+    K1.row(a) = Hx.transpose();
+    K2 += Jx(a) * H[a];
+  }
+  const Mat3 K = J.transpose() * K1 + K2;
+  const Vec3 k1 = K.transpose() * z1, k2 = K.transpose() * z2;  // rows of ZᵀK
+  const double zk2 = lambda_max_2x2(k1.squaredNorm(), k1.dot(k2), k2.squaredNorm());
+  const double zk = std::sqrt(std::max(zk2, 0.0) + 1e-12 * (k1.squaredNorm() + k2.squaredNorm())) + epsF;
+  const double j2 = std::sqrt(std::max(es.eigenvalues()(2), 0.0) + epsM);  // ≥ ‖J‖₂
+  const double f11 = -2 * r * (w.norm() + epsF);
+  const double phi = -2 * j2 * r * hessian_operator_norm(H) - 2 * r * epsF;
+  const double q = rho + r * zk;
+  const double D = mu2 + phi - mu1 - f11;
+  const double lam = mu1 + f11 + 0.5 * (D - std::hypot(D, 2 * q));
+  if (!(lam > 0) || !std::isfinite(lam)) return kNone;
+  return std::sqrt(lam) * (1 - 1e-14);
+}
+
 double alpha_beta_norm2(const Vec3& u, const Vec3& w, const Vec3& q) {
   const EdgeAlphaBeta ab = edge_alpha_beta(u, w, q);
   return ab.alpha.squaredNorm() + ab.beta.squaredNorm();
@@ -161,6 +220,8 @@ const char* to_string(LipschitzBound b) {
       return "third";
     case LipschitzBound::kCombined:
       return "combined";
+    case LipschitzBound::kSpectral:
+      return "spectral";
   }
   return "third";
 }
@@ -169,7 +230,8 @@ LipschitzBound lipschitz_bound_from_string(const std::string& s) {
   if (s == "first") return LipschitzBound::kFirstOrder;
   if (s == "third") return LipschitzBound::kThirdOrder;
   if (s == "combined") return LipschitzBound::kCombined;
-  throw InputError("", "unknown bound '" + s + "' (expected 'first', 'third' or 'combined')");
+  if (s == "spectral") return LipschitzBound::kSpectral;
+  throw InputError("", "unknown bound '" + s + "' (expected 'first', 'third', 'combined' or 'spectral')");
 }
 
 }  // namespace lidef

@@ -269,12 +269,14 @@ struct OctreeCertifier::Run {
   const double side;      // base voxel side (a voxel's own: side_of(i))
   const bool third;       // ‖H(c)‖ and Σ δ Θ needed (third and combined)
   const bool combined;    // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
+  const bool spectral;    // combined, and the Taylor σ3 lower bound as a third candidate (Step 3c)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
   // Base voxels.
   VecXd scaleJ, scaleH, hnorm, sigma3, T, delta;
   VecXd hop, T1;  // combined: operator-norm bound of H(c) and the first-order Σ δ Γ
+  VecXd lb2;      // spectral: taylor_sigma3_lower_bound at the base centers (−∞: none)
   std::vector<Mat3> Jc;
   std::vector<char> sign_unresolved;  // per base voxel: det J's sign at the center not resolved
   std::vector<double> device_Y;       // coefficients for the backend's base stage (empty: CPU)
@@ -298,7 +300,8 @@ struct OctreeCertifier::Run {
         E(o.cage_.num_edges()),
         side(o.sampling_.side),
         third(params.bound != LipschitzBound::kFirstOrder),
-        combined(params.bound == LipschitzBound::kCombined),
+        combined(params.bound == LipschitzBound::kCombined || params.bound == LipschitzBound::kSpectral),
+        spectral(params.bound == LipschitzBound::kSpectral),
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
         fm(o.basis_.face_matrices(y_)) {
     cert.bound = p.bound;
@@ -308,11 +311,19 @@ struct OctreeCertifier::Run {
 
   // Exact J, ‖H‖ and rounding scales at any point, from the full coefficients through the differential
   // representation (one pass over the faces per point; see HarmonicBasis::differential_jet).
-  void eval_point(const Vec3& c, Mat3& J, double& hn, double& sJ, double& sH, double* hn_op = nullptr) const {
+  void eval_point(const Vec3& c, Mat3& J, double& hn, double& sJ, double& sH, double* hn_op = nullptr,
+                  double rad = 0, double* lb = nullptr) const {
     const MapJet jet = oc.basis_.differential_jet(fm, c, third ? 2 : 1, &sJ, &sH);
     J = jet.J;
     hn = third ? jet.hessian_norm() : 0.0;
     if (hn_op) *hn_op = combined ? hessian_operator_norm(jet.H) : 0.0;
+    if (lb) *lb = spectral ? taylor_sigma3_lower_bound(jet.J, jet.H, rad) : -kInf;
+  }
+  // Spectral: the smaller of ‖H(c)‖_op and the Taylor σ3 bound's first-order loss (σ3(c) − ℓ)/r, so that
+  // lipschitz() gives min(first order, that + ½ r T3) (Step 3c).
+  static double taylor_part(double hn_op, double s3, double lb, double rad) {
+    if (!(rad > 0) || !(lb > -kInf)) return hn_op;
+    return std::min(hn_op, (s3 - lb) / rad);
   }
   // The L of condition (6), so that the loss over the leaf is rad·L (docs/certificate.md, Steps 1-3b):
   //   first: t1;  third: ‖H(c)‖_F + rad·t3;  combined: min(t1, ‖H(c)‖_op + ½ rad·t3) — the Taylor form
@@ -337,6 +348,7 @@ struct OctreeCertifier::Run {
     scaleH.resize(N);
     hnorm.resize(N);
     hop.setZero(N);
+    lb2.setConstant(N, -kInf);
     Jc.resize(N);
     if (use_stored) {
       std::vector<double> Ycols = coefficient_columns();
@@ -353,7 +365,8 @@ struct OctreeCertifier::Run {
     } else {
 #pragma omp parallel for schedule(dynamic, 64)
       for (long i = 0; i < N; ++i)
-        eval_point(oc.sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), &hop(i));
+        eval_point(oc.sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), &hop(i),
+                   oc.sampling_.radius_of(static_cast<int>(i)), &lb2(i));
     }
     cert.ms_jacobian = ms_since(t0);
   }
@@ -401,6 +414,7 @@ struct OctreeCertifier::Run {
         for (int a = 0; a < 3; ++a)
           H[a] << H6[a][0], H6[a][1], H6[a][2], H6[a][1], H6[a][3], H6[a][4], H6[a][2], H6[a][4], H6[a][5];
         hop(i) = hessian_operator_norm(H);
+        if (spectral) lb2(i) = taylor_sigma3_lower_bound(J, H, oc.sampling_.radius_of(static_cast<int>(i)));
       }
     }
   }
@@ -456,7 +470,7 @@ struct OctreeCertifier::Run {
     base.resize(N);
     for (long i = 0; i < N; ++i) {
       const double r = oc.sampling_.radius_of(static_cast<int>(i));
-      const double L = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
+      const double L = lipschitz(hnorm(i), taylor_part(hop(i), sigma3(i), lb2(i), r), Tf(i), T(i), r);
       const double lb = sigma3(i) - r * L;
       // Not clear of the cage: refused (the bound's argument needs the ball inside the cage's interior).
       const double margin =
@@ -623,7 +637,7 @@ struct OctreeCertifier::Run {
         }
         EdgeJet::Values ev[W];
         im.edge_jet->evaluate_lanes(*edge_data, c, rad, n, third, !third || combined, third, ev);
-        for (int k = 0; k < n; ++k) node_values(ev[k], vals[q0 + k]);
+        for (int k = 0; k < n; ++k) node_values(ev[k], rad[k], vals[q0 + k]);
       }
       return;
     }
@@ -633,10 +647,12 @@ struct OctreeCertifier::Run {
       const double rad = 0.5 * std::sqrt(3.0) * nd.side;
       Mat3 J;
       NodeValues& v = vals[q];
-      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H, &v.hnorm_op);
+      double lb = -kInf;
+      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H, &v.hnorm_op, rad, &lb);
       bool resolved = true;
       v.sigma3 = signed_singular_values(J, &resolved)(2);
       v.sign_unresolved = !resolved;
+      v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, lb, rad);
       double own = 0;
       for (long e = 0; e < E; ++e)
         if (delta(e) != 0)
@@ -656,10 +672,10 @@ struct OctreeCertifier::Run {
     const double rad = 0.5 * std::sqrt(3.0) * nd.side;
     EdgeJet::Values ev;
     im.edge_jet->evaluate(*edge_data, nd.c, rad, third, !third || combined, third, ev);
-    node_values(ev, v);
+    node_values(ev, rad, v);
   }
   // σ3 (signed SVD), ‖H‖ and the node's own bound from one node's per-edge values.
-  void node_values(const EdgeJet::Values& ev, NodeValues& v) const {
+  void node_values(const EdgeJet::Values& ev, double rad, NodeValues& v) const {
     v.scale_J = ev.scale_J;
     v.scale_H = ev.scale_H;
     bool resolved = true;
@@ -667,6 +683,7 @@ struct OctreeCertifier::Run {
     v.sign_unresolved = !resolved;
     if (third) v.hnorm = std::sqrt(ev.H[0].squaredNorm() + ev.H[1].squaredNorm() + ev.H[2].squaredNorm());
     if (combined) v.hnorm_op = hessian_operator_norm(ev.H);
+    if (spectral) v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, taylor_sigma3_lower_bound(ev.J, ev.H, rad), rad);
     v.own_bound = third ? ev.T_third : ev.T_first;
     v.own_first = ev.T_first;
   }
