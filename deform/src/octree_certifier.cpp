@@ -321,9 +321,11 @@ struct OctreeCertifier::Run {
   }
   // Spectral: the smaller of ‖H(c)‖_op and the Taylor σ3 bound's first-order loss (σ3(c) − ℓ)/r, so that
   // lipschitz() gives min(first order, that + ½ r T3) (Step 3c).
+  // Only at a center with σ3 > 0 (resolved): ℓ then bounds the same positive σ3, and the loss is never
+  // negative (ℓ ≤ σ3(c) up to rounding).
   static double taylor_part(double hn_op, double s3, double lb, double rad) {
-    if (!(rad > 0) || !(lb > -kInf)) return hn_op;
-    return std::min(hn_op, (s3 - lb) / rad);
+    if (!(rad > 0) || !(s3 > 0) || !(lb > -kInf)) return hn_op;
+    return std::min(hn_op, std::max(0.0, (s3 - lb) / rad));
   }
   // The L of condition (6), so that the loss over the leaf is rad·L (docs/certificate.md, Steps 1-3b):
   //   first: t1;  third: ‖H(c)‖_F + rad·t3;  combined: min(t1, ‖H(c)‖_op + ½ rad·t3) — the Taylor form
