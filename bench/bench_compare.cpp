@@ -35,7 +35,6 @@
 #include "lidef/number_format.h"
 #include "lidef/scenario.h"
 
-extern "C" void openblas_set_num_threads(int);
 
 namespace fs = std::filesystem;
 
@@ -92,10 +91,8 @@ int main(int argc, char** argv) {
     std::cerr << "bench_compare: no scenarios folder in " << data << " (skipped)\n";
     return 0;
   }
-  if (threads > 0) {
-    omp_set_num_threads(threads);
-    openblas_set_num_threads(threads);
-  }
+  // The library's products split over OpenMP's threads, OpenBLAS in each calling thread (blas_kernel.h).
+  if (threads > 0) omp_set_num_threads(threads);
   opt.cache_dir = cache;
   std::vector<fs::path> files;
   for (const auto& e : fs::directory_iterator(fs::path(data) / "scenarios"))

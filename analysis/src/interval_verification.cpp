@@ -173,16 +173,14 @@ double frobenius_hi(It begin, It end) {
 // μ slightly above the floating-point λmax of G's midpoint is proven ≥ λmax of every G in the enclosure by
 // Sylvester's criterion on μI − G (all leading principal minors > 0 in interval arithmetic); when that fails,
 // the Frobenius norm (sqrt(trace G)) is returned.
-double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
-  IM3 G = zero_m3();
-  for (int k = 0; k < 3; ++k)
-    for (int l = 0; l < 3; ++l)
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) G[k][l] += H[a][b][k] * H[a][b][l];
+// Upper bound of λmax(G) for every symmetric G in the enclosure (G[k][l] and G[l][k] the same interval): a
+// candidate μ from the midpoint's eigenvalue plus slack, proven ≥ λmax by Sylvester's criterion on μI − G (all
+// three leading principal minors > 0 in interval arithmetic); +∞ when no candidate is proven.
+double lambda_max_hi(const IM3& G) {
   Mat3 mid;
   for (int k = 0; k < 3; ++k)
     for (int l = 0; l < 3; ++l) mid(k, l) = 0.5 * (lo(G[k][l]) + hi(G[k][l]));
-  if (!mid.allFinite()) return frobenius;
+  if (!mid.allFinite()) return kInf;
   const double lmax = Eigen::SelfAdjointEigenSolver<Mat3>(mid, Eigen::EigenvaluesOnly).eigenvalues()(2);
   const double tr = std::max(0.0, mid.trace());
   // Candidates from tight to generous: the first one proven is used.
@@ -193,9 +191,98 @@ double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
     const I d2 = m00 * m11 - sq(G[0][1]);
     const I d3 = m00 * (m11 * m22 - sq(G[1][2])) - G[0][1] * (G[0][1] * m22 + G[1][2] * G[0][2]) -
                  G[0][2] * (G[0][1] * G[1][2] + m11 * G[0][2]);
-    if (lo(m00) > 0 && lo(d2) > 0 && lo(d3) > 0) return std::min(frobenius, hi(isqrt(mu)));
+    if (lo(m00) > 0 && lo(d2) > 0 && lo(d3) > 0) return hi(mu);
   }
-  return frobenius;
+  return kInf;
+}
+
+double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
+  IM3 G = zero_m3();
+  for (int k = 0; k < 3; ++k)
+    for (int l = 0; l < 3; ++l)
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) G[k][l] += H[a][b][k] * H[a][b][l];
+  const double mu = lambda_max_hi(G);
+  return std::isfinite(mu) ? std::min(frobenius, hi(isqrt(pt(mu)))) : frobenius;
+}
+
+// Step 3c of docs/certificate.md in intervals: a rigorous lower bound ℓ of σ3ˢ(J + H[v]) over |v| ≤ r, for
+// every J and H in the enclosures (H[a][b][k] = ∂J_ab/∂p_k, not assumed symmetric); −∞ when none. The basis
+// B = [x z1 z2] (the midpoint's eigenvectors of JᵀJ, any doubles) need not be orthonormal: in the coordinates c
+// of y = B c the 2x2 reduction is exact linear algebra for unit c, and |y| = 1 gives |c|² ≥ 1/λmax(BᵀB).
+double taylor_sigma3_lower_bound_i(const IM3& J, const std::array<IM3, 3>& H, double r, double hop_hi) {
+  const I det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) +
+                J[0][1] * (J[1][2] * J[2][0] - J[1][0] * J[2][2]) +
+                J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+  if (!(lo(det) > 0) || !(r >= 0) || !std::isfinite(hop_hi)) return -kInf;
+  Mat3 mid;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) mid(a, b) = 0.5 * lo(J[a][b]) + 0.5 * hi(J[a][b]);
+  if (!mid.allFinite()) return -kInf;
+  const Eigen::SelfAdjointEigenSolver<Mat3> es(mid.transpose() * mid);
+  Mat3 B;
+  B.col(0) = es.eigenvectors().col(0).normalized();
+  B.col(1) = (es.eigenvectors().col(1) - B.col(0) * B.col(0).dot(es.eigenvectors().col(1))).normalized();
+  B.col(2) = B.col(0).cross(B.col(1)).normalized();
+  if (!B.allFinite()) return -kInf;
+  // S = Bᵀ JᵀJ B = (JB)ᵀ(JB): μ1 = S00, ρ = |S_{Z0}|, μ2 = λmin(S_ZZ).
+  IM3 JB = zero_m3(), S = zero_m3();
+  for (int a = 0; a < 3; ++a)
+    for (int j = 0; j < 3; ++j)
+      for (int b = 0; b < 3; ++b) JB[a][j] += J[a][b] * pt(B(b, j));
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int a = 0; a < 3; ++a) S[i][j] += JB[a][i] * JB[a][j];
+  const I mu1 = S[0][0];
+  const I rho = isqrt(sq(S[1][0]) + sq(S[2][0]));
+  const I mu2 = (S[1][1] + S[2][2]) / pt(2) - isqrt(sq((S[1][1] - S[2][2]) / pt(2)) + sq(S[1][2]));
+  // Linear in v, with x = B e1: f(v) = 2 wᵀv, w = Σ_a (Jx)_a Hᵀ_a x ((Hᵀ_a x)_k = Σ_b H[a][b][k] x_b);
+  // ZᵀF(v)x = ZᵀK v, K = JᵀK1 + K2, K1 rows (Hᵀ_a x)ᵀ, K2[b][k] = Σ_a (Jx)_a H[a][b][k].
+  IV3 w;
+  IM3 K1 = zero_m3(), K2 = zero_m3(), K = zero_m3();
+  for (int a = 0; a < 3; ++a) {
+    const I jx = JB[a][0];
+    for (int k = 0; k < 3; ++k) {
+      I hx = pt(0);
+      for (int b = 0; b < 3; ++b) hx += H[a][b][k] * pt(B(b, 0));
+      K1[a][k] = hx;
+      w.v[k] += jx * hx;
+      for (int b = 0; b < 3; ++b) K2[b][k] += jx * H[a][b][k];
+    }
+  }
+  for (int b = 0; b < 3; ++b)
+    for (int k = 0; k < 3; ++k) {
+      K[b][k] = K2[b][k];
+      for (int a = 0; a < 3; ++a) K[b][k] += J[a][b] * K1[a][k];
+    }
+  std::array<IV3, 2> ZK;  // rows of ZᵀK
+  for (int i = 0; i < 2; ++i)
+    for (int k = 0; k < 3; ++k) {
+      ZK[i].v[k] = pt(0);
+      for (int b = 0; b < 3; ++b) ZK[i].v[k] += pt(B(b, 1 + i)) * K[b][k];
+    }
+  const I g11 = dot(ZK[0], ZK[0]), g12 = dot(ZK[0], ZK[1]), g22 = dot(ZK[1], ZK[1]);
+  const I zk = isqrt((g11 + g22) / pt(2) + isqrt(sq((g11 - g22) / pt(2)) + sq(g12)));
+  // ‖J‖₂ and λmax(BᵀB) (the scale of |c|), both proven upper bounds.
+  IM3 JtJ = zero_m3(), BtB = zero_m3();
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int a = 0; a < 3; ++a) {
+        JtJ[i][j] += J[a][i] * J[a][j];
+        BtB[i][j] += pt(B(a, i)) * pt(B(a, j));
+      }
+  const double jtj = lambda_max_hi(JtJ), btb = lambda_max_hi(BtB);
+  if (!std::isfinite(jtj) || !std::isfinite(btb)) return -kInf;
+  // The worst case over the ball (each term at its monotone end), evaluated in intervals from those ends:
+  // φ ≥ −λmax(BᵀB) ‖F‖₂ ≥ −λmax(BᵀB) 2 ‖J‖₂ r ‖H‖_op.
+  const I f = pt(-2) * pt(r) * pt(hi(norm(w)));
+  const I phi = pt(-2) * pt(btb) * isqrt(pt(jtj)) * pt(r) * pt(hop_hi);
+  const I q = pt(hi(rho)) + pt(r) * pt(hi(zk));
+  const I m1 = pt(lo(mu1)), m2 = pt(lo(mu2));
+  const I D = m2 + pt(lo(phi)) - m1 - pt(lo(f));
+  const I lam = m1 + pt(lo(f)) + (D - isqrt(sq(D) + pt(4) * sq(q))) / pt(2);
+  if (!(lo(lam) > 0)) return -kInf;
+  return lo(isqrt(pt(lo(lam)) / pt(btb)));
 }
 
 double sigma3_lower_bound_i(const IM3& J) {
@@ -464,9 +551,10 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
   res.radius_hi = r;
 
   const bool third = im.bound != LipschitzBound::kFirstOrder;  // ‖H(c)‖ and Σ δ Θ (third, combined)
-  // Spectral certificates are re-proven with the combined L: the Taylor σ3 bound (Step 3c) has no interval
-  // version yet, so a leaf that only it certifies is reported as not proven (docs/certificate.md).
+  // Spectral: the combined L, and the Taylor σ3 bound of Step 3c in intervals (taylor_sigma3_lower_bound_i).
   const bool combined = im.bound == LipschitzBound::kCombined || im.bound == LipschitzBound::kSpectral;
+  const bool spectral = im.bound == LipschitzBound::kSpectral;
+  double hop = kInf;
   IM3 J;
   std::array<IM3, 3> H;
   im.jet(c, J, H, third);
@@ -487,13 +575,24 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
     L = pt(frob) + pt(r) * sum;
     // Combined: min(first order, Taylor form ‖H(c)‖_op + ½ r Σ δ Θ); both are upper bounds, so is the min.
     if (combined) {
-      const I taylor = pt(hessian_operator_norm_hi(H, frob)) + pt(r) * sum / pt(2);
+      hop = hessian_operator_norm_hi(H, frob);
+      const I taylor = pt(hop) + pt(r) * sum / pt(2);
       L = pt(std::min(hi(sum1), hi(taylor)));
     }
   }
   res.L_hi = std::isnan(hi(L)) ? kInf : hi(L);
   const I margin = pt(res.sigma3_lo) - pt(r) * pt(res.L_hi);
   res.margin_lo = std::isnan(lo(margin)) ? -kInf : lo(margin);
+  // Spectral (Step 3c): σ3 ≥ ℓ − ½ r² Σ δ Θ on the ball; where that is the better margin, L_hi is the loss
+  // over r that gives it from sigma3_lo.
+  if (spectral) {
+    const double ell = taylor_sigma3_lower_bound_i(J, H, r, hop);
+    const I m2 = pt(ell) - pt(r) * pt(r) * pt(hi(sum)) / pt(2);
+    if (ell > -kInf && !std::isnan(lo(m2)) && lo(m2) > res.margin_lo) {
+      res.margin_lo = lo(m2);
+      res.L_hi = hi((pt(res.sigma3_lo) - pt(res.margin_lo)) / pt(r));
+    }
+  }
   res.proven = res.margin_lo > 0;
   return res;
 }

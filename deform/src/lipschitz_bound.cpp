@@ -162,13 +162,13 @@ double taylor_sigma3_lower_bound(const Mat3& J, const std::array<Mat3, 3>& H, do
   const double rho = std::hypot(z1.dot(Mx), z2.dot(Mx)) + epsM;
   const double m11 = z1.dot(M * z1), m12 = z1.dot(M * z2), m22 = z2.dot(M * z2);
   const double mu2 = 0.5 * (m11 + m22) - std::hypot(0.5 * (m11 - m22), m12) - epsM;
-  // Linear in v: f11(v) = 2 wᵀv with w = Σ_a (Jx)_a H[a] x; F(v)x = K v with K = Jᵀ K1 + K2,
-  // K1 = rows (H[a] x)ᵀ, K2 = Σ_a (Jx)_a H[a].
+  // Linear in v: f11(v) = 2 wᵀv with w = Σ_a (Jx)_a H[a]ᵀ x; F(v)x = K v with K = Jᵀ K1 + K2,
+  // K1 = rows (H[a]ᵀ x)ᵀ, K2 = Σ_a (Jx)_a H[a].
   const Vec3 Jx = J * x;
   Vec3 w = Vec3::Zero();
   Mat3 K1, K2 = Mat3::Zero();
   for (int a = 0; a < 3; ++a) {
-    const Vec3 Hx = H[a] * x;
+    const Vec3 Hx = H[a].transpose() * x;  // (E(v)x)_a = vᵀ H[a]ᵀ x (H[a] symmetric up to rounding)
     w += Jx(a) * Hx;
     K1.row(a) = Hx.transpose();
     K2 += Jx(a) * H[a];

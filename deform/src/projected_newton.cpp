@@ -25,7 +25,6 @@ namespace lidef {
 
 namespace {
 
-// Solves H x = b for symmetric positive definite H (overwritten by its factor). false if H is not SPD.
 // b <- L⁻ᵀ L⁻¹ b for dpotrf's lower factor L (n by n).
 bool cholesky_solve_factored(const MatXd& L, VecXd& b) {
   const int n = static_cast<int>(L.rows()), one = 1;
@@ -34,6 +33,7 @@ bool cholesky_solve_factored(const MatXd& L, VecXd& b) {
   return info == 0;
 }
 
+// Solves H x = b for symmetric positive definite H (overwritten by its factor). false if H is not SPD.
 bool cholesky_solve(MatXd& H, VecXd& b) {
   const int n = static_cast<int>(H.rows());
   int info = 0;
