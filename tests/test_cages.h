@@ -18,6 +18,15 @@ inline MatX3d perturbed_map(const Cage& cage, double amp, unsigned seed) {
   return y;
 }
 
+// perturbed_map with the output scaled by (1, 0.7, 0.45): σ1 > σ2 > σ3 with gaps, as on deformed maps (near
+// the identity all three are ≈ 1 and the spectral bound, docs/certificate.md Step 3c, has no gap to use).
+inline MatX3d anisotropic_perturbed_map(const Cage& cage, double amp, unsigned seed) {
+  MatX3d y = perturbed_map(cage, amp, seed);
+  y.col(1) *= 0.7;
+  y.col(2) *= 0.45;
+  return y;
+}
+
 // Icosphere of radius 1 (subdivided `levels` times), each vertex radially scaled by a factor in
 // [1 − bump, 1 + bump] (seeded) so the cage is star-shaped but not convex. CCW seen from outside.
 inline TriMesh icosphere(int levels, double bump = 0.0, unsigned seed = 1) {

@@ -213,11 +213,7 @@ TEST(CombinedBound, CertificatesAreNoWeakerThanEitherBoundAndHoldUnderDenseSampl
   const OctreeCertifier cert(cage, samp);
   int certified = 0;
   for (double amp : {0.005, 0.02}) {
-    // Anisotropic (output scaled by 1, 0.7, 0.45): σ1 > σ2 > σ3 with gaps, as on deformed maps; near the
-    // identity all three are ≈ 1 and the spectral term has no gap to work with (Step 3c).
-    MatX3d y = perturbed_map(cage, amp, 20);
-    y.col(1) *= 0.7;
-    y.col(2) *= 0.45;
+    const MatX3d y = lidef::test::anisotropic_perturbed_map(cage, amp, 20);
     CertifyParams p;
     p.max_depth = 0;
     p.bound = LipschitzBound::kFirstOrder;

@@ -220,9 +220,7 @@ TEST(IntervalVerification, SpectralTermRaisesTheProvenMargin) {
   sp.target_count = 600;
   sp.count_tolerance = 0.2;
   const VoxelSampling samp = sample_voxels(cage, sp);
-  MatX3d y = lidef::test::perturbed_map(cage, 0.02, 20);
-  y.col(1) *= 0.7;
-  y.col(2) *= 0.45;
+  const MatX3d y = lidef::test::anisotropic_perturbed_map(cage, 0.02, 20);
   CertifyParams cp;
   cp.bound = LipschitzBound::kSpectral;
   cp.max_depth = 0;
