@@ -313,6 +313,38 @@ TEST_F(CertifyCli, FoldedMapIsNotCertified) {
   EXPECT_EQ(zeros, failing);
 }
 
+// --bound-tolerance (a row of the parameter table): the certificate is refined until its lower bound of σ3 is
+// within the tolerance of the smallest sampled σ3, and certificate.json says so; the spectral bound needs fewer
+// refined voxels for it than the third-order bound; without the flag the fields say "off".
+TEST_F(CertifyCli, BoundToleranceTightensTheLowerBoundAndIsRecorded) {
+  TempDir tmp;
+  write_coeffs(tmp / "y.txt", perturbed(ball(), 0.004, 3));
+  std::string output;
+  ASSERT_EQ(certify(ball(), tmp / "y.txt", tmp / "plain", &output), 0) << output;
+  const nlohmann::json p = read_json(tmp / "plain/certificate.json");
+  EXPECT_EQ(p["bound_tolerance"].get<double>(), 0.0);
+  EXPECT_TRUE(p["bound_tolerance_met"].is_null());
+  long refined[2] = {0, 0};
+  int k = 0;
+  for (const char* b : {"third", "spectral"}) {
+    const std::string out = tmp / ("t_" + std::string(b));
+    ASSERT_EQ(certify(ball(), tmp / "y.txt", out, &output, std::string("--bound-tolerance 0.3 --bound ") + b), 0)
+        << output;
+    const nlohmann::json j = read_json(out + "/certificate.json");
+    EXPECT_EQ(j["bound_tolerance"].get<double>(), 0.3);
+    EXPECT_EQ(j["bound_tolerance_met"], true) << b;
+    EXPECT_GE(j["min_lower_bound"].get<double>(), 0.7 * j["min_sigma3_center"].get<double>()) << b;
+    EXPECT_GT(j["min_lower_bound"].get<double>(), p["min_lower_bound"].get<double>()) << b;
+    refined[k++] = j["refined"].get<long>();
+  }
+  EXPECT_GT(refined[0], 0) << "the tolerance should need refinement with the third-order bound";
+  EXPECT_LE(refined[1], refined[0]) << "spectral is the tighter bound";
+  // The fields survive the reader (lidef verify reads certificate.json).
+  const CertificateReport back = read_certificate_json(tmp / "t_spectral/certificate.json");
+  EXPECT_EQ(back.cert.bound_tolerance, 0.3);
+  EXPECT_TRUE(back.cert.bound_tolerance_met);
+}
+
 TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
   TempDir tmp;
   // A non-affine map that certifies with some refinement.

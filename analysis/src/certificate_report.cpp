@@ -270,6 +270,9 @@ std::string certificate_json(const CertificateReport& r) {
   j["min_sigma3_center"] = num(c.min_sigma3_center);
   j["min_margin"] = num(c.min_margin);
   j["min_lower_bound"] = num(c.min_lower_bound);
+  // The tight-lower-bound stage (bound_tolerance > 0): the tolerance asked for and whether it was reached.
+  j["bound_tolerance"] = num(c.bound_tolerance);
+  j["bound_tolerance_met"] = c.bound_tolerance > 0 ? ojson(c.bound_tolerance_met) : ojson();
   j["mesh_vertices"] = r.mesh_vertices;
   j["mesh_coverage"] = num(r.mesh_coverage);
   j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
@@ -353,6 +356,10 @@ CertificateReport read_certificate_json(const std::string& path) {
   c.min_sigma3_center = rd.number(root, "min_sigma3_center");
   c.min_margin = rd.number(root, "min_margin");
   c.min_lower_bound = rd.number(root, "min_lower_bound");
+  if (root.contains("bound_tolerance")) {  // absent in certificates written before it
+    c.bound_tolerance = rd.number(root, "bound_tolerance");
+    c.bound_tolerance_met = c.bound_tolerance > 0 && rd.boolean(root, "bound_tolerance_met");
+  }
   r.mesh_vertices = rd.integer(root, "mesh_vertices");
   r.mesh_coverage = rd.number(root, "mesh_coverage");
   r.mesh_vertices_uncovered = rd.integer(root, "mesh_vertices_uncovered");
