@@ -135,8 +135,8 @@ int main(int argc, char** argv) {
       << "- data: " << opt.data << "; CPU: " << bench::cpu_model() << "; " << opt.samples
       << " samples per ball, up to " << opt.leaves << " leaves per group\n\n"
       << "| model | leaves | n | first: median (p10, p90) | third: median (p10, p90) | combined: median "
-         "(p10, p90) | median per-leaf third/combined | L/max pair slope: third, combined (median) | combined "
-         "with the Taylor sigma3 bound (Step 3c): median (p10, p90) | median per-leaf third/that |\n"
+         "(p10, p90) | median per-leaf third/combined | L/max pair slope: third, combined (median) | "
+         "spectral (Step 3c): median (p10, p90) | median per-leaf third/spectral |\n"
       << "|---|---|---:|---|---|---|---:|---|---|---:|\n";
   int bad = 0;
   for (const std::string& name : opt.models) {

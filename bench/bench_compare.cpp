@@ -35,7 +35,6 @@
 #include "lidef/number_format.h"
 #include "lidef/scenario.h"
 
-
 namespace fs = std::filesystem;
 
 namespace {

@@ -322,9 +322,8 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
       Cb(static_cast<size_t>(s) * 6 * s);
   for (float& x : A) x = U(rng);
   for (float& x : B) x = U(rng);
-  row.block = time_reps(reps, [&] {
-    lidef::gemm_parallel(false, false, s, s, kb, A.data(), s, B.data(), kb, Cb.data(), s);
-  });
+  row.block = time_reps(
+      reps, [&] { lidef::gemm_parallel(false, false, s, s, kb, A.data(), s, B.data(), kb, Cb.data(), s); });
   row.block_flops = 2.0 * s * s * kb;
   // The six blocks as one product (the implementation's call shape): s x 6s = (s x 3|H|)(3|H| x 6s).
   row.fused = time_reps(reps, [&] {

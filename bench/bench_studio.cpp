@@ -3,8 +3,8 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz]. Needs an X display; without
-// DISPLAY it re-runs itself under xvfb-run.
+// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz]. Needs an X display;
+// without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -68,7 +68,8 @@ struct Result {
   double seconds = 0;
   long frames = 0, new_maps = 0, steps = 0, accepted = 0;
   double ms_step = 0, ms_certificate = 0, ms_frame = 0, ms_render = 0;
-  double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, refined = 0, trials = 0, reused = 0;
+  double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, refined = 0, trials = 0,
+         reused = 0;
   bool all_certified = true;
   double final_error = 0;
 };
@@ -162,7 +163,8 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz]\n");
+    std::fprintf(stderr,
+                 "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
@@ -261,8 +263,9 @@ int main(int argc, char** argv) {
   }
   // Where a step's time goes (means per Newton step), in the window and for the engine alone.
   std::printf(
-      "\n| parameters | run | ms per step | gradient | Hessian | Cholesky | line search | of which certificate "
-      "| refined voxels (accepted certificate) | line-search trials | steps reusing the Hessian factor |\n"
+      "\n| parameters | run | ms per step | gradient | Hessian | Cholesky | line search "
+      "| of which certificate | refined voxels (accepted certificate) | line-search trials | steps reusing "
+      "the Hessian factor |\n"
       "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const auto& sp : splits)
     for (int k = 0; k < 2; ++k) {

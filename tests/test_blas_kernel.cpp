@@ -1,7 +1,6 @@
 // The OpenBLAS kernel choice (lidef/blas_kernel.h): every program of the project re-executes itself once so
 // that OpenBLAS does not run its SSE3 fallback on a CPU it does not know.
 #include <gtest/gtest.h>
-
 #include <omp.h>
 
 #include <random>
@@ -81,7 +80,8 @@ TEST(BlasKernel, ParallelGemmMatchesEigenInEverySplit) {
     for (const bool ta : {false, true})
       for (const bool tb : {false, true}) {
         const lidef::MatXd A = ta ? random(k, m) : random(m, k), B = tb ? random(n, k) : random(k, n);
-        const lidef::MatXd ref = (ta ? lidef::MatXd(A.transpose()) : A) * (tb ? lidef::MatXd(B.transpose()) : B);
+        const lidef::MatXd ref =
+            (ta ? lidef::MatXd(A.transpose()) : A) * (tb ? lidef::MatXd(B.transpose()) : B);
         const double scale = static_cast<double>(k);  // |entries| ≤ 1
         lidef::MatXd C1(m, n), C2(m, n);
         const int saved = omp_get_max_threads();

@@ -190,9 +190,8 @@ TEST(CertificateBounds, DifferentialRepresentationEqualsMinusBasisHessian) {
 TEST(Certificate, IdentityCertifiesAtDepthZero) {
   const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 3000);
   OctreeCertifier cert(s.cage, s.sampling);
-  for (LipschitzBound b :
-       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined,
-          LipschitzBound::kSpectral}) {
+  for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder,
+                           LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
     CertifyParams p;
     p.bound = b;
     const Certificate c = cert.certify(s.cage.identity_coefficients(), p);
@@ -230,9 +229,8 @@ TEST(Certificate, CertifiedMapsHaveNoNonPositiveSigma3UnderDenseSampling) {
   }
   for (double amp : {0.05, 0.45, 0.9, 1.3}) maps.push_back(smooth_map(s.cage, s.sub, amp, 11));
   for (size_t mi = 0; mi < maps.size(); ++mi)
-    for (LipschitzBound b :
-         {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined,
-          LipschitzBound::kSpectral}) {
+    for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder,
+                             LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
       // The weak first-order bound refines strongly bent maps into very many leaves: check it on the
       // milder maps only, to keep the dense verification affordable.
       if (b == LipschitzBound::kFirstOrder && mi + 2 >= maps.size()) continue;
@@ -272,9 +270,8 @@ TEST(Certificate, FoldedMapIsNeverCertified) {
       fold = cert.basis().map_jet(y, s.sampling.centers.row(i).transpose(), 1).J.determinant() < 0;
     if (!fold) continue;
     std::cout << "fold at amplitude " << amp << "\n";
-    for (LipschitzBound b :
-         {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined,
-          LipschitzBound::kSpectral}) {
+    for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder,
+                             LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
       CertifyParams p;
       p.bound = b;
       p.max_depth = 3;  // the verdict cannot depend on depth here; deeper only costs time
@@ -296,9 +293,8 @@ TEST(Certificate, UnresolvedSignIsNotCertifiedWithItsOwnReason) {
   const Mat3 A = Vec3(1.0, 2.0, -3.0) * Vec3(0.5, -1.5, 2.5).transpose();
   const MatX3d y = s.cage.identity_coefficients() * A.transpose();  // y_v = A v, y_t = A n_t
   OctreeCertifier cert(s.cage, s.sampling, nullptr, 0.0);           // centers evaluated in double
-  for (LipschitzBound b :
-       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined,
-          LipschitzBound::kSpectral}) {
+  for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder,
+                           LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
     CertifyParams p;
     p.bound = b;
     p.max_depth = 2;

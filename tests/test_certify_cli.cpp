@@ -314,8 +314,8 @@ TEST_F(CertifyCli, FoldedMapIsNotCertified) {
 }
 
 // --bound-tolerance (a row of the parameter table): the certificate is refined until its lower bound of σ3 is
-// within the tolerance of the smallest sampled σ3, and certificate.json says so; the spectral bound needs fewer
-// refined voxels for it than the third-order bound; without the flag the fields say "off".
+// within the tolerance of the smallest sampled σ3, and certificate.json says so; the spectral bound needs
+// fewer refined voxels for it than the third-order bound; without the flag the fields say "off".
 TEST_F(CertifyCli, BoundToleranceTightensTheLowerBoundAndIsRecorded) {
   TempDir tmp;
   write_coeffs(tmp / "y.txt", perturbed(ball(), 0.004, 3));
@@ -328,7 +328,8 @@ TEST_F(CertifyCli, BoundToleranceTightensTheLowerBoundAndIsRecorded) {
   int k = 0;
   for (const char* b : {"third", "spectral"}) {
     const std::string out = tmp / ("t_" + std::string(b));
-    ASSERT_EQ(certify(ball(), tmp / "y.txt", out, &output, std::string("--bound-tolerance 0.3 --bound ") + b), 0)
+    ASSERT_EQ(certify(ball(), tmp / "y.txt", out, &output, std::string("--bound-tolerance 0.3 --bound ") + b),
+              0)
         << output;
     const nlohmann::json j = read_json(out + "/certificate.json");
     EXPECT_EQ(j["bound_tolerance"].get<double>(), 0.3);

@@ -107,7 +107,7 @@ TEST(CombinedBound, TaylorSigma3LowerBoundHoldsOnSampledDirections) {
     Vec3 sv(1 + U(rng), 0.5 + 0.5 * U(rng), 0.1 + 0.4 * U(rng));
     const int kind = trial % 4;
     if (kind == 1) sv(2) = sv(1) * (1 - 1e-9 * U(rng));  // no gap between σ2 and σ3
-    if (kind == 2) sv(2) = 1e-6 * U(rng);                 // nearly singular
+    if (kind == 2) sv(2) = 1e-6 * U(rng);                // nearly singular
     Mat3 J = rotation() * sv.asDiagonal() * rotation();
     if (trial % 23 == 0) J.col(0) = -J.col(0);  // det < 0: no bound
     std::array<Mat3, 3> H;
@@ -152,8 +152,8 @@ TEST(CombinedBound, TaylorSigma3LowerBoundHoldsOnSampledDirections) {
 
 // For balls around random interior points, with radius from the distance to the cage over a safety factor
 // (1.0: the ball touches the cage, as the clearance allows at the limit), the Taylor form and the first-order
-// bound hold at sampled points: |σ3(q) − σ3(c)| ≤ |q−c| ‖H(c)‖_op + ½|q−c|² T3 and ≤ |q−c| T1, and so does the
-// spectral bound (Step 3c): σ3(q) ≥ ℓ − ½|q−c|² T3.
+// bound hold at sampled points: |σ3(q) − σ3(c)| ≤ |q−c| ‖H(c)‖_op + ½|q−c|² T3 and ≤ |q−c| T1, and so does
+// the spectral bound (Step 3c): σ3(q) ≥ ℓ − ½|q−c|² T3.
 TEST(CombinedBound, HoldsOnSampledPointsOfRandomBallsUpToTheClearance) {
   const Cage cage(lidef::test::icosphere(1, 0.2, 3));
   const HarmonicBasis B(cage);

@@ -207,9 +207,8 @@ TEST(EdgeJet, BatchedRefinementAgreesWithPerEdgeAndPerFace) {
   sp.count_tolerance = 0.1;
   const OctreeCertifier cert(cage, sample_voxels(cage, sp));
   const MatX3d y = perturbed_map(cage, 0.012, 21);
-  for (LipschitzBound b :
-       {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder, LipschitzBound::kCombined,
-          LipschitzBound::kSpectral}) {
+  for (LipschitzBound b : {LipschitzBound::kFirstOrder, LipschitzBound::kThirdOrder,
+                           LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
     CertifyParams p;
     p.bound = b;
     p.max_depth = 3;
@@ -255,7 +254,8 @@ TEST(EdgeJet, BatchedRefinedCertificatesHoldUnderDenseSampling) {
   const OctreeCertifier cert(cage, sample_voxels(cage, sp));
   int refined_certified = 0;
   for (double amp : {0.008, 0.012})
-    for (LipschitzBound b : {LipschitzBound::kThirdOrder, LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
+    for (LipschitzBound b :
+         {LipschitzBound::kThirdOrder, LipschitzBound::kCombined, LipschitzBound::kSpectral}) {
       const MatX3d y = perturbed_map(cage, amp, 21);
       CertifyParams p;
       p.bound = b;

@@ -212,8 +212,9 @@ TEST(IntervalVerification, CertifiedLeavesOfProceduralModelsAreProven) {
 }
 
 // The Taylor σ3 bound in intervals (Step 3c) does work: on a map with spread singular values (as in
-// CombinedBound.CertificatesAreNoWeakerThan...), the interval re-proof of a spectral certificate proves a larger
-// margin than the combined L alone on some leaves, never a smaller one, and never above the certificate's σ3 − rL.
+// CombinedBound.CertificatesAreNoWeakerThan...), the interval re-proof of a spectral certificate proves a
+// larger margin than the combined L alone on some leaves, never a smaller one, and never above the
+// certificate's σ3 − rL.
 TEST(IntervalVerification, SpectralTermRaisesTheProvenMargin) {
   const Cage cage(lidef::test::icosphere(2, 0.15, 8));
   SamplingParams sp;
@@ -225,8 +226,10 @@ TEST(IntervalVerification, SpectralTermRaisesTheProvenMargin) {
   cp.bound = LipschitzBound::kSpectral;
   cp.max_depth = 0;
   const Certificate cert = certify_map(cage, samp, y, cp);
-  const IntervalVerification vs = verify_certificate_intervals(cage, y, cert.leaves, LipschitzBound::kSpectral);
-  const IntervalVerification vc = verify_certificate_intervals(cage, y, cert.leaves, LipschitzBound::kCombined);
+  const IntervalVerification vs =
+      verify_certificate_intervals(cage, y, cert.leaves, LipschitzBound::kSpectral);
+  const IntervalVerification vc =
+      verify_certificate_intervals(cage, y, cert.leaves, LipschitzBound::kCombined);
   ASSERT_EQ(vs.results.size(), vc.results.size());
   ASSERT_GT(vs.results.size(), 100u);
   const HarmonicBasis basis(cage);
@@ -248,7 +251,8 @@ TEST(IntervalVerification, SpectralTermRaisesTheProvenMargin) {
     raised += ms > mc + 1e-12;
   }
   EXPECT_EQ(vs.proven, static_cast<long>(vs.results.size()));
-  std::cout << raised << " of " << vs.results.size() << " leaves: the spectral term raised the proven margin\n";
+  std::cout << raised << " of " << vs.results.size()
+            << " leaves: the spectral term raised the proven margin\n";
   EXPECT_GT(raised, 0);
 }
 

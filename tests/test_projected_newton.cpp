@@ -498,7 +498,8 @@ TEST(ProjectedNewton, DraggingReusesTheHessianFactorAndKeepsEveryMapCertified) {
       const IterationRecord rec = s->step();
       d.drag.push_back(rec);
       if (rec.accepted)
-        d.full_certified.push_back(full.certify(s->coefficients(), s->certify_params(false, false)).certified);
+        d.full_certified.push_back(
+            full.certify(s->coefficients(), s->certify_params(false, false)).certified);
     }
     s->solve([&](const IterationRecord& rec) {
       d.rest.push_back(rec);
@@ -532,11 +533,12 @@ TEST(ProjectedNewton, DraggingReusesTheHessianFactorAndKeepsEveryMapCertified) {
 
   const Drag fresh = run(false, 2), zero = run(true, 0);
   for (const Drag* d : {&fresh, &zero})
-    for (const IterationRecord& rec : d->drag) EXPECT_FALSE(rec.hessian_reused) << "iteration " << rec.iteration;
+    for (const IterationRecord& rec : d->drag)
+      EXPECT_FALSE(rec.hessian_reused) << "iteration " << rec.iteration;
   // Both end at rest at the same minimum (the solves stop at a relative energy decrease of 1e-5).
   EXPECT_NEAR(reused.final_energy.total, fresh.final_energy.total, 1e-5 * fresh.final_energy.total);
-  std::printf("drag: %d of 12 steps reused a factor; at rest E %.8e (reused) vs %.8e (never), %zu vs %zu "
-              "iterations\n",
-              n_reused, reused.final_energy.total, fresh.final_energy.total, reused.rest.size(),
-              fresh.rest.size());
+  std::printf(
+      "drag: %d of 12 steps reused a factor; at rest E %.8e (reused) vs %.8e (never), %zu vs %zu "
+      "iterations\n",
+      n_reused, reused.final_energy.total, fresh.final_energy.total, reused.rest.size(), fresh.rest.size());
 }

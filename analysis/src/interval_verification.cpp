@@ -168,14 +168,9 @@ double frobenius_hi(It begin, It end) {
   return hi(isqrt(s));
 }
 
-// Upper bound of the operator norm of the Hessian tensor v ↦ Σ_k v_k H_k (H_k)_ab = H[a][b][k], as a map into
-// (R³ˣ³, ‖·‖_F): sqrt(λmax(G)), G_kl = Σ_ab H[a][b][k] H[a][b][l] (docs/certificate.md, Step 3b). A candidate
-// μ slightly above the floating-point λmax of G's midpoint is proven ≥ λmax of every G in the enclosure by
-// Sylvester's criterion on μI − G (all leading principal minors > 0 in interval arithmetic); when that fails,
-// the Frobenius norm (sqrt(trace G)) is returned.
 // Upper bound of λmax(G) for every symmetric G in the enclosure (G[k][l] and G[l][k] the same interval): a
-// candidate μ from the midpoint's eigenvalue plus slack, proven ≥ λmax by Sylvester's criterion on μI − G (all
-// three leading principal minors > 0 in interval arithmetic); +∞ when no candidate is proven.
+// candidate μ from the midpoint's eigenvalue plus slack, proven ≥ λmax by Sylvester's criterion on μI − G
+// (all three leading principal minors > 0 in interval arithmetic); +∞ when no candidate is proven.
 double lambda_max_hi(const IM3& G) {
   Mat3 mid;
   for (int k = 0; k < 3; ++k)
@@ -196,6 +191,9 @@ double lambda_max_hi(const IM3& G) {
   return kInf;
 }
 
+// Upper bound of the operator norm of the Hessian tensor v ↦ Σ_k v_k H_k (H_k)_ab = H[a][b][k], as a map into
+// (R³ˣ³, ‖·‖_F): sqrt(λmax(G)), G_kl = Σ_ab H[a][b][k] H[a][b][l] (docs/certificate.md, Step 3b), λmax proven
+// by lambda_max_hi; when that fails, the Frobenius norm (sqrt(trace G)) is returned.
 double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
   IM3 G = zero_m3();
   for (int k = 0; k < 3; ++k)
@@ -208,8 +206,8 @@ double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
 
 // Step 3c of docs/certificate.md in intervals: a rigorous lower bound ℓ of σ3ˢ(J + H[v]) over |v| ≤ r, for
 // every J and H in the enclosures (H[a][b][k] = ∂J_ab/∂p_k, not assumed symmetric); −∞ when none. The basis
-// B = [x z1 z2] (the midpoint's eigenvectors of JᵀJ, any doubles) need not be orthonormal: in the coordinates c
-// of y = B c the 2x2 reduction is exact linear algebra for unit c, and |y| = 1 gives |c|² ≥ 1/λmax(BᵀB).
+// B = [x z1 z2] (the midpoint's eigenvectors of JᵀJ, any doubles) need not be orthonormal: in the coordinates
+// c of y = B c the 2x2 reduction is exact linear algebra for unit c, and |y| = 1 gives |c|² ≥ 1/λmax(BᵀB).
 double taylor_sigma3_lower_bound_i(const IM3& J, const std::array<IM3, 3>& H, double r, double hop_hi) {
   const I det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) +
                 J[0][1] * (J[1][2] * J[2][0] - J[1][0] * J[2][2]) +

@@ -1,9 +1,8 @@
 #include "lidef/blas_kernel.h"
 
 #include <cblas.h>
-#include <unistd.h>
-
 #include <omp.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -84,7 +83,8 @@ void use_blas_in_calling_thread() {
 
 namespace {
 template <class T>
-void gemm_one(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const T* B, int ldb, T* C, int ldc) {
+void gemm_one(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const T* B, int ldb, T* C,
+              int ldc) {
   const auto opa = ta ? CblasTrans : CblasNoTrans, opb = tb ? CblasTrans : CblasNoTrans;
   if constexpr (std::is_same_v<T, float>)
     cblas_sgemm(CblasColMajor, opa, opb, m, n, k, 1.0f, A, lda, B, ldb, 0.0f, C, ldc);
@@ -92,9 +92,11 @@ void gemm_one(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const 
     cblas_dgemm(CblasColMajor, opa, opb, m, n, k, 1.0, A, lda, B, ldb, 0.0, C, ldc);
 }
 
-// Slices of C: columns j0..j1 take B's columns (rows of Bᵀ) j0..j1; rows i0..i1 take A's rows (columns of Aᵀ).
+// Slices of C: columns j0..j1 take B's columns (rows of Bᵀ) j0..j1; rows i0..i1 take A's rows (columns of
+// Aᵀ).
 template <class T>
-void gemm_split(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const T* B, int ldb, T* C, int ldc) {
+void gemm_split(bool ta, bool tb, int m, int n, int k, const T* A, int lda, const T* B, int ldb, T* C,
+                int ldc) {
   use_blas_in_calling_thread();
   if (m <= 0 || n <= 0) return;
   const int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
@@ -130,16 +132,16 @@ void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C) {
   if (!prepare_product(A, B, C)) return;
   // Row-major C = A B is column-major Cᵀ = Bᵀ Aᵀ, and a column-major B is a row-major Bᵀ: so Cᵀ (n by m) is
   // the column-major product of B transposed (lda = k) and A read as the column-major Aᵀ (k by m).
-  gemm_parallel(true, false, static_cast<int>(B.cols()), static_cast<int>(A.rows()), static_cast<int>(A.cols()),
-                B.data(), static_cast<int>(B.rows()), A.data(), static_cast<int>(A.cols()), C.data(),
-                static_cast<int>(B.cols()));
+  gemm_parallel(true, false, static_cast<int>(B.cols()), static_cast<int>(A.rows()),
+                static_cast<int>(A.cols()), B.data(), static_cast<int>(B.rows()), A.data(),
+                static_cast<int>(A.cols()), C.data(), static_cast<int>(B.cols()));
 }
 
 void blas_product(const MatXd& A, const MatXd& B, MatXd& C) {
   if (!prepare_product(A, B, C)) return;
-  gemm_parallel(false, false, static_cast<int>(A.rows()), static_cast<int>(B.cols()), static_cast<int>(A.cols()),
-                A.data(), static_cast<int>(A.rows()), B.data(), static_cast<int>(B.rows()), C.data(),
-                static_cast<int>(C.rows()));
+  gemm_parallel(false, false, static_cast<int>(A.rows()), static_cast<int>(B.cols()),
+                static_cast<int>(A.cols()), A.data(), static_cast<int>(A.rows()), B.data(),
+                static_cast<int>(B.rows()), C.data(), static_cast<int>(C.rows()));
 }
 
 std::string blas_numerics() {

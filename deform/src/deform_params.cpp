@@ -72,8 +72,9 @@ std::vector<ParamInfo> make_table() {
       {"max_depth", "certificate", &D::max_depth, 0, 20, "octree levels of the certificate"},
       {"bound", "certificate", &D::bound, 0, 0,
        "Lipschitz bound: \"first\" (17), \"third\" (21) order, or \"combined\" (per leaf the smaller of "
-       "first order and the Taylor form with the Hessian's operator norm), or \"spectral\" (combined, and the "
-       "Taylor polynomial's sigma3 bounded through the eigenvalues of J^T J); docs/certificate.md"},
+       "first order and the Taylor form with the Hessian's operator norm), or \"spectral\" "
+       "(combined, and the Taylor polynomial's sigma3 bounded through the eigenvalues of J^T J); "
+       "docs/certificate.md"},
       {"max_refined", "certificate", &D::max_refined, 0, 1e9,
        "child voxels evaluated per certification of a result at most"},
       {"line_search_max_refined", "certificate", &D::line_search_max_refined, 0, 1e9,

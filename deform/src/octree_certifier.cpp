@@ -685,7 +685,8 @@ struct OctreeCertifier::Run {
     v.sign_unresolved = !resolved;
     if (third) v.hnorm = std::sqrt(ev.H[0].squaredNorm() + ev.H[1].squaredNorm() + ev.H[2].squaredNorm());
     if (combined) v.hnorm_op = hessian_operator_norm(ev.H);
-    if (spectral) v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, taylor_sigma3_lower_bound(ev.J, ev.H, rad), rad);
+    if (spectral)
+      v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, taylor_sigma3_lower_bound(ev.J, ev.H, rad), rad);
     v.own_bound = third ? ev.T_third : ev.T_first;
     v.own_first = ev.T_first;
   }

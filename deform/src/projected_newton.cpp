@@ -360,7 +360,8 @@ void DeformationSolver::set_params(const DeformParams& p) {
   q.safety = params_.safety;
   q.hessian_fraction = params_.hessian_fraction;
   q.domain = params_.domain;
-  // A kept Hessian factor stays valid unless what it was assembled with changed (weights are compared at use).
+  // A kept Hessian factor stays valid unless what it was assembled with changed (weights are compared at
+  // use).
   if (q.diagonal_shift != params_.diagonal_shift || q.hessian_precision != params_.hessian_precision)
     factor_ = {};
   params_ = q;
@@ -533,7 +534,8 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   const EnergyWeights weights_at_start = weights_;  // restored if the iteration is interrupted
   const int max_attempts = params_.dynamic_weighting ? 1 + params_.direction_retries : 1;
   // Dragging: the first step after new targets may reuse the previous step's factor (set_dragging).
-  bool may_reuse = dragging_ && params_.drag_hessian_reuse > 0 && targets_version_ != stepped_targets_version_;
+  bool may_reuse =
+      dragging_ && params_.drag_hessian_reuse > 0 && targets_version_ != stepped_targets_version_;
   stepped_targets_version_ = targets_version_;
   for (int attempt = 0; attempt < max_attempts && !interrupted; ++attempt) {
     rec.lambda_p2p = weights_.p2p;

@@ -33,12 +33,12 @@ std::vector<std::pair<std::string, std::string>> blas_environment();
 // Call first thing in main(), before any thread starts.
 void reexec_with_environment(char** argv, const std::vector<std::pair<std::string, std::string>>& env);
 
-// OpenBLAS runs in the calling thread (openblas_set_num_threads(1), set once by the first call of any function
-// below); the products split their output over OpenMP's threads instead. Why: Debian's OpenBLAS is the pthread
-// build, whose workers spin ~0.1 s after each call; on two cores they then take a core from the OpenMP stages
-// that follow and from the studio's renderer (bench_studio at the defaults: a 900x900 Cholesky 8 ms alone,
-// 63 ms beside the window; 3.1 -> 4.8 view updates/s with one BLAS thread; docs/benchmarks.md). One pool, one
-// wait policy (OMP_WAIT_POLICY, gui/src/omp_wait.h).
+// OpenBLAS runs in the calling thread (openblas_set_num_threads(1), set once by the first call of any
+// function below); the products split their output over OpenMP's threads instead. Why: Debian's OpenBLAS is
+// the pthread build, whose workers spin ~0.1 s after each call; on two cores they then take a core from the
+// OpenMP stages that follow and from the studio's renderer (bench_studio at the defaults: a 900x900 Cholesky
+// 8 ms alone, 63-76 ms beside the window; 3.1-3.6 -> 4.2 view updates/s, side by side; docs/benchmarks.md).
+// One pool, one wait policy (OMP_WAIT_POLICY, gui/src/omp_wait.h).
 void use_blas_in_calling_thread();
 // Column-major C (m by n) = op(A) op(B), op = transpose when the flag is set, as cblas_?gemm with alpha 1 and
 // beta 0, the columns of C (or its rows when n < 2 × threads) split over OpenMP's threads. Each element of C

@@ -42,9 +42,9 @@ struct DeformParams {
   double armijo = 1e-4;            // sufficient-decrease constant c1
   int max_halvings = 40;           // line-search halvings before "no certified step"
   double diagonal_shift = 1e-5;    // added to the reduced Hessian's diagonal
-  // While the handles are dragged (DeformationSolver::set_dragging: the studio), a Newton step right after new
-  // targets may solve with the previous step's Hessian factor instead of assembling its own, at most this many
-  // steps in a row (0 = never). The CLI never drags. docs/solver.md, "Dragging".
+  // While the handles are dragged (DeformationSolver::set_dragging: the studio), a Newton step right after
+  // new targets may solve with the previous step's Hessian factor instead of assembling its own, at most this
+  // many steps in a row (0 = never). The CLI never drags. docs/solver.md, "Dragging".
   int drag_hessian_reuse = 2;
   HessianPrecision hessian_precision = HessianPrecision::kSingle;  // products of the reduced Hessian
   // Handle error reported as "reached", as a fraction of the model size (Frame::scale, normalization.h: half

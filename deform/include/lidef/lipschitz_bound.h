@@ -22,8 +22,8 @@ namespace lidef {
 //   third     (21): loss r·(‖H(c)‖_F + r Σ δ Θ)
 //   combined  (Step 3b): per leaf the smaller of the first-order loss and the Taylor form
 //                        r ‖H(c)‖_op + ½ r² Σ δ Θ (Weyl + second-order Taylor of J, operator norm of H(c)).
-//   spectral  (Step 3c): combined, and a third candidate per leaf: σ3(c) − ℓ + ½ r² Σ δ Θ with ℓ a lower bound
-//                        of σ3 on the first-order Taylor polynomial of J over the ball
+//   spectral  (Step 3c): combined, and a third candidate per leaf: σ3(c) − ℓ + ½ r² Σ δ Θ with ℓ a
+//                        lower bound of σ3 on the first-order Taylor polynomial of J over the ball
 //                        (taylor_sigma3_lower_bound: the smallest eigenvalue of JᵀJ moved by the exact
 //                        first-order change, minus a second-order term with the spectral gap).
 enum class LipschitzBound { kFirstOrder, kThirdOrder, kCombined, kSpectral };
@@ -52,9 +52,9 @@ inline double third_order_factor(double h, double d, double a, double b) {
 double hessian_operator_norm(const std::array<Mat3, 3>& H);
 
 // A lower bound of σ3ˢ(J + H[v]) over all |v| ≤ r, where H[v] has rows (H[a] v)ᵀ (the first-order Taylor
-// polynomial of J around the center): λmin((J+H[v])ᵀ(J+H[v])) ≥ λmin(JᵀJ + F(v)), F(v) = JᵀH[v] + H[v]ᵀJ, bounded
-// below through the smallest eigenvector of JᵀJ and its 2x2 reduction (docs/certificate.md, Step 3c), with
-// a rounding allowance. −∞ when det J ≤ 0, J or H is not finite, or the bound is not positive.
+// polynomial of J around the center): λmin((J+H[v])ᵀ(J+H[v])) ≥ λmin(JᵀJ + F(v)), F(v) = JᵀH[v] + H[v]ᵀJ,
+// bounded below through the smallest eigenvector of JᵀJ and its 2x2 reduction (docs/certificate.md, Step 3c),
+// with a rounding allowance. −∞ when det J ≤ 0, J or H is not finite, or the bound is not positive.
 double taylor_sigma3_lower_bound(const Mat3& J, const std::array<Mat3, 3>& H, double r);
 
 // Lower bound of |q−u| + |q−w| over q in the ball B(p, r): the larger of
