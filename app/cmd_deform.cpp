@@ -65,7 +65,8 @@ const char* kIterationsHeader =
     "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
     "norm,"
     "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
-    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total";
+    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
+    "cg_steps,cg_scale";
 
 std::string iteration_row(const IterationRecord& r) {
   std::ostringstream s;
@@ -77,7 +78,8 @@ std::string iteration_row(const IterationRecord& r) {
     << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error)
     << ',' << '"' << r.weight_action << '"' << ',' << format_g(r.ms_gradient, 6) << ','
     << format_g(r.ms_hessian, 6) << ',' << format_g(r.ms_solve, 6) << ',' << format_g(r.ms_line_search, 6)
-    << ',' << format_g(r.ms_certificate, 6) << ',' << format_g(r.ms_total, 6);
+    << ',' << format_g(r.ms_certificate, 6) << ',' << format_g(r.ms_total, 6) << ',' << r.cg_steps << ','
+    << d(r.cg_scale);
   return s.str();
 }
 

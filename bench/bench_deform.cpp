@@ -35,8 +35,12 @@
 // scenario); progress on stderr. Exit code 0, 2 on bad input, 3 when a solve failed (an exception) or a final
 // map is not certified.
 //
+// --newton-cg-steps N sets DeformParams::newton_cg_steps for every scenario (to compare the subset
+// direction's conjugate-gradient correction with the plain direction in one build).
+//
 // Usage: bench_deform [DATA_DIR] [--scenarios DIR] [--only a,b] [--iterations N] [--cap N] [--threads T]
 //                     [--reps R] [--cache-dir DIR] [--hessian-models bar,animal] [--no-compare] [--markdown]
+//                     [--newton-cg-steps N]
 #include <cblas.h>
 #include <omp.h>
 #include <unistd.h>
@@ -96,6 +100,7 @@ struct Options {
   int cap = 8;         // max_iterations of the capped scenarios
   int threads = 0;     // > 0: OpenMP and OpenBLAS threads
   int reps = 7;        // Hessian / SYRK repetitions
+  int cg_steps = -1;   // >= 0: newton_cg_steps for every scenario (-1: the scenario's)
   std::string cache_dir = "/tmp/lidef-bench-cache";
   std::vector<std::string> hessian_models = {"bar", "animal"};
   bool compare = true;
@@ -390,6 +395,8 @@ int main(int argc, char** argv) {
         opt.scenarios = next();
       else if (a == "--only")
         opt.only = split_list(next());
+      else if (a == "--newton-cg-steps")
+        opt.cg_steps = std::stoi(next());
       else if (a == "--iterations" || a == "--max-iterations")
         opt.iterations = std::stoi(next());
       else if (a == "--cap")
@@ -522,6 +529,7 @@ int main(int argc, char** argv) {
   std::cout << "- runs: scenario parameters (defaults: max_iterations 50, dynamic weighting on)";
   if (opt.iterations > 0)
     std::cout << ", max_iterations " << opt.iterations << " for every scenario (--iterations)";
+  if (opt.cg_steps >= 0) std::cout << ", newton_cg_steps " << opt.cg_steps << " for every scenario";
   std::cout << "; capped at " << opt.cap << " iterations: ";
   for (size_t k = 0; k < kCapped.size(); ++k) std::cout << (k ? ", " : "") << kCapped[k];
   std::cout << (opt.compare ? "; each scenario again with dynamic_weighting = false" : "") << "\n";
@@ -605,6 +613,7 @@ int main(int argc, char** argv) {
       p.dynamic_weighting = dyn;
       r.capped = contains(kCapped, sc.name) && opt.iterations == 0;
       if (opt.iterations > 0) p.max_iterations = opt.iterations;
+      if (opt.cg_steps >= 0) p.newton_cg_steps = opt.cg_steps;
       if (r.capped) p.max_iterations = std::min(p.max_iterations, opt.cap);
       r.max_iterations = p.max_iterations;
       std::cerr << "bench_deform: " << sc.name << " (dynamic weighting " << r.variant << ", max "

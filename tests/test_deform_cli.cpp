@@ -40,7 +40,8 @@ const char* const kIterationsHeader =
     "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
     "norm,"
     "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
-    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total";
+    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
+    "cg_steps,cg_scale";
 
 const std::vector<std::string> kOutputs = {"certificate.json", "coefficients.txt", "deformed.obj",
                                            "deformed.vtp",     "iterations.csv",   "leaves.vtu",

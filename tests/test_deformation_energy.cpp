@@ -429,6 +429,69 @@ TEST(DeformationEnergy, JacobiansAreTheReducedGradientMatrixTimesY) {
   std::printf("max |JT - G y| / (2^-24 |G||y|) = %.3f (0 for double storage)\n", worst);
 }
 
+// The exact second derivatives along a direction (the solver's conjugate-gradient correction) against the
+// all-sample unprojected Hessian matrix, with volume weights: Σ w_i G_iᵀ ∇²E_iso[dJ_i] / |I| plus the
+// quadratic terms equals H vec(d), and the curvature equals vec(d)ᵀ H vec(d), both to rounding (1e-10
+// relative).
+TEST(DeformationEnergy, HessianTimesDirectionEqualsTheExactHessianMatrix) {
+  const EnergySetup& S = setup();
+  DeformationEnergy E = make_energy();
+  E.set_handles(S.D, offset_targets(8));
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<double> U(0.2, 3.0);
+  VecXd w(E.num_samples());
+  for (Eigen::Index i = 0; i < w.size(); ++i) w(i) = U(rng);
+  E.set_sample_weights(w);
+  const TestMap m = test_map(E);
+  const EnergyWeights ew{10.0, 0.5};
+  const MatXd H = E.hessian(m.JT, ew, false, true);
+  const int s = E.reduced_size();
+  for (unsigned seed : {3u, 4u, 5u}) {
+    const MatS3 d = random_map(0.1, seed) - S.y_identity;
+    const MatJT dJ = E.jacobians(d);
+    const MatS3 Hd =
+        E.distortion_hessian_times_sum(m.JT, dJ) / E.num_samples() + E.quadratic_hessian_times(d, ew);
+    const VecXd ref = H * Eigen::Map<const VecXd>(d.data(), 3 * s);
+    const double err = (Eigen::Map<const VecXd>(Hd.data(), 3 * s) - ref).norm();
+    EXPECT_LT(err, 1e-10 * ref.norm()) << "seed " << seed;
+    const double curvature =
+        E.distortion_curvature(m.JT, dJ) / E.num_samples() +
+        Eigen::Map<const VecXd>(d.data(), 3 * s)
+            .dot(Eigen::Map<const VecXd>(E.quadratic_hessian_times(d, ew).data(), 3 * s));
+    const double ref_curvature = Eigen::Map<const VecXd>(d.data(), 3 * s).dot(ref);
+    EXPECT_NEAR(curvature, ref_curvature, 1e-10 * std::abs(ref_curvature)) << "seed " << seed;
+  }
+}
+
+// The two passes over the stored float rows (jacobians, and the transposed sum behind the gradient) on a
+// shape that reaches every remainder path of their vector loops: s = 43 (not a multiple of 4) and 3|I| = 903
+// rows (odd, not a multiple of 4; 301 samples = two chunks). Reference: the same float-rounded G in double
+// arithmetic.
+TEST(DeformationEnergy, GradientMatrixPassesHandleEveryShape) {
+  const int n = 301, s = 43;
+  std::mt19937 rng(37);
+  std::normal_distribution<double> N01;
+  MatXdR G(3 * n, s);
+  for (Eigen::Index r = 0; r < G.rows(); ++r)
+    for (int j = 0; j < s; ++j) G(r, j) = 0.01 * N01(rng) + (j == r % 3 ? 1.0 : 0.0);
+  // y = [I₃; 0] + noise: J_i = I + O(0.05), det J_i > 0.
+  MatS3 y = MatS3::Zero(s, 3);
+  y.topRows<3>().setIdentity();
+  for (int j = 0; j < s; ++j)
+    for (int a = 0; a < 3; ++a) y(j, a) += 0.003 * N01(rng);
+  const DeformationEnergy E(G, {}, VecXd::Ones(s), 10);
+  const MatXd Gf = G.cast<float>().cast<double>();
+  const MatJT JT = E.jacobians(y);
+  const MatJT JT_ref = Gf * y;
+  EXPECT_LT((JT - JT_ref).cwiseAbs().maxCoeff(), 1e-14);
+  MatJT P(3 * n, 3);
+  for (int i = 0; i < n; ++i)
+    P.middleRows<3>(3 * i) = sd_gradient(JT.middleRows<3>(3 * i).transpose()).transpose();
+  const MatS3 g_ref = Gf.transpose() * P;
+  const MatS3 g = E.distortion_gradient_sum(JT);
+  EXPECT_LT((g - g_ref).cwiseAbs().maxCoeff(), 1e-12 * g_ref.cwiseAbs().maxCoeff());
+}
+
 TEST(DeformationEnergy, IdentityWithTargetsAtSourcesIsAZero) {
   // At ỹ = Ξᵀ y_id with q_h = p_h the energy's minimum 0 is attained, up to rounding:
   //  - J_i = I up to the storage of G: with G rounded to float (deformation_energy.h) |J − I| ≲ 2⁻²⁴ Σ|G||ỹ|

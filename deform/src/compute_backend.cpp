@@ -22,11 +22,21 @@ class CpuEnergyKernels final : public EnergyKernels {
   MatXd distortion_pair_blocks(bool double_precision) override {
     return e_.distortion_pair_blocks(J_, double_precision);
   }
+  bool has_hessian_products() const override { return true; }
+  MatS3 distortion_hessian_direction_sum() override { return e_.distortion_hessian_times_sum(J_, dJ_); }
+  double distortion_curvature() override { return e_.distortion_curvature(J_, dJ_); }
+  void accumulate_direction(double alpha, bool start) override {
+    if (start)
+      sum_ = alpha * dJ_;
+    else
+      sum_ += alpha * dJ_;
+  }
+  void use_accumulated_direction() override { dJ_.swap(sum_); }
   MatJT current_jacobians() override { return J_; }
 
  private:
   const DeformationEnergy& e_;
-  MatJT J_, dJ_;
+  MatJT J_, dJ_, sum_;
 };
 
 class CpuBackend final : public ComputeBackend {

@@ -57,6 +57,9 @@ std::vector<ParamInfo> make_table() {
       {"drag_hessian_reuse", "newton", &D::drag_hessian_reuse, 0, 1000,
        "while handles are dragged (studio): Newton steps in a row that may reuse the previous step's Hessian "
        "factor (0 = never)"},
+      {"newton_cg_steps", "newton", &D::newton_cg_steps, 0, 20,
+       "conjugate-gradient iterates on the exact Hessian after the subset Hessian's solve (1 = scale the "
+       "direction to the exact model's minimum; 0 = off)"},
       {"hessian_precision", "newton", &D::hessian_precision, 0, 0,
        "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,

@@ -12,6 +12,7 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/newton_cg.h"
 #include "lidef/number_format.h"
 
 // LAPACK Cholesky from OpenBLAS (blocked and threaded; several times faster than Eigen::LLT at 900 x 900).
@@ -551,6 +552,8 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
 
     const VecXd gvec = Eigen::Map<const VecXd>(g.data(), 3 * s);
     VecXd dvec = -gvec;
+    MatXd F;                      // this step's factor (when not kept in factor_)
+    const MatXd* L = &factor_.L;  // the factor dvec was solved with
     const bool reuse = may_reuse && factor_.L.size() > 0 && factor_.reuses < params_.drag_hessian_reuse &&
                        factor_.weights.p2p == weights_.p2p && factor_.weights.smooth == weights_.smooth;
     rec.hessian_reused = reuse;
@@ -568,7 +571,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       rec.ms_hessian += ms_since(t0);
 
       t0 = Clock::now();
-      MatXd F = H;
+      F = H;
       bool ok = cholesky_solve(F, dvec);
       for (double extra = 1e-6; !ok && extra < 1e6; extra *= 100) {
         // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision
@@ -579,17 +582,25 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
         ok = cholesky_solve(F, dvec);
       }
       if (!ok) throw NumericalError("projected Newton: the reduced Hessian is not positive definite");
-      if (dragging_ && params_.drag_hessian_reuse > 0)
+      if (dragging_ && params_.drag_hessian_reuse > 0) {
         factor_ = {std::move(F), weights_, 0};
-      else
+        L = &factor_.L;
+      } else {
         factor_ = {};
+        L = &F;
+      }
       rec.ms_solve += ms_since(t0);
     }
+    t0 = Clock::now();
+    if (params_.newton_cg_steps > 0)
+      dvec = conjugate_gradient_correction(gvec, dvec, *L, rec);  // leaves the kernels' direction at dvec
+    else
+      kernels_->set_direction(Eigen::Map<const MatS3>(dvec.data(), s, 3));
+    rec.ms_solve += ms_since(t0);
     const MatS3 delta = Eigen::Map<const MatS3>(dvec.data(), s, 3);
     rec.newton_decrement = -gvec.dot(dvec);
 
     t0 = Clock::now();
-    kernels_->set_direction(delta);
     const double slope = gvec.dot(dvec);  // < 0 for a descent direction
     const bool may_retry = attempt + 1 < max_attempts && e0.p2p >= p2p_far &&
                            (weights_.p2p > params_.min_p2p_factor * params_.lambda_p2p ||
@@ -667,6 +678,49 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   rec.ms_total = ms_since(t_iter);
   history_.push_back(rec);
   return rec;
+}
+
+VecXd DeformationSolver::conjugate_gradient_correction(const VecXd& gvec, const VecXd& p0, const MatXd& L,
+                                                       IterationRecord& rec) {
+  // The exact Hessian's products for truncated_newton_cg (newton_cg.h): the distortion part from the kernels
+  // (or on the host from the current Jacobians, for a backend without them), the quadratic terms exactly.
+  const int s = subspace_.size();
+  const double n = energy_->num_samples();
+  auto as_mat = [s](const VecXd& v) { return Eigen::Map<const MatS3>(v.data(), s, 3); };
+  auto as_vec = [s](const MatS3& m) { return Eigen::Map<const VecXd>(m.data(), 3 * s); };
+  const bool native = kernels_->has_hessian_products();
+  MatJT J_host, dJ_host;
+  if (!native) J_host = kernels_->current_jacobians();
+  NewtonCgOperators ops;
+  ops.curvature = [&](const VecXd& p) {
+    double dis;
+    if (native) {
+      kernels_->set_direction(as_mat(p));
+      dis = kernels_->distortion_curvature();
+    } else {
+      dJ_host = energy_->jacobians(as_mat(p));
+      dis = energy_->distortion_curvature(J_host, dJ_host);
+    }
+    return dis / n + p.dot(as_vec(energy_->quadratic_hessian_times(as_mat(p), weights_)));
+  };
+  ops.hessian_times = [&](const VecXd& p) -> VecXd {
+    const MatS3 dis = native ? kernels_->distortion_hessian_direction_sum()
+                             : energy_->distortion_hessian_times_sum(J_host, dJ_host);
+    return as_vec(dis / n + energy_->quadratic_hessian_times(as_mat(p), weights_));
+  };
+  ops.precondition = [&](VecXd& r) { return cholesky_solve_factored(L, r); };
+  ops.accepted = [&](double alpha, int k) {
+    if (native) kernels_->accumulate_direction(alpha, k == 0);
+  };
+  NewtonCgResult cg = truncated_newton_cg(gvec, p0, params_.newton_cg_steps, ops);
+  rec.cg_steps = cg.steps;
+  rec.cg_scale = cg.scale;
+  // The kernels' direction becomes d: the accumulated Jacobians (no pass over G), or one pass.
+  if (cg.steps > 0 && native)
+    kernels_->use_accumulated_direction();
+  else
+    kernels_->set_direction(as_mat(cg.d));
+  return cg.d;
 }
 
 void DeformationSolver::update_weights(IterationRecord& rec) {

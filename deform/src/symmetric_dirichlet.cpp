@@ -68,6 +68,16 @@ Mat3 sd_gradient(const Mat3& J) {
   return 2.0 * J - 2.0 * JinvT * Jinv * JinvT;
 }
 
+Mat3 sd_hessian_times(const Mat3& J, const Mat3& dJ) {
+  if (!(J.determinant() > 0)) return Mat3::Constant(kNaN);
+  // ∇E = 2J − 2 Aᵀ A Aᵀ with A = J⁻¹ and dA = −A dJ A, so d(Aᵀ A Aᵀ) = −(B X B Bᵀ B + B Bᵀ dJ Bᵀ B + B Bᵀ B X
+  // B) with B = Aᵀ, X = dJᵀ.
+  const Mat3 B = J.inverse().transpose();
+  const Mat3 BBt = B * B.transpose(), BtB = B.transpose() * B;
+  const Mat3 XB = dJ.transpose() * B;
+  return 2.0 * dJ + 2.0 * (B * XB * B.transpose() * B + BBt * dJ * BtB + BBt * B * XB);
+}
+
 Mat9 sd_hessian(const Mat3& J) {
   return hessian_from_eigensystem(J, false);
 }

@@ -15,6 +15,7 @@
 
 #include "lidef/cage.h"
 #include "lidef/deformation_energy.h"
+#include "lidef/errors.h"
 #include "lidef/types.h"
 
 namespace lidef {
@@ -36,6 +37,17 @@ class EnergyKernels {
   // The six pair blocks G_Hᵀ diag(H̃^{aa'}) G_H of the PSD-projected distortion Hessian at J_cur, side by side
   // (s by 6s, pairs 00, 01, 02, 11, 12, 22), weighted by 1/|H|; single or double precision products.
   virtual MatXd distortion_pair_blocks(bool double_precision) = 0;
+  // Exact second derivatives along dJ at J_cur (DeformationEnergy::distortion_hessian_times_sum /
+  // distortion_curvature), for the conjugate-gradient correction of the subset Hessian. A backend that
+  // does not provide them says so with has_hessian_products() (the solver then computes them on the host from
+  // current_jacobians()). The direction sum D = Σ α_k dJ_k of the CG iterates is kept beside dJ so that the
+  // final direction needs no further pass over G: accumulate_direction(α, start) adds α dJ to it (start:
+  // D = α dJ), use_accumulated_direction() makes D the direction dJ.
+  virtual bool has_hessian_products() const { return false; }
+  virtual MatS3 distortion_hessian_direction_sum() { throw Error("this backend has no Hessian products"); }
+  virtual double distortion_curvature() { throw Error("this backend has no Hessian products"); }
+  virtual void accumulate_direction(double, bool) { throw Error("this backend has no Hessian products"); }
+  virtual void use_accumulated_direction() { throw Error("this backend has no Hessian products"); }
   // J_cur in the JT layout (3|I| by 3), for reports and tests.
   virtual MatJT current_jacobians() = 0;
 };

@@ -46,6 +46,10 @@ struct DeformParams {
   // new targets may solve with the previous step's Hessian factor instead of assembling its own, at most this
   // many steps in a row (0 = never). The CLI never drags. docs/solver.md, "Dragging".
   int drag_hessian_reuse = 2;
+  // Preconditioned conjugate-gradient iterates on the exact (all-sample) Hessian after the subset Hessian's
+  // solve: 1 = scale the direction to the exact quadratic model's minimum along it, each more = one exact
+  // Hessian-vector product (0 = off). docs/solver.md, "Correcting the subset Hessian".
+  int newton_cg_steps = 1;
   HessianPrecision hessian_precision = HessianPrecision::kSingle;  // products of the reduced Hessian
   // Handle error reported as "reached", as a fraction of the model size (Frame::scale, normalization.h: half
   // the largest extent of the cage's bounding box), so that it means the same for a scaled model.

@@ -102,6 +102,14 @@ class DeformationEnergy {
   double distortion_sum(const MatJT& JT) const;
   // Σ_i G_iᵀ ∂E_iso/∂J_i (s by 3, not divided by |I|).
   MatS3 distortion_gradient_sum(const MatJT& JT) const;
+  // Exact (all samples, unprojected) second derivatives along a direction whose Jacobians are dJ (= G d,
+  // 3|I| by 3), for the conjugate-gradient correction of the subset Hessian (docs/solver.md): Σ_i w_i G_iᵀ
+  // ∇²E_iso(J_i)[dJ_i] (s by 3) and Σ_i w_i ⟨dJ_i, ∇²E_iso(J_i)[dJ_i]⟩, neither divided by |I|. Deterministic
+  // like the sums above; require det J_i > 0 everywhere.
+  MatS3 distortion_hessian_times_sum(const MatJT& JT, const MatJT& dJ) const;
+  double distortion_curvature(const MatJT& JT, const MatJT& dJ) const;
+  // The exact Hessian of the handle and smoothness terms times d (s by 3).
+  MatS3 quadratic_hessian_times(const MatS3& d, const EnergyWeights& w) const;
   // The six pair blocks (s by 6s) of the PSD-projected distortion Hessian on the subset H, weighted by 1/|H|,
   // products in single (OpenBLAS sgemm) or double precision (dgemm).
   MatXd distortion_pair_blocks(const MatJT& JT, bool double_precision) const;
@@ -120,6 +128,12 @@ class DeformationEnergy {
   MatXd pair_blocks(const MatJT& JT, bool projected, bool all_samples, bool double_precision) const;
   MatXd products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const;
   void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
+  // Σ_i w_i per_sample(i) in fixed chunks added in order (the same bits for every thread count).
+  template <class PerSample>
+  double weighted_sample_sum(const PerSample& per_sample) const;
+  // Σ_i w_i G_iᵀ per_sample(i) (s by 3) for a per-sample 3x3 in J's layout, in fixed chunks.
+  template <class PerSample>
+  MatS3 weighted_transpose_sum(const PerSample& per_sample) const;
   VecXd all_block_weights() const;  // #samples: w_i / Σ w (1/n without weights)
   MatXfR G_;
   std::vector<int> subset_;

@@ -95,6 +95,8 @@ struct IterationRecord {
   double max_handle_error = 0;  // max ‖f(p_h) − q_h‖ at the current map
   std::string weight_action;    // what dynamic weighting did after this step ("", "smooth*", "p2p*", "reset")
   bool hessian_reused = false;  // the direction came from an earlier step's factor (set_dragging)
+  int cg_steps = 0;             // conjugate-gradient iterates taken (newton_cg_steps; 0: the plain direction)
+  double cg_scale = 0;          // the first iterate's scale of the plain direction (1: the subset Hessian's)
   double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, ms_certificate = 0, ms_total = 0;
 };
 
@@ -268,6 +270,10 @@ class DeformationSolver {
   bool dragging_ = false;
   long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
   struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
+  // The plain direction p0 = −(factor)⁻¹ ∇E improved by params_.newton_cg_steps preconditioned CG iterates
+  // on the exact Hessian; leaves the kernels' direction set to the result.
+  VecXd conjugate_gradient_correction(const VecXd& gvec, const VecXd& p0, const MatXd& L,
+                                      IterationRecord& rec);
 };
 
 }  // namespace lidef

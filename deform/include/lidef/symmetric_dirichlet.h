@@ -52,6 +52,12 @@ double sd_energy(const Mat3& J);
 // ∂E/∂J, same layout as J. NaN-filled when det J ≤ 0.
 Mat3 sd_gradient(const Mat3& J);
 
+// ∂²E/∂J² applied to dJ (same layout as J; = sd_hessian(J) vec(dJ) reshaped), without projection, from the
+// closed form: with B = J⁻ᵀ, X = dJᵀ, it is 2 dJ + 2 (B X B Bᵀ B + B Bᵀ dJ Bᵀ B + B Bᵀ B X B) — a few 3x3
+// products, no eigensystem (the solver's Hessian-vector products, docs/solver.md "Correcting the subset
+// Hessian"). NaN-filled when det J ≤ 0.
+Mat3 sd_hessian_times(const Mat3& J, const Mat3& dJ);
+
 // ∂²E/∂vec(J)² (column-major vec), from the analytic eigensystem, without clamping. Symmetric. NaN-filled
 // when det J ≤ 0.
 Mat9 sd_hessian(const Mat3& J);
