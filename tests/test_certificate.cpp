@@ -359,6 +359,55 @@ TEST(Certificate, DeterministicAndReducedPathAgrees) {
   EXPECT_NEAR(a.min_sigma3_center, c.min_sigma3_center, 1e-10);
 }
 
+// CertifyParams::priority_voxels (the line search's "check where the last trial failed first"): the verdict
+// never depends on it — the same certificate, bit for bit, when certified — and a trial that fails where the
+// list points is rejected after refining less. Maps of growing amplitude give certified maps that refine and
+// maps that fail at the depth limit without folding.
+TEST(Certificate, PriorityVoxelsNeverChangeTheVerdictAndRejectEarly) {
+  const CertCase s = make_setup(lidef::test::icosphere(2, 0.15, 8), 1500);
+  OctreeCertifier cert(s.cage, s.sampling);
+  std::mt19937 rng(41);
+  int certified_refining = 0, failing_early = 0;
+  for (double amp = 0.1; amp < 3; amp *= 1.3) {
+    const MatX3d y = smooth_map(s.cage, s.sub, amp, 15);
+    CertifyParams p;
+    p.max_depth = 2;
+    p.stop_on_failure = true;
+    p.keep_leaves = false;
+    const Certificate plain = cert.certify(y, p);
+    std::vector<std::vector<long>> lists = {plain.failed_voxels, {}};
+    std::uniform_int_distribution<long> pick(0, s.sampling.size() - 1);
+    for (int k = 0; k < 6; ++k) lists.back().push_back(pick(rng));
+    for (const std::vector<long>& list : lists) {
+      CertifyParams q = p;
+      q.priority_voxels = list;
+      const Certificate c = cert.certify(y, q);
+      SCOPED_TRACE("amplitude " + std::to_string(amp));
+      EXPECT_EQ(c.certified, plain.certified);
+      if (plain.certified) {
+        EXPECT_EQ(c.num_leaves, plain.num_leaves);
+        EXPECT_EQ(c.refined, plain.refined);
+        EXPECT_EQ(c.min_lower_bound, plain.min_lower_bound);
+        EXPECT_EQ(c.min_sigma3_center, plain.min_sigma3_center);
+      }
+    }
+    if (plain.certified && plain.refined > 0) ++certified_refining;
+    if (!plain.certified && plain.min_sigma3_center > 0 && !plain.failed_voxels.empty()) {
+      // The trial after a rejection: the failed voxels first.
+      CertifyParams q = p;
+      q.priority_voxels = plain.failed_voxels;
+      const Certificate c = cert.certify(y, q);
+      EXPECT_LE(c.refined, plain.refined);
+      if (c.refined < plain.refined) ++failing_early;
+      std::printf(
+          "amplitude %.3f: not certified, %zu failed voxels, refined %ld without the list, %ld with\n", amp,
+          plain.failed_voxels.size(), plain.refined, c.refined);
+    }
+  }
+  EXPECT_GE(certified_refining, 1) << "no certified map that refines: the test maps are too mild";
+  EXPECT_GE(failing_early, 1) << "no failing map rejected with less refinement";
+}
+
 TEST(Certificate, BadInputIsRejected) {
   const CertCase s = make_setup(lidef::test::icosphere(1, 0.1, 8), 300);
   OctreeCertifier cert(s.cage, s.sampling);

@@ -141,6 +141,25 @@ TEST(CompareCli, BeamAllMethodsEndToEnd) {
   EXPECT_FALSE(vhm.at("certified").empty());          // judged by lidef's certificate
   EXPECT_TRUE(tri.at("mean_e_iso_minus_6").empty());  // no volumetric distortion for a surface method
   EXPECT_TRUE(tri.at("certified").empty());
+  // The solid mean (harmonic methods, on the samples of lidef's certified domain): for lidef it is the
+  // distortion term lidef minimized, which `lidef deform` reports from its own (float-stored, reduced) basis
+  // gradients — an independent evaluation of the same number (full basis, per point); 1e-5 covers the float
+  // storage.
+  EXPECT_NE(md.find("mean E_iso−6 (solid)"), std::string::npos);
+  EXPECT_TRUE(tet.at("mean_e_iso_minus_6_solid").empty());
+  EXPECT_TRUE(tri.at("mean_e_iso_minus_6_solid").empty());
+  EXPECT_GT(num(vhm, "mean_e_iso_minus_6_solid"), 0);
+  const double solid = num(lidef, "mean_e_iso_minus_6_solid");
+  EXPECT_GT(solid, 0);
+  std::string dlog;
+  ASSERT_EQ(run_lidef("deform '" + lidef::test::project_data() +
+                          "/scenarios/beam_bend.json' --quiet --out '" + dir / "deform" + "' " + kSmall,
+                      &dlog),
+            0)
+      << dlog;
+  const nlohmann::json summary = nlohmann::json::parse(lidef::test::read_text(dir / "deform/summary.json"));
+  const double e_dis = summary.at("energy").at("dis").get<double>();
+  EXPECT_NEAR(solid, e_dis, 1e-5 * e_dis) << "compare's solid mean vs deform's distortion term";
 }
 
 TEST(CompareCli, FailingMethodIsReportedAndOthersRun) {

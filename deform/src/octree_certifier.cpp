@@ -253,6 +253,7 @@ struct OctreeCertifier::Run {
   // The refinement of one failing base voxel.
   struct VoxelState {
     bool ok = true, definite_fail = false;
+    bool failed_here = false;  // its own proof failed (Certificate::failed_voxels)
     long refined = 1, evaluated = 0;
     int depth_used = 0;
     double min_sigma = kInf;
@@ -543,21 +544,47 @@ struct OctreeCertifier::Run {
     const auto t0 = Clock::now();
     const long F = static_cast<long>(failing_base.size());
     vs.resize(F);
+    std::vector<long> refinable;
     for (long fi = 0; fi < F; ++fi) {
       const long i = failing_base[fi];
       if (!im.clear[i]) uncleared.push_back(i);
       if (!im.clear[i] || sigma3(i) <= 0 || p.max_depth == 0) {
         vs[fi].ok = false;  // refused, or σ3 ≤ 0 at a center: no subdivision can certify it
+        vs[fi].failed_here = true;
         if (p.stop_on_failure) abort = true;
         continue;
       }
-      vs[fi].first_child = add_children(base[i].center, base[i].side, 0, T(i), combined ? T1(i) : 0.0, fi);
+      refinable.push_back(fi);
     }
+    // With a priority list (line search), its voxels are refined first, to completion; the others only if
+    // they all pass. A voxel left unrefined after an abort keeps its failing base leaf (not certified).
+    std::vector<long> first, rest;
+    if (p.stop_on_failure && !p.priority_voxels.empty()) {
+      std::vector<long> prio = p.priority_voxels;
+      std::sort(prio.begin(), prio.end());
+      for (long fi : refinable)
+        (std::binary_search(prio.begin(), prio.end(), failing_base[fi]) ? first : rest).push_back(fi);
+    } else {
+      rest = refinable;
+    }
+    for (const std::vector<long>* phase : {&first, &rest}) {
+      if (p.stop_on_failure && abort) break;
+      for (long fi : *phase) {
+        const long i = failing_base[fi];
+        vs[fi].first_child = add_children(base[i].center, base[i].side, 0, T(i), combined ? T1(i) : 0.0, fi);
+      }
+      refine_frontier();
+    }
+    cert.ms_refine = ms_since(t0);
+  }
+  // Level-synchronous refinement of the nodes in `frontier` until none is left (or an abort).
+  void refine_frontier() {
     std::vector<int> batch;
     std::vector<NodeValues> vals;
     while (!frontier.empty()) {
       if (p.stop_on_failure && abort) {
         for (int id : frontier) unresolved(tree[id]);
+        frontier.clear();
         break;
       }
       take_batch(batch);
@@ -565,7 +592,6 @@ struct OctreeCertifier::Run {
       frontier.clear();
       decide_batch(batch, vals);
     }
-    cert.ms_refine = ms_since(t0);
   }
   int add_children(const Vec3& c, double sd, int depth, double bound, double bound_first, long fi) {
     const int first = static_cast<int>(tree.size());
@@ -592,6 +618,7 @@ struct OctreeCertifier::Run {
       if (st.definite_fail || ++st.evaluated > p.max_children_per_voxel ||
           budget_used++ >= p.max_refined_voxels) {
         if (!st.definite_fail) budget_hit = true;
+        if (st.evaluated > p.max_children_per_voxel) st.failed_here = true;
         unresolved(nd);
         if (p.stop_on_failure) abort = true;
         continue;
@@ -715,6 +742,7 @@ struct OctreeCertifier::Run {
       } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
         tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, false, bi, v.sign_unresolved};
         st.ok = false;
+        if (v.sigma3 <= 0 || depth >= p.max_depth) st.failed_here = true;
         // σ3 ≤ 0 (or a sign not resolved, σ3 = 0) at a center settles this voxel: refining its other nodes
         // cannot change the verdict.
         if (v.sigma3 <= 0) st.definite_fail = true;
@@ -781,6 +809,8 @@ struct OctreeCertifier::Run {
     }
     cert.certified = all_ok;
     cert.num_leaves = leaves;
+    for (size_t k = 0; k < vs.size() && cert.failed_voxels.size() < 64; ++k)
+      if (vs[k].failed_here) cert.failed_voxels.push_back(failing_base[k]);
     cert.uncleared_voxels = static_cast<long>(uncleared.size());
     if (!cert.certified) cert.reason = failure_reason();
     return std::move(cert);

@@ -622,7 +622,9 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       const auto tc = Clock::now();
       CertifyParams cp = certify_params(true, false);
       cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
+      cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
       Certificate c = certifier_->certify_reduced(yt, cp);
+      if (!c.certified) line_search_failed_ = c.failed_voxels;
       rec.ms_certificate += ms_since(tc);
       if (trace)
         std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld (%s) %.1f ms\n", t, et.total,

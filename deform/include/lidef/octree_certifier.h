@@ -48,6 +48,12 @@ struct CertifyParams {
   // small σ3 really is, not merely that it is positive. Never changes the verdict; uses what is left of
   // max_refined_voxels and max_depth (docs/certificate.md, "Tight lower bound").
   double bound_tolerance = 0;
+  // With stop_on_failure: base voxels (indices into the sampling, any order) whose refinement runs first, to
+  // completion, before the other failing voxels are refined — the line search passes the voxels that failed
+  // its previous trial, so that a trial failing at the same place is rejected without refining the rest.
+  // Never changes the verdict: without a budget running out the same nodes are evaluated (docs/solver.md,
+  // "One Newton iteration").
+  std::vector<long> priority_voxels;
 };
 
 // One leaf of the certification octree.
@@ -89,6 +95,10 @@ struct Certificate {
   long uncleared_voxels = 0;
   std::vector<CertLeaf> leaves;   // when keep_leaves (in base-voxel order, children depth-first)
   std::vector<CertLeaf> failing;  // first failing leaves (σ3 ≤ 0, or depth/budget exhausted)
+  // Base voxels (ascending, at most 64) whose own proof failed: refused, σ3 ≤ 0 at a center, max depth or the
+  // per-voxel budget reached — not the ones merely left unrefined after stop_on_failure stopped (the line
+  // search's CertifyParams::priority_voxels for its next trial).
+  std::vector<long> failed_voxels;
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
 

@@ -268,6 +268,9 @@ class DeformationSolver {
     int reuses = 0;         // steps that took it after the one that assembled it
   } factor_;
   bool dragging_ = false;
+  // Base voxels whose proof failed in the last rejected line-search trial: the next trial refines them first
+  // (CertifyParams::priority_voxels), so a trial failing at the same place is rejected early.
+  std::vector<long> line_search_failed_;
   long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
   struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
   // The plain direction p0 = −(factor)⁻¹ ∇E improved by params_.newton_cg_steps preconditioned CG iterates

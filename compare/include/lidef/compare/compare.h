@@ -62,6 +62,10 @@ struct MethodResult {
   int reached = -1;
   double mean_e_iso = std::numeric_limits<double>::quiet_NaN();    // mean of E_iso − 6 over mesh vertices
   double max_e_iso = std::numeric_limits<double>::quiet_NaN();     // max (+∞ if some vertex is inverted)
+  // Harmonic methods (lidef, VHM): the volume-weighted mean of E_iso − 6 over the samples of lidef's
+  // certified domain (the mesh's solid, or the grid with domain "voxels") — what lidef minimizes, on the same
+  // samples for both; +∞ if some sample is inverted; NaN for the other methods.
+  double mean_e_iso_solid = std::numeric_limits<double>::quiet_NaN();
   double volume_ratio = std::numeric_limits<double>::quiet_NaN();  // deformed / rest mesh volume (Fig. 12)
   double crease_deg = std::numeric_limits<double>::quiet_NaN();    // smoothness: see crease_measure
   long inverted = -1;           // PWL(Tet): tets with det J ≤ 0 (-1 = not applicable)
