@@ -3,7 +3,7 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz]. Needs an X display;
+// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]. Needs an X display;
 // without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
@@ -62,6 +62,8 @@ struct Config {
   int dof, samples;
   View view;
   int hessian_reuse = -1;  // DeformParams::drag_hessian_reuse; -1: the table's default
+  double hessian_fraction = -1;  // DeformParams::hessian_fraction; < 0: the table's default
+  int cg_steps = -1;             // DeformParams::newton_cg_steps; -1: the table's default
 };
 
 struct Result {
@@ -164,7 +166,7 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
-                 "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz]\n");
+                 "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
@@ -199,8 +201,12 @@ int main(int argc, char** argv) {
     configs = {configs[0], {"default, drag_hessian_reuse 0", 300, 30000, View::kMesh, 0}};
   else if (which == "lipschitz")  // the two preset rows: mesh and Lipschitz view
     configs = {configs[2], configs[3]};
+  else if (which == "subset")  // the defaults against a 3% Hessian subset, with one and two CG iterates
+    configs = {configs[0],
+               {"default, hessian_fraction 0.03", 300, 30000, View::kMesh, -1, 0.03},
+               {"default, hessian_fraction 0.03, newton_cg_steps 2", 300, 30000, View::kMesh, -1, 0.03, 2}};
   else if (which != "all") {
-    std::fprintf(stderr, "bench_studio: --configs all, quick, default or lipschitz\n");
+    std::fprintf(stderr, "bench_studio: --configs all, quick, default, lipschitz or subset\n");
     return 2;
   }
   std::printf("OMP_WAIT_POLICY=%s. ", std::getenv("OMP_WAIT_POLICY"));
@@ -225,6 +231,8 @@ int main(int argc, char** argv) {
     p.reduced_dof = c.dof;
     p.samples = c.samples;
     if (c.hessian_reuse >= 0) p.drag_hessian_reuse = c.hessian_reuse;
+    if (c.hessian_fraction > 0) p.hessian_fraction = c.hessian_fraction;
+    if (c.cg_steps >= 0) p.newton_cg_steps = c.cg_steps;
     Result with_window, alone;
     {
       StudioWindow win;
