@@ -3,8 +3,8 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]. Needs an X display;
-// without DISPLAY it re-runs itself under xvfb-run.
+// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]. Needs an X
+// display; without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -165,8 +165,9 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr,
-                 "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]\n");
+    std::fprintf(
+        stderr,
+        "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
