@@ -739,7 +739,8 @@ int main(int argc, char** argv) {
   std::cout
       << "\nColumns: means over all iterations of IterationRecord::ms_gradient (energy + gradient on all "
          "samples), ms_hessian (9x9 PSD projections on H, the Kronecker products, quadratic terms), ms_solve "
-         "(dense Cholesky), ms_line_search (all trials: Armijo energy evaluations and certificates), "
+         "(dense Cholesky, the direction's Jacobians G δ and the CG iterates), ms_line_search (all trials: "
+         "Armijo energy evaluations and certificates), "
          "ms_certificate (the certificates of the line search only); other = total − the four stages "
          "(handle errors, dynamic weighting, bookkeeping). Refined = voxels subdivided by the accepted map's "
          "certificate.\n";

@@ -272,7 +272,7 @@ int main(int argc, char** argv) {
   }
   // Where a step's time goes (means per Newton step), in the window and for the engine alone.
   std::printf(
-      "\n| parameters | run | ms per step | gradient | Hessian | Cholesky | line search "
+      "\n| parameters | run | ms per step | gradient | Hessian | solve (Cholesky, direction) | line search "
       "| of which certificate | refined voxels (accepted certificate) | line-search trials | steps reusing "
       "the Hessian factor |\n"
       "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");

@@ -49,8 +49,9 @@ inline double sum4(V4d v) {
 }
 
 // out(r, a) = Σ_j G(r, j) y(j, a) for rows [r0, r1) of G (row-major float, s columns), y: s by 3
-// column-major; out: column-major with leading dimension ld (JT's layout). Two rows at a time: six
-// independent sums.
+// column-major; out: column-major with leading dimension ld (JT's layout). Four rows at a time: twelve
+// independent sums; the next four rows are prefetched while they lie in [r0, r1) (no pointer past the range
+// is formed).
 void rows_times(const MatXfR& G, int r0, int r1, const MatS3& y, double* out, Eigen::Index ld) {
   const int s = static_cast<int>(G.cols());
   const double* y0 = y.col(0).data();
@@ -69,10 +70,13 @@ void rows_times(const MatXfR& G, int r0, int r1, const MatS3& y, double* out, Ei
   for (; r + 4 <= r1; r += 4) {
     const float* g[4] = {G.row(r).data(), G.row(r + 1).data(), G.row(r + 2).data(), G.row(r + 3).data()};
     V4d acc[4][3] = {};
+    const bool ahead = r + 8 <= r1;  // the next group lies in the range
     for (int j = 0; j < s4; j += 4) {
       const V4d c0 = load4(y0 + j), c1 = load4(y1 + j), c2 = load4(y2 + j);
-      __builtin_prefetch(g[0] + j + 4 * s);  // the same column 4 rows ahead (the next group)
-      __builtin_prefetch(g[2] + j + 4 * s);
+      if (ahead) {  // the same columns 4 rows ahead (the next group)
+        __builtin_prefetch(g[0] + 4 * s + j);
+        __builtin_prefetch(g[2] + 4 * s + j);
+      }
       for (int k = 0; k < 4; ++k) {
         const V4d gk = widen4(g[k] + j);
         acc[k][0] += gk * c0;
@@ -118,9 +122,12 @@ void rows_transpose_times(const MatXfR& G, int r0, int r1, const double* P, Eige
     V4d q[4][3];
     for (int k = 0; k < 4; ++k)
       for (int a = 0; a < 3; ++a) q[k][a] = V4d{p[k][a], p[k][a], p[k][a], p[k][a]};
+    const bool ahead = r + 8 <= r1;  // as in rows_times
     for (int j = 0; j < s4; j += 4) {
-      __builtin_prefetch(g[0] + j + 4 * s);  // as in rows_times
-      __builtin_prefetch(g[2] + j + 4 * s);
+      if (ahead) {
+        __builtin_prefetch(g[0] + 4 * s + j);
+        __builtin_prefetch(g[2] + 4 * s + j);
+      }
       const V4d w0 = widen4(g[0] + j), w1 = widen4(g[1] + j), w2 = widen4(g[2] + j), w3 = widen4(g[3] + j);
       store4(c0 + j, load4(c0 + j) + ((w0 * q[0][0] + w1 * q[1][0]) + (w2 * q[2][0] + w3 * q[3][0])));
       store4(c1 + j, load4(c1 + j) + ((w0 * q[0][1] + w1 * q[1][1]) + (w2 * q[2][1] + w3 * q[3][1])));

@@ -717,11 +717,13 @@ VecXd DeformationSolver::conjugate_gradient_correction(const VecXd& gvec, const 
   NewtonCgResult cg = truncated_newton_cg(gvec, p0, params_.newton_cg_steps, ops);
   rec.cg_steps = cg.steps;
   rec.cg_scale = cg.scale;
-  // The kernels' direction becomes d: the accumulated Jacobians (no pass over G), or one pass.
-  if (cg.steps > 0 && native)
-    kernels_->use_accumulated_direction();
-  else
+  // The kernels' direction becomes d: the accumulated Jacobians (no pass over G); with no iterate it is
+  // already p0 (the first curvature set it); on the host fallback one pass.
+  if (native) {
+    if (cg.steps > 0) kernels_->use_accumulated_direction();
+  } else {
     kernels_->set_direction(as_mat(cg.d));
+  }
   return cg.d;
 }
 
