@@ -3,8 +3,8 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]. Needs an X
-// display; without DISPLAY it re-runs itself under xvfb-run.
+// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset|refinement]. Needs
+// an X display; without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -64,6 +64,7 @@ struct Config {
   int hessian_reuse = -1;  // DeformParams::drag_hessian_reuse; -1: the table's default
   double hessian_fraction = -1;  // DeformParams::hessian_fraction; < 0: the table's default
   int cg_steps = -1;             // DeformParams::newton_cg_steps; -1: the table's default
+  int refinement = -1;           // DeformParams::refinement (RefinementEval); -1: the table's default
 };
 
 struct Result {
@@ -165,9 +166,9 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(
-        stderr,
-        "usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset]\n");
+    std::fprintf(stderr,
+                 "usage: bench_studio DATA_DIR [--seconds S] [--configs "
+                 "all|quick|default|lipschitz|subset|refinement]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
@@ -206,8 +207,12 @@ int main(int argc, char** argv) {
     configs = {configs[0],
                {"default, hessian_fraction 0.03", 300, 30000, View::kMesh, -1, 0.03},
                {"default, hessian_fraction 0.03, newton_cg_steps 2", 300, 30000, View::kMesh, -1, 0.03, 2}};
+  else if (which == "refinement")  // the defaults (far-field refinement) against the batched refinement
+    configs = {configs[0],
+               {"default, refinement batched", 300, 30000, View::kMesh, -1, -1, -1,
+                static_cast<int>(RefinementEval::kPerEdgeBatched)}};
   else if (which != "all") {
-    std::fprintf(stderr, "bench_studio: --configs all, quick, default, lipschitz or subset\n");
+    std::fprintf(stderr, "bench_studio: --configs all, quick, default, lipschitz, subset or refinement\n");
     return 2;
   }
   std::printf("OMP_WAIT_POLICY=%s. ", std::getenv("OMP_WAIT_POLICY"));
@@ -234,6 +239,7 @@ int main(int argc, char** argv) {
     if (c.hessian_reuse >= 0) p.drag_hessian_reuse = c.hessian_reuse;
     if (c.hessian_fraction > 0) p.hessian_fraction = c.hessian_fraction;
     if (c.cg_steps >= 0) p.newton_cg_steps = c.cg_steps;
+    if (c.refinement >= 0) p.refinement = static_cast<RefinementEval>(c.refinement);
     Result with_window, alone;
     {
       StudioWindow win;

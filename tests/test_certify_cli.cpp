@@ -38,7 +38,7 @@ using lidef::test::TempDir;
 
 namespace {
 
-const char* const kVoxelsHeader = "cx,cy,cz,side,depth,sigma3,L,margin,certified";
+const char* const kVoxelsHeader = "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error";
 const char* const kVerifyHeader =
     "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified";
 
@@ -177,7 +177,7 @@ TEST_F(CertifyCli, IdentityCertifiesAtDepthZeroAndIsDeterministic) {
   EXPECT_EQ(j["domain"]["uncleared_voxels"], 0);
   // voxels.csv: exact header, one row per leaf, all certified; no refinement, so each leaf is a sampling leaf
   // of side base side / 2^depth (the mesh domain's levels toward the cage).
-  const auto rows = read_csv(tmp / "a/voxels.csv", kVoxelsHeader, 9);
+  const auto rows = read_csv(tmp / "a/voxels.csv", kVoxelsHeader, 10);
   ASSERT_EQ(static_cast<long>(rows.size()), j["leaves"].get<long>());
   for (const auto& r : rows) {
     EXPECT_EQ(r[3], std::ldexp(j["voxel_side"].get<double>(), -static_cast<int>(r[4])));
@@ -191,7 +191,7 @@ TEST_F(CertifyCli, IdentityCertifiesAtDepthZeroAndIsDeterministic) {
   const nlohmann::json g = read_json(tmp / "grid/certificate.json");
   EXPECT_EQ(g["domain"]["kind"], "voxels");
   EXPECT_LT(g["mesh_coverage"].get<double>(), 0.5);
-  for (const auto& r : read_csv(tmp / "grid/voxels.csv", kVoxelsHeader, 9)) {
+  for (const auto& r : read_csv(tmp / "grid/voxels.csv", kVoxelsHeader, 10)) {
     EXPECT_EQ(r[3], g["voxel_side"].get<double>());
     EXPECT_EQ(r[4], 0);
   }
@@ -235,7 +235,7 @@ TEST_F(CertifyCli, VtkFilesParseWithTheDocumentedArrays) {
   // Cell 0 is the cube of the first voxels.csv row: its volume is side³ (hexahedron corner order is right).
   double b[6];
   ug->GetCell(0)->GetBounds(b);
-  const double side = read_csv(tmp / "c/voxels.csv", kVoxelsHeader, 9).front()[3];  // its own (mesh domain)
+  const double side = read_csv(tmp / "c/voxels.csv", kVoxelsHeader, 10).front()[3];  // its own (mesh domain)
   EXPECT_NEAR(b[1] - b[0], side, 1e-12);
   EXPECT_NEAR(b[3] - b[2], side, 1e-12);
   EXPECT_NEAR(b[5] - b[4], side, 1e-12);
@@ -297,7 +297,7 @@ TEST_F(CertifyCli, FoldedMapIsNotCertified) {
   EXPECT_EQ(f["center"].size(), 3u);
   EXPECT_LE(f["margin"].get<double>(), 0);
   EXPECT_LT(j["min_sigma3_center"].get<double>(), 0);
-  const auto rows = read_csv(tmp / "out/voxels.csv", kVoxelsHeader, 9);
+  const auto rows = read_csv(tmp / "out/voxels.csv", kVoxelsHeader, 10);
   ASSERT_EQ(static_cast<long>(rows.size()), j["leaves"].get<long>());
   long failing = 0;
   for (const auto& r : rows) failing += r[8] == 0;
@@ -367,7 +367,7 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
       << output;
   const auto rows = read_csv(tmp / "cert/verify.csv", kVerifyHeader, 12);
   ASSERT_EQ(static_cast<long>(rows.size()), leaves);
-  const auto cert_rows = read_csv(tmp / "cert/voxels.csv", kVoxelsHeader, 9);
+  const auto cert_rows = read_csv(tmp / "cert/voxels.csv", kVoxelsHeader, 10);
   double max_tight = 0;
   for (size_t i = 0; i < rows.size(); ++i) {
     EXPECT_EQ(rows[i][0], cert_rows[i][0]);  // same leaf order, exact centers
@@ -420,7 +420,7 @@ TEST_F(VerifyCli, UnderstatedLipschitzConstantsAreCaught) {
     std::vector<std::string> f;
     std::istringstream ss(line);
     for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
-    ASSERT_EQ(f.size(), 9u);
+    ASSERT_EQ(f.size(), 10u);
     f[6] = format_double(std::strtod(f[6].c_str(), nullptr) / 1000);
     for (size_t k = 0; k < f.size(); ++k) forged += (k ? "," : "") + f[k];
     forged += "\n";

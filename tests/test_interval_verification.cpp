@@ -348,7 +348,7 @@ TEST(IntervalVerification, CliExitCodes) {
     std::istringstream r(vox.substr(row1, end1 - row1));
     for (std::string x; std::getline(r, x, ',');) f.push_back(x);
   }
-  ASSERT_EQ(f.size(), 9u);
+  ASSERT_EQ(f.size(), 10u);
   ASSERT_EQ(f[8], "1");
   f[3] = format_double(8 * std::stod(f[3]));
   std::string row;

@@ -426,6 +426,8 @@ TEST(OpenCL, CertificatesMatchCpu) {
       CertifyParams cp;
       cp.bound = bound;
       cp.max_refined_voxels = 20000;
+      // The CPU's exact refinement (the far field, the CPU default, refines differently: test_far_field.cpp).
+      cp.refinement = RefinementEval::kPerEdgeBatched;
       // The device evaluates octree nodes per face (the differential representation), as the CPU's per-face
       // path does; the CPU's default per-edge path (edge_jet.h) sums other magnitudes into its rounding
       // allowance τ, so its margins differ by ~1e-9 of those sums: it is compared by verdicts only.

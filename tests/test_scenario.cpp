@@ -37,8 +37,8 @@ std::string input_error(F&& f) {
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
   // Counted by hand in deform_params.h: 6 sampling + 2 energy + 13 newton (3 of them continuation) +
-  // 5 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 43;
+  // 6 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
+  const int kFields = 44;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -75,6 +75,7 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "continuation_stage_iterations",  // newton
                                              "max_depth",
                                              "bound",
+                                             "refinement",
                                              "max_refined",
                                              "line_search_max_refined",
                                              "bound_tolerance",  // certificate

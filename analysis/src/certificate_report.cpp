@@ -40,6 +40,7 @@ ojson leaf_json(const CertLeaf& l) {
   j["sigma3"] = num(l.sigma3);
   j["L"] = num(l.L);
   j["margin"] = num(l.margin);
+  j["sigma3_error"] = num(l.sigma3_error);
   return j;
 }
 
@@ -166,7 +167,14 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
   return r;
 }
 
-const char* voxels_csv_header() { return "cx,cy,cz,side,depth,sigma3,L,margin,certified"; }
+// sigma3_error (since the far-field refinement): |sigma3 − the true σ3 at the center| ≤ it (0: exact). Files
+// written before it have the first 9 columns only; they are still read.
+const char* voxels_csv_header() {
+  return "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error";
+}
+namespace {
+const char* kVoxelsCsvHeader9 = "cx,cy,cz,side,depth,sigma3,L,margin,certified";
+}
 
 std::string voxels_csv(const std::vector<CertLeaf>& leaves) {
   std::string s = voxels_csv_header();
@@ -175,7 +183,8 @@ std::string voxels_csv(const std::vector<CertLeaf>& leaves) {
   for (const CertLeaf& l : leaves) {
     for (int k = 0; k < 3; ++k) s += format_double(l.center(k)) + ',';
     s += format_double(l.side) + ',' + std::to_string(l.depth) + ',' + format_double(l.sigma3) + ',' +
-         format_double(l.L) + ',' + format_double(l.margin) + ',' + (l.certified ? "1" : "0") + '\n';
+         format_double(l.L) + ',' + format_double(l.margin) + ',' + (l.certified ? "1" : "0") + ',' +
+         format_double(l.sigma3_error) + '\n';
   }
   return s;
 }
@@ -185,19 +194,20 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
   std::istringstream in(text);
   std::string line;
   long lineno = 1;
-  if (!std::getline(in, line) || line != voxels_csv_header())
+  if (!std::getline(in, line) || (line != voxels_csv_header() && line != kVoxelsCsvHeader9))
     throw InputError(path, std::string("bad header (expected '") + voxels_csv_header() + "')", 1);
+  const int nfields = line == kVoxelsCsvHeader9 ? 9 : 10;
   std::vector<CertLeaf> leaves;
   while (std::getline(in, line)) {
     ++lineno;
     if (line.empty()) throw InputError(path, "empty line", lineno);
-    double f[9];
+    double f[10] = {};
     int k = 0;
     size_t start = 0;
     while (true) {
       const size_t comma = line.find(',', start);
       const std::string field = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-      if (k >= 9) throw InputError(path, "more than 9 fields", lineno);
+      if (k >= nfields) throw InputError(path, "more than " + std::to_string(nfields) + " fields", lineno);
       char* end = nullptr;
       f[k] = std::strtod(field.c_str(), &end);
       if (field.empty() || *end != '\0') throw InputError(path, "field " + std::to_string(k + 1) + " is not a number: '" + field + "'", lineno);
@@ -205,7 +215,10 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
       if (comma == std::string::npos) break;
       start = comma + 1;
     }
-    if (k != 9) throw InputError(path, "expected 9 fields, found " + std::to_string(k), lineno);
+    if (k != nfields)
+      throw InputError(path, "expected " + std::to_string(nfields) + " fields, found " + std::to_string(k),
+                       lineno);
+    if (!(f[9] >= 0)) throw InputError(path, "sigma3_error must be a number >= 0", lineno);
     if (!(f[3] > 0) || !std::isfinite(f[3])) throw InputError(path, "side must be a positive number", lineno);
     if (f[4] != std::floor(f[4]) || f[4] < 0 || f[4] > 64) throw InputError(path, "depth must be an integer in 0..64", lineno);
     if (f[8] != 0 && f[8] != 1) throw InputError(path, "certified must be 0 or 1", lineno);
@@ -219,6 +232,7 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
     l.L = f[6];
     l.margin = f[7];
     l.certified = f[8] == 1;
+    l.sigma3_error = f[9];
     l.base = -1;  // not stored
     leaves.push_back(l);
   }

@@ -78,6 +78,10 @@ std::vector<ParamInfo> make_table() {
        "first order and the Taylor form with the Hessian's operator norm), or \"spectral\" "
        "(combined, and the Taylor polynomial's sigma3 bounded through the eigenvalues of J^T J); "
        "docs/certificate.md"},
+      {"refinement", "certificate", &D::refinement, 0, 0,
+       "how the certificate evaluates octree children: \"far-field\" (the faces near a child exactly, the "
+       "others expanded around its parent with a bounded remainder; third-order bound only), \"batched\" "
+       "(every face, 8 children per SIMD pass), \"per-edge\", \"per-face\"; docs/certificate.md"},
       {"max_refined", "certificate", &D::max_refined, 0, 1e9,
        "child voxels evaluated per certification of a result at most"},
       {"line_search_max_refined", "certificate", &D::line_search_max_refined, 0, 1e9,
@@ -130,6 +134,10 @@ struct EnumNames;
 template <>
 struct EnumNames<LipschitzBound> {
   static constexpr const char* names[] = {"first", "third", "combined", "spectral"};
+};
+template <>
+struct EnumNames<RefinementEval> {
+  static constexpr const char* names[] = {"per-face", "per-edge", "batched", "far-field"};
 };
 template <>
 struct EnumNames<HessianPrecision> {
@@ -423,6 +431,7 @@ SamplingParams sampling_params_of(const DeformParams& params) {
 CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure, bool keep_leaves) {
   CertifyParams cp;
   cp.bound = params.bound;
+  cp.refinement = params.refinement;
   cp.max_depth = params.max_depth;
   cp.max_refined_voxels = params.max_refined;
   cp.stop_on_failure = stop_on_failure;

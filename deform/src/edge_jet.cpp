@@ -56,6 +56,98 @@ EdgeJet::EdgeJet(const Cage& cage) {
     c.dhat = dv / c.d;
     edges_.push_back(c);
   }
+  face_edges_.assign(faces_.size(), {-1, -1, -1});
+  auto add_edge = [&](int t, int e) {
+    for (int& slot : face_edges_[t])
+      if (slot < 0) {
+        slot = e;
+        return;
+      }
+    throw Error("EdgeJet: a face with more than 3 edges");
+  };
+  for (size_t e = 0; e < edges_.size(); ++e) {
+    add_edge(edges_[e].f0, static_cast<int>(e));
+    add_edge(edges_[e].f1, static_cast<int>(e));
+  }
+  face_center_.resize(faces_.size());
+  face_radius_.resize(faces_.size());
+  for (size_t t = 0; t < faces_.size(); ++t) {
+    const Vec3 g = (x_[faces_[t][0]] + x_[faces_[t][1]] + x_[faces_[t][2]]) / 3.0;
+    double R = 0;
+    for (int k = 0; k < 3; ++k) R = std::max(R, (x_[faces_[t][k]] - g).norm());
+    face_center_[t] = g;
+    // Rounded up by a relative 1e-12 (and the centroid's rounding): the sphere must contain the face.
+    face_radius_[t] = R * (1 + 1e-12) + 1e-15 * g.norm();
+  }
+}
+
+void EdgeJet::faces_near(const Vec3& c, double radius, const std::vector<int>* candidates,
+                         std::vector<int>& out) const {
+  out.clear();
+  auto near = [&](int t) { return (face_center_[t] - c).norm() - face_radius_[t] <= radius; };
+  if (candidates) {
+    for (int t : *candidates)
+      if (near(t)) out.push_back(t);
+  } else {
+    for (int t = 0; t < static_cast<int>(faces_.size()); ++t)
+      if (near(t)) out.push_back(t);
+  }
+}
+
+void EdgeJet::make_patch(const HarmonicBasis::FaceMatrices& fm, const std::vector<int>& faces,
+                         Patch& out) const {
+  // Marks, reset before returning: local vertex index, and whether a face lies in S.
+  thread_local std::vector<int> vmap;
+  thread_local std::vector<char> in_s, edge_seen;
+  if (vmap.size() != x_.size()) vmap.assign(x_.size(), -1);
+  if (in_s.size() != faces_.size()) in_s.assign(faces_.size(), 0);
+  if (edge_seen.size() != edges_.size()) edge_seen.assign(edges_.size(), 0);
+  out.x.clear();
+  out.faces.clear();
+  out.md.A.clear();
+  out.md.scale_A.clear();
+  out.md.edges.clear();
+  for (int t : faces) in_s[t] = 1;
+  auto local = [&](int v) {
+    if (vmap[v] < 0) {
+      vmap[v] = static_cast<int>(out.x.size());
+      out.x.push_back(x_[v]);
+    }
+    return vmap[v];
+  };
+  auto scale_A = [&](int t) { return std::max(fm.A[t].cwiseAbs().sum(), fm.A_abs[t]); };
+  auto scale_AD = [&](int t, int k) { return std::max(fm.AD[t][k].cwiseAbs().sum(), 2.0 * fm.A_abs[t]); };
+  for (int t : faces) {
+    out.faces.push_back({local(faces_[t][0]), local(faces_[t][1]), local(faces_[t][2])});
+    out.md.A.push_back(fm.A[t]);
+    out.md.scale_A.push_back(scale_A(t));
+  }
+  for (int t : faces)
+    for (int e : face_edges_[t]) {
+      if (edge_seen[e]) continue;
+      edge_seen[e] = 1;
+      const EdgeConst& c = edges_[e];
+      const bool in0 = in_s[c.f0] != 0, in1 = in_s[c.f1] != 0;
+      MapData::Edge me;
+      me.delta = Mat3::Zero();
+      if (in0) me.delta += c.s0 * fm.A[c.f0];
+      if (in1) me.delta += c.s1 * fm.A[c.f1];
+      me.norm = me.delta.norm();
+      if (me.norm == 0) continue;
+      me.delta_x = me.delta * cross_matrix(c.dhat);
+      me.scale_a = (in0 ? scale_A(c.f0) : 0.0) + (in1 ? scale_A(c.f1) : 0.0);
+      me.scale_ad = (in0 ? scale_AD(c.f0, c.k0) : 0.0) + (in1 ? scale_AD(c.f1, c.k1) : 0.0);
+      me.v0 = local(c.v0);
+      me.v1 = local(c.v1);
+      me.d = c.d;
+      out.md.edges.push_back(me);
+    }
+  // Reset only what was touched (a patch is small; the marks span the cage).
+  for (int t : faces) {
+    in_s[t] = 0;
+    for (int k = 0; k < 3; ++k) vmap[faces_[t][k]] = -1;
+    for (int e : face_edges_[t]) edge_seen[e] = 0;
+  }
 }
 
 EdgeJet::MapData EdgeJet::prepare(const HarmonicBasis::FaceMatrices& fm) const {
@@ -86,20 +178,30 @@ EdgeJet::MapData EdgeJet::prepare(const HarmonicBasis::FaceMatrices& fm) const {
 // bounds.
 void EdgeJet::evaluate(const MapData& md, const Vec3& p, double r, bool hessian, bool want_first,
                        bool want_third, Values& out) const {
-  const size_t nv = x_.size(), nf = faces_.size();
+  evaluate_view(whole(), md, p, r, hessian, want_first, want_third, out);
+}
+
+void EdgeJet::evaluate(const Patch& s, const Vec3& p, double r, bool hessian, bool want_first,
+                       bool want_third, Values& out) const {
+  evaluate_view(view_of(s), s.md, p, r, hessian, want_first, want_third, out);
+}
+
+void EdgeJet::evaluate_view(const View& g, const MapData& md, const Vec3& p, double r, bool hessian,
+                            bool want_first, bool want_third, Values& out) const {
+  const size_t nv = g.nv, nf = g.nf;
   thread_local std::vector<Vec3> l;
   thread_local std::vector<double> L;
   l.resize(nv);
   L.resize(nv);
   for (size_t v = 0; v < nv; ++v) {
-    l[v] = x_[v] - p;
+    l[v] = g.x[v] - p;
     L[v] = l[v].norm();
   }
   Mat3 J = Mat3::Zero();
   double sJ = 0, sH = 0, T1 = 0, T3 = 0;
   // Signed solid angle / 4π of each face (van Oosterom & Strackee, as HarmonicBasis::face_at_point).
   for (size_t t = 0; t < nf; ++t) {
-    const auto& f = faces_[t];
+    const auto& f = g.faces[t];
     const Vec3 &l0 = l[f[0]], &l1 = l[f[1]], &l2 = l[f[2]];
     const double L0 = L[f[0]], L1 = L[f[1]], L2 = L[f[2]];
     const double triple = l0.dot(l1.cross(l2));
@@ -157,18 +259,18 @@ void EdgeJet::evaluate(const MapData& md, const Vec3& p, double r, bool hessian,
 // domain of lane_math (a point on a face's plane inside it, or at a vertex): the caller then evaluates the
 // points one by one.
 template <bool kHessian, bool kFirst, bool kThird>
-bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const double* pz, const double* r,
-                    Values* out, int n) const {
+bool EdgeJet::lanes(const View& g, const MapData& md, const double* px, const double* py, const double* pz,
+                    const double* r, Values* out, int n) {
   using namespace lane_math;
   constexpr int W = kLanes;
-  const size_t nv = x_.size(), nf = faces_.size();
+  const size_t nv = g.nv, nf = g.nf;
   // Per vertex 5 rows: l = x_v − p (3), |l|, 1/|l|.
   thread_local std::vector<double> vbuf;
   vbuf.resize(nv * 5 * W);
   double* const vb = vbuf.data();
   for (size_t v = 0; v < nv; ++v) {
     double* b = vb + v * 5 * W;
-    const double x0 = x_[v].x(), x1 = x_[v].y(), x2 = x_[v].z();
+    const double x0 = g.x[v].x(), x1 = g.x[v].y(), x2 = g.x[v].z();
 #pragma omp simd
     for (int k = 0; k < W; ++k) {
       const double lx = x0 - px[k], ly = x1 - py[k], lz = x2 - pz[k];
@@ -183,9 +285,9 @@ bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const
   alignas(64) double J[9][W] = {}, sJ[W] = {};
   alignas(64) double omega[W];
   for (size_t t = 0; t < nf; ++t) {
-    const double* b0 = vb + faces_[t][0] * 5 * W;
-    const double* b1 = vb + faces_[t][1] * 5 * W;
-    const double* b2 = vb + faces_[t][2] * 5 * W;
+    const double* b0 = vb + g.faces[t][0] * 5 * W;
+    const double* b1 = vb + g.faces[t][1] * 5 * W;
+    const double* b2 = vb + g.faces[t][2] * 5 * W;
     int bad = 0;
 #pragma omp simd reduction(| : bad)
     for (int k = 0; k < W; ++k) {
@@ -297,6 +399,16 @@ bool EdgeJet::lanes(const MapData& md, const double* px, const double* py, const
 
 void EdgeJet::evaluate_lanes(const MapData& md, const Vec3* p, const double* r, int n, bool hessian,
                              bool want_first, bool want_third, Values* out) const {
+  evaluate_lanes_view(whole(), md, p, r, n, hessian, want_first, want_third, out);
+}
+
+void EdgeJet::evaluate_lanes(const Patch& s, const Vec3* p, const double* r, int n, bool hessian,
+                             bool want_first, bool want_third, Values* out) const {
+  evaluate_lanes_view(view_of(s), s.md, p, r, n, hessian, want_first, want_third, out);
+}
+
+void EdgeJet::evaluate_lanes_view(const View& g, const MapData& md, const Vec3* p, const double* r, int n,
+                                  bool hessian, bool want_first, bool want_third, Values* out) const {
   if (n < 1 || n > kLanes) throw Error("EdgeJet::evaluate_lanes: 1 to " + std::to_string(kLanes) + " points");
   // Unused lanes repeat the last point (each lane's result depends on its own point only).
   alignas(64) double px[kLanes], py[kLanes], pz[kLanes], pr[kLanes];
@@ -307,17 +419,17 @@ void EdgeJet::evaluate_lanes(const MapData& md, const Vec3* p, const double* r, 
     pz[k] = p[q].z();
     pr[k] = r[q];
   }
-  using Lanes = bool (EdgeJet::*)(const MapData&, const double*, const double*, const double*, const double*,
-                                  Values*, int) const;
+  using Lanes = bool (*)(const View&, const MapData&, const double*, const double*, const double*,
+                         const double*, Values*, int);
   static constexpr Lanes kByFlags[8] = {
       &EdgeJet::lanes<false, false, false>, &EdgeJet::lanes<false, false, true>,
       &EdgeJet::lanes<false, true, false>,  &EdgeJet::lanes<false, true, true>,
       &EdgeJet::lanes<true, false, false>,  &EdgeJet::lanes<true, false, true>,
       &EdgeJet::lanes<true, true, false>,   &EdgeJet::lanes<true, true, true>};
-  const bool ok = (this->*kByFlags[(hessian ? 4 : 0) + (want_first ? 2 : 0) + (want_third ? 1 : 0)])(
-      md, px, py, pz, pr, out, n);
+  const bool ok = kByFlags[(hessian ? 4 : 0) + (want_first ? 2 : 0) + (want_third ? 1 : 0)](g, md, px, py, pz,
+                                                                                            pr, out, n);
   if (!ok)
-    for (int k = 0; k < n; ++k) evaluate(md, p[k], r[k], hessian, want_first, want_third, out[k]);
+    for (int k = 0; k < n; ++k) evaluate_view(g, md, p[k], r[k], hessian, want_first, want_third, out[k]);
 }
 
 }  // namespace lidef

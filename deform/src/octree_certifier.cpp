@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <mutex>
 
@@ -249,6 +250,27 @@ struct OctreeCertifier::Run {
     long fi;             // index into failing_base
     int first_child;     // index of the first of its 8 children in `tree` (−1: a leaf)
     CertLeaf leaf;
+    int far = -1;  // far-field refinement: index into `far` of its parent's FarField (−1: evaluated exactly)
+  };
+  // Far-field refinement (RefinementEval::kFarField, docs/certificate.md Step 4d): what the 8 children of a
+  // subdivided node P share. With N = the faces near P and F_far = J − F_N (the other faces' part), for q in
+  // B(c, rad): F_far(q) = J_far + H_far[q − c] + R, ‖R‖_F ≤ ½|q − c|² T.
+  struct FarField {
+    Vec3 c = Vec3::Zero();
+    double rad = 0;
+    std::vector<int> near;  // N, ascending
+    EdgeJet::Patch patch;   // the faces of N
+    Mat3 J = Mat3::Zero();  // J̃_far(c) = J̃(c) − J_N(c), |J_far(c) − J̃_far(c)|₂ ≤ eps_J
+    std::array<Mat3, 3> H{Mat3::Zero(), Mat3::Zero(), Mat3::Zero()};  // ‖H_far(c) − H̃_far(c)‖_F ≤ eps_H
+    double eps_J = 0, eps_H = 0;
+    double T = kInf;                  // ≥ sup over B(c, rad) of ‖D³F_far‖_F (81 entries)
+    double scale_J = 0, scale_H = 0;  // rounding magnitudes of J̃_far, H̃_far
+    bool ok = false;                  // false: children are evaluated exactly
+  };
+  // A node's J̃ and H̃ (needed when it is subdivided: its children's FarField).
+  struct Jet {
+    Mat3 J = Mat3::Zero();
+    std::array<Mat3, 3> H{Mat3::Zero(), Mat3::Zero(), Mat3::Zero()};
   };
   // The refinement of one failing base voxel.
   struct VoxelState {
@@ -272,6 +294,7 @@ struct OctreeCertifier::Run {
   const bool combined;    // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
   const bool spectral;    // combined, and the Taylor σ3 lower bound as a third candidate (Step 3c)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
+  const bool far_mode;    // far-field refinement (third-order bound, CPU)
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
   // Base voxels.
@@ -304,6 +327,7 @@ struct OctreeCertifier::Run {
         combined(params.bound == LipschitzBound::kCombined || params.bound == LipschitzBound::kSpectral),
         spectral(params.bound == LipschitzBound::kSpectral),
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
+        far_mode(params.refinement == RefinementEval::kFarField && third && !combined && !im.kernels),
         fm(o.basis_.face_matrices(y_)) {
     cert.bound = p.bound;
     cert.voxel_side = side;
@@ -361,10 +385,12 @@ struct OctreeCertifier::Run {
         scaleJ(i) = im.scale_J(i) * cmax;
         scaleH(i) = im.scale_H(i) * cmax;
       }
-      if (im.kernels && !combined)
+      if (im.kernels && !combined) {
         device_Y = std::move(Ycols);  // the backend's base stage also forms T (stage 3)
-      else
+      } else {
         stored_derivatives(Ycols);
+        if (far_mode) stored_cols = std::move(Ycols);
+      }
     } else {
 #pragma omp parallel for schedule(dynamic, 64)
       for (long i = 0; i < N; ++i)
@@ -380,6 +406,25 @@ struct OctreeCertifier::Run {
     for (long k = 0; k < m; ++k)
       for (int a = 0; a < 3; ++a) Ycols[a * m + k] = yr_ptr ? yr_ptr[a * yr_rows + k] : y(k, a);
     return Ycols;
+  }
+  std::vector<double> stored_cols;  // far mode: the coefficient columns (stored_hessian)
+  // H at base center i from its 6 stored Hessian rows (xx, xy, xz, yy, yz, zz) times the coefficients.
+  void stored_hessian(long i, std::array<Mat3, 3>& H) const {
+    const long m = im.m;
+    const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m) + 3 * m;
+    double h6[6][3];
+    for (int q = 0; q < 6; ++q) {
+      const float* g = blk + q * m;
+      for (int a = 0; a < 3; ++a) {
+        const double* ya = stored_cols.data() + a * m;
+        double acc = 0;
+#pragma omp simd reduction(+ : acc)
+        for (long k = 0; k < m; ++k) acc += static_cast<double>(g[k]) * ya[k];
+        h6[q][a] = acc;
+      }
+    }
+    for (int a = 0; a < 3; ++a)
+      H[a] << h6[0][a], h6[1][a], h6[2][a], h6[1][a], h6[3][a], h6[4][a], h6[2][a], h6[4][a], h6[5][a];
   }
   // J and ‖H‖ at every base center: the 9 stored rows of each voxel times the coefficient columns.
   void stored_derivatives(const std::vector<double>& Ycols) {
@@ -569,9 +614,13 @@ struct OctreeCertifier::Run {
     }
     for (const std::vector<long>* phase : {&first, &rest}) {
       if (p.stop_on_failure && abort) break;
-      for (long fi : *phase) {
+      std::vector<int> far_of;
+      if (far_mode) base_far_fields(*phase, far_of);
+      for (size_t k = 0; k < phase->size(); ++k) {
+        const long fi = (*phase)[k];
         const long i = failing_base[fi];
-        vs[fi].first_child = add_children(base[i].center, base[i].side, 0, T(i), combined ? T1(i) : 0.0, fi);
+        vs[fi].first_child = add_children(base[i].center, base[i].side, 0, T(i), combined ? T1(i) : 0.0, fi,
+                                          far_mode ? far_of[k] : -1);
       }
       refine_frontier();
     }
@@ -591,13 +640,19 @@ struct OctreeCertifier::Run {
       evaluate_batch(batch, vals);
       frontier.clear();
       decide_batch(batch, vals);
+      if (far_mode) {
+        // The batch's parents' far fields were last needed to build their children's (decide_batch).
+        for (int id : batch)
+          if (tree[id].far >= 0) far[tree[id].far] = FarField{};
+      }
     }
   }
-  int add_children(const Vec3& c, double sd, int depth, double bound, double bound_first, long fi) {
+  int add_children(const Vec3& c, double sd, int depth, double bound, double bound_first, long fi,
+                   int far_index = -1) {
     const int first = static_cast<int>(tree.size());
     for (int k = 0; k < 8; ++k) {
       const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
-      tree.push_back({c + sd * off, sd / 2, depth + 1, bound, bound_first, fi, -1, {}});
+      tree.push_back({c + sd * off, sd / 2, depth + 1, bound, bound_first, fi, -1, {}, far_index});
       frontier.push_back(first + k);
     }
     return first;
@@ -640,8 +695,12 @@ struct OctreeCertifier::Run {
       im.kernels->evaluate_nodes(fm.A, fm.AD, fm.A_abs, delta, third, bc, brad, vals);
       return;
     }
+    if (far_mode) {
+      evaluate_far_batch(batch, vals);
+      return;
+    }
     if (p.refinement != RefinementEval::kPerFace) {
-      if (!edge_data) edge_data = std::make_unique<EdgeJet::MapData>(im.edge_jet->prepare(fm));
+      full_data();
       if (p.refinement == RefinementEval::kPerEdge) {
 #pragma omp parallel for schedule(dynamic, 4)
         for (long q = 0; q < nb; ++q) evaluate_node_per_edge(tree[batch[q]], vals[q]);
@@ -649,25 +708,17 @@ struct OctreeCertifier::Run {
       }
       // Consecutive groups of kLanes nodes (the 8 children of a node, when no budget cut the batch); each
       // node's values depend on the node only, so neither the grouping nor the thread count changes them.
-      constexpr long W = EdgeJet::kLanes;
-      const long groups = (nb + W - 1) / W;
-      // One group (a single subdivided node): no parallel region, whose fork and join can cost more than
-      // the group itself on a busy machine (animal, first bound, 8 children: refine 0.7 ms at 1 thread,
-      // 9.7 ms at 2).
-#pragma omp parallel for schedule(dynamic, 1) if (groups > 1)
-      for (long g = 0; g < groups; ++g) {
-        const long q0 = g * W;
-        const int n = static_cast<int>(std::min(W, nb - q0));
-        Vec3 c[W];
-        double rad[W];
-        for (int k = 0; k < n; ++k) {
-          c[k] = tree[batch[q0 + k]].c;
-          rad[k] = 0.5 * std::sqrt(3.0) * tree[batch[q0 + k]].side;
-        }
-        EdgeJet::Values ev[W];
-        im.edge_jet->evaluate_lanes(*edge_data, c, rad, n, third, !third || combined, third, ev);
-        for (int k = 0; k < n; ++k) node_values(ev[k], rad[k], vals[q0 + k]);
-      }
+      in_lane_groups(
+          nb,
+          [&](long q, Vec3& c, double& rad) {
+            c = tree[batch[q]].c;
+            rad = 0.5 * std::sqrt(3.0) * tree[batch[q]].side;
+          },
+          [&](const Vec3* c, const double* rad, int n, long q0) {
+            EdgeJet::Values ev[EdgeJet::kLanes];
+            im.edge_jet->evaluate_lanes(*edge_data, c, rad, n, third, !third || combined, third, ev);
+            for (int k = 0; k < n; ++k) node_values(ev[k], rad[k], vals[q0 + k]);
+          });
       return;
     }
 #pragma omp parallel for schedule(dynamic, 4)
@@ -717,7 +768,271 @@ struct OctreeCertifier::Run {
     v.own_bound = third ? ev.T_third : ev.T_first;
     v.own_first = ev.T_first;
   }
+  // Runs `eval(c, rad, n, first)` on consecutive groups of at most kLanes of `count` items (items first ..
+  // first + n − 1), `point(k, c, rad)` giving item k's center and ball radius: one SIMD pass of
+  // EdgeJet::evaluate_lanes per group, the groups in parallel. With a single group no parallel region is
+  // opened: its fork and join can cost more than the group itself on a busy machine (animal, first bound, 8
+  // children: refine 0.7 ms at 1 thread, 9.7 ms at 2).
+  template <class Point, class Eval>
+  static void in_lane_groups(long count, const Point& point, const Eval& eval) {
+    constexpr long W = EdgeJet::kLanes;
+    const long groups = (count + W - 1) / W;
+#pragma omp parallel for schedule(dynamic, 1) if (groups > 1)
+    for (long g = 0; g < groups; ++g) {
+      const long first = g * W;
+      const int n = static_cast<int>(std::min(W, count - first));
+      Vec3 c[W];
+      double rad[W];
+      for (int k = 0; k < n; ++k) point(first + k, c[k], rad[k]);
+      eval(c, rad, n, first);
+    }
+  }
   mutable std::unique_ptr<EdgeJet::MapData> edge_data;  // built on the first refinement batch
+  mutable std::once_flag edge_data_once;
+  // Thread-safe: the far-field batch needs it only for its rare exact re-evaluations, from inside a parallel
+  // loop (on the animal's cage preparing it costs 0.3 ms, more than a far-field level of 88 children).
+  const EdgeJet::MapData& full_data() const {
+    std::call_once(edge_data_once,
+                   [&] { edge_data = std::make_unique<EdgeJet::MapData>(im.edge_jet->prepare(fm)); });
+    return *edge_data;
+  }
+
+  // --- 4d. Far-field refinement (docs/certificate.md, Step 4d).
+  std::vector<FarField> far;
+  mutable std::vector<Jet> batch_jets;  // J̃, H̃ of the last evaluated batch's nodes (far mode)
+  // Groups of consecutive batch nodes with the same parent far field (at most kLanes): far-field groups when
+  // it is usable, else (none: the tight-lower-bound stage; or T_far infinite) evaluated exactly in SIMD
+  // lanes; a node whose σ3 does not clear its eps_J is evaluated again exactly, so that "σ3 ≤ 0 at a center"
+  // is never said of an approximation.
+  void evaluate_far_batch(const std::vector<int>& batch, std::vector<NodeValues>& vals) const {
+    const long nb = static_cast<long>(batch.size());
+    batch_jets.assign(nb, Jet{});
+    std::vector<char> redo(nb, 0);
+    std::vector<std::pair<long, int>> groups;  // (first, count)
+    for (long q = 0; q < nb;) {
+      long e = q + 1;
+      while (e < nb && e - q < EdgeJet::kLanes && tree[batch[e]].far == tree[batch[q]].far) ++e;
+      groups.push_back({q, static_cast<int>(e - q)});
+      q = e;
+    }
+    const long ng = static_cast<long>(groups.size());
+#pragma omp parallel for schedule(dynamic, 1) if (ng > 1)
+    for (long g = 0; g < ng; ++g) {
+      const long q0 = groups[g].first;
+      const int n = groups[g].second;
+      constexpr int W = EdgeJet::kLanes;
+      Vec3 c[W];
+      double rad[W];
+      for (int k = 0; k < n; ++k) {
+        c[k] = tree[batch[q0 + k]].c;
+        rad[k] = 0.5 * std::sqrt(3.0) * tree[batch[q0 + k]].side;
+      }
+      EdgeJet::Values ev[W];
+      const int fidx = tree[batch[q0]].far;
+      const FarField* ff = fidx >= 0 && far[fidx].ok ? &far[fidx] : nullptr;
+      if (!ff) {
+        im.edge_jet->evaluate_lanes(full_data(), c, rad, n, true, false, true, ev);
+        for (int k = 0; k < n; ++k) exact_values(ev[k], rad[k], vals[q0 + k], batch_jets[q0 + k]);
+        continue;
+      }
+      im.edge_jet->evaluate_lanes(ff->patch, c, rad, n, true, false, true, ev);
+      for (int k = 0; k < n; ++k) {
+        NodeValues& v = vals[q0 + k];
+        far_values(*ff, c[k], ev[k], v, batch_jets[q0 + k]);
+        // Again exactly when σ3 does not clear eps_J (so that σ3 ≤ 0 is only said of an exact value), or
+        // when the node fails only because of the far field's own terms: without eps_J, eps_H and the far
+        // part of its bound it would pass, so an exact evaluation may certify it here instead of splitting
+        // it (deep in the octree the far field's terms, inherited from coarser balls, no longer shrink).
+        const Node& nd = tree[batch[q0 + k]];
+        const double own = std::min(nd.bound, v.own_bound);
+        if (!(v.sigma3 > v.eps_J) ||
+            (!(third_margin(nd, v, own, v.eps_J, v.eps_H) > 0) &&
+             (nd.depth >= p.max_depth || third_margin(nd, v, std::min(nd.bound, ev[k].T_third), 0, 0) > 0)))
+          redo[q0 + k] = 1;
+      }
+    }
+    // The exact re-evaluations, 8 nodes per SIMD pass.
+    std::vector<long> again;
+    for (long q = 0; q < nb; ++q)
+      if (redo[q]) again.push_back(q);
+    const long na = static_cast<long>(again.size());
+    in_lane_groups(
+        na,
+        [&](long k, Vec3& c, double& rad) {
+          c = tree[batch[again[k]]].c;
+          rad = 0.5 * std::sqrt(3.0) * tree[batch[again[k]]].side;
+        },
+        [&](const Vec3* c, const double* rad, int n, long k0) {
+          EdgeJet::Values ev[EdgeJet::kLanes];
+          im.edge_jet->evaluate_lanes(full_data(), c, rad, n, true, false, true, ev);
+          for (int k = 0; k < n; ++k)
+            exact_values(ev[k], rad[k], vals[again[k0 + k]], batch_jets[again[k0 + k]]);
+        });
+    exact_redone += na;
+  }
+  mutable long exact_redone = 0;  // far mode: nodes evaluated again exactly
+  // Condition (6)'s margin with the third-order bound (as decide_batch forms it) for a node's values with
+  // the given own bound and far-field errors.
+  double third_margin(const Node& nd, const NodeValues& v, double own, double eps_J, double eps_H) const {
+    const double rad = 0.5 * std::sqrt(3.0) * nd.side;
+    const double L = v.hnorm + eps_H + rad * own;
+    return v.sigma3 - eps_J - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+  }
+  void exact_values(const EdgeJet::Values& ev, double rad, NodeValues& v, Jet& jet) const {
+    node_values(ev, rad, v);
+    v.eps_J = v.eps_H = 0;
+    jet.J = ev.J;
+    jet.H = ev.H;
+  }
+  // A child at c from its near faces' values `ev` (J_N, H_N, T_N over its own ball) and the parent's far
+  // field:
+  //   J̃ = J_N(c) + J̃_far + H̃_far[Δ],  H̃ = H_N(c) + H̃_far,  Δ = c − c_P,
+  //   eps_J = eps_J,P + |Δ| eps_H,P + ½|Δ|² T,  eps_H = eps_H,P + |Δ| T,  own bound = T_N + T
+  // (the child's ball lies in the parent's, where T bounds the far part's third derivative).
+  void far_values(const FarField& ff, const Vec3& c, const EdgeJet::Values& ev, NodeValues& v,
+                  Jet& jet) const {
+    const Vec3 d = c - ff.c;
+    const double dn = d.norm();
+    jet.J = ev.J + ff.J;
+    for (int a = 0; a < 3; ++a) {
+      jet.J.row(a) += (ff.H[a] * d).transpose();
+      jet.H[a] = ev.H[a] + ff.H[a];
+    }
+    bool resolved = true;
+    v.sigma3 = signed_singular_values(jet.J, &resolved)(2);
+    v.sign_unresolved = !resolved;
+    v.hnorm = std::sqrt(jet.H[0].squaredNorm() + jet.H[1].squaredNorm() + jet.H[2].squaredNorm());
+    v.eps_J = ff.eps_J + dn * ff.eps_H + 0.5 * dn * dn * ff.T;
+    v.eps_H = ff.eps_H + dn * ff.T;
+    v.scale_J = ev.scale_J + ff.scale_J + dn * ff.scale_H;
+    v.scale_H = ev.scale_H + ff.scale_H;
+    v.own_bound = ev.T_third + ff.T;
+    v.own_first = 0;
+    v.hnorm_op = 0;
+  }
+  // The far field of a subdivided node (center c, radius rad, values v, jet) whose own parent's far field is
+  // `parent` (nullptr: a base voxel or an exactly evaluated parent; then T is summed over every edge, from
+  // the base voxel's factor row `row` when given).
+  void build_far(FarField& ff, const Vec3& c, double rad, const NodeValues& v, const Jet& jet,
+                 const FarField* parent, const float* row) const {
+    ff.c = c;
+    ff.rad = rad;
+    const bool inherit = parent && parent->ok;
+    im.edge_jet->faces_near(c, p.far_field_reach * rad, inherit ? &parent->near : nullptr, ff.near);
+    im.edge_jet->make_patch(fm, ff.near, ff.patch);
+    EdgeJet::Values ev;
+    im.edge_jet->evaluate(ff.patch, c, rad, true, false, false, ev);
+    ff.J = jet.J - ev.J;
+    for (int a = 0; a < 3; ++a) ff.H[a] = jet.H[a] - ev.H[a];
+    ff.eps_J = v.eps_J;
+    ff.eps_H = v.eps_H;
+    ff.scale_J = v.scale_J + ev.scale_J;
+    ff.scale_H = v.scale_H + ev.scale_H;
+    ff.T = inherit ? parent->T + ring_T(parent->near, ff.near, c, rad) : far_T(ff.near, c, rad, row);
+    ff.ok = std::isfinite(ff.T);
+  }
+  // ‖A_t‖_F, and per edge the norm of δ_e restricted to a set of faces (`in`: membership marks).
+  double face_norm(int t) const {
+    return fm.A[t].norm();
+  }
+  double restricted_delta(int e, const std::vector<char>& in) const {
+    const CageEdge& ce = oc.cage_.edges[e];
+    const bool i0 = in[ce.f0] != 0, i1 = in[ce.f1] != 0;
+    return i0 && i1 ? delta(e) : i0 ? face_norm(ce.f0) : i1 ? face_norm(ce.f1) : 0.0;
+  }
+  // Σ_e ‖δ_e^far‖ Θ_e(B(c, rad)) over every edge, far = the faces not in `near` (sorted): a bound of the far
+  // part's third derivative on the ball (Step 2's (20) for the faces of the far part).
+  double far_T(const std::vector<int>& near, const Vec3& c, double rad, const float* row) const {
+    thread_local std::vector<char> in;
+    in.assign(oc.cage_.num_faces(), 1);
+    for (int t : near) in[t] = 0;
+    double s = 0;
+    for (long e = 0; e < E; ++e) {
+      const double w = restricted_delta(static_cast<int>(e), in);
+      if (w == 0) continue;
+      const double th =
+          row ? static_cast<double>(row[e]) : third_order_edge_factor(im.eu[e], im.ew[e], c, rad);
+      s += w * th;
+    }
+    return s;
+  }
+  // Σ over the edges of the ring R = old \ now (the faces that were near the parent and are far from this
+  // node) of ‖δ_e^R‖ Θ_e(B(c, rad)): the far part grows by F_R (both lists ascending).
+  double ring_T(const std::vector<int>& old, const std::vector<int>& now, const Vec3& c, double rad) const {
+    thread_local std::vector<char> in, seen;
+    if (in.size() != static_cast<size_t>(oc.cage_.num_faces())) in.assign(oc.cage_.num_faces(), 0);
+    if (seen.size() != static_cast<size_t>(E)) seen.assign(E, 0);
+    std::vector<int> ring;
+    std::set_difference(old.begin(), old.end(), now.begin(), now.end(), std::back_inserter(ring));
+    for (int t : ring) in[t] = 1;
+    double s = 0;
+    for (int t : ring)
+      for (int e : im.edge_jet->face_edges(t)) {
+        if (seen[e]) continue;
+        seen[e] = 1;
+        const double w = restricted_delta(e, in);
+        if (w != 0) s += w * third_order_edge_factor(im.eu[e], im.ew[e], c, rad);
+      }
+    for (int t : ring) {
+      in[t] = 0;
+      for (int e : im.edge_jet->face_edges(t)) seen[e] = 0;
+    }
+    return s;
+  }
+  // Base voxel i's far field (ball radius rad, its J̃, H̃ and errors). The children's balls must lie in the
+  // ball: |Δ| + r_child = the voxel's half-diagonal ≤ rad, up to the rounding of the radii (relative 1e-12
+  // here; it moves a factor by as little, within τ).
+  void base_far(FarField& ff, long i, double rad, const NodeValues& v, const Jet& jet,
+                const FactorMatrix* rows) const {
+    build_far(ff, base[i].center, rad, v, jet, nullptr, rows ? rows->row(i).data() : nullptr);
+    if (rad < 0.5 * std::sqrt(3.0) * base[i].side * (1 - 1e-12)) ff.ok = false;
+  }
+  // The far fields of the base voxels about to be refined (failing_base indices `fis`): J and H at their
+  // centers exactly (8 voxels per SIMD pass), T from their factor rows. far_of[k] indexes `far`.
+  void base_far_fields(const std::vector<long>& fis, std::vector<int>& far_of) {
+    const long n = static_cast<long>(fis.size());
+    far_of.resize(n);
+    const size_t first = far.size();
+    far.resize(first + n);
+    for (long k = 0; k < n; ++k) far_of[k] = static_cast<int>(first + k);
+    const FactorMatrix* rows = im.third.rows() == N ? &im.third : nullptr;
+    if (use_stored && !stored_cols.empty()) {
+      // J̃ and H̃ from the stored derivatives (J as the base stage computed it, H from the 6 stored Hessian
+      // rows): within the float-storage allowance of the exact values (Step 5), which becomes eps_J, eps_H.
+#pragma omp parallel for schedule(dynamic, 4) if (n > 1)
+      for (long k = 0; k < n; ++k) {
+        const long i = failing_base[fis[k]];
+        NodeValues v;
+        v.scale_J = scaleJ(i);
+        v.scale_H = scaleH(i);
+        v.eps_J = kFloatStorageRel * scaleJ(i);
+        v.eps_H = kFloatStorageRel * scaleH(i);
+        Jet jet;
+        jet.J = Jc[i];
+        stored_hessian(i, jet.H);
+        base_far(far[first + k], i, oc.sampling_.radius_of(static_cast<int>(i)), v, jet, rows);
+      }
+      return;
+    }
+    in_lane_groups(
+        n,
+        [&](long k, Vec3& c, double& rad) {
+          const long i = failing_base[fis[k]];
+          c = base[i].center;
+          rad = oc.sampling_.radius_of(static_cast<int>(i));
+        },
+        [&](const Vec3* c, const double* rad, int m, long k0) {
+          EdgeJet::Values ev[EdgeJet::kLanes];
+          im.edge_jet->evaluate_lanes(full_data(), c, rad, m, true, false, false, ev);
+          for (int k = 0; k < m; ++k) {
+            const long i = failing_base[fis[k0 + k]];
+            NodeValues v;
+            v.scale_J = ev[k].scale_J;
+            v.scale_H = ev[k].scale_H;
+            base_far(far[first + k0 + k], i, rad[k], v, Jet{ev[k].J, ev[k].H}, rows);
+          }
+        });
+  }
   // Condition (6) at each node of the batch, in order: a certified leaf, a failed leaf, or 8 children.
   void decide_batch(const std::vector<int>& batch, const std::vector<NodeValues>& vals) {
     for (size_t q = 0; q < batch.size(); ++q) {
@@ -733,14 +1048,15 @@ struct OctreeCertifier::Run {
       const double rad = 0.5 * std::sqrt(3.0) * sd;
       const double bnd = std::min(tree[id].bound, v.own_bound);
       const double bnd1 = combined ? std::min(tree[id].bound_first, v.own_first) : bnd;
-      const double L = lipschitz(v.hnorm, v.hnorm_op, bnd1, bnd, rad);
-      const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+      const double L = lipschitz(v.hnorm + v.eps_H, v.hnorm_op, bnd1, bnd, rad);
+      const double margin =
+          v.sigma3 - v.eps_J - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
       const int bi = static_cast<int>(failing_base[fi]);
       const int leaf_depth = level(bi) + depth;
       if (margin > 0) {
-        tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, true, bi, v.sign_unresolved};
+        tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, true, bi, v.sign_unresolved, v.eps_J};
       } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
-        tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, false, bi, v.sign_unresolved};
+        tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, false, bi, v.sign_unresolved, v.eps_J};
         st.ok = false;
         if (v.sigma3 <= 0 || depth >= p.max_depth) st.failed_here = true;
         // σ3 ≤ 0 (or a sign not resolved, σ3 = 0) at a center settles this voxel: refining its other nodes
@@ -749,11 +1065,29 @@ struct OctreeCertifier::Run {
         if (p.stop_on_failure) abort = true;
       } else {
         ++st.refined;
-        const int first = add_children(c, sd, depth, bnd, bnd1, fi);
+        int far_index = -1;
+        if (far_mode) {
+          far_index = static_cast<int>(far.size());
+          far.emplace_back();
+          pending_far.push_back({far_index, static_cast<int>(q)});
+        }
+        const int first = add_children(c, sd, depth, bnd, bnd1, fi, far_index);
         tree[id].first_child = first;
       }
     }
+    // The new far fields (each from its node's values and its parent's far field), in parallel.
+    const long np = static_cast<long>(pending_far.size());
+#pragma omp parallel for schedule(dynamic, 4) if (np > 1)
+    for (long k = 0; k < np; ++k) {
+      const int q = pending_far[k].second;
+      const Node& nd = tree[batch[q]];
+      const FarField* parent = nd.far >= 0 ? &far[nd.far] : nullptr;
+      build_far(far[pending_far[k].first], nd.c, 0.5 * std::sqrt(3.0) * nd.side, vals[q], batch_jets[q],
+                parent, nullptr);
+    }
+    pending_far.clear();
   }
+  std::vector<std::pair<int, int>> pending_far;  // (index into far, position in the batch)
 
   // --- 5. Assemble, in base-voxel order with each subtree depth-first (children in octant order).
   Certificate assemble() {
@@ -952,6 +1286,8 @@ const char* to_string(RefinementEval r) {
       return "per-edge";
     case RefinementEval::kPerEdgeBatched:
       return "batched";
+    case RefinementEval::kFarField:
+      return "far-field";
   }
   return "batched";
 }

@@ -69,6 +69,9 @@ struct NodeValues {
   double sigma3 = 0, hnorm = 0, own_bound = 0, scale_J = 0, scale_H = 0;
   double hnorm_op = 0, own_first = 0;  // bound "combined" only (CPU): ‖H‖_op bound and Σ_e δ_e Γ_e
   bool sign_unresolved = false;
+  // Far-field refinement (CPU): sigma3 and hnorm are those of an approximate J̃ and H̃ with |J − J̃|₂ ≤ eps_J
+  // and ‖H − H̃‖_F ≤ eps_H at the center (docs/certificate.md, Step 4d); 0 for an exact evaluation.
+  double eps_J = 0, eps_H = 0;
 };
 
 class CertifierKernels {

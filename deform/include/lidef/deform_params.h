@@ -61,6 +61,7 @@ struct DeformParams {
   // --- Certificate (line search and output)
   int max_depth = 6;
   LipschitzBound bound = LipschitzBound::kThirdOrder;  // first (17) or third (21) order
+  RefinementEval refinement = RefinementEval::kFarField;  // how octree children are evaluated (CertifyParams)
   long max_refined = 200000;                           // child voxels evaluated per certification of a result
   long line_search_max_refined = 20000;  // the same budget for line-search trials: a trial that needs more is
                                          // rejected (sound: "not certified") and the step halved
@@ -102,7 +103,8 @@ struct ParamInfo {
   using Member =
       std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*, bool DeformParams::*,
                    std::string DeformParams::*, LipschitzBound DeformParams::*,
-                   HessianPrecision DeformParams::*, BackendKind DeformParams::*, DomainKind DeformParams::*>;
+                   HessianPrecision DeformParams::*, BackendKind DeformParams::*, DomainKind DeformParams::*,
+                   RefinementEval DeformParams::*>;
   const char* name;   // JSON key; the CLI flag is "--" + name with '_' → '-'
   const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution", "testing"
   Member member;

@@ -55,7 +55,49 @@ class EdgeJet {
   void evaluate_lanes(const MapData& md, const Vec3* p, const double* r, int n, bool hessian, bool want_first,
                       bool want_third, Values* out) const;
 
+  // A subset S of the cage's faces: F_S(p) = Σ_{t∈S} f_t(p), the part of J that the faces of S contribute
+  // in the per-face representation (Step 2), and its derivatives. J, H and the factor sums of F_S are those
+  // of Step 4b with δ_e summed over the faces of e that lie in S (docs/certificate.md, Step 4d: the far-field
+  // refinement evaluates children on the faces near them only). The vertices of S are renumbered compactly.
+  struct Patch {
+    std::vector<Vec3> x;                    // the vertices of the faces of S
+    std::vector<std::array<int, 3>> faces;  // |S|, local vertex indices
+    MapData md;                             // A, scale_A per face of S; edges with local v0, v1
+  };
+  // `faces`: indices of S (distinct). Fills `out` (reused storage).
+  void make_patch(const HarmonicBasis::FaceMatrices& fm, const std::vector<int>& faces, Patch& out) const;
+  void evaluate(const Patch& s, const Vec3& p, double r, bool hessian, bool want_first, bool want_third,
+                Values& out) const;
+  void evaluate_lanes(const Patch& s, const Vec3* p, const double* r, int n, bool hessian, bool want_first,
+                      bool want_third, Values* out) const;
+
+  // The faces among `candidates` (all faces when nullptr; ascending order kept) whose bounding sphere
+  // (centroid, largest centroid–vertex distance) comes within `radius` of c: every other face lies farther
+  // than `radius` from c. Monotone: with radius' + |c' − c| ≤ radius, the faces near (c', radius') are among
+  // those near (c, radius).
+  void faces_near(const Vec3& c, double radius, const std::vector<int>* candidates,
+                  std::vector<int>& out) const;
+  int num_faces() const { return static_cast<int>(faces_.size()); }
+  // The 3 undirected edges (indices into Cage::edges) of face t.
+  const std::array<int, 3>& face_edges(int t) const { return face_edges_[t]; }
+
  private:
+  // Vertices and faces a pass runs over: the whole cage (x_, faces_) or a patch.
+  struct View {
+    const Vec3* x;
+    size_t nv;
+    const std::array<int, 3>* faces;
+    size_t nf;
+  };
+  View whole() const { return {x_.data(), x_.size(), faces_.data(), faces_.size()}; }
+  static View view_of(const Patch& s) { return {s.x.data(), s.x.size(), s.faces.data(), s.faces.size()}; }
+  void evaluate_view(const View& g, const MapData& md, const Vec3& p, double r, bool hessian, bool want_first,
+                     bool want_third, Values& out) const;
+  void evaluate_lanes_view(const View& g, const MapData& md, const Vec3* p, const double* r, int n,
+                           bool hessian, bool want_first, bool want_third, Values* out) const;
+  std::vector<std::array<int, 3>> face_edges_;  // #F
+  std::vector<Vec3> face_center_;               // #F: centroid
+  std::vector<double> face_radius_;             // #F: largest centroid–vertex distance
   std::vector<Vec3> x_;                    // #V vertex positions
   std::vector<std::array<int, 3>> faces_;  // #F
   struct EdgeConst {
@@ -67,8 +109,8 @@ class EdgeJet {
   };
   std::vector<EdgeConst> edges_;
   template <bool kHessian, bool kFirst, bool kThird>
-  bool lanes(const MapData& md, const double* px, const double* py, const double* pz, const double* r,
-             Values* out, int n) const;
+  static bool lanes(const View& g, const MapData& md, const double* px, const double* py, const double* pz,
+                    const double* r, Values* out, int n);
 };
 
 }  // namespace lidef

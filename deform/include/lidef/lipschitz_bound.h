@@ -30,6 +30,16 @@ enum class LipschitzBound { kFirstOrder, kThirdOrder, kCombined, kSpectral };
 const char* to_string(LipschitzBound b);  // "first" / "third" / "combined" / "spectral"
 LipschitzBound lipschitz_bound_from_string(const std::string& s);  // throws InputError
 
+// How the CPU refinement evaluates octree children (docs/certificate.md, Steps 4b–4d; the benchmarks
+// compare them in one run): per face (HarmonicBasis::differential_jet, the first code), per edge one child at
+// a time (EdgeJet::evaluate), per edge with 8 children at once in SIMD lanes (EdgeJet::evaluate_lanes) —
+// these three give the same values up to rounding, covered by the allowance τ — or far field: the 8 children
+// of a node evaluated on the cage faces near them only, the other faces' part expanded to second order around
+// the parent's center with a bounded remainder that the margin subtracts (third-order bound only; the others
+// use "batched").
+enum class RefinementEval { kPerFace, kPerEdge, kPerEdgeBatched, kFarField };
+const char* to_string(RefinementEval r);  // "per-face" / "per-edge" / "batched" / "far-field"
+
 // The per-edge factors as functions of the ball-dependent lower bounds, shared by the per-voxel factors below
 // and the per-edge evaluation of octree children (edge_jet.h): h = lower bound of m over the ball (> d),
 // a, b = lower bounds of |q−u|, |q−w| over the ball (> 0). Callers check h > d (and a, b > 0) first.

@@ -26,13 +26,6 @@
 
 namespace lidef {
 
-// How the CPU refinement evaluates octree children (docs/certificate.md, Steps 4b and 4c; the benchmarks
-// compare them in one run): per face (HarmonicBasis::differential_jet, the first code), per edge one child at
-// a time (EdgeJet::evaluate), or per edge with 8 children at once in SIMD lanes (EdgeJet::evaluate_lanes).
-// All three give the same values up to rounding, covered by the allowance τ.
-enum class RefinementEval { kPerFace, kPerEdge, kPerEdgeBatched };
-const char* to_string(RefinementEval r);  // "per-face" / "per-edge" / "batched"
-
 struct CertifyParams {
   LipschitzBound bound = LipschitzBound::kThirdOrder;
   int max_depth = 6;                 // subdivision levels below the base voxels
@@ -41,7 +34,11 @@ struct CertifyParams {
       4096;                      // budget per base voxel (a full depth-4 subtree); exhausted = not certified
   bool stop_on_failure = false;  // return as soon as the verdict is "not certified" (line search)
   bool keep_leaves = true;       // fill Certificate::leaves (reports); the verdict never depends on it
-  RefinementEval refinement = RefinementEval::kPerEdgeBatched;  // CPU evaluation of octree children
+  RefinementEval refinement = RefinementEval::kFarField;  // CPU evaluation of octree children
+  // Far field: a face is "near" a subdivided node of radius r when its bounding sphere comes within
+  // far_field_reach · r of the node's center (docs/certificate.md, Step 4d). Larger: more faces evaluated
+  // exactly, a smaller remainder.
+  double far_field_reach = 4.0;
   int max_failing_reported = 20;
   // Above 0 (a fraction, 0.1 = 10%): once the map is certified, keep refining the leaves whose bound is
   // loosest until min_lower_bound ≥ (1 − bound_tolerance) · min_sigma3_center, so the lower bound says how
@@ -67,6 +64,9 @@ struct CertLeaf {
   bool certified = false;
   int base = 0;                  // index of the base voxel it refines
   bool sign_unresolved = false;  // det J's sign at the center not resolved in double precision (σ3 = 0)
+  // |sigma3 − the true σ3 at the center| ≤ sigma3_error: 0 where J was evaluated exactly, the far-field
+  // remainder where it was not (RefinementEval::kFarField; margin already subtracts it).
+  double sigma3_error = 0;
 };
 
 struct Certificate {
@@ -78,7 +78,7 @@ struct Certificate {
   long num_leaves = 0;  // leaf voxels (= voxels + 7 × refined when complete)
   long refined = 0;     // voxels subdivided
   int max_depth_used = 0;
-  double min_sigma3_center = 0;  // over all evaluated centers
+  double min_sigma3_center = 0;  // over all evaluated centers (far-field leaves: within their sigma3_error)
   double min_margin = 0;         // over leaves: σ3 − r L − τ
   // A lower bound of the true σ3 on the covered region: the smallest σ3 − r L − τ over the leaves (the
   // rounding allowance τ included; −∞ when a leaf was left unevaluated). It equals min_margin; the name says
