@@ -66,6 +66,10 @@ struct OctreeCertifier::Impl {
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
+  // Certifying by perturbation (Step 4e): per voxel Γ_i ≥ sup over its ball of the norm of the map ỹ ↦ J
+  // (built on first use; reduced mode only).
+  mutable std::once_flag gamma_once;
+  mutable VecXd gamma;
   mutable std::vector<char> first_finite, third_finite;  // per voxel: no factor is +∞
   // Stored as floats rounded *up*, so that they stay upper bounds.
   mutable Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> first, third;
@@ -306,6 +310,10 @@ struct OctreeCertifier::Run {
   std::vector<double> device_Y;       // coefficients for the backend's base stage (empty: CPU)
   std::vector<CertLeaf> base;
   std::vector<long> failing_base;
+  // Certifying by perturbation: per base voxel 1 when certified from the previous map, and that bound.
+  std::vector<char> perturbed;
+  VecXd perturbed_lower;
+  bool evaluated(long i) const { return perturbed.empty() || !perturbed[i]; }
   // Refinement.
   std::vector<VoxelState> vs;
   std::vector<Node> tree;
@@ -365,6 +373,94 @@ struct OctreeCertifier::Run {
   // Weyl |Δσ3| ≤ ‖ΔJ‖₂ ≤ Σ|ΔJ_ab|, |Δ‖H‖| ≤ ‖ΔH‖_F.
   static double tolerance(double sJ, double sH, double s3, double L, double rad, double storage) {
     return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
+  }
+
+  // --- 0. Certifying by perturbation (Step 4e): base voxels whose bound at the previous certified map ỹ₀
+  // exceeds Γ_i ‖ỹ − ỹ₀‖_F are certified without evaluation. Reduced mode on the CPU only.
+  void perturbation() {
+    if (!p.previous_y || !p.previous_lower || im.mode != Impl::Mode::kReduced || !yr_ptr || im.kernels)
+      return;
+    const auto& y0 = *p.previous_y;
+    const auto& lower = *p.previous_lower;
+    if (y0.rows() != yr_rows || static_cast<long>(lower.size()) != N) return;
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a)
+      for (long k = 0; k < yr_rows; ++k) {
+        const double d = yr_ptr[a * yr_rows + k] - y0(k, a);
+        d2 += d * d;
+      }
+    const double dn = std::sqrt(d2);
+    const VecXd& gamma = perturbation_constants();
+    perturbed.assign(N, 0);
+    perturbed_lower.setConstant(N, -kInf);
+    for (long i = 0; i < N; ++i) {
+      // The factor 1 + 1e-9 covers the rounding of dn, Γ_i and this product (each ≤ ~1e-13 relative).
+      const double lb = lower[i] - gamma(i) * dn * (1 + 1e-9);
+      if (im.clear[i] && lb > 0 && lb > p.perturbation_floor) {
+        perturbed[i] = 1;
+        perturbed_lower(i) = lb;
+      }
+    }
+  }
+  // Γ_i = ‖G(c)‖₂ + r (‖H(c)‖_F + ½ r Σ_e W_e Θ_e(B_i)), the reduced basis' gradients G (3 by s) and
+  // Hessians H (27 by s) at the center from the stored rows (each within 2⁻²⁴ of its value: × (1 + 2⁻²³)),
+  // W_e = sqrt(Σ_k ‖δ_e(ψ_k)‖²) over the reduced basis functions ψ_k (Step 2's δ of a scalar function, a
+  // 3-vector), Θ the third-order factors (Step 3). Then ‖J(ỹ) − J(ỹ₀)‖_F ≤ Γ_i ‖ỹ − ỹ₀‖_F on the ball (Step
+  // 4e).
+  const VecXd& perturbation_constants() const {
+    std::call_once(im.gamma_once, [&] {
+      const MatXd& xi = *im.reduction;
+      const long s = xi.cols();
+      VecXd W2 = VecXd::Zero(E);
+      for (long k0 = 0; k0 < s; k0 += 3) {
+        MatX3d Y = MatX3d::Zero(xi.rows(), 3);
+        for (int a = 0; a < 3 && k0 + a < s; ++a) Y.col(a) = xi.col(k0 + a);
+        const HarmonicBasis::FaceMatrices f = oc.basis_.face_matrices(Y);
+        for (long e = 0; e < E; ++e) {
+          const CageEdge& ce = oc.cage_.edges[e];
+          W2(e) += (f.A[ce.f0] - f.A[ce.f1]).squaredNorm();  // the 3 rows: 3 basis functions
+        }
+      }
+      const VecXd W = W2.cwiseSqrt() * (1 + 1e-12);
+      const auto& factors = factor_matrix(true);
+      const long m = im.m;
+      constexpr double kStored = 1 + 0x1p-23;
+      VecXd g(N);
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < N; ++i) {
+        const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
+        // ‖G‖₂² = λ_max(G Gᵀ) ≤ the largest absolute row sum of the 3×3 Gram matrix (Gershgorin), up to √3
+        // below ‖G‖_F² where the three gradient rows are nearly orthogonal and of equal length.
+        double gram[3][3] = {};
+        for (int a = 0; a < 3; ++a)
+          for (int b = a; b < 3; ++b) {
+            double acc = 0;
+            for (long k = 0; k < m; ++k) acc += static_cast<double>(blk[a * m + k]) * blk[b * m + k];
+            gram[a][b] = gram[b][a] = acc;
+          }
+        double gj = 0;
+        for (int a = 0; a < 3; ++a)
+          gj = std::max(gj, std::abs(gram[a][0]) + std::abs(gram[a][1]) + std::abs(gram[a][2]));
+        gj *= 1 + 1e-12;  // the rounding of the m-term sums (≤ m u relative)
+        double gh = 0;
+        for (long q = 3 * m; q < 9 * m; ++q) {
+          const double v = blk[q];
+          const long row = q / m;                                    // 3 xx, 4 xy, 5 xz, 6 yy, 7 yz, 8 zz
+          gh += (row == 4 || row == 5 || row == 7 ? 2 : 1) * v * v;  // off-diagonals twice
+        }
+        double t = 0;
+        if (im.third_finite[i]) {
+          const float* f = factors.row(i).data();
+          for (long e = 0; e < E; ++e) t += W(e) * static_cast<double>(f[e]);
+        } else {
+          t = kInf;
+        }
+        const double r = oc.sampling_.radius_of(static_cast<int>(i));
+        g(i) = std::sqrt(gj) * kStored + r * (std::sqrt(gh) * kStored + 0.5 * r * t);
+      }
+      im.gamma = std::move(g);
+    });
+    return im.gamma;
   }
 
   // --- 1. J and H at the base centers: from the stored derivatives (CPU, or left to the backend's base
@@ -434,6 +530,7 @@ struct OctreeCertifier::Run {
     const double* y2 = y1 + m;
 #pragma omp parallel for schedule(static)
     for (long i = 0; i < N; ++i) {
+      if (!evaluated(i)) continue;
       const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
       double out[9][3];
       for (int row = 0; row < 9; ++row) {
@@ -475,6 +572,10 @@ struct OctreeCertifier::Run {
     if (device_Y.empty()) {
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i) {
+        if (!evaluated(i)) {
+          sigma3(i) = std::numeric_limits<double>::quiet_NaN();
+          continue;
+        }
         bool resolved = true;
         sigma3(i) = signed_singular_values(Jc[i], &resolved)(2);
         sign_unresolved[i] = !resolved;
@@ -513,10 +614,25 @@ struct OctreeCertifier::Run {
     if (!on_device) factor_sums(factors, third ? im.third_finite : im.first_finite, T);
     if (combined) factor_sums(factor_matrix(false), im.first_finite, T1);
     const VecXd& Tf = combined ? T1 : T;  // first-order sums (first, combined)
-    cert.min_sigma3_center = sigma3.minCoeff();
+    cert.min_sigma3_center = kInf;
+    for (long i = 0; i < N; ++i)
+      if (evaluated(i)) cert.min_sigma3_center = std::min(cert.min_sigma3_center, sigma3(i));
     const double base_storage = use_stored ? kFloatStorageRel : 0.0;
     base.resize(N);
     for (long i = 0; i < N; ++i) {
+      if (!evaluated(i)) {
+        const double nan = std::numeric_limits<double>::quiet_NaN();
+        base[i] = {oc.sampling_.centers.row(i).transpose(),
+                   oc.sampling_.side_of(static_cast<int>(i)),
+                   level(i),
+                   nan,
+                   nan,
+                   perturbed_lower(i),
+                   true,
+                   static_cast<int>(i),
+                   false};
+        continue;
+      }
       const double r = oc.sampling_.radius_of(static_cast<int>(i));
       const double L = lipschitz(hnorm(i), taylor_part(hop(i), sigma3(i), lb2(i), r), Tf(i), T(i), r);
       const double lb = sigma3(i) - r * L;
@@ -547,6 +663,10 @@ struct OctreeCertifier::Run {
     for (long i = 0; i < N; ++i) {
       double s = 0;
       const float* f = factors.row(i).data();
+      if (!evaluated(i)) {
+        out(i) = 0;
+        continue;
+      }
       if (row_finite[i]) {
 #pragma omp simd reduction(+ : s)
         for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
@@ -1095,8 +1215,10 @@ struct OctreeCertifier::Run {
     cert.min_margin = kInf;
     cert.min_lower_bound = kInf;
     long leaves = 0;
+    cert.base_lower.assign(N, kInf);
     auto emit = [&](const CertLeaf& l) {
       ++leaves;
+      if (l.base >= 0 && l.base < N) cert.base_lower[l.base] = std::min(cert.base_lower[l.base], l.margin);
       cert.min_margin = std::min(cert.min_margin, l.margin);
       // σ3 − r L − τ: the rounding allowance τ belongs to the bound (σ3 and L are computed in floating
       // point), so this is a lower bound of the true σ3 on the leaf; a leaf left unevaluated counts as −∞.
@@ -1143,6 +1265,8 @@ struct OctreeCertifier::Run {
     }
     cert.certified = all_ok;
     cert.num_leaves = leaves;
+    if (!cert.certified) cert.base_lower.clear();
+    cert.perturbed_voxels = perturbed.empty() ? 0 : std::count(perturbed.begin(), perturbed.end(), 1);
     for (size_t k = 0; k < vs.size() && cert.failed_voxels.size() < 64; ++k)
       if (vs[k].failed_here) cert.failed_voxels.push_back(failing_base[k]);
     cert.uncleared_voxels = static_cast<long>(uncleared.size());
@@ -1268,6 +1392,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   const auto t_start = Clock::now();
   if (p.max_depth < 0) throw InputError("", "max depth must be >= 0");
   Run run(*this, y, yr_ptr, yr_rows, p);
+  run.perturbation();
   run.base_derivatives();
   run.base_sigma3();
   run.base_bounds();

@@ -163,6 +163,7 @@ struct DeformationSolver::Precompute {
     const auto t0 = Clock::now();
     S.certifier_ = std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, 1.5e9,
                                                      [this](double f) { tick(f); });
+    S.perturb_lower_.clear();  // bounds of another certifier's voxels
     say("certificate precomputation (basis gradients and Hessians at the samples): " +
         format_g(ms_since(t0), 4) + " ms");
   }
@@ -211,6 +212,7 @@ struct DeformationSolver::Precompute {
       S.certifier_ =
           std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, std::move(d));
       if (third.size() > 0) S.certifier_->adopt_third_factors(std::move(third), std::move(third_finite));
+      S.perturb_lower_.clear();  // bounds of another certifier's voxels
     } catch (const CacheReader::Bad&) {
       return rejected(k, "malformed payload");
     } catch (const Error& e) {
@@ -623,6 +625,11 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       CertifyParams cp = certify_params(true, false);
       cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
       cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
+      if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
+        cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
+        cp.previous_lower = &perturb_lower_;
+        cp.perturbation_floor = params_.epsilon;  // condition (36) then decides as without them
+      }
       Certificate c = certifier_->certify_reduced(yt, cp);
       if (!c.certified) line_search_failed_ = c.failed_voxels;
       rec.ms_certificate += ms_since(tc);
@@ -643,6 +650,8 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       rec.terms = et;
       y_ = yt;
       kernels_->accept(t);
+      perturb_y_ = yt;
+      perturb_lower_ = c.base_lower;
       cert_ = frame_.from_normalized(std::move(c));
       break;
     }

@@ -51,6 +51,16 @@ struct CertifyParams {
   // Never changes the verdict: without a budget running out the same nodes are evaluated (docs/solver.md,
   // "One Newton iteration").
   std::vector<long> priority_voxels;
+  // Certifying by perturbation (docs/certificate.md, Step 4e; certify_reduced only): a map ỹ₀ (s by 3)
+  // certified earlier by this certifier, and that certificate's Certificate::base_lower. A base voxel i with
+  // base_lower[i] > Γ_i ‖ỹ − ỹ₀‖_F is certified without evaluating it (Γ_i bounds the reduced basis
+  // gradients' norm on the voxel). Both null: every voxel is evaluated.
+  const Eigen::Matrix<double, Eigen::Dynamic, 3>* previous_y = nullptr;
+  const std::vector<double>* previous_lower = nullptr;
+  // A voxel is taken over only when its new bound exceeds this floor: then every bound below the floor is
+  // that of an evaluated voxel, and a test "min_lower_bound < floor" decides as it would without the previous
+  // map (the solver passes its dynamic weighting's epsilon, condition (36)).
+  double perturbation_floor = 0;
 };
 
 // One leaf of the certification octree.
@@ -99,6 +109,10 @@ struct Certificate {
   // per-voxel budget reached — not the ones merely left unrefined after stop_on_failure stopped (the line
   // search's CertifyParams::priority_voxels for its next trial).
   std::vector<long> failed_voxels;
+  // When certified: per base voxel the smallest lower bound of σ3 over its leaves
+  // (CertifyParams::previous_lower of a later certificate); empty otherwise.
+  std::vector<double> base_lower;
+  long perturbed_voxels = 0;  // base voxels certified by perturbation (σ3 and L not evaluated: NaN)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
 

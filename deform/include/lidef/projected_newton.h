@@ -273,6 +273,11 @@ class DeformationSolver {
   // Base voxels whose proof failed in the last rejected line-search trial: the next trial refines them first
   // (CertifyParams::priority_voxels), so a trial failing at the same place is rejected early.
   std::vector<long> line_search_failed_;
+  // The last map the line search accepted and its certificate's per-voxel lower bounds (normalized frame):
+  // the next trials certify by perturbation from it (CertifyParams::previous_y), used only while y_ is still
+  // that map, bit for bit.
+  MatS3 perturb_y_;
+  std::vector<double> perturb_lower_;
   long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
   struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
   // The plain direction p0 = −(factor)⁻¹ ∇E improved by params_.newton_cg_steps preconditioned CG iterates

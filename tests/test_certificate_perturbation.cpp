@@ -1,0 +1,142 @@
+// Certifying by perturbation (CertifyParams::previous_y / previous_lower; docs/certificate.md, Step 4e): base
+// voxels certified from an earlier certified map without being evaluated. Checked against dense sampling of
+// the true σ3 of the new map on every such voxel, against the certificate without the previous map (same
+// verdict), and for large changes (nothing is taken over).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "lidef/certificate_verification.h"
+#include "lidef/octree_certifier.h"
+#include "lidef/sampling.h"
+#include "lidef/subspace.h"
+#include "test_cages.h"
+
+using namespace lidef;
+
+namespace {
+
+using MatR = Eigen::Matrix<double, Eigen::Dynamic, 3>;
+
+// A bent map in the subspace: the identity plus low modes (as test_certificate.cpp's smooth_map).
+MatR bent_reduced(const Cage& cage, const SpectralSubspace& sub, double amp, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  const double size = (cage.bbox_max - cage.bbox_min).norm();
+  for (int k = 4; k < std::min(12, sub.size()); ++k)
+    for (int a = 0; a < 3; ++a) y.col(a) += amp * size * N01(rng) * sub.basis.col(k);
+  return sub.basis.transpose() * y;
+}
+
+}  // namespace
+
+TEST(CertificatePerturbation, VoxelsTakenOverHoldUnderDenseSamplingAndTheVerdictIsUnchanged) {
+  const Cage cage(lidef::test::icosphere(2, 0.15, 8));
+  SamplingParams sp;
+  sp.target_count = 1500;
+  sp.count_tolerance = 0.1;
+  const VoxelSampling sampling = sample_voxels(cage, sp);
+  const SpectralSubspace sub = compute_subspace(cage, 40);
+  const OctreeCertifier cert(cage, sampling, &sub.basis);
+  const MatR y0 = bent_reduced(cage, sub, 0.6, 14);
+  CertifyParams p;
+  p.max_depth = 4;
+  const Certificate c0 = cert.certify_reduced(y0, p);
+  ASSERT_TRUE(c0.certified) << c0.reason;
+  ASSERT_EQ(static_cast<long>(c0.base_lower.size()), sampling.size());
+  EXPECT_EQ(c0.perturbed_voxels, 0);
+  // base_lower is a lower bound of σ3 on each base voxel: no sample below it.
+  {
+    std::vector<CertLeaf> base;
+    for (long i = 0; i < sampling.size(); i += 7) {
+      CertLeaf l;
+      l.center = sampling.centers.row(i).transpose();
+      l.side = sampling.side_of(static_cast<int>(i));
+      l.certified = true;
+      l.margin = c0.base_lower[i];
+      base.push_back(l);
+    }
+    const VerificationResult v = verify_certificate(cert.basis(), sub.basis * y0, base, 16, 2);
+    for (size_t k = 0; k < base.size(); ++k) EXPECT_GE(v.voxels[k].min_sigma3, base[k].margin);
+  }
+  std::mt19937 rng(3);
+  std::normal_distribution<double> N01;
+  MatR dir(y0.rows(), 3);
+  for (long k = 0; k < dir.rows(); ++k)
+    for (int a = 0; a < 3; ++a) dir(k, a) = N01(rng);
+  dir *= y0.norm() / dir.norm();
+  long taken_over_checked = 0;
+  int some_taken = 0;
+  for (double eps : {1e-5, 1e-4, 1e-3, 1e-2, 0.3}) {
+    const MatR y = y0 + eps * dir;
+    CertifyParams q = p;
+    const Certificate plain = cert.certify_reduced(y, q);
+    q.previous_y = &y0;
+    q.previous_lower = &c0.base_lower;
+    const Certificate c = cert.certify_reduced(y, q);
+    SCOPED_TRACE("eps " + std::to_string(eps));
+    std::cout << "change " << eps << " of |y0|: " << c.perturbed_voxels << " of " << sampling.size()
+              << " voxels certified by perturbation\n";
+    EXPECT_EQ(c.certified, plain.certified);
+    if (eps >= 0.3) {
+      EXPECT_EQ(c.perturbed_voxels, 0) << "a large change takes nothing over";
+    }
+    if (c.perturbed_voxels > 0) ++some_taken;
+    // Every voxel taken over: its bound holds for the new map under dense sampling.
+    std::vector<CertLeaf> taken;
+    for (const CertLeaf& l : c.leaves)
+      if (std::isnan(l.sigma3) && l.certified) taken.push_back(l);
+    EXPECT_EQ(static_cast<long>(taken.size()), c.perturbed_voxels);
+    if (taken.size() > 400) taken.resize(400);
+    const VerificationResult v = verify_certificate(cert.basis(), sub.basis * y, taken, 24, 5);
+    EXPECT_EQ(v.nonpositive_in_certified, 0);
+    for (size_t k = 0; k < taken.size(); ++k) {
+      EXPECT_GE(v.voxels[k].min_sigma3, taken[k].margin) << "voxel at " << taken[k].center.transpose();
+      ++taken_over_checked;
+    }
+    // A map certified with voxels taken over passes its bounds on: a third map from it is still sound.
+    if (c.certified) {
+      EXPECT_EQ(static_cast<long>(c.base_lower.size()), sampling.size());
+    }
+  }
+  std::cout << taken_over_checked << " voxels certified by perturbation checked by dense sampling\n";
+  EXPECT_GE(some_taken, 3);
+  EXPECT_GT(taken_over_checked, 500);
+}
+
+// A previous map of another shape (wrong row count) or bounds of another sampling are ignored, not trusted.
+TEST(CertificatePerturbation, MismatchedPreviousDataIsIgnored) {
+  const Cage cage(lidef::test::icosphere(1, 0.1, 3));
+  SamplingParams sp;
+  sp.target_count = 300;
+  sp.count_tolerance = 0.2;
+  const VoxelSampling sampling = sample_voxels(cage, sp);
+  const SpectralSubspace sub = compute_subspace(cage, 20);
+  const OctreeCertifier cert(cage, sampling, &sub.basis);
+  const MatR y0 = bent_reduced(cage, sub, 0.2, 5);
+  const Certificate c0 = cert.certify_reduced(y0);
+  ASSERT_TRUE(c0.certified);
+  CertifyParams q;
+  const MatR other = MatR::Zero(y0.rows() - 1, 3);
+  q.previous_y = &other;
+  q.previous_lower = &c0.base_lower;
+  EXPECT_EQ(cert.certify_reduced(y0, q).perturbed_voxels, 0);
+  const std::vector<double> short_lower(c0.base_lower.begin(), c0.base_lower.end() - 1);
+  q.previous_y = &y0;
+  q.previous_lower = &short_lower;
+  EXPECT_EQ(cert.certify_reduced(y0, q).perturbed_voxels, 0);
+  q.previous_lower = &c0.base_lower;
+  EXPECT_EQ(cert.certify_reduced(y0, q).perturbed_voxels, sampling.size()) << "the same map: every voxel";
+  // The floor: no voxel whose bound would be below it is taken over (all are, here, below 1e9).
+  q.perturbation_floor = 1e9;
+  EXPECT_EQ(cert.certify_reduced(y0, q).perturbed_voxels, 0);
+  double lowest = 1e300;
+  for (double b : c0.base_lower) lowest = std::min(lowest, b);
+  q.perturbation_floor = lowest;  // the voxel(s) at the lowest bound stay evaluated
+  const Certificate c = cert.certify_reduced(y0, q);
+  EXPECT_LT(c.perturbed_voxels, sampling.size());
+  EXPECT_GT(c.perturbed_voxels, 0);
+  EXPECT_EQ(c.min_lower_bound, c0.min_lower_bound) << "the lowest bound is an evaluated one";
+}
