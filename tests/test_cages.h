@@ -4,6 +4,7 @@
 #include <random>
 
 #include "lidef/cage.h"
+#include "lidef/subspace.h"
 #include "lidef/tri_mesh.h"
 
 namespace lidef::test {
@@ -15,6 +16,18 @@ inline MatX3d perturbed_map(const Cage& cage, double amp, unsigned seed) {
   std::normal_distribution<double> N01;
   MatX3d y = cage.identity_coefficients();
   for (int i = 0; i < y.rows(); ++i) y.row(i) += amp * Vec3(N01(rng), N01(rng), N01(rng)).transpose();
+  return y;
+}
+
+// A smooth bent map in the span of a subspace (#V+#F by 3): the cage's identity plus N(0, (amp · bbox
+// diagonal)²) multiples of the low modes 4..11 (seeded).
+inline MatX3d smooth_map(const Cage& cage, const SpectralSubspace& sub, double amp, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01;
+  MatX3d y = cage.identity_coefficients();
+  const double size = (cage.bbox_max - cage.bbox_min).norm();
+  for (int k = 4; k < std::min(12, sub.size()); ++k)
+    for (int a = 0; a < 3; ++a) y.col(a) += amp * size * N01(rng) * sub.basis.col(k);
   return y;
 }
 

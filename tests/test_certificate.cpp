@@ -16,6 +16,7 @@
 #include "test_support.h"
 
 using namespace lidef;
+using lidef::test::smooth_map;
 
 namespace {
 
@@ -30,15 +31,6 @@ Vec3 random_unit(std::mt19937& rng) {
 
 // A smooth non-affine map: identity plus `amp` times a fixed random mix of the smoothest non-affine
 // subspace directions (columns 4..11 of Ξ), one mix per coordinate.
-MatX3d smooth_map(const Cage& cage, const SpectralSubspace& sub, double amp, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> N01;
-  MatX3d y = cage.identity_coefficients();
-  const double size = (cage.bbox_max - cage.bbox_min).norm();
-  for (int k = 4; k < std::min(12, sub.size()); ++k)
-    for (int a = 0; a < 3; ++a) y.col(a) += amp * size * N01(rng) * sub.basis.col(k);
-  return y;
-}
 
 struct CertCase {
   Cage cage;

@@ -19,15 +19,9 @@ namespace {
 
 using MatR = Eigen::Matrix<double, Eigen::Dynamic, 3>;
 
-// A bent map in the subspace: the identity plus low modes (as test_certificate.cpp's smooth_map).
+// A bent map in the subspace, in reduced coordinates.
 MatR bent_reduced(const Cage& cage, const SpectralSubspace& sub, double amp, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> N01;
-  MatX3d y = cage.identity_coefficients();
-  const double size = (cage.bbox_max - cage.bbox_min).norm();
-  for (int k = 4; k < std::min(12, sub.size()); ++k)
-    for (int a = 0; a < 3; ++a) y.col(a) += amp * size * N01(rng) * sub.basis.col(k);
-  return sub.basis.transpose() * y;
+  return sub.basis.transpose() * lidef::test::smooth_map(cage, sub, amp, seed);
 }
 
 }  // namespace
