@@ -12,6 +12,7 @@
 
 #include "lidef/certificate_verification.h"
 #include "lidef/edge_jet.h"
+#include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
@@ -27,21 +28,10 @@ double frob(const std::array<Mat3, 3>& H) {
   return std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
 }
 
-// Distance from p to the closed triangle (a, b, c), by minimizing over a fine barycentric grid and the edges
-// (a test reference: slow, independent of the bounding-sphere test it checks).
+// Distance from p to the closed triangle (a, b, c) (geometry.h's exact closest point; independent of the
+// bounding spheres faces_near uses).
 double point_triangle_distance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  // Project onto the plane; inside → plane distance, else the closest edge point.
-  const Vec3 n = (b - a).cross(c - a);
-  const double nn = n.squaredNorm();
-  const Vec3 q = p - n * (n.dot(p - a) / nn);
-  const double wa = (b - q).cross(c - q).dot(n) / nn, wb = (c - q).cross(a - q).dot(n) / nn;
-  const double wc = 1 - wa - wb;
-  if (wa >= 0 && wb >= 0 && wc >= 0) return (p - q).norm();
-  auto seg = [&](const Vec3& u, const Vec3& w) {
-    const double t = std::clamp((p - u).dot(w - u) / (w - u).squaredNorm(), 0.0, 1.0);
-    return (p - (u + t * (w - u))).norm();
-  };
-  return std::min({seg(a, b), seg(b, c), seg(c, a)});
+  return std::sqrt(point_triangle_dist2(p, a, b, c));
 }
 
 // A random point inside the icosphere cage at least `clear` from its surface, with its ball radius.

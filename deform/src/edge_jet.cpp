@@ -115,31 +115,20 @@ void EdgeJet::make_patch(const HarmonicBasis::FaceMatrices& fm, const std::vecto
     }
     return vmap[v];
   };
-  auto scale_A = [&](int t) { return std::max(fm.A[t].cwiseAbs().sum(), fm.A_abs[t]); };
-  auto scale_AD = [&](int t, int k) { return std::max(fm.AD[t][k].cwiseAbs().sum(), 2.0 * fm.A_abs[t]); };
   for (int t : faces) {
     out.faces.push_back({local(faces_[t][0]), local(faces_[t][1]), local(faces_[t][2])});
     out.md.A.push_back(fm.A[t]);
-    out.md.scale_A.push_back(scale_A(t));
+    out.md.scale_A.push_back(face_scale(fm, t));
   }
   for (int t : faces)
     for (int e : face_edges_[t]) {
       if (edge_seen[e]) continue;
       edge_seen[e] = 1;
       const EdgeConst& c = edges_[e];
-      const bool in0 = in_s[c.f0] != 0, in1 = in_s[c.f1] != 0;
       MapData::Edge me;
-      me.delta = Mat3::Zero();
-      if (in0) me.delta += c.s0 * fm.A[c.f0];
-      if (in1) me.delta += c.s1 * fm.A[c.f1];
-      me.norm = me.delta.norm();
-      if (me.norm == 0) continue;
-      me.delta_x = me.delta * cross_matrix(c.dhat);
-      me.scale_a = (in0 ? scale_A(c.f0) : 0.0) + (in1 ? scale_A(c.f1) : 0.0);
-      me.scale_ad = (in0 ? scale_AD(c.f0, c.k0) : 0.0) + (in1 ? scale_AD(c.f1, c.k1) : 0.0);
+      if (!edge_terms(fm, c, in_s[c.f0] != 0, in_s[c.f1] != 0, me)) continue;
       me.v0 = local(c.v0);
       me.v1 = local(c.v1);
-      me.d = c.d;
       out.md.edges.push_back(me);
     }
   // Reset only what was touched (a patch is small; the marks span the cage).
@@ -150,26 +139,41 @@ void EdgeJet::make_patch(const HarmonicBasis::FaceMatrices& fm, const std::vecto
   }
 }
 
+double EdgeJet::face_scale(const HarmonicBasis::FaceMatrices& fm, int t) {
+  return std::max(fm.A[t].cwiseAbs().sum(), fm.A_abs[t]);
+}
+
+bool EdgeJet::edge_terms(const HarmonicBasis::FaceMatrices& fm, const EdgeConst& c, bool in0, bool in1,
+                         MapData::Edge& e) {
+  // ‖δ_e‖: for both faces ‖A_f0 − A_f1‖ (= ‖s0 A_f0 + s1 A_f1‖, s0 = −s1 on an oriented cage), for one ‖A_t‖.
+  e.norm = in0 && in1 ? (fm.A[c.f0] - fm.A[c.f1]).norm()
+           : in0      ? fm.A[c.f0].norm()
+           : in1      ? fm.A[c.f1].norm()
+                      : 0.0;
+  if (e.norm == 0) return false;  // no contribution to J, H or the bounds (as in the per-face code)
+  e.delta = Mat3::Zero();
+  if (in0) e.delta += c.s0 * fm.A[c.f0];
+  if (in1) e.delta += c.s1 * fm.A[c.f1];
+  e.delta_x = e.delta * cross_matrix(c.dhat);
+  // The same rounding magnitudes the per-face evaluation adds for the half-edges.
+  e.scale_a = (in0 ? face_scale(fm, c.f0) : 0.0) + (in1 ? face_scale(fm, c.f1) : 0.0);
+  e.scale_ad = (in0 ? std::max(fm.AD[c.f0][c.k0].cwiseAbs().sum(), 2.0 * fm.A_abs[c.f0]) : 0.0) +
+               (in1 ? std::max(fm.AD[c.f1][c.k1].cwiseAbs().sum(), 2.0 * fm.A_abs[c.f1]) : 0.0);
+  e.v0 = c.v0;
+  e.v1 = c.v1;
+  e.d = c.d;
+  return true;
+}
+
 EdgeJet::MapData EdgeJet::prepare(const HarmonicBasis::FaceMatrices& fm) const {
   MapData md;
   const size_t nf = faces_.size();
   md.A = fm.A;
   md.scale_A.resize(nf);
-  for (size_t t = 0; t < nf; ++t) md.scale_A[t] = std::max(fm.A[t].cwiseAbs().sum(), fm.A_abs[t]);
+  for (size_t t = 0; t < nf; ++t) md.scale_A[t] = face_scale(fm, static_cast<int>(t));
   for (const EdgeConst& c : edges_) {
     MapData::Edge e;
-    e.norm = (fm.A[c.f0] - fm.A[c.f1]).norm();
-    if (e.norm == 0) continue;  // no contribution to J, H or the bounds (as in the per-face code)
-    e.delta = c.s0 * fm.A[c.f0] + c.s1 * fm.A[c.f1];
-    e.delta_x = e.delta * cross_matrix(c.dhat);
-    // The same rounding magnitudes the per-face evaluation adds for the two half-edges.
-    e.scale_a = md.scale_A[c.f0] + md.scale_A[c.f1];
-    e.scale_ad = std::max(fm.AD[c.f0][c.k0].cwiseAbs().sum(), 2.0 * fm.A_abs[c.f0]) +
-                 std::max(fm.AD[c.f1][c.k1].cwiseAbs().sum(), 2.0 * fm.A_abs[c.f1]);
-    e.v0 = c.v0;
-    e.v1 = c.v1;
-    e.d = c.d;
-    md.edges.push_back(e);
+    if (edge_terms(fm, c, true, true, e)) md.edges.push_back(e);
   }
   return md;
 }

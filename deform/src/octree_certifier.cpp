@@ -261,7 +261,6 @@ struct OctreeCertifier::Run {
   // B(c, rad): F_far(q) = J_far + H_far[q − c] + R, ‖R‖_F ≤ ½|q − c|² T.
   struct FarField {
     Vec3 c = Vec3::Zero();
-    double rad = 0;
     std::vector<int> near;  // N, ascending
     EdgeJet::Patch patch;   // the faces of N
     Mat3 J = Mat3::Zero();  // J̃_far(c) = J̃(c) − J_N(c), |J_far(c) − J̃_far(c)|₂ ≤ eps_J
@@ -988,14 +987,16 @@ struct OctreeCertifier::Run {
           for (int k = 0; k < n; ++k)
             exact_values(ev[k], rad[k], vals[again[k0 + k]], batch_jets[again[k0 + k]]);
         });
-    exact_redone += na;
   }
-  mutable long exact_redone = 0;  // far mode: nodes evaluated again exactly
   // Condition (6)'s margin with the third-order bound (as decide_batch forms it) for a node's values with
   // the given own bound and far-field errors.
   double third_margin(const Node& nd, const NodeValues& v, double own, double eps_J, double eps_H) const {
     const double rad = 0.5 * std::sqrt(3.0) * nd.side;
-    const double L = v.hnorm + eps_H + rad * own;
+    return node_margin(v, eps_J, v.hnorm + eps_H + rad * own, rad);
+  }
+  // Condition (6) at a refinement node: σ3 − eps_J − rad L − τ (eps_J: the far field's error of σ3, 0 for an
+  // exact evaluation).
+  static double node_margin(const NodeValues& v, double eps_J, double L, double rad) {
     return v.sigma3 - eps_J - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
   }
   void exact_values(const EdgeJet::Values& ev, double rad, NodeValues& v, Jet& jet) const {
@@ -1036,7 +1037,6 @@ struct OctreeCertifier::Run {
   void build_far(FarField& ff, const Vec3& c, double rad, const NodeValues& v, const Jet& jet,
                  const FarField* parent, const float* row) const {
     ff.c = c;
-    ff.rad = rad;
     const bool inherit = parent && parent->ok;
     im.edge_jet->faces_near(c, p.far_field_reach * rad, inherit ? &parent->near : nullptr, ff.near);
     im.edge_jet->make_patch(fm, ff.near, ff.patch);
@@ -1169,8 +1169,7 @@ struct OctreeCertifier::Run {
       const double bnd = std::min(tree[id].bound, v.own_bound);
       const double bnd1 = combined ? std::min(tree[id].bound_first, v.own_first) : bnd;
       const double L = lipschitz(v.hnorm + v.eps_H, v.hnorm_op, bnd1, bnd, rad);
-      const double margin =
-          v.sigma3 - v.eps_J - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+      const double margin = node_margin(v, v.eps_J, L, rad);
       const int bi = static_cast<int>(failing_base[fi]);
       const int leaf_depth = level(bi) + depth;
       if (margin > 0) {
@@ -1328,7 +1327,7 @@ struct OctreeCertifier::Run {
           const double rad = 0.5 * std::sqrt(3.0) * nd.side;
           const double L =
               lipschitz(v.hnorm, v.hnorm_op, combined ? v.own_first : v.own_bound, v.own_bound, rad);
-          const double margin = v.sigma3 - rad * L - tolerance(v.scale_J, v.scale_H, v.sigma3, L, rad, 0.0);
+          const double margin = node_margin(v, 0.0, L, rad);
           kids[k] = {nd.c, nd.side, nd.depth, v.sigma3, L, margin, margin > 0, l.base, v.sign_unresolved};
           worst = std::min(worst, margin);
           c.min_sigma3_center = std::min(c.min_sigma3_center, v.sigma3);

@@ -108,6 +108,12 @@ class EdgeJet {
     double d;
   };
   std::vector<EdgeConst> edges_;
+  // max(‖A_t‖₁, A_abs_t): face t's rounding scale.
+  static double face_scale(const HarmonicBasis::FaceMatrices& fm, int t);
+  // Edge c's terms for the faces of c in the set (in0: f0, in1: f1): δ_e, δ_e[d̂]×, ‖δ_e‖, rounding scales,
+  // global vertex indices. False when δ_e = 0 (the edge contributes nothing).
+  static bool edge_terms(const HarmonicBasis::FaceMatrices& fm, const EdgeConst& c, bool in0, bool in1,
+                         MapData::Edge& e);
   template <bool kHessian, bool kFirst, bool kThird>
   static bool lanes(const View& g, const MapData& md, const double* px, const double* py, const double* pz,
                     const double* r, Values* out, int n);

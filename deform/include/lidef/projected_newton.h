@@ -89,8 +89,10 @@ struct IterationRecord {
   int certificate_rejections = 0;  // halvings because the certificate failed
   bool accepted = false;
   bool certified = false;       // the current map (accepted point, or the previous one) is certified
-  double min_sigma3 = 0;        // certificate of the current map: min σ3 at the voxel centers
-  double min_lower_bound = 0;   // min over leaves of σ3 − r L
+  // The line search's certificate of the current map: min σ3 at the evaluated voxel centers, and min over
+  // leaves of σ3 − r L − τ (voxels certified by perturbation carry their bound, docs/certificate.md Step 4e).
+  double min_sigma3 = 0;
+  double min_lower_bound = 0;
   long refined = 0;             // voxels the certificate subdivided
   double max_handle_error = 0;  // max ‖f(p_h) − q_h‖ at the current map
   std::string weight_action;    // what dynamic weighting did after this step ("", "smooth*", "p2p*", "reset")
