@@ -4,7 +4,9 @@
 // verdict), and for large changes (nothing is taken over).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
 
 #include "lidef/certificate_verification.h"
@@ -24,17 +26,52 @@ MatR bent_reduced(const Cage& cage, const SpectralSubspace& sub, double amp, uns
   return sub.basis.transpose() * lidef::test::smooth_map(cage, sub, amp, seed);
 }
 
+// The subdivided icosphere's ~1,460 voxels, 40 basis functions and a certified bent map y0.
+struct BentCase {
+  Cage cage{lidef::test::icosphere(2, 0.15, 8)};
+  VoxelSampling sampling;
+  SpectralSubspace sub;
+  std::unique_ptr<OctreeCertifier> cert;
+  MatR y0;
+  BentCase() {
+    SamplingParams sp;
+    sp.target_count = 1500;
+    sp.count_tolerance = 0.1;
+    sampling = sample_voxels(cage, sp);
+    sub = compute_subspace(cage, 40);
+    cert = std::make_unique<OctreeCertifier>(cage, sampling, &sub.basis);
+    y0 = bent_reduced(cage, sub, 0.6, 14);
+  }
+};
+
+// Checks every voxel of c taken over (σ3 = NaN, certified) by dense sampling of the map y: none has a sampled
+// σ3 below its bound. At most `limit` voxels, spread over the list ordered by bound (the lowest included).
+// Returns how many were checked.
+long check_taken_over(const BentCase& b, const MatR& y, const Certificate& c, size_t limit) {
+  std::vector<CertLeaf> taken;
+  for (const CertLeaf& l : c.leaves)
+    if (std::isnan(l.sigma3) && l.certified) taken.push_back(l);
+  EXPECT_EQ(static_cast<long>(taken.size()), c.perturbed_voxels);
+  std::sort(taken.begin(), taken.end(),
+            [](const CertLeaf& a, const CertLeaf& l) { return a.margin < l.margin; });
+  std::vector<CertLeaf> pick;
+  for (size_t k = 0; k < taken.size(); k += std::max<size_t>(1, taken.size() / limit))
+    pick.push_back(taken[k]);
+  const VerificationResult v = verify_certificate(b.cert->basis(), b.sub.basis * y, pick, 24, 5);
+  EXPECT_EQ(v.nonpositive_in_certified, 0);
+  for (size_t k = 0; k < pick.size(); ++k)
+    EXPECT_GE(v.voxels[k].min_sigma3, pick[k].margin) << "voxel at " << pick[k].center.transpose();
+  return static_cast<long>(pick.size());
+}
+
 }  // namespace
 
 TEST(CertificatePerturbation, VoxelsTakenOverHoldUnderDenseSamplingAndTheVerdictIsUnchanged) {
-  const Cage cage(lidef::test::icosphere(2, 0.15, 8));
-  SamplingParams sp;
-  sp.target_count = 1500;
-  sp.count_tolerance = 0.1;
-  const VoxelSampling sampling = sample_voxels(cage, sp);
-  const SpectralSubspace sub = compute_subspace(cage, 40);
-  const OctreeCertifier cert(cage, sampling, &sub.basis);
-  const MatR y0 = bent_reduced(cage, sub, 0.6, 14);
+  const BentCase b;
+  const VoxelSampling& sampling = b.sampling;
+  const SpectralSubspace& sub = b.sub;
+  const OctreeCertifier& cert = *b.cert;
+  const MatR& y0 = b.y0;
   CertifyParams p;
   p.max_depth = 4;
   const Certificate c0 = cert.certify_reduced(y0, p);
@@ -79,17 +116,7 @@ TEST(CertificatePerturbation, VoxelsTakenOverHoldUnderDenseSamplingAndTheVerdict
     }
     if (c.perturbed_voxels > 0) ++some_taken;
     // Every voxel taken over: its bound holds for the new map under dense sampling.
-    std::vector<CertLeaf> taken;
-    for (const CertLeaf& l : c.leaves)
-      if (std::isnan(l.sigma3) && l.certified) taken.push_back(l);
-    EXPECT_EQ(static_cast<long>(taken.size()), c.perturbed_voxels);
-    if (taken.size() > 400) taken.resize(400);
-    const VerificationResult v = verify_certificate(cert.basis(), sub.basis * y, taken, 24, 5);
-    EXPECT_EQ(v.nonpositive_in_certified, 0);
-    for (size_t k = 0; k < taken.size(); ++k) {
-      EXPECT_GE(v.voxels[k].min_sigma3, taken[k].margin) << "voxel at " << taken[k].center.transpose();
-      ++taken_over_checked;
-    }
+    taken_over_checked += check_taken_over(b, y, c, 400);
     // A map certified with voxels taken over passes its bounds on: a third map from it is still sound.
     if (c.certified) {
       EXPECT_EQ(static_cast<long>(c.base_lower.size()), sampling.size());
@@ -133,4 +160,75 @@ TEST(CertificatePerturbation, MismatchedPreviousDataIsIgnored) {
   EXPECT_LT(c.perturbed_voxels, sampling.size());
   EXPECT_GT(c.perturbed_voxels, 0);
   EXPECT_EQ(c.min_lower_bound, c0.min_lower_bound) << "the lowest bound is an evaluated one";
+}
+
+namespace {
+
+// D = G̃ d at every base center from the certifier's stored float rows (JT layout, 3N by 3), in double as
+// DeformationEnergy::jacobians computes it.
+MatR direction_jacobians(const OctreeCertifier& cert, long voxels, const MatR& d) {
+  const OctreeCertifier::ReducedDerivativesRef r = cert.reduced_derivatives();
+  MatR D(3 * voxels, 3);
+  for (long i = 0; i < voxels; ++i)
+    for (int row = 0; row < 3; ++row)
+      for (int a = 0; a < 3; ++a) {
+        double acc = 0;
+        for (long k = 0; k < r.m; ++k) acc += double((*r.GH)[(9 * i + row) * r.m + k]) * d(k, a);
+        D(3 * i + row, a) = acc;
+      }
+  return D;
+}
+
+}  // namespace
+
+// With the direction's Jacobians (CertifyParams::direction_jacobians, Step 4e's center term t ‖G d‖ instead
+// of ‖G‖₂ ‖ỹ − ỹ₀‖): more voxels taken over, each still holding under dense sampling of the new map, the
+// verdict unchanged; a direction that does not match the change (a wrong step) is covered by the residual,
+// and Jacobians of another size are ignored.
+TEST(CertificatePerturbation, TheDirectionsJacobiansTakeOverMoreAndStaySound) {
+  const BentCase b;
+  const long N = b.sampling.size();
+  const OctreeCertifier& cert = *b.cert;
+  const MatR& y0 = b.y0;
+  CertifyParams p;
+  p.max_depth = 4;
+  const Certificate c0 = cert.certify_reduced(y0, p);
+  ASSERT_TRUE(c0.certified) << c0.reason;
+  // A smooth direction (the difference of two bent maps), as a Newton step would be.
+  MatR dir = bent_reduced(b.cage, b.sub, 0.6, 15) - y0;
+  const MatR D = direction_jacobians(cert, N, dir);
+  long more = 0, checked = 0;
+  for (double t : {1e-3, 1e-2, 0.05, 0.2}) {
+    SCOPED_TRACE("t " + std::to_string(t));
+    const MatR y = y0 + t * dir;
+    CertifyParams q = p;
+    const Certificate plain = cert.certify_reduced(y, q);
+    q.previous_y = &y0;
+    q.previous_lower = &c0.base_lower;
+    const Certificate norm_only = cert.certify_reduced(y, q);
+    q.direction = &dir;
+    q.direction_jacobians = &D;
+    q.direction_step = t;
+    q.direction_scale = dir.norm();
+    const Certificate c = cert.certify_reduced(y, q);
+    std::cout << "step " << t << ": " << c.perturbed_voxels << " taken over with the direction, "
+              << norm_only.perturbed_voxels << " with ‖G‖‖δ‖ alone, of " << N << "\n";
+    EXPECT_EQ(c.certified, plain.certified);
+    EXPECT_GE(c.perturbed_voxels, norm_only.perturbed_voxels);
+    if (c.perturbed_voxels > norm_only.perturbed_voxels) ++more;
+    // A wrong step (the change is t d, the step says 2t): the residual ‖ỹ − ỹ₀ − 2t d‖ is then large and
+    // the bound no smaller than the norm-only one's minimum with it; still sound.
+    CertifyParams wrong = q;
+    wrong.direction_step = 2 * t;
+    const Certificate cw = cert.certify_reduced(y, wrong);
+    for (const Certificate* cc : {&c, &cw}) checked += check_taken_over(b, y, *cc, 250);
+    // Jacobians of another size: ignored (the norm-only test decides).
+    const MatR short_D = D.topRows(D.rows() - 3);
+    CertifyParams bad = q;
+    bad.direction_jacobians = &short_D;
+    EXPECT_EQ(cert.certify_reduced(y, bad).perturbed_voxels, norm_only.perturbed_voxels);
+  }
+  std::cout << checked << " voxels taken over checked by dense sampling\n";
+  EXPECT_GE(more, 2) << "the direction's center term takes over more voxels at some steps";
+  EXPECT_GT(checked, 500);
 }

@@ -33,6 +33,7 @@ class CpuEnergyKernels final : public EnergyKernels {
   }
   void use_accumulated_direction() override { dJ_.swap(sum_); }
   MatJT current_jacobians() override { return J_; }
+  const MatJT* direction_jacobians() const override { return &dJ_; }
 
  private:
   const DeformationEnergy& e_;

@@ -66,10 +66,14 @@ struct OctreeCertifier::Impl {
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
-  // Certifying by perturbation (Step 4e): per voxel Γ_i ≥ sup over its ball of the norm of the map ỹ ↦ J
-  // (built on first use; reduced mode only).
+  // Certifying by perturbation (Step 4e), per voxel (built on first use; reduced mode only): Γ_i = g2 + rest
+  // ≥ sup over its ball of the norm of the map ỹ ↦ J, with its center part g2 ≥ ‖G_i‖₂; and ‖G̃_i‖_F of the
+  // stored rows.
+  struct PerturbationConstants {
+    VecXd g2, rest, gF;
+  };
   mutable std::once_flag gamma_once;
-  mutable VecXd gamma;
+  mutable PerturbationConstants pert;
   mutable std::vector<char> first_finite, third_finite;  // per voxel: no factor is +∞
   // Stored as floats rounded *up*, so that they stay upper bounds.
   mutable Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> first, third;
@@ -389,24 +393,66 @@ struct OctreeCertifier::Run {
         d2 += d * d;
       }
     const double dn = std::sqrt(d2);
-    const VecXd& gamma = perturbation_constants();
+    const Impl::PerturbationConstants& pc = perturbation_constants();
+    const double rho = direction_residual(y0);  // ≥ ‖ỹ − ỹ₀ − t d‖_F; < 0: no usable direction
+    const MatS3* D = rho >= 0 ? p.direction_jacobians : nullptr;
+    const double t = p.direction_step, kDir = 0x1p-30 * t * p.direction_scale + 0x1p-23 * dn;
     perturbed.assign(N, 0);
     perturbed_lower.setConstant(N, -kInf);
     for (long i = 0; i < N; ++i) {
-      // The factor 1 + 1e-9 covers the rounding of dn, Γ_i and this product (each ≤ ~1e-13 relative).
-      const double lb = lower[i] - gamma(i) * dn * (1 + 1e-9);
+      double center = pc.g2(i) * dn;
+      if (D) {
+        // ‖ΔJ(c_i)‖₂ ≤ t ‖D_i‖₂ + t ‖G̃_i d − D_i‖ + ‖G̃_i‖₂ ‖ρ‖ + ‖(G_i − G̃_i) δ‖ (Step 4e).
+        const double dj = t * spectral_bound(D->middleRows(3 * i, 3)) + pc.g2(i) * rho + pc.gF(i) * kDir;
+        center = std::min(center, dj);
+      }
+      // The factor 1 + 1e-9 covers the rounding of dn, Γ_i, ‖D_i‖ and these products (each ≤ ~1e-13
+      // relative).
+      const double lb = lower[i] - (center + pc.rest(i) * dn) * (1 + 1e-9);
       if (im.clear[i] && lb > 0 && lb > p.perturbation_floor) {
         perturbed[i] = 1;
         perturbed_lower(i) = lb;
       }
     }
   }
+  // ≥ ‖ỹ − ỹ₀ − t d‖_F for the direction of CertifyParams (computed entrywise, each entry's rounding, ≤ 3u
+  // of the magnitudes, added; 1e-300 for underflow); −1 when no direction was passed or its sizes do not
+  // match (then only Γ_i ‖δ‖ is used).
+  double direction_residual(const MatS3& y0) const {
+    const MatS3* d = p.direction;
+    const MatS3* D = p.direction_jacobians;
+    const double t = p.direction_step;
+    if (!d || !D || d->rows() != yr_rows || D->rows() != 3 * N || !(t >= 0) || !std::isfinite(t) ||
+        !(p.direction_scale >= 0) || !std::isfinite(p.direction_scale) || yr_rows >= (1L << 20))
+      return -1;
+    constexpr double u = 0x1p-53;
+    double r2 = 0;
+    for (int a = 0; a < 3; ++a)
+      for (long k = 0; k < yr_rows; ++k) {
+        const double y = yr_ptr[a * yr_rows + k], y00 = y0(k, a), td = t * (*d)(k, a);
+        const double e =
+            std::abs((y - y00) - td) + 4 * u * (std::abs(y) + std::abs(y00) + std::abs(td)) + 1e-300;
+        r2 += e * e;
+      }
+    const double rho = std::sqrt(r2) * (1 + 1e-12);
+    return std::isfinite(rho) ? rho : -1;
+  }
+  // ≥ ‖M‖₂ for a 3 by 3 block (the JT rows of one center): the smaller of ‖M‖_F and the root of Gershgorin's
+  // bound on λ_max(MᵀM).
+  template <class Block>
+  static double spectral_bound(const Block& M) {
+    const Mat3 A = M;
+    const Mat3 gram = A.transpose() * A;
+    const double gersh = gram.cwiseAbs().rowwise().sum().maxCoeff();
+    return std::sqrt(std::min(A.squaredNorm(), gersh));
+  }
+
   // Γ_i = ‖G(c)‖₂ + r (‖H(c)‖_F + ½ r Σ_e W_e Θ_e(B_i)), the reduced basis' gradients G (3 by s) and
   // Hessians H (27 by s) at the center from the stored rows (each within 2⁻²⁴ of its value: × (1 + 2⁻²³)),
   // W_e = sqrt(Σ_k ‖δ_e(ψ_k)‖²) over the reduced basis functions ψ_k (Step 2's δ of a scalar function, a
   // 3-vector), Θ the third-order factors (Step 3). Then ‖J(ỹ) − J(ỹ₀)‖_F ≤ Γ_i ‖ỹ − ỹ₀‖_F on the ball (Step
   // 4e).
-  const VecXd& perturbation_constants() const {
+  const Impl::PerturbationConstants& perturbation_constants() const {
     std::call_once(im.gamma_once, [&] {
       const MatXd& xi = *im.reduction;
       const long s = xi.cols();
@@ -424,7 +470,8 @@ struct OctreeCertifier::Run {
       const auto& factors = factor_matrix(true);
       const long m = im.m;
       constexpr double kStored = 1 + 0x1p-23;
-      VecXd g(N);
+      Impl::PerturbationConstants out;
+      out.g2.resize(N), out.rest.resize(N), out.gF.resize(N);
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i) {
         const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
@@ -455,11 +502,13 @@ struct OctreeCertifier::Run {
           t = kInf;
         }
         const double r = oc.sampling_.radius_of(static_cast<int>(i));
-        g(i) = std::sqrt(gj) * kStored + r * (std::sqrt(gh) * kStored + 0.5 * r * t);
+        out.g2(i) = std::sqrt(gj) * kStored;
+        out.rest(i) = r * (std::sqrt(gh) * kStored + 0.5 * r * t) * (1 + 1e-12);
+        out.gF(i) = std::sqrt(gram[0][0] + gram[1][1] + gram[2][2]) * (1 + 1e-12);
       }
-      im.gamma = std::move(g);
+      im.pert = std::move(out);
     });
-    return im.gamma;
+    return im.pert;
   }
 
   // --- 1. J and H at the base centers: from the stored derivatives (CPU, or left to the backend's base

@@ -596,8 +596,10 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     t0 = Clock::now();
     if (params_.newton_cg_steps > 0)
       dvec = conjugate_gradient_correction(gvec, dvec, *L, rec);  // leaves the kernels' direction at dvec
-    else
+    else {
       kernels_->set_direction(Eigen::Map<const MatS3>(dvec.data(), s, 3));
+      direction_scale_ = dvec.norm() * (1 + 1e-12);
+    }
     rec.ms_solve += ms_since(t0);
     const MatS3 delta = Eigen::Map<const MatS3>(dvec.data(), s, 3);
     rec.newton_decrement = -gvec.dot(dvec);
@@ -629,13 +631,20 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
         cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
         cp.previous_lower = &perturb_lower_;
         cp.perturbation_floor = params_.epsilon;  // condition (36) then decides as without them
+        if (const MatJT* dJ = kernels_->direction_jacobians()) {  // the center term from G d (Step 4e)
+          cp.direction = &delta;
+          cp.direction_jacobians = dJ;
+          cp.direction_step = t;
+          cp.direction_scale = direction_scale_;
+        }
       }
       Certificate c = certifier_->certify_reduced(yt, cp);
       if (!c.certified) line_search_failed_ = c.failed_voxels;
       rec.ms_certificate += ms_since(tc);
       if (trace)
-        std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld (%s) %.1f ms\n", t, et.total,
-                     c.certified ? 1 : 0, c.refined, c.reason.c_str(), ms_since(tc));
+        std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms\n", t,
+                     et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
+                     ms_since(tc));
       if (!c.certified) {
         ++rec.certificate_rejections;
         if (may_retry) {
@@ -703,7 +712,9 @@ VecXd DeformationSolver::conjugate_gradient_correction(const VecXd& gvec, const 
   MatJT J_host, dJ_host;
   if (!native) J_host = kernels_->current_jacobians();
   NewtonCgOperators ops;
+  double p_norm = 0, combined_scale = 0;  // ‖p‖_F of the last iterate; Σ_k |α_k| ‖p_k‖_F
   ops.curvature = [&](const VecXd& p) {
+    p_norm = p.norm();
     double dis;
     if (native) {
       kernels_->set_direction(as_mat(p));
@@ -722,17 +733,22 @@ VecXd DeformationSolver::conjugate_gradient_correction(const VecXd& gvec, const 
   ops.precondition = [&](VecXd& r) { return cholesky_solve_factored(L, r); };
   ops.accepted = [&](double alpha, int k) {
     if (native) kernels_->accumulate_direction(alpha, k == 0);
+    combined_scale += std::abs(alpha) * p_norm;
   };
   NewtonCgResult cg = truncated_newton_cg(gvec, p0, params_.newton_cg_steps, ops);
   rec.cg_steps = cg.steps;
   rec.cg_scale = cg.scale;
   // The kernels' direction becomes d: the accumulated Jacobians (no pass over G); with no iterate it is
   // already p0 (the first curvature set it); on the host fallback one pass.
+  // direction_scale_ (CertifyParams::direction_scale): the combined Jacobians Σ_k α_k G p_k round like
+  // Σ_k |α_k| ‖p_k‖ (docs/certificate.md, Step 4e); a single pass like ‖d‖.
   if (native) {
     if (cg.steps > 0) kernels_->use_accumulated_direction();
   } else {
     kernels_->set_direction(as_mat(cg.d));
   }
+  const bool combined = native && cg.steps > 0;
+  direction_scale_ = (combined ? std::max(combined_scale, cg.d.norm()) : cg.d.norm()) * (1 + 1e-12);
   return cg.d;
 }
 

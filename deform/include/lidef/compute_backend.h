@@ -50,6 +50,9 @@ class EnergyKernels {
   virtual void use_accumulated_direction() { throw Error("this backend has no Hessian products"); }
   // J_cur in the JT layout (3|I| by 3), for reports and tests.
   virtual MatJT current_jacobians() = 0;
+  // dJ on the host (JT layout, double sums of the stored float rows: DeformationEnergy::jacobians), for the
+  // certificate's perturbation test (CertifyParams::direction_jacobians); nullptr where it stays on a device.
+  virtual const MatJT* direction_jacobians() const { return nullptr; }
 };
 
 // The data a certifier backend needs, all owned by the OctreeCertifier that creates it.

@@ -61,6 +61,16 @@ struct CertifyParams {
   // that of an evaluated voxel, and a test "min_lower_bound < floor" decides as it would without the previous
   // map (the solver passes its dynamic weighting's epsilon, condition (36)).
   double perturbation_floor = 0;
+  // Optional, with previous_y (Step 4e, "the center term from a direction"): ỹ = ỹ₀ + t d up to rounding
+  // (t = direction_step, d = *direction, s by 3) and D = *direction_jacobians (3N by 3, the layout of
+  // DeformationEnergy::jacobians), G_i d at every base center from the same stored float rows, with
+  // ‖D_i − G_i d‖_F ≤ 2⁻³⁰ ‖G_i‖_F · direction_scale (direction_scale ≥ ‖d‖_F; for a combination Σ_k α_k p_k
+  // whose Jacobians were combined likewise, Σ_k |α_k| ‖p_k‖_F). Replaces the center term ‖G_i‖₂ ‖ỹ − ỹ₀‖_F by
+  // t ‖D_i‖₂ plus the rounding terms where that is smaller. Ignored unless the sizes match.
+  const Eigen::Matrix<double, Eigen::Dynamic, 3>* direction = nullptr;
+  const Eigen::Matrix<double, Eigen::Dynamic, 3>* direction_jacobians = nullptr;
+  double direction_step = 0;
+  double direction_scale = 0;
 };
 
 // One leaf of the certification octree.

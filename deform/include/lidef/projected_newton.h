@@ -280,10 +280,13 @@ class DeformationSolver {
   // that map, bit for bit.
   MatS3 perturb_y_;
   std::vector<double> perturb_lower_;
+  // ≥ ‖d‖_F for the kernels' direction d, bounding the rounding of its Jacobians (CertifyParams::
+  // direction_scale): Σ_k |α_k| ‖p_k‖_F when they were combined from CG iterates.
+  double direction_scale_ = 0;
   long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
   struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
   // The plain direction p0 = −(factor)⁻¹ ∇E improved by params_.newton_cg_steps preconditioned CG iterates
-  // on the exact Hessian; leaves the kernels' direction set to the result.
+  // on the exact Hessian; leaves the kernels' direction set to the result (and direction_scale_).
   VecXd conjugate_gradient_correction(const VecXd& gvec, const VecXd& p0, const MatXd& L,
                                       IterationRecord& rec);
 };
