@@ -416,8 +416,8 @@ struct OctreeCertifier::Run {
     }
   }
   // ≥ ‖ỹ − ỹ₀ − t d‖_F for the direction of CertifyParams (computed entrywise, each entry's rounding, ≤ 3u
-  // of the magnitudes, added; 1e-300 for underflow); −1 when no direction was passed or its sizes do not
-  // match (then only Γ_i ‖δ‖ is used).
+  // of the magnitudes, added); −1 when no direction was passed or its sizes do not match (then only Γ_i ‖δ‖
+  // is used).
   double direction_residual(const MatS3& y0) const {
     const MatS3* d = p.direction;
     const MatS3* D = p.direction_jacobians;
@@ -430,11 +430,11 @@ struct OctreeCertifier::Run {
     for (int a = 0; a < 3; ++a)
       for (long k = 0; k < yr_rows; ++k) {
         const double y = yr_ptr[a * yr_rows + k], y00 = y0(k, a), td = t * (*d)(k, a);
-        const double e =
-            std::abs((y - y00) - td) + 4 * u * (std::abs(y) + std::abs(y00) + std::abs(td)) + 1e-300;
+        const double e = std::abs((y - y00) - td) + 4 * u * (std::abs(y) + std::abs(y00) + std::abs(td));
         r2 += e * e;
       }
-    const double rho = std::sqrt(r2) * (1 + 1e-12);
+    // 1e-300: the product t·d's underflow (≤ 2⁻¹⁰⁷⁴ per entry; sums and differences do not underflow).
+    const double rho = std::sqrt(r2) * (1 + 1e-12) + 1e-300;
     return std::isfinite(rho) ? rho : -1;
   }
   // ≥ ‖M‖₂ for a 3 by 3 block (the JT rows of one center): the smaller of ‖M‖_F and the root of Gershgorin's
