@@ -106,6 +106,33 @@ TEST(PrecomputeCache, RoundTripAndKeyMismatchMisses) {
   EXPECT_FALSE(off.load(key, payload, &ev));
 }
 
+// Empty arrays and 0-row matrices (a sampling without refined leaves, an empty Hessian subset) round-trip.
+// Their data() may be null, which memcpy must not be given even for 0 bytes: UBSan's nonnull check found it
+// in `make check-sanitize` (the reader now copies only non-empty payloads). Named apart from
+// PrecomputeCache.* so that CI's sanitized subset runs it.
+TEST(CacheReader, EmptyArraysAndMatricesRoundTrip) {
+  TempDir dir;
+  const PrecomputeCache cache(dir.str(), 1 << 30);
+  const std::vector<int> none;
+  const Eigen::Matrix<double, Eigen::Dynamic, 3> empty_rows(0, 3);
+  const std::vector<double> after = ramp(5, 2.0);
+  CacheWriter w;
+  w.array(none.data(), none.size());
+  w.matrix(empty_rows);
+  w.array(after.data(), after.size());
+  CacheKey key("empty");
+  cache.store(key, w);
+  std::vector<char> payload;
+  ASSERT_TRUE(cache.load(key, payload));
+  CacheReader r(std::move(payload));
+  EXPECT_TRUE(r.array<int>().empty());
+  Eigen::Matrix<double, Eigen::Dynamic, 3> m;
+  r.matrix(m, -1, 3);
+  EXPECT_EQ(m.rows(), 0);
+  EXPECT_EQ(r.array<double>(), after);
+  EXPECT_TRUE(r.at_end());
+}
+
 TEST(PrecomputeCache, CorruptedTruncatedOrForeignEntriesAreRemovedNotTrusted) {
   TempDir dir;
   const PrecomputeCache cache(dir.str(), 1 << 30);

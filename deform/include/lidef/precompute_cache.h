@@ -116,7 +116,7 @@ class CacheReader {
     const auto n = scalar<std::uint64_t>();
     if (n > buf_.size()) throw Bad{};
     std::vector<T> v(static_cast<std::size_t>(n));
-    std::memcpy(v.data(), take(sizeof(T) * v.size()), sizeof(T) * v.size());
+    copy_out(v.data(), sizeof(T) * v.size());
     return v;
   }
   // Into an existing Eigen matrix type: the stored shape must match `rows`/`cols` when they are ≥ 0.
@@ -127,11 +127,17 @@ class CacheReader {
     const auto n = scalar<std::uint64_t>();
     if (n != static_cast<std::uint64_t>(r) * static_cast<std::uint64_t>(c) || n > buf_.size()) throw Bad{};
     m.resize(r, c);
-    std::memcpy(m.data(), take(sizeof(typename M::Scalar) * n), sizeof(typename M::Scalar) * n);
+    copy_out(m.data(), sizeof(typename M::Scalar) * n);
   }
   bool at_end() const { return pos_ == buf_.size(); }
 
  private:
+  // An empty array's data() may be null, and memcpy's pointers must not be, even for 0 bytes (UBSan's
+  // nonnull-attribute check found it in `make check-sanitize`).
+  void copy_out(void* dst, std::size_t bytes) {
+    const char* src = take(bytes);
+    if (bytes > 0) std::memcpy(dst, src, bytes);
+  }
   const char* take(std::size_t bytes) {
     if (bytes > buf_.size() - pos_) throw Bad{};
     const char* p = buf_.data() + pos_;

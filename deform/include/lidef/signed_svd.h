@@ -4,7 +4,8 @@
 // The sign of σ3 is the sign of det J, taken from an error-bounded determinant (det_sign): the cofactor
 // determinant fl(det J) is trusted only when |fl(det J)| exceeds a rigorous bound on its rounding error
 // (docs/certificate.md, "Step 5"). When it does not, the sign is *unresolved* and σ3 is reported as 0: its
-// magnitude is then below what rounding can resolve anyway (|det J| = σ1 σ2 |σ3| is within the bound of 0).
+// magnitude is then below what rounding can resolve anyway (|det J| = σ1 σ2 |σ3| is within twice the bound
+// of 0).
 // When det J = 0 exactly (every term of the expansion has a zero factor), σ3 is 0 as well, and resolved.
 // Every case whose sign is resolved and nonzero is bit-identical to taking the sign of J.determinant().
 #pragma once
