@@ -216,8 +216,8 @@ TEST(CertificatePerturbation, TheDirectionsJacobiansTakeOverMoreAndStaySound) {
     EXPECT_EQ(c.certified, plain.certified);
     EXPECT_GE(c.perturbed_voxels, norm_only.perturbed_voxels);
     if (c.perturbed_voxels > norm_only.perturbed_voxels) ++more;
-    // A wrong step (the change is t d, the step says 2t): the residual ‖ỹ − ỹ₀ − 2t d‖ is then large and
-    // the bound no smaller than the norm-only one's minimum with it; still sound.
+    // A wrong step (the change is t d, the step says 2t): the residual ‖ỹ − ỹ₀ − 2t d‖ is then large, the
+    // direction's term loose, and what is taken over must still hold.
     CertifyParams wrong = q;
     wrong.direction_step = 2 * t;
     const Certificate cw = cert.certify_reduced(y, wrong);
