@@ -6,6 +6,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -21,6 +22,12 @@
 #include "lidef/errors.h"
 #include "lidef/hash.h"
 #include "lidef/smoothness.h"
+
+extern "C" {
+// LAPACK (OpenBLAS): eigenvalues and eigenvectors of a symmetric matrix, divide and conquer.
+void dsyevd_(const char* jobz, const char* uplo, const int* n, double* a, const int* lda, double* w,
+             double* work, const int* lwork, int* iwork, const int* liwork, int* info);
+}
 
 namespace lidef {
 
@@ -86,16 +93,48 @@ void fix_signs(MatXd& X) {
   }
 }
 
+// All eigenpairs of the symmetric D (ascending) by LAPACK's divide and conquer (OpenBLAS's dsyevd).
+bool lapack_symmetric_eigen(MatXd D, MatXd& vecs, VecXd& vals) {
+  const int n = static_cast<int>(D.rows());
+  VecXd w(n);
+  int lwork = -1, liwork = -1, info = 0, iwork_query = 0;
+  double work_query = 0;
+  dsyevd_("V", "L", &n, D.data(), &n, w.data(), &work_query, &lwork, &iwork_query, &liwork, &info);
+  if (info != 0) return false;
+  lwork = static_cast<int>(work_query);
+  liwork = iwork_query;
+  std::vector<double> work(static_cast<size_t>(std::max(1, lwork)));
+  std::vector<int> iwork(static_cast<size_t>(std::max(1, liwork)));
+  dsyevd_("V", "L", &n, D.data(), &n, w.data(), work.data(), &lwork, iwork.data(), &liwork, &info);
+  if (info != 0) return false;
+  vecs = std::move(D);
+  vals = std::move(w);
+  return true;
+}
+
 // Smallest `m` eigenpairs of M = KᵀK on Q's orthogonal complement, dense: the Q directions are lifted above
 // the whole spectrum (M + μ QQᵀ, μ > λ_max) so that the lowest m eigenvectors are those of the complement.
-void complement_dense(const SpMat& M, const MatXd& Q, int m, MatXd& vecs, VecXd& vals) {
+// Eigen's tridiagonal QR iteration can stop at its iteration limit without converging: measured on the
+// project's ball cage in its normalized frame with -march=native code on an AMD EPYC (never on the Xeon the
+// project was first measured on). LAPACK's dsyevd then computes the same eigenpairs; returns whether it was
+// needed.
+bool complement_dense(const SpMat& M, const MatXd& Q, int m, MatXd& vecs, VecXd& vals) {
   MatXd D = MatXd(M);
   const double mu = 2.0 * D.trace() + 1.0;  // trace >= λ_max for a PSD matrix
   D.noalias() += mu * Q * Q.transpose();
   Eigen::SelfAdjointEigenSolver<MatXd> es(D);
-  if (es.info() != Eigen::Success) throw NumericalError("spectral subspace: dense eigen-solver failed");
-  vecs = es.eigenvectors().leftCols(m);
-  vals = es.eigenvalues().head(m);
+  if (es.info() == Eigen::Success) {
+    vecs = es.eigenvectors().leftCols(m);
+    vals = es.eigenvalues().head(m);
+    return false;
+  }
+  MatXd all_vecs;
+  VecXd all_vals;
+  if (!lapack_symmetric_eigen(std::move(D), all_vecs, all_vals))
+    throw NumericalError("spectral subspace: the dense eigen-solvers (Eigen's, then LAPACK dsyevd) failed");
+  vecs = all_vecs.leftCols(m);
+  vals = all_vals.head(m);
+  return true;
 }
 
 // y = P (M − σI)^{-1} P x with P = I − QQᵀ: the largest eigenvalues ν of this operator are 1/(λ − σ) for
@@ -225,9 +264,10 @@ SpectralSubspace compute_subspace(const Cage& cage, int s, SubspaceSolver solver
 
   MatXd vecs;
   VecXd vals;
+  bool lapack = false;
   if (m > 0) {
     if (solver == SubspaceSolver::Dense)
-      complement_dense(M, Q, m, vecs, vals);
+      lapack = complement_dense(M, Q, m, vecs, vals);
     else
       complement_sparse(M, Q, m, vecs, vals);
     // The solvers return the complement eigenvectors orthogonal to Q only up to rounding; make it exact so
@@ -247,7 +287,7 @@ SpectralSubspace compute_subspace(const Cage& cage, int s, SubspaceSolver solver
   for (int j = 0; j < 4; ++j) out.eigenvalues(j) = (K * out.basis.col(j)).squaredNorm();
   out.eigenvalues.tail(m) = vals;
   out.cage_hash = subspace_cage_hash(cage);
-  out.solver = solver == SubspaceSolver::Dense ? "dense" : "sparse";
+  out.solver = solver == SubspaceSolver::Dense ? (lapack ? "dense, LAPACK dsyevd" : "dense") : "sparse";
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -17,7 +17,8 @@ namespace lidef {
 
 enum class SubspaceSolver {
   Auto,    // Dense when #V+#F <= kDenseSubspaceLimit or s is a large fraction of #V+#F, otherwise Sparse
-  Dense,   // Eigen::SelfAdjointEigenSolver on the dense #V+#F square matrix (O(n³), exact full spectrum)
+  Dense,   // Eigen::SelfAdjointEigenSolver on the dense #V+#F square matrix (O(n³), exact full spectrum);
+           // LAPACK dsyevd where Eigen's QR iteration does not converge
   Sparse,  // Spectra Lanczos, shift-invert (sparse LDLᵀ of KᵀK − σI, σ < 0) on the deflated complement
 };
 
@@ -28,7 +29,7 @@ struct SpectralSubspace {
   MatXd basis;                  // #V+#F by s, orthonormal columns, ascending eigenvalue
   VecXd eigenvalues;            // s, ascending, >= 0 (the first 4 are the affine null space, ~1e-25)
   std::uint64_t cage_hash = 0;  // subspace_cage_hash(cage) of the cage it was computed for
-  std::string solver;           // "dense", "sparse", or "cache" when loaded from disk
+  std::string solver;  // "dense", "dense, LAPACK dsyevd" (Eigen did not converge), "sparse", or "cache"
   double seconds = 0;           // wall time of the computation (or of the load)
   int size() const { return static_cast<int>(basis.cols()); }
 };
