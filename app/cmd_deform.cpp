@@ -121,8 +121,12 @@ void add_deform_command(CLI::App& app, Action& action) {
       "and writes the last certified map. Exit code: 0 targets reached (stop reason converged, or\n"
       "reached_not_converged: handles within tolerance, Newton stopped before its convergence test), 1 "
       "stopped\n"
-      "early (the output is still the last certified map), 2 error. Parameters: docs/parameters.md; solver:\n"
-      "docs/solver.md.");
+      "early (the output is still the last certified map), 2 error. When the handles pin the subspace, the\n"
+      "run first checks whether the targets are provably out of reach (every reaching map folds:\n"
+      "blocked_by_certificate; no map reaches them: targets_unreachable) and then tries only a direct "
+      "solve;\n"
+      "summary.json's \"unreachable\" says what was proven, or why nothing was. Parameters: "
+      "docs/parameters.md;\nsolver: docs/solver.md.");
   sub->callback([opts, &action] {
     action = [opts]() -> int {
       const Opts& o = *opts;
@@ -268,6 +272,16 @@ void add_deform_command(CLI::App& app, Action& action) {
                             {"max_group_rotation_deg", path_report.max_angle_deg},
                             {"path_segments", path_report.segments},
                             {"path_reached", path_report.path_reached}};
+      const UnreachabilityProof& un = path_report.unreachable;
+      sj["unreachable"] = {{"proven", un.proven},
+                           {"kind", un.kind},
+                           {"reason", un.reason},
+                           {"handle_matrix_condition", un.condition},
+                           {"least_squares_residual", un.residual}};
+      if (un.kind == "orientation")
+        sj["unreachable"]["fold"] = {{"point", {un.point.x(), un.point.y(), un.point.z()}},
+                                     {"sigma_min_least_squares", un.sigma_min},
+                                     {"jacobian_change_bound", un.jacobian_bound}};
       sj["message"] = res.message;
       sj["iterations"] = static_cast<int>(solver.history().size());
       sj["certified"] = cert.certified;
@@ -306,6 +320,9 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << "  max handle error " << format_g(max_err, 3)
                 << (max_err <= tolerance ? " (reached)" : " (NOT reached)") << ", global volume ratio "
                 << format_g(vol_ratio, 5) << "\n"
+                << (max_err <= tolerance
+                        ? ""
+                        : std::string("  ") + (un.proven ? "PROVEN: " : "") + un.reason + "\n")
                 << "  CERTIFIED locally injective on "
                 << (solver.sampling().domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
                 << cert.voxels << (solver.sampling().domain == "mesh" ? " voxels)" : " voxels")

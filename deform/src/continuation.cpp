@@ -266,8 +266,26 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
   const std::vector<int> planned = planned_stages(path, params.continuation_angle);
   const bool large = std::any_of(planned.begin(), planned.end(), [](int m) { return m > 1; });
 
+  // Targets pinned by the handles to maps that cannot be certified: no strategy can reach them, so only the
+  // direct solve runs (its last certified map is the closest the solver finds) and the result says why.
+  solver.set_targets(targets, "targets");
+  report.unreachable = prove_targets_unreachable(solver);
   SolveResult result;
-  if (!params.continuation) {
+  if (report.unreachable.proven) {
+    report.strategies.push_back(
+        "direct (the targets are proven unreachable by a certified map: no other "
+        "strategy tried)");
+    runner.say("the targets are proven unreachable: " + report.unreachable.reason);
+    SolveResult r = runner.run(targets, runner.budget());
+    if (r.reason != StopReason::kInterrupted && !runner.reached()) {
+      const bool folds = report.unreachable.kind == "orientation";
+      r.message = std::string(folds ? "blocked by the certificate: " : "") + report.unreachable.reason +
+                  "; the map is the last certified one of a direct solve toward them (Newton ended " +
+                  to_string(r.reason) + ": " + r.message + ")";
+      r.reason = folds ? StopReason::kBlocked : StopReason::kUnreachable;
+    }
+    result = runner.finish(r);
+  } else if (!params.continuation) {
     // Waypoints are the user's: visit each with a full solve, then the targets.
     report.strategies.push_back(waypoints.empty() ? "direct" : "waypoints, one solve each");
     for (const MatX3d& w : waypoints) {
@@ -307,7 +325,8 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
   }
   // Strategy 4: where the others stopped short, a local/global map (rotation-aware, like VHM) through the
   // same certificate.
-  if (params.continuation && result.reason != StopReason::kInterrupted && !runner.reached()) {
+  if (params.continuation && !report.unreachable.proven && result.reason != StopReason::kInterrupted &&
+      !runner.reached()) {
     report.strategies.push_back("local/global warm start after the continuation stopped short (" +
                                 std::string(to_string(result.reason)) + ")");
     runner.say("the continuation stopped short of the targets (" + result.message +

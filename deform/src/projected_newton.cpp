@@ -77,6 +77,8 @@ const char* to_string(StopReason r) {
       return "interrupted";
     case StopReason::kReached:
       return "reached_not_converged";
+    case StopReason::kUnreachable:
+      return "targets_unreachable";
   }
   return "?";
 }

@@ -17,9 +17,13 @@
 //                    a short Newton polish; up to 4 rounds while the handle error drops.
 // A stage whose targets are not reached (max handle error above max(handle_tolerance, 10% of the stage's
 // largest handle move)) is retried with half the step along the path (a reached one doubles it again, up to
-// the planned step); below 1/64 of a planned stage the path is given up (then strategy 4; if it fails too, the
-// result says "blocked by the certificate", with the strategies tried).
-// `continuation = false` keeps strategy 1 only (waypoints are still visited, one full solve each).
+// the planned step); below 1/64 of a planned stage the path is given up (then strategy 4; if it fails too,
+// the result says "blocked by the certificate", with the strategies tried). `continuation = false` keeps
+// strategy 1 only (waypoints are still visited, one full solve each). Before any of them,
+// prove_targets_unreachable (unreachable_targets.h) checks whether the handles pin the subspace to maps that
+// cannot be certified: when that is proven, only a direct solve toward the targets runs (the closest
+// certified map it finds is the result) and the result says so — "blocked_by_certificate" when every reaching
+// map folds, "targets_unreachable" when no map of the subspace reaches them at all.
 #pragma once
 #include <atomic>
 #include <functional>
@@ -28,6 +32,7 @@
 
 #include "lidef/projected_newton.h"
 #include "lidef/types.h"
+#include "lidef/unreachable_targets.h"
 
 namespace lidef {
 
@@ -40,6 +45,7 @@ struct PathSolveReport {
   double max_angle_deg = 0;             // largest rotation of a handle group along the path
   double path_reached = 0;              // how far along the path the handles got, in segments (0..K)
   int segments = 0;                     // K: path segments (waypoints + 1)
+  UnreachabilityProof unreachable;      // of the final targets, checked before the strategies ran
 };
 
 // Solves from the solver's current map to `targets` (#h by 3) through `waypoints` (each #h by 3, in order).

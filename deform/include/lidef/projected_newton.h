@@ -115,6 +115,9 @@ enum class StopReason {
              // map, but Newton stopped before its convergence test (blocked, no certified step, or an
              // internal polish limit — not the user's max_iterations): the targets are met, the energy is not
              // stationary (the message says why)
+  kUnreachable,  // solve_to_targets only: proven that no map of the subspace reaches the targets (the least-
+                 // squares residual of the handles alone exceeds the tolerance; unreachable_targets.h). The
+                 // map is the last certified one of a direct solve toward them.
 };
 const char* to_string(StopReason r);
 
