@@ -10,7 +10,8 @@
 // reaches the targets has det J(x) < 0 at x, inside the certified domain: no certificate can accept it.
 // Likewise, if even the least-squares map misses a handle by more than √#h τ in total (‖D̃ ỹ₀ − Q‖_F > √#h τ),
 // no map of the subspace reaches the targets at all. The factor 2 absorbs the double-precision rounding of
-// the SVD, the least-squares map and the basis (all relative ~1e-12 at the accepted conditioning).
+// the SVD, the least-squares map and the basis (relative ~cond(D̃) · 1e-16 ≤ ~1e-8 at the accepted
+// conditioning, cond(D̃) ≤ 1e8).
 //
 // Otherwise nothing is proven and `reason` says why (too few handles, a handle matrix without full rank, or
 // a least-squares map that is orientation-preserving everywhere within the margin). Not proven ≠ reachable.
