@@ -277,7 +277,10 @@ void add_deform_command(CLI::App& app, Action& action) {
                            {"kind", un.kind},
                            {"reason", un.reason},
                            {"handle_matrix_condition", un.condition},
-                           {"least_squares_residual", un.residual}};
+                           {"least_squares_residual", un.residual},
+                           {"least_squares_residual_lower_bound", un.residual_lower},
+                           {"least_squares_residual_upper_bound", un.residual_upper},
+                           {"residual_rounding_floor", un.rounding_floor}};
       if (un.kind == "orientation")
         sj["unreachable"]["fold"] = {{"point", {un.point.x(), un.point.y(), un.point.z()}},
                                      {"sigma_min_least_squares", un.sigma_min},

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <numeric>
 #include <sstream>
 
@@ -20,6 +21,7 @@
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/interval_verification.h"
+#include "lidef/leaf_coverage.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
@@ -36,10 +38,14 @@ constexpr int kListedUnproven = 5;  // leaves named on the console when some is 
 
 // `lidef verify --interval`: the rigorous re-proof of every certified leaf (interval_verification.h).
 // Writes interval.csv (deterministic) and interval.json (with the wall time), prints one summary line.
-ExitCode run_interval_verify(const CertificateReport& rep, const Cage& cage, const MatX3d& y,
+// PROVEN needs three things: the certificate says certified, its leaves cover what it claims
+// (leaf_coverage.h), and every certified leaf is re-proved on its ball widened to hold its exact grid cell.
+ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, const MatX3d& y,
                              const std::string& out_dir) {
   const std::vector<CertLeaf>& leaves = rep.cert.leaves;
-  const IntervalVerification v = verify_certificate_intervals(cage, y, leaves, rep.cert.bound);
+  const LeafCoverage coverage = prove_leaf_coverage(rep, model.mesh);
+  const IntervalVerification v =
+      verify_certificate_intervals(model.cage, y, leaves, rep.cert.bound, coverage.radius_slack);
   StagedOutputs out(out_dir);
   write_file_atomic(out.path("interval.csv"), [&](std::ostream& s) {
     s << "leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin\n";
@@ -57,6 +63,10 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Cage& cage, con
     s << "{\n"
       << "  \"format\": \"lidef-interval-verification\",\n"
       << "  \"certificate_certified\": " << (rep.cert.certified ? "true" : "false") << ",\n"
+      << "  \"coverage_proven\": " << (coverage.proven ? "true" : "false") << ",\n"
+      << "  \"coverage\": " << nlohmann::json(coverage.reason).dump() << ",\n"
+      << "  \"coverage_cells_checked\": " << coverage.cells_checked << ",\n"
+      << "  \"radius_slack\": " << num(coverage.radius_slack) << ",\n"
       << "  \"bound\": \"" << to_string(rep.cert.bound) << "\",\n"
       << "  \"leaves\": " << leaves.size() << ",\n"
       << "  \"certified_leaves\": " << checked << ",\n"
@@ -69,16 +79,18 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Cage& cage, con
       << "}\n";
   });
   out.commit();
-  const bool ok = v.not_proven == 0;
+  const bool leaves_ok = v.not_proven == 0;
+  const bool ok = leaves_ok && coverage.proven && rep.cert.certified;
   std::cout << "lidef verify --interval: " << (ok ? "PROVEN" : "NOT PROVEN") << ": " << v.proven << " of "
             << checked << " certified leaves proven in interval arithmetic (" << leaves.size()
             << " leaves in all), worst slack " << format_g(v.worst_slack) << ", " << format_g(v.seconds, 3)
             << " s (" << format_g(leaves_per_s, 3) << " leaves/s); wrote " << out.final_path("")
             << "{interval.csv, interval.json}\n";
+  std::cout << "  coverage: " << coverage.reason << "\n";
   if (!rep.cert.certified)
-    std::cout << "  note: the certificate itself says 'not certified' (" << rep.cert.reason
-              << "); only its certified leaves were re-proved, which certifies nothing about the others\n";
-  if (!ok) {
+    std::cout << "  the certificate itself says 'not certified' (" << rep.cert.reason
+              << "): only its certified leaves were re-proved, which certifies nothing about the others\n";
+  if (!leaves_ok) {
     int listed = 0;
     for (size_t q = 0; q < v.results.size() && listed < kListedUnproven; ++q) {
       const IntervalLeaf& r = v.results[q];
@@ -135,15 +147,22 @@ void add_verify_command(CLI::App& app, Action& action) {
       "\n"
       "--interval: a rigorous re-proof instead of sampling (docs/certificate.md, 'Interval re-proof'). For\n"
       "every certified leaf, J and the Hessian at its center (closed-form Green-coordinate derivatives), a\n"
-      "lower bound of sigma3, the certificate's Lipschitz constant L (first order, third order or combined, as certified) "
+      "lower bound of sigma3, the certificate's Lipschitz constant L (first order, third order or combined, "
+      "as certified) "
       "and\n"
       "the margin sigma3 - r L are enclosed in intervals with outward rounding (log/atan widened by 4 "
       "ulps);\n"
       "the leaf is proven when the lower end of the margin is > 0 (no rounding allowance). Writes "
       "interval.csv\n"
       "(leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin; leaf = 0-based row of voxels.csv) and\n"
-      "interval.json (leaves, proven, not_proven, worst_slack = min margin_lo, time). Exit code: 0 every\n"
-      "certified leaf proven, 1 some not (the first ones are listed), 2 error.");
+      "interval.json (leaves, proven, not_proven, worst_slack = min margin_lo, coverage, time). It also "
+      "proves\n"
+      "that the leaves cover the domain the certificate claims (every leaf a cell of the certificate's "
+      "grid,\n"
+      "every grid cell meeting the mesh's triangles or solid covered by certified leaves; 'voxels' domain:\n"
+      "every base voxel tiled), and widens each ball to hold its exact cell. Exit code: 0 the certificate\n"
+      "says certified, the coverage is proven and every certified leaf is proven; 1 otherwise (the first\n"
+      "unproven leaves or the coverage gap are listed); 2 error.");
   sub->callback([opts, &action] {
     action = [opts] {
       const Opts& o = *opts;
@@ -165,7 +184,7 @@ void add_verify_command(CLI::App& app, Action& action) {
         out_dir = fs::path(o.certificate).parent_path().string();
         if (out_dir.empty()) out_dir = ".";
       }
-      if (o.interval) return run_interval_verify(rep, model.cage, y, out_dir);
+      if (o.interval) return run_interval_verify(rep, model, y, out_dir);
       const HarmonicBasis basis(model.cage);
       const VerificationResult v = verify_certificate(basis, y, leaves, o.samples, o.seed);
 

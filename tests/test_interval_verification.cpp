@@ -3,7 +3,8 @@
 // enclosures must contain them and be tight); matrices built as U diag(s) Vᵀ with known singular values
 // (the σ3 bound must stay below s3, and near it when well conditioned); the certifier's verdicts on small
 // procedural models (every certified leaf must be proven); tampered leaves (must not be proven); the CLI's
-// exit codes. IntervalSlow.*: the certificates of every shared scenario's output (label "slow").
+// exit codes, a table cut short (its leaves proven, their coverage not) and a certificate that says "not
+// certified" (never PROVEN). IntervalSlow.*: the certificates of every shared scenario's output (label "slow").
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -365,6 +366,56 @@ TEST(IntervalVerification, CliExitCodes) {
   EXPECT_NE(output.find("NOT PROVEN"), std::string::npos) << output;
   EXPECT_NE(output.find("not proven: leaf 0 "), std::string::npos) << output;
   EXPECT_EQ(read_json(tmp / "cert/interval.json")["not_proven"].get<long>(), 1);
+
+  // A certificate cut to its first 10 leaves, its leaf count and hash rewritten (FNV is no signature): every
+  // leaf left is proven, but they no longer cover the domain the certificate claims (exit 1, the gap named).
+  ASSERT_EQ(run_lidef("certify " + quote(ball) + " --coeffs " + quote(tmp / "y.txt") + " --out " +
+                          quote(tmp / "cut") + " --samples 400 --grid 0",
+                      &output),
+            0)
+      << output;
+  {
+    const std::string full = lidef::test::read_text(tmp / "cut/voxels.csv");
+    size_t end = 0;
+    for (int row = 0; row < 11; ++row) end = full.find('\n', end) + 1;
+    const std::string cut = full.substr(0, end);
+    std::string cj_text = lidef::test::read_text(tmp / "cut/certificate.json");
+    nlohmann::json cut_json = nlohmann::json::parse(cj_text);
+    const std::string leaves_line = "\"leaves\": " + std::to_string(cut_json["leaves"].get<long>()) + ",";
+    const size_t at_leaves = cj_text.find(leaves_line);
+    ASSERT_NE(at_leaves, std::string::npos);
+    cj_text.replace(at_leaves, leaves_line.size(), "\"leaves\": 10,");
+    const std::string old_cut_hash = hex64(fnv1a64(full));
+    cj_text.replace(cj_text.find(old_cut_hash), old_cut_hash.size(), hex64(fnv1a64(cut)));
+    lidef::test::write_text(tmp / "cut/voxels.csv", cut);
+    lidef::test::write_text(tmp / "cut/certificate.json", cj_text);
+  }
+  EXPECT_EQ(run_lidef("verify " + quote(ball) + " --coeffs " + quote(tmp / "y.txt") + " --certificate " +
+                          quote(tmp / "cut/certificate.json") + " --interval",
+                      &output),
+            1)
+      << output;
+  EXPECT_NE(output.find("NOT PROVEN: 10 of 10"), std::string::npos) << output;
+  EXPECT_NE(output.find("do not provably cover the certified domain"), std::string::npos) << output;
+  EXPECT_FALSE(read_json(tmp / "cut/interval.json")["coverage_proven"].get<bool>());
+
+  // A certificate that says "not certified" (a mirrored map) is never PROVEN, whatever its leaves.
+  {
+    std::ofstream out(tmp / "mirror.txt");
+    write_coefficients(out, cage.affine_coefficients(Vec3(-1, 1, 1).asDiagonal(), Vec3::Zero()));
+  }
+  ASSERT_EQ(run_lidef("certify " + quote(ball) + " --coeffs " + quote(tmp / "mirror.txt") + " --out " +
+                          quote(tmp / "folded") + " --samples 400 --grid 0",
+                      &output),
+            1)
+      << output;
+  EXPECT_EQ(run_lidef("verify " + quote(ball) + " --coeffs " + quote(tmp / "mirror.txt") + " --certificate " +
+                          quote(tmp / "folded/certificate.json") + " --interval",
+                      &output),
+            1)
+      << output;
+  EXPECT_NE(output.find("NOT PROVEN"), std::string::npos) << output;
+  EXPECT_NE(output.find("the certificate itself says 'not certified'"), std::string::npos) << output;
 
   // Bad input: a missing certificate, other coefficients (exit 2, nothing written).
   EXPECT_EQ(run_lidef("verify " + quote(ball) + " --coeffs identity --certificate " +

@@ -137,6 +137,24 @@ TEST(UnreachableTargets, ProvesNothingWithFewHandlesOrReachableTargets) {
   }
 }
 
+// Targets that the start map reaches (every target at its source) with a handle tolerance of 0 or below the
+// rounding of evaluating the handles: the computed least-squares residual is rounding (~1e-14), an upper
+// bound of the exact one, so no residual proof may be built on it: its lower bound stays below the floor.
+TEST(UnreachableTargets, ReachedTargetsAreNeverProvenUnreachableWhateverTheTolerance) {
+  for (const double tolerance : {0.0, 4e-16, 1e-12}) {
+    DeformParams params = small_params();
+    params.handle_tolerance = tolerance;
+    DeformationSolver s(beam().model.cage, params, beam().cache.str());
+    s.set_handles(mirror().sources, mirror().sources, "in place");
+    const UnreachabilityProof p = prove_targets_unreachable(s);
+    EXPECT_FALSE(p.proven) << "tolerance " << tolerance << ": " << p.reason;
+    EXPECT_GT(p.residual, 0) << "the computed residual is rounding, not zero";
+    EXPECT_LE(p.residual_lower, p.residual) << tolerance;
+    EXPECT_LT(p.residual_lower, 2 * p.rounding_floor) << tolerance;
+    EXPECT_GE(p.residual_upper, p.residual);
+  }
+}
+
 TEST(UnreachableTargets, ResidualFormAgreesWithAnIndependentLeastSquaresSolve) {
   DeformationSolver s(beam().model.cage, small_params(), beam().cache.str());
   // The mirror's 1000 points, each target moved at random by up to 0.05: no map of 40 coefficients per
@@ -155,6 +173,10 @@ TEST(UnreachableTargets, ResidualFormAgreesWithAnIndependentLeastSquaresSolve) {
   const MatS3 y = D.colPivHouseholderQr().solve(Q);
   const double min_residual = (D * y - Q).norm();
   EXPECT_NEAR(p.residual, min_residual, 1e-9 * min_residual);
+  // The bounds enclose it, and the rounding taken off is far below the residual here.
+  EXPECT_LE(p.residual_lower, min_residual);
+  EXPECT_GE(p.residual_upper, p.residual);
+  EXPECT_GT(p.residual_lower, (1 - 1e-6) * min_residual);
   // The statement: every map misses some handle by more than τ — the best one by its residual / √#h.
   const double tau = s.params().handle_tolerance;
   EXPECT_GT(min_residual / std::sqrt(static_cast<double>(D.rows())), tau);

@@ -536,7 +536,7 @@ JetEnclosure IntervalVerifier::jet(const Vec3& p) const {
   return out;
 }
 
-IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
+IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double radius_slack) const {
   const Impl& im = *impl_;
   IntervalLeaf res;
   // The ball: the voxel of side h around c has circumradius (√3/2) h. voxels.csv holds shortest round-trip
@@ -545,7 +545,7 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
   auto ulp = [](double x) { return step_up(std::abs(x)) - std::abs(x); };
   const I h = pt(side) + pt(ulp(side));
   const I shift = isqrt(sq(pt(ulp(c.x()))) + sq(pt(ulp(c.y()))) + sq(pt(ulp(c.z()))));
-  const double r = hi(isqrt(pt(3)) / pt(2) * h + shift);
+  const double r = hi(isqrt(pt(3)) / pt(2) * h + shift + pt(radius_slack));
   res.radius_hi = r;
 
   const bool third = im.bound != LipschitzBound::kFirstOrder;  // ‖H(c)‖ and Σ δ Θ (third, combined)
@@ -596,7 +596,8 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side) const {
 }
 
 IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d& y,
-                                                  const std::vector<CertLeaf>& leaves, LipschitzBound bound) {
+                                                  const std::vector<CertLeaf>& leaves, LipschitzBound bound,
+                                                  double radius_slack) {
   const auto t0 = std::chrono::steady_clock::now();
   IntervalVerification out;
   const IntervalVerifier verifier(cage, y, bound);
@@ -607,7 +608,7 @@ IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d
 #pragma omp parallel for schedule(dynamic, 8)
   for (long q = 0; q < n; ++q) {
     const CertLeaf& l = leaves[out.leaf_index[q]];
-    out.results[q] = verifier.verify_leaf(l.center, l.side);
+    out.results[q] = verifier.verify_leaf(l.center, l.side, radius_slack);
   }
   out.worst_slack = kInf;
   for (const IntervalLeaf& r : out.results) {

@@ -695,7 +695,10 @@ struct OctreeCertifier::Run {
                  margin,
                  margin > 0,
                  static_cast<int>(i),
-                 sign_unresolved[i] != 0};
+                 sign_unresolved[i] != 0,
+                 // σ3 from the float-stored derivatives: within the storage allowance of the exact one
+                 // (Step 5), which the margin already subtracts; reported like the far field's eps_J.
+                 base_storage * scaleJ(i)};
       if (!(margin > 0)) failing_base.push_back(i);
     }
     cert.ms_bound = ms_since(t0) - device_ms;

@@ -23,6 +23,18 @@ constexpr double kMargin = 2;
 // evaluated again in double precision from the basis for the proof.
 constexpr int kScreened = 256;
 constexpr int kCandidates = 8;
+// Unit roundoff of double precision, and γ_n = n u / (1 − n u): the relative error bound of a sum or dot
+// product of n terms computed in double precision (Higham, "Accuracy and Stability of Numerical Algorithms",
+// Lemma 3.1 and Eq. 3.5).
+constexpr double kUnitRoundoff = 0x1p-53;
+double gamma_n(double n) {
+  const double nu = n * kUnitRoundoff;
+  return nu / (1 - nu);
+}
+// Backward error of the computed SVD, as a multiple of u ‖D̃‖₂ per unit of max(#h, s): the computed singular
+// values are those of D̃ + ΔD̃ with ‖ΔD̃‖₂ ≤ p(#h, s) u ‖D̃‖₂ for a modest p (Golub and Van Loan, Sec. 8.6.3);
+// p = 64 max(#h, s) is generous for one-sided Jacobi, bidiagonal QR and divide and conquer alike.
+constexpr double kSvdBackwardPerRow = 64;
 
 struct Candidate {
   int sample = -1;
@@ -46,6 +58,45 @@ Candidate evaluate_point(const MatXd& Gx, const MatXd& M, const MatS3& y0, doubl
   c.bound = norm_m * eps;
   c.ratio = c.bound > 0 ? c.sigma_min / c.bound : INFINITY;
   return c;
+}
+
+// Bounds of the residuals of step 3 (docs/certificate.md, "Targets no certified map reaches"), with every
+// rounding of the double-precision computation accounted for:
+//   upper ≥ ‖D̃ ỹ₀ − Q‖_F   (the exact residual of the computed ỹ₀; the radius of step 4 needs an upper bound)
+//   lower ≤ ρ* = min over all ỹ of ‖D̃ ỹ − Q‖_F   (the exact least-squares residual; step 3 needs a lower
+//   bound)
+// r = D̃ ỹ₀ − Q splits into its part in the range of D̃ and the rest; the rest is the exact least-squares
+// residual, so ρ*² = ‖r‖² − ‖P r‖² with ‖P r‖_F = ‖Uᵀ r‖_F = ‖Σ⁻¹ Vᵀ D̃ᵀ r‖_F ≤ ‖D̃ᵀ r‖_F / σ_min(D̃). The
+// computed r̂ differs from r by at most γ_{s+1} (|D̃| |ỹ₀| + |Q|) entrywise, D̃ᵀ r̂ from its computed value by
+// γ_{#h} |D̃ᵀ| |r̂|, and every Frobenius norm by a relative γ of its length.
+struct ResidualBounds {
+  double computed = 0;  // ‖r̂‖_F as computed
+  double upper = 0;
+  double lower = 0;
+  double rounding = 0;  // bound of ‖r̂ − r‖_F: how finely a map's handle errors can be evaluated at all
+};
+ResidualBounds residual_bounds(const MatXd& D, const MatX3d& Q, const MatS3& y0, double sigma_min_lo,
+                               double sigma_max_hi) {
+  const double h = static_cast<double>(D.rows()), s = static_cast<double>(D.cols());
+  const double g_norm = gamma_n(3 * h + 2);  // a Frobenius norm of 3 #h entries, its square root included
+  const MatX3d r = D * y0 - Q;
+  ResidualBounds b;
+  b.computed = r.norm();
+  // Sums of non-negative terms: computed ≥ (1 − γ) exact, so exact ≤ computed (1 + 2γ) while γ < ½.
+  const MatX3d magnitude = D.cwiseAbs() * y0.cwiseAbs() + Q.cwiseAbs();
+  const double e_r = gamma_n(s + 1) * magnitude.norm() * (1 + 2 * gamma_n(s + 1)) * (1 + 2 * g_norm);
+  b.rounding = e_r;
+  b.upper = b.computed * (1 + g_norm) + e_r;
+  const MatS3 g = D.transpose() * r;
+  const MatS3 g_rounding = D.transpose().cwiseAbs() * r.cwiseAbs();
+  const double g_hi = g.norm() * (1 + gamma_n(3 * s + 2)) +
+                      gamma_n(h) * g_rounding.norm() * (1 + 2 * gamma_n(h)) * (1 + 2 * gamma_n(3 * s + 2)) +
+                      sigma_max_hi * e_r;
+  const double r_lo = std::max(0.0, b.computed * (1 - g_norm) - e_r);
+  const double p_hi = sigma_min_lo > 0 ? g_hi / sigma_min_lo : INFINITY;
+  // Rounding of this last step: a relative 4u on each square and on the square root, taken off.
+  b.lower = r_lo > p_hi ? std::sqrt((r_lo - p_hi) * (r_lo + p_hi)) * (1 - 8 * kUnitRoundoff) : 0.0;
+  return b;
 }
 
 }  // namespace
@@ -81,15 +132,25 @@ UnreachabilityProof prove_targets_unreachable(const DeformationSolver& solver) {
   }
   const MatXd W = svd.matrixV() * sv.cwiseInverse().asDiagonal();  // s by s: D̃⁺ = W Uᵀ
   p.least_squares = W * (svd.matrixU().transpose() * Q);
-  p.residual = (D * p.least_squares - Q).norm();
+  const double svd_error = kSvdBackwardPerRow * std::max(h, s) * kUnitRoundoff * smax;
+  const ResidualBounds rb = residual_bounds(D, Q, p.least_squares, smin - svd_error, smax + svd_error);
+  p.residual = rb.computed;
+  p.residual_upper = rb.upper;
+  p.residual_lower = rb.lower;
+  p.rounding_floor = rb.rounding;
   const double reach = std::sqrt(static_cast<double>(h)) * p.tolerance;  // ‖D̃ỹ − Q‖_F of a reaching map
-  p.radius = reach + p.residual;
-  if (p.residual >= kMargin * reach) {
+  p.radius = reach + p.residual_upper;
+  // Below the rounding of evaluating D̃ ỹ − Q, "reached" and "missed" cannot be told apart in double
+  // precision: the proof never claims a residual smaller than that, whatever the tolerance (even 0).
+  const double needed = kMargin * std::max(reach, p.rounding_floor);
+  if (p.residual_lower >= needed) {
     p.proven = true;
     p.kind = "residual";
-    p.reason = "no map of the subspace reaches the targets: the least-squares residual " +
-               format_g(p.residual, 4) + " exceeds " + format_g(kMargin, 2) +
-               " x sqrt(#handles) x tolerance = " + format_g(kMargin * reach, 4) + " (normalized frame)";
+    p.reason = "no map of the subspace reaches the targets: the least-squares residual is at least " +
+               format_g(p.residual_lower, 4) + " (computed " + format_g(p.residual, 4) +
+               ", less its rounding), at least " + format_g(kMargin, 2) +
+               " x max(sqrt(#handles) x tolerance, rounding floor) = " + format_g(needed, 4) +
+               " (normalized frame)";
     return p;
   }
 

@@ -12,7 +12,9 @@
 //     ‖H(c)‖ + r Σ_e ‖δ_e‖ Θ_e, whichever the certificate used), each factor's upper end;
 //   - the proven margin  lower(σ3) − upper(r)·upper(L).
 // A leaf is *proven* when that margin is > 0. Nothing here is a floating-point estimate called proven.
-// The ball's radius covers the decimal round trip of voxels.csv: r = (√3/2)(h + ulp(h)) + ‖ulp(c)‖₂.
+// The ball's radius covers the decimal round trip of voxels.csv: r = (√3/2)(h + ulp(h)) + ‖ulp(c)‖₂, plus the
+// slack that makes it hold the exact grid cell the leaf stands for (leaf_coverage.h). That the leaves cover
+// the certified domain at all is proven separately by prove_leaf_coverage; `lidef verify --interval` runs both.
 #pragma once
 #include <array>
 #include <memory>
@@ -62,8 +64,9 @@ class IntervalVerifier {
 
   // Enclosure of J and H at the exact point p.
   JetEnclosure jet(const Vec3& p) const;
-  // Re-proves the leaf with center `center` and side `side` as read from voxels.csv.
-  IntervalLeaf verify_leaf(const Vec3& center, double side) const;
+  // Re-proves the leaf with center `center` and side `side` as read from voxels.csv, on its ball widened by
+  // `radius_slack` (leaf_coverage.h: so that the ball holds the exact grid cell the leaf stands for).
+  IntervalLeaf verify_leaf(const Vec3& center, double side, double radius_slack = 0) const;
 
  private:
   struct Impl;
@@ -78,8 +81,10 @@ struct IntervalVerification {
   double seconds = 0;
 };
 
-// Re-proves every certified leaf of `leaves` (OpenMP threads; the results do not depend on their number).
+// Re-proves every certified leaf of `leaves` (OpenMP threads; the results do not depend on their number), each
+// on its ball widened by `radius_slack` (model units).
 IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d& y,
-                                                  const std::vector<CertLeaf>& leaves, LipschitzBound bound);
+                                                  const std::vector<CertLeaf>& leaves, LipschitzBound bound,
+                                                  double radius_slack = 0);
 
 }  // namespace lidef

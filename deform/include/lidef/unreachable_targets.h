@@ -8,8 +8,10 @@
 // at every point x (G_x: 3 by s reduced basis gradients). If ỹ₀ is orientation-reversing at a voxel center x
 // by more than twice that radius (det J_ỹ₀(x) < 0 and σ_min(J_ỹ₀(x)) ≥ 2 ‖G_x D̃⁺‖₂ ε), every map that
 // reaches the targets has det J(x) < 0 at x, inside the certified domain: no certificate can accept it.
-// Likewise, if even the least-squares map misses a handle by more than √#h τ in total (‖D̃ ỹ₀ − Q‖_F > √#h τ),
-// no map of the subspace reaches the targets at all. The factor 2 absorbs the double-precision rounding of
+// Likewise, if even the least-squares map misses a handle by more than √#h τ in total — proven on a lower bound
+// of the exact least-squares residual, from which the rounding of its computation has been taken off, never on
+// the computed residual itself (an upper bound, of order cond(D̃) u ‖Q‖ where the targets are reachable) — no
+// map of the subspace reaches the targets at all. The factor 2 absorbs the double-precision rounding of
 // the SVD, the least-squares map and the basis (relative ~cond(D̃) · 1e-16 ≤ ~1e-8 at the accepted
 // conditioning, cond(D̃) ≤ 1e8).
 //
@@ -34,8 +36,16 @@ struct UnreachabilityProof {
   int reduced_size = 0;       // s
   double condition = 0;       // σ_max(D̃) / σ_min(D̃) (0 when not computed)
   double tolerance = 0;       // τ: handle_tolerance, normalized frame (= model units / frame scale)
-  double residual = 0;        // ‖D̃ ỹ₀ − Q‖_F, normalized frame
-  double radius = 0;          // ε = √#h τ + residual
+  double residual = 0;        // ‖D̃ ỹ₀ − Q‖_F as computed, normalized frame
+  // Bounds with every rounding accounted for (docs/certificate.md, step 3): residual_upper ≥ the exact
+  // ‖D̃ ỹ₀ − Q‖_F of the computed ỹ₀; residual_lower ≤ the exact least-squares residual min ‖D̃ ỹ − Q‖_F
+  // (0 when the rounding may account for all of it). "residual" is proven on residual_lower only.
+  double residual_upper = 0;
+  double residual_lower = 0;
+  // Bound of the rounding in an evaluated ‖D̃ ỹ₀ − Q‖_F: below it reached and missed are not told apart, so
+  // "residual" needs residual_lower ≥ 2 max(√#h τ, rounding_floor) — a tolerance of 0 proves nothing finer.
+  double rounding_floor = 0;
+  double radius = 0;          // ε = √#h τ + residual_upper
   Vec3 point = Vec3::Zero();  // "orientation": the voxel center x, model units
   double sigma_min = 0;       // "orientation": σ_min(J_ỹ₀(x)) (det J_ỹ₀(x) < 0)
   double jacobian_bound = 0;  // "orientation": ‖G_x D̃⁺‖₂ ε ≥ ‖J_ỹ(x) − J_ỹ₀(x)‖₂ for every reaching ỹ
