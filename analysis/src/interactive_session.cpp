@@ -220,6 +220,11 @@ std::shared_ptr<const Model> InteractiveSession::model() const {
   return model_;
 }
 
+std::shared_ptr<const Model> InteractiveSession::solver_model() const {
+  std::lock_guard<std::mutex> lk(mutex_);
+  return solver_model_;
+}
+
 std::string InteractiveSession::check_source(const Vec3& p) const {
   const auto m = model();
   if (!m) return "no model is loaded";
@@ -521,6 +526,8 @@ void InteractiveSession::Engine::apply_params(const Command& c) {
   if (changes_precomputation(params, c.params)) {
     build_solver(model, c.params, sources, targets);
     handles_to_solver();
+    // build_solver left the state at "preparing": a final state, or the progress would stay on screen.
+    publish_state(SessionState::kResting, "parameters applied: solver rebuilt");
   } else {
     solver->set_params(c.params);
     params = c.params;
@@ -653,6 +660,10 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
     session.cache_stores_.push_back(mesh_store);
   }
   // Committed only now: a failure above leaves the previous session as it was.
+  {
+    std::lock_guard<std::mutex> lk(session.mutex_);
+    session.solver_model_ = new_model;
+  }
   solver = std::move(built);
   backend = new_backend;
   Mv = std::move(v);
@@ -665,9 +676,11 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
   field_deformed.reset();
   verification.reset();
   leaves_version = field_version = verification_version = -1;
+  if (session.stage_hook_) session.stage_hook_("ready");
 }
 
 void InteractiveSession::Engine::on_progress(const std::string& name, double fraction) {
+  if (session.stage_hook_) session.stage_hook_(name);
   if (session.cancel_.load()) throw Cancelled();
   stage = name;
   progress = fraction;
@@ -727,6 +740,13 @@ bool InteractiveSession::Engine::compute_extras(bool resting) {
   const bool verify_now = verify_samples > 0 && resting;
   const bool need_leaves = (extras.leaves || verify_now) && leaves_version != map_version;
   if (need_leaves && (due || verify_now)) {
+    if (verify_now) {  // the leaves of a large model take seconds too: say so before
+      stage = "verifying: the certificate's leaves";
+      progress = 0;
+      publish_frame(make_frame());
+      stage.clear();
+      progress = -1;
+    }
     compute_leaves();
     did = true;
   }
@@ -781,9 +801,48 @@ void InteractiveSession::Engine::compute_field() {
   field_version = map_version;
 }
 
+// In chunks of leaves, so that a long verification (tens of seconds on a large model) publishes its progress
+// and stops at a cancel (cancel_preparation()). Chunk k samples its leaves with seed k + 1 (the samples of a
+// leaf depend on its chunk and its index there; the same for every run).
 void InteractiveSession::Engine::compute_verification() {
-  verification = std::make_shared<const VerificationResult>(
-      verify_certificate(solver->basis(), solver->coefficients(), leaves->leaves, verify_samples));
+  const std::vector<CertLeaf>& all = leaves->leaves;
+  const long n = static_cast<long>(all.size()), chunk = std::max<long>(128, (n + 39) / 40);
+  auto result = std::make_shared<VerificationResult>();
+  result->min_sigma3 = std::numeric_limits<double>::infinity();
+  const std::string saved_status = status;
+  for (long b = 0, k = 0; b < n; b += chunk, ++k) {
+    if (session.cancel_.load()) {
+      verify_samples = 0;
+      stage.clear();
+      progress = -1;
+      status = "verification cancelled";
+      return;
+    }
+    stage = "verifying the certificate (dense sampling)";
+    progress = static_cast<double>(b) / static_cast<double>(n);
+    status = stage;
+    if (b > 0) publish_frame(make_frame());
+    const std::vector<CertLeaf> part(all.begin() + b, all.begin() + std::min(n, b + chunk));
+    VerificationResult r = verify_certificate(solver->basis(), solver->coefficients(), part, verify_samples,
+                                              static_cast<unsigned>(k + 1));
+    result->points += r.points;
+    if (!r.voxels.empty()) result->min_sigma3 = std::min(result->min_sigma3, r.min_sigma3);
+    result->nonpositive_in_certified += r.nonpositive_in_certified;
+    result->violations += r.violations;
+    for (VoxelVerification& v : r.voxels) {
+      v.leaf += b;
+      result->voxels.push_back(v);
+    }
+    for (BoundViolation& v : r.violation_list)
+      if (result->violation_list.size() < 100) {
+        v.leaf += b;
+        result->violation_list.push_back(v);
+      }
+  }
+  stage.clear();
+  progress = -1;
+  status = saved_status;
+  verification = std::move(result);
   verification_version = map_version;
   verify_samples = 0;
 }
@@ -792,6 +851,9 @@ void InteractiveSession::Engine::compute_verification() {
 
 void InteractiveSession::Engine::rest() {
   if (commands_queued(false)) return;  // more work first; extras when the engine rests
+  // Whatever command ended a preparation, the engine rests now: never leave "preparing" as the last word.
+  if (state == SessionState::kPreparing)
+    publish_state(solver ? SessionState::kResting : SessionState::kEmpty, status);
   if (solver && state != SessionState::kIterating) {
     try {
       compute_extras(true);
@@ -824,6 +886,8 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
   f->field_version = field_version;
   f->verification = verification;
   f->verification_version = verification_version;
+  f->stage = stage;  // a verification in progress (preparing frames are make_preparing_frame's)
+  f->progress = progress;
   if (solver) {
     const DeformationSolver& S = *solver;
     f->history = S.history();

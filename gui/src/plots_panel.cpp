@@ -238,18 +238,24 @@ void PlotsPanel::set_bound_tolerance(double t) {
   update();
 }
 
+void PlotsPanel::set_model_name(const QString& name) {
+  model_name_ = name;
+  update();
+}
+
 QString PlotsPanel::history_title() const {
-  if (iterations_.empty()) return "Solver history";
+  const QString who = model_name_.isEmpty() ? QString() : model_name_ + ": ";
+  if (iterations_.empty()) return who + "Solver history";
   const IterationPoint& last = iterations_.back();
   const QString tol = bound_tolerance_ > 0
                           ? QString::fromUtf8("within %1% of sampled").arg(100 * bound_tolerance_, 0, 'g', 3)
                           : QString::fromUtf8("only proven > 0: set bound_tolerance");
-  return QString::fromUtf8("%1 iterations; last: σ3 ≥ %2 certified (%3), sampled min %4, %5 refined")
-      .arg(iterations_.size())
-      .arg(last.lower_bound, 0, 'g', 4)
-      .arg(tol)
-      .arg(last.sampled, 0, 'g', 4)
-      .arg(last.refined);
+  return who + QString::fromUtf8("%1 iterations; last: σ3 ≥ %2 certified (%3), sampled min %4, %5 refined")
+                   .arg(iterations_.size())
+                   .arg(last.lower_bound, 0, 'g', 4)
+                   .arg(tol)
+                   .arg(last.sampled, 0, 'g', 4)
+                   .arg(last.refined);
 }
 
 void PlotsPanel::set_verification(const VerificationResult& v) {
@@ -382,10 +388,11 @@ void PlotsPanel::paint_verification(QPainter& p, const QRect& area) const {
 
   // Title in two runs so that the violation count alone can turn red.
   const QFontMetrics fm(p.font());
-  QString head = QString("Certificate vs. ground truth: %1 leaves, ").arg(n);
+  const QString who = model_name_.isEmpty() ? QString() : model_name_ + ": ";
+  QString head = who + QString("Certificate vs. ground truth: %1 leaves, ").arg(n);
   const QString tail = QString("%1 violation%2").arg(violations_).arg(violations_ == 1 ? "" : "s");
   if (fm.horizontalAdvance(head + tail) > area.width() - 12)
-    head = QString("Certificate: %1 leaves, ").arg(n);
+    head = who + QString("Certificate: %1 leaves, ").arg(n);
   const int title_w = fm.horizontalAdvance(head) + fm.horizontalAdvance(tail);
   const int title_x = area.left() + std::max(6, (area.width() - title_w) / 2);
   const QRect title_box(title_x, area.top() + 4, area.width(), fm.height());

@@ -30,6 +30,8 @@ class PlotsPanel : public QWidget {
   void set_history(const std::vector<lidef::IterationRecord>& history);
   // The certifier's bound_tolerance the history was computed with (0: the bound is only proven > 0).
   void set_bound_tolerance(double t);
+  // The model the plots describe (first words of both titles).
+  void set_model_name(const QString& name);
   // The title of the history plot (what it says about the last iteration).
   QString history_title() const;
   // Shows `v` in the bottom plot and repaints.
@@ -63,6 +65,7 @@ class PlotsPanel : public QWidget {
   std::vector<LeafPoint> leaves_;  // sorted by L (precomputed: a paint must stay cheap with 1e5 leaves)
   long violations_ = 0;
   double bound_tolerance_ = 0;
+  QString model_name_;
   bool has_verification_ = false;
 };
 

@@ -85,6 +85,7 @@ nlohmann::json settings_to_json(const ViewSettings& s) {
           {"mesh_volume_ratio", s.mesh_volume_ratio},
           {"rest_cage", s.rest_cage},
           {"deformed_cage", s.deformed_cage},
+          {"mesh_edges", s.mesh_edges},
           {"sigma_deformed_space", s.sigma_deformed_space},
           {"slice", {s.slice[0], s.slice[1], s.slice[2]}},
           {"slice_pos", {s.slice_pos[0], s.slice_pos[1], s.slice_pos[2]}},
@@ -109,6 +110,7 @@ void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::str
     get("mesh_volume_ratio", s.mesh_volume_ratio);
     get("rest_cage", s.rest_cage);
     get("deformed_cage", s.deformed_cage);
+    get("mesh_edges", s.mesh_edges);
     get("sigma_deformed_space", s.sigma_deformed_space);
     for (int a = 0; a < 3; ++a) {
       if (j.contains("slice")) s.slice[a] = j.at("slice").at(a).get<bool>();
@@ -253,7 +255,18 @@ struct Scene::Impl {
   std::pair<double, double> range{0, 0};  // of the colour bar shown last
   bool bar_in_strip = false;              // the bar has its own renderer (a strip right of the model)
   long model_version = -1;
-  std::string caption;
+  std::string caption, model_name;
+  // Handles not at their targets: red lines from the image to the target (mesh view).
+  Ptr<vtkActor> misses = Ptr<vtkActor>::New();
+  Ptr<vtkPolyDataMapper> misses_mapper = Ptr<vtkPolyDataMapper>::New();
+  double handle_tolerance = 1e-3;
+  int unreached = 0;
+  // The picked point.
+  Ptr<vtkActor> picked = Ptr<vtkActor>::New();
+  Ptr<vtkSphereSource> picked_sphere = Ptr<vtkSphereSource>::New();
+  bool picked_valid = false;
+  Vec3 picked_rest = Vec3::Zero(), picked_image = Vec3::Zero();
+  void update_picked(const SessionFrame& f, const ViewSettings& s);
   // What the leaf glyphs were last built from (show_leaves_view rebuilds them only when this changes).
   std::shared_ptr<const Certificate> glyph_leaves;
   std::string glyph_settings;
@@ -359,9 +372,22 @@ Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make
   // (anchored by its bottom at 0.94, the second line pushed the first out of the view).
   I.text->GetTextProperty()->SetVerticalJustificationToTop();
   I.text->SetPosition(0.01, 0.985);
-  for (vtkProp* p :
-       std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage, I.images,
-                                       I.slices, I.volume, I.leaves, I.marks, I.outline, I.text}) {
+  I.misses->SetMapper(I.misses_mapper);
+  I.misses->GetProperty()->SetColor(0.85, 0.1, 0.1);
+  I.misses->GetProperty()->SetLineWidth(3);
+  I.misses->GetProperty()->LightingOff();
+  I.misses->PickableOff();
+  I.picked_sphere->SetThetaResolution(16);
+  I.picked_sphere->SetPhiResolution(12);
+  auto picked_mapper = Ptr<vtkPolyDataMapper>::New();
+  picked_mapper->SetInputConnection(I.picked_sphere->GetOutputPort());
+  I.picked->SetMapper(picked_mapper);
+  I.picked->GetProperty()->SetColor(1.0, 0.55, 0.0);
+  I.picked->PickableOff();
+  I.mesh_actor->GetProperty()->SetEdgeColor(0.25, 0.25, 0.25);
+  for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
+                                                    I.images, I.slices, I.volume, I.leaves, I.marks,
+                                                    I.outline, I.misses, I.picked, I.text}) {
     p->VisibilityOff();
     renderer->AddViewProp(p);
   }
@@ -385,6 +411,20 @@ std::pair<double, double> Scene::shown_range() const {
 }
 void Scene::set_certified_domain(DomainKind d) {
   impl_->domain = d;
+}
+void Scene::set_model_name(const std::string& name) {
+  impl_->model_name = name;
+}
+void Scene::set_handle_tolerance(double fraction) {
+  impl_->handle_tolerance = fraction;
+}
+int Scene::unreached_handles() const {
+  return impl_->unreached;
+}
+void Scene::set_picked(bool valid, const Vec3& rest, const Vec3& image) {
+  impl_->picked_valid = valid;
+  impl_->picked_rest = rest;
+  impl_->picked_image = image;
 }
 vtkActor* Scene::leaves_actor() const {
   return impl_->leaves;
@@ -560,9 +600,11 @@ std::string glyph_key(const ViewSettings& s) {
 }  // namespace
 
 void Scene::Impl::hide_all() {
-  for (vtkProp* p : std::initializer_list<vtkProp*>{mesh_actor, context_mesh, rest_cage, def_cage, images,
-                                                    slices, volume, leaves, marks, outline, bar})
+  for (vtkProp* p :
+       std::initializer_list<vtkProp*>{mesh_actor, context_mesh, rest_cage, def_cage, images, slices, volume,
+                                       leaves, marks, outline, misses, picked, bar})
     p->VisibilityOff();
+  unreached = 0;
   bar->SetNumberOfLabels(5);
   range = {0, 0};
 }
@@ -620,6 +662,36 @@ void Scene::Impl::update_handle_images(const SessionFrame& f, const ViewSettings
   images_mapper->SetInputData(pd);
   image_sphere->SetRadius(0.008 * diag);
   images->SetVisibility(s.view == View::kMesh && f.images.rows() > 0);
+  // Unreached handles, as the solver measures "reached" (handle_tolerance of Frame::scale), once the solver
+  // rests: while it iterates the images trail the targets anyway.
+  const double scale = 0.5 * (model.cage.bbox_max - model.cage.bbox_min).maxCoeff();
+  auto lpts = Ptr<vtkPoints>::New();
+  auto lines = Ptr<vtkCellArray>::New();
+  unreached = 0;
+  if (f.images.rows() == f.targets.rows() && f.state == SessionState::kResting)
+    for (Eigen::Index i = 0; i < f.images.rows(); ++i) {
+      if ((f.images.row(i) - f.targets.row(i)).norm() <= handle_tolerance * scale) continue;
+      ++unreached;
+      const vtkIdType a = lpts->InsertNextPoint(f.images(i, 0), f.images(i, 1), f.images(i, 2));
+      const vtkIdType b = lpts->InsertNextPoint(f.targets(i, 0), f.targets(i, 1), f.targets(i, 2));
+      const vtkIdType ids[2] = {a, b};
+      lines->InsertNextCell(2, ids);
+    }
+  auto lpd = Ptr<vtkPolyData>::New();
+  lpd->SetPoints(lpts);
+  lpd->SetLines(lines);
+  misses_mapper->SetInputData(lpd);
+  misses->SetVisibility(s.view == View::kMesh && unreached > 0);
+}
+
+void Scene::Impl::update_picked(const SessionFrame& f, const ViewSettings& s) {
+  if (!picked_valid) return;
+  const bool deformed = s.view == View::kMesh || (s.view == View::kSigma3 && s.sigma_deformed_space);
+  const Vec3 p = deformed ? picked_image : picked_rest;
+  const Model& model = *f.model;
+  picked_sphere->SetCenter(p.x(), p.y(), p.z());
+  picked_sphere->SetRadius(0.012 * (model.cage.bbox_max - model.cage.bbox_min).norm());
+  picked->VisibilityOn();
 }
 
 void Scene::Impl::show_bar(vtkScalarsToColors* colors, const char* title) {
@@ -638,6 +710,7 @@ void Scene::Impl::show_bar(vtkScalarsToColors* colors, const char* title) {
 // Mesh view: the deformed mesh coloured by det J (log scale, symmetric around 1) or E_iso − 6.
 std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSettings& s) {
   mesh_actor->VisibilityOn();
+  mesh_actor->GetProperty()->SetEdgeVisibility(s.mesh_edges ? 1 : 0);
   rest_cage->SetVisibility(s.rest_cage);
   def_cage->SetVisibility(s.deformed_cage);
   const Field fld = shown_field(s);
@@ -941,8 +1014,9 @@ void Scene::Impl::set_caption_text(const std::string& c) {
 
 void Scene::Impl::set_caption(const std::string& what, const SessionFrame& f) {
   const std::string cert = f.certified ? "certified" : "NOT certified";
-  set_caption_text(what + "\n" + cert + ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) +
-                   ", iteration " + std::to_string(f.history.size()));
+  set_caption_text((model_name.empty() ? "" : model_name + ": ") + what + "\n" + cert +
+                   ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) + ", iteration " +
+                   std::to_string(f.history.size()));
 }
 
 void Scene::show(const SessionFrame& f, const ViewSettings& s) {
@@ -955,6 +1029,7 @@ void Scene::show(const SessionFrame& f, const ViewSettings& s) {
   I.adopt_model(f);
   I.update_mesh(f, s);
   I.update_handle_images(f, s);
+  I.update_picked(f, s);
   std::string what;
   if (s.view == View::kMesh)
     what = I.show_mesh_view(f, s);

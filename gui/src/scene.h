@@ -27,6 +27,7 @@ struct ViewSettings {
   // Mesh view.
   bool mesh_volume_ratio = false;  // colour by det J instead of E_iso − 6
   bool rest_cage = false, deformed_cage = true;
+  bool mesh_edges = false;  // the mesh's triangle edges over its colours
   // σ3 view.
   bool sigma_deformed_space = false;      // slices drawn at the deformed grid positions
   bool slice[3] = {true, true, false};    // x, y, z slice planes
@@ -78,6 +79,15 @@ class Scene {
   // The certified domain of the session's parameters: with kMesh (the mesh and its solid) the σ3 view draws
   // the mesh surface where it crosses the slices, the domain's boundary.
   void set_certified_domain(DomainKind d);
+  // The name of the model shown (first words of the caption: what the caption's verdict is about).
+  void set_model_name(const std::string& name);
+  // Handles whose image is farther from the target than `fraction` of the model size (Frame::scale: half the
+  // largest extent of the cage's bounding box; DeformParams::handle_tolerance) get a red line from the image
+  // to the target in the mesh view; unreached_handles() counts them in the last shown frame.
+  void set_handle_tolerance(double fraction);
+  int unreached_handles() const;
+  // The picked point, marked by an orange sphere: at f(p) in the deformed-space views, at p in rest space.
+  void set_picked(bool valid, const Vec3& rest, const Vec3& image);
   // The leaves glyph actor (Lipschitz/octree views) and the σ3 slices, for picking.
   vtkActor* leaves_actor() const;
   vtkActor* slices_actor() const;

@@ -33,4 +33,8 @@ void report_to_user(QWidget* parent, QLabel* status, const std::function<void(co
 // transparent background needs renderers with background alpha 0 and alpha bit planes). (studio_window.cpp)
 std::string write_window_png(vtkRenderWindow* window, const std::string& path, bool rgba = false);
 
+// An engine status line with its stop reason in words ("targets_unreachable: ..." → "targets unreachable
+// (proven: ...): ..."); other lines unchanged. (studio_window.cpp)
+std::string stop_reason_in_words(const std::string& status);
+
 }  // namespace lidef::studio

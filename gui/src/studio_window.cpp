@@ -1,6 +1,7 @@
 #include "studio_window.h"
 
 #include <QVTKOpenGLNativeWidget.h>
+#include <vtkAxesActor.h>
 #include <vtkCallbackCommand.h>
 #include <vtkCamera.h>
 #include <vtkCellPicker.h>
@@ -10,7 +11,9 @@
 #include <vtkInteractorStyleTrackballCamera.h>
 #include <vtkObjectFactory.h>
 #include <vtkOpenGLRenderer.h>
+#include <vtkOrientationMarkerWidget.h>
 #include <vtkPNGWriter.h>
+#include <vtkPolyData.h>
 #include <vtkPropPicker.h>
 #include <vtkProperty.h>
 #include <vtkRenderWindowInteractor.h>
@@ -19,6 +22,7 @@
 #include <vtkWindowToImageFilter.h>
 
 #include <QAction>
+#include <QActionGroup>
 #include <QApplication>
 #include <QButtonGroup>
 #include <QCheckBox>
@@ -44,6 +48,7 @@
 #include <QRadioButton>
 #include <QScreen>
 #include <QScrollArea>
+#include <QScrollBar>
 #include <QSettings>
 #include <QSlider>
 #include <QSpinBox>
@@ -51,6 +56,7 @@
 #include <QTimer>
 #include <QToolBar>
 #include <QVBoxLayout>
+#include <QWheelEvent>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -149,7 +155,24 @@ vtkStandardNewMacro(StudioStyle)
   StudioWindow* owner = nullptr;
 };
 
+// Passes a wheel event to the scroll area instead of a widget that has no focus.
+class WheelGuard : public QObject {
+ public:
+  using QObject::QObject;
+  bool eventFilter(QObject* o, QEvent* e) override {
+    auto* w = qobject_cast<QWidget*>(o);
+    if (e->type() != QEvent::Wheel || !w || w->hasFocus()) return false;
+    for (QWidget* p = w->parentWidget(); p; p = p->parentWidget())
+      if (auto* scroll = qobject_cast<QScrollArea*>(p)) {
+        QApplication::sendEvent(scroll->verticalScrollBar(), e);
+        break;
+      }
+    return true;
+  }
+};
+
 StudioWindow::StudioWindow(QWidget* parent) : QMainWindow(parent) {
+  wheel_guard_ = new WheelGuard(this);
   sources_.resize(0, 3);
   targets_.resize(0, 3);
   setAcceptDrops(true);
@@ -231,6 +254,16 @@ void StudioWindow::build_ui() {
     if (!hover_timer_->isActive()) hover_timer_->start();
   };
   window_->GetInteractor()->SetInteractorStyle(style);
+  // Orientation axes in the lower-left corner (x red, y yellow, z green), turning with the camera.
+  auto axes = vtkSmartPointer<vtkAxesActor>::New();
+  axes_widget_ = vtkSmartPointer<vtkOrientationMarkerWidget>::New();
+  axes_widget_->SetOrientationMarker(axes);
+  axes_widget_->SetInteractor(window_->GetInteractor());
+  axes_widget_->SetViewport(0.0, 0.0, 0.13, 0.2);
+  axes_widget_->SetEnabled(1);
+  axes_widget_->InteractiveOff();
+  QSettings st;
+  up_axis_ = std::clamp(st.value("view/up_axis", 1).toInt(), 0, 2);
 
   // Menus and tool bar.
   QMenu* file = menuBar()->addMenu("&File");
@@ -238,7 +271,7 @@ void StudioWindow::build_ui() {
     const QString d = QFileDialog::getExistingDirectory(this, "Open model folder (cage.obj, mesh.obj)");
     if (!d.isEmpty()) open_path(d.toStdString());
   });
-  file->addAction("Open m&esh (automatic cage)...", this, [this] {
+  QAction* open_mesh = file->addAction("Open m&esh (automatic cage)...", this, [this] {
     const QString f =
         QFileDialog::getOpenFileName(this, "Open a mesh: lidef makes its cage", {},
                                      "Meshes (*.obj *.off *.ply *.stl *.OBJ *.OFF *.PLY *.STL)");
@@ -249,6 +282,9 @@ void StudioWindow::build_ui() {
     if (!f.isEmpty()) open_path(f.toStdString());
   });
   open_sc->setShortcut(QKeySequence::Open);
+  QMenu* recent = file->addMenu("Open &recent");
+  recent->setObjectName("recent_menu");
+  connect(recent, &QMenu::aboutToShow, this, [this, recent] { fill_recent_menu(recent); });
   QAction* save = file->addAction("&Save session...", this, [this] {
     const QString f = QFileDialog::getSaveFileName(this, "Save session", {}, "Scenario JSON (*.json)");
     if (!f.isEmpty()) save_session(f.toStdString());
@@ -282,6 +318,7 @@ void StudioWindow::build_ui() {
   QAction* redo_a = edit->addAction("&Redo handle edit", this, [this] { redo(); });
   redo_a->setShortcut(QKeySequence::Redo);
   edit->addAction("Delete all handles", this, [this] {
+    if (!edits_allowed()) return;
     push_undo();
     sources_.resize(0, 3);
     targets_.resize(0, 3);
@@ -316,6 +353,7 @@ void StudioWindow::build_ui() {
   QToolBar* tb = addToolBar("Main");
   tb->setObjectName("Main");
   tb->addAction(open_model);
+  tb->addAction(open_mesh);
   tb->addAction(open_sc);
   tb->addAction(save);
   tb->addSeparator();
@@ -387,20 +425,49 @@ void StudioWindow::build_ui() {
   splitDockWidget(picked_dock, plots_dock, Qt::Vertical);
   resizeDocks({vd, picked_dock, plots_dock}, {330, 150, 330}, Qt::Vertical);
   resizeDocks({vd}, {360}, Qt::Horizontal);
+  build_view_menu(help);
 
   badge_ = new QLabel(" no map ");
+  badge_->setObjectName("badge");
   status_ = new QLabel("File > Open a model folder or a scenario; click on the mesh to add a handle");
+  status_->setObjectName("status");
   statusBar()->addWidget(status_, 1);
   prepare_bar_ = new QProgressBar;
+  prepare_bar_->setObjectName("prepare_bar");
   prepare_bar_->setRange(0, 1000);
   prepare_bar_->setMinimumWidth(320);
   prepare_bar_->setVisible(false);
   prepare_cancel_ = new QPushButton("Cancel");
+  prepare_cancel_->setObjectName("prepare_cancel");
   prepare_cancel_->setToolTip("Stop preprocessing this model (the model before stays open)");
   prepare_cancel_->setVisible(false);
-  connect(prepare_cancel_, &QPushButton::clicked, this, [this] { session_->cancel_preparation(); });
+  connect(prepare_cancel_, &QPushButton::clicked, this, [this] { cancel_opening(); });
   statusBar()->addPermanentWidget(prepare_bar_);
   statusBar()->addPermanentWidget(prepare_cancel_);
+  // A solver iteration that runs for seconds (a large model, a long line search): a busy bar and Stop.
+  wait_bar_ = new QProgressBar;
+  wait_bar_->setObjectName("wait_bar");
+  wait_bar_->setRange(0, 0);
+  wait_bar_->setMinimumWidth(200);
+  wait_bar_->setVisible(false);
+  wait_stop_ = new QPushButton("Stop");
+  wait_stop_->setObjectName("wait_stop");
+  wait_stop_->setToolTip(
+      "Interrupt the solver after its current line-search trial (Esc); the map stays certified");
+  wait_stop_->setVisible(false);
+  connect(wait_stop_, &QPushButton::clicked, this, [this] { session_->stop(); });
+  statusBar()->addPermanentWidget(wait_bar_);
+  statusBar()->addPermanentWidget(wait_stop_);
+  auto* wait_timer = new QTimer(this);
+  wait_timer->setInterval(250);
+  connect(wait_timer, &QTimer::timeout, this, [this] {
+    const auto now = std::chrono::steady_clock::now().time_since_epoch().count();
+    const double idle =
+        std::chrono::duration<double>(std::chrono::steady_clock::duration(now - last_frame_ns_.load()))
+            .count();
+    update_long_wait(session_->state(), idle);
+  });
+  wait_timer->start();
   statusBar()->addPermanentWidget(badge_);
   chrome_.push_back(statusBar());
   // First run: most of the screen (the saved geometry replaces it, restore_layout()).
@@ -412,6 +479,87 @@ void StudioWindow::build_ui() {
     size = size.boundedTo(avail.size());
   }
   resize(size);
+}
+
+// View menu: the panels (closed ones come back here), the up axis, orientation axes, mesh edges.
+void StudioWindow::build_view_menu(QMenu* before) {
+  QMenu* view = new QMenu("&View", this);
+  view->setObjectName("view_menu");
+  menuBar()->insertMenu(before->menuAction(), view);
+  for (QDockWidget* d : findChildren<QDockWidget*>()) view->addAction(d->toggleViewAction());
+  for (QToolBar* t : findChildren<QToolBar*>()) view->addAction(t->toggleViewAction());
+  view->addSeparator();
+  QMenu* up = view->addMenu("&Up axis");
+  auto* group = new QActionGroup(this);
+  const char* names[3] = {"+X up", "+Y up", "+Z up"};
+  for (int a = 0; a < 3; ++a) {
+    QAction* act = up->addAction(names[a]);
+    act->setObjectName(QString("up_") + "xyz"[a]);
+    act->setCheckable(true);
+    act->setChecked(a == up_axis_);
+    group->addAction(act);
+    connect(act, &QAction::triggered, this, [this, a] { set_up_axis(a); });
+  }
+  QAction* axes = view->addAction("&Orientation axes");
+  axes->setObjectName("orientation_axes");
+  axes->setCheckable(true);
+  axes->setChecked(true);
+  connect(axes, &QAction::toggled, this, [this](bool on) { set_orientation_axes(on); });
+  QAction* edges = view->addAction("Mesh &edges");
+  edges->setObjectName("mesh_edges");
+  edges->setCheckable(true);
+  edges->setShortcut(Qt::Key_E);
+  edges->setChecked(settings_.mesh_edges);
+  connect(edges, &QAction::toggled, this, [this](bool on) {
+    if (settings_.mesh_edges == on) return;
+    settings_.mesh_edges = on;
+    refresh_view_panel();
+    settings_changed();
+  });
+}
+
+void StudioWindow::set_up_axis(int axis) {
+  up_axis_ = std::clamp(axis, 0, 2);
+  QSettings().setValue("view/up_axis", up_axis_);
+  if (auto* a = findChild<QAction*>(QString("up_") + "xyz"[up_axis_])) {
+    const QSignalBlocker block(a);
+    a->setChecked(true);
+  }
+  reset_camera();
+}
+
+void StudioWindow::set_orientation_axes(bool on) {
+  axes_widget_->SetEnabled(on ? 1 : 0);
+  if (on) axes_widget_->InteractiveOff();
+  if (auto* a = findChild<QAction*>("orientation_axes")) {
+    const QSignalBlocker block(a);
+    a->setChecked(on);
+  }
+  window_->Render();
+}
+
+bool StudioWindow::orientation_axes() const {
+  return axes_widget_->GetEnabled() != 0;
+}
+
+QStringList StudioWindow::recent_files() const {
+  return QSettings().value("recent/files").toStringList();
+}
+
+void StudioWindow::add_recent(const std::string& path) {
+  const QString p = QString::fromStdString(std::filesystem::absolute(path).lexically_normal().string());
+  QStringList list = recent_files();
+  list.removeAll(p);
+  list.prepend(p);
+  while (list.size() > kRecentFiles) list.removeLast();
+  QSettings().setValue("recent/files", list);
+}
+
+void StudioWindow::fill_recent_menu(QMenu* menu) {
+  menu->clear();
+  const QStringList list = recent_files();
+  if (list.isEmpty()) menu->addAction("(none yet)")->setEnabled(false);
+  for (const QString& f : list) menu->addAction(f, this, [this, f] { open_path(f.toStdString()); });
 }
 
 QWidget* StudioWindow::build_view_panel() {
@@ -454,6 +602,8 @@ QWidget* StudioWindow::build_view_panel() {
         "Otherwise by E_iso - 6, the symmetric Dirichlet density above its minimum (0 at rotations)");
   check(ml, "Rest cage", &settings_.rest_cage, "Wireframe of the cage");
   check(ml, "Deformed cage", &settings_.deformed_cage, "Wireframe of the vertex coefficients y_v");
+  check(ml, "Triangle edges", &settings_.mesh_edges,
+        "The mesh's edges over its colours (View > Mesh edges, E)");
   lay->addWidget(mesh);
   auto* sig = new QGroupBox("sigma3 field");
   auto* sl = new QVBoxLayout(sig);
@@ -508,6 +658,13 @@ QWidget* StudioWindow::build_view_panel() {
   ll->addRow("Min depth", depth);
   lay->addWidget(leaves);
   lay->addStretch(1);
+  // The panel scrolls: a wheel turn over a box or slider the user did not click must scroll, never change
+  // its value (a mode or slice jumping under a passing wheel).
+  for (QWidget* c : w->findChildren<QWidget*>())
+    if (qobject_cast<QComboBox*>(c) || qobject_cast<QAbstractSpinBox*>(c) || qobject_cast<QSlider*>(c)) {
+      c->setFocusPolicy(Qt::StrongFocus);
+      c->installEventFilter(wheel_guard_);
+    }
   return w;
 }
 
@@ -518,6 +675,7 @@ void StudioWindow::set_multisamples(int n) {
 void StudioWindow::set_view_only(bool on) {
   view_only_ = on;
   for (QWidget* c : chrome_) c->setVisible(!on);
+  set_orientation_axes(!on);  // pictures for papers and docs: the model alone
 }
 
 void StudioWindow::set_settings(const ViewSettings& s) {
@@ -547,6 +705,10 @@ void StudioWindow::set_params(const DeformParams& p) {
 }
 
 void StudioWindow::settings_changed() {
+  if (auto* a = findChild<QAction*>("mesh_edges"); a && a->isChecked() != settings_.mesh_edges) {
+    const QSignalBlocker block(a);
+    a->setChecked(settings_.mesh_edges);
+  }
   session_->set_extras(extras_for(settings_));
   sync_widgets();  // the target spheres belong to the mesh view
   if (shown_) {
@@ -574,79 +736,197 @@ void StudioWindow::report_error(const std::string& title, const std::string& mes
 
 std::string StudioWindow::resolve_model(const std::string& path) {
   if (!is_mesh_file(path)) return path;
-  // Making a cage takes seconds: a worker thread makes it while this (UI) thread shows its stages.
-  QProgressDialog progress(QString::fromStdString("Making a cage for " + path), QString(), 0, 0, this);
+  // Making a cage takes seconds: a worker thread makes it while this (UI) thread shows its stages in a
+  // dialog at once (a minimum duration would hide it: a range of 0..0 never calls setValue), with Cancel.
+  QProgressDialog progress(QString::fromStdString("Making a cage for " + path), "Cancel", 0, 0, this);
+  progress.setObjectName("cage_progress");
   progress.setWindowTitle("Automatic cage");
   progress.setWindowModality(Qt::WindowModal);
-  progress.setMinimumDuration(300);
+  progress.setMinimumDuration(0);
+  progress.setAutoClose(false);
+  progress.setAutoReset(false);
+  connect(&progress, &QProgressDialog::canceled, this, [this] { cancel_opening(); });
   std::mutex m;
   std::string last_line, folder;
   std::exception_ptr failure;
   std::atomic<bool> done{false};
+  cage_cancel_.store(false);
+  cage_running_.store(true);
+  // The cage maker reports a line between its steps; a cancel is honoured there (it cannot stop inside a
+  // step, so the dialog says it waits for the step to end).
   std::thread worker([&] {
     try {
       folder = resolve_model_path(path, [&](const std::string& line) {
+        if (cage_line_hook_) cage_line_hook_(line);
+        if (cage_cancel_.load()) throw Cancelled();
         std::lock_guard<std::mutex> lk(m);
         last_line = line;
       });
+      if (cage_cancel_.load()) throw Cancelled();
     } catch (...) {
       failure = std::current_exception();
     }
     done.store(true);
   });
+  progress.show();
   while (!done.load()) {
     {
       std::lock_guard<std::mutex> lk(m);
-      if (!last_line.empty()) progress.setLabelText(QString::fromStdString(last_line));
+      if (cage_cancel_.load())
+        progress.setLabelText("Cancelling: waiting for the cage maker's current step to end...");
+      else if (!last_line.empty())
+        progress.setLabelText(QString::fromStdString(last_line));
       model_note_ = last_line;
     }
     QApplication::processEvents(QEventLoop::AllEvents, 30);
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   worker.join();
+  cage_running_.store(false);
   if (failure) std::rethrow_exception(failure);
   model_note_ = last_line;
   return folder;
 }
 
+void StudioWindow::cancel_opening() {
+  if (cage_running_.load())
+    cage_cancel_.store(true);
+  else
+    session_->cancel_preparation();
+}
+
 bool StudioWindow::open_path(const std::string& path) {
   model_note_.clear();
+  OpenRecord rec;
+  rec.path = path;
   try {
     std::error_code ec;
     if (std::filesystem::is_directory(path, ec) || is_mesh_file(path)) {
-      session_->open_model(resolve_model(path), params_->params());
-      scenario_name_ = std::filesystem::path(path).filename().string();
-      pending_camera_.clear();
+      const std::string dir = resolve_model(path);
+      session_->open_model(dir, params_->params());
+      rec.name = std::filesystem::path(path).filename().string();
+      rec.source = std::filesystem::absolute(path).lexically_normal().string();
+      rec.params = params_->params();
     } else {
-      session_->open_scenario(path);
-      const Scenario sc = session_->scenario();
-      scenario_name_ = sc.name;
-      pending_camera_ = sc.studio;
-      if (!sc.studio.empty()) {
-        const auto j = nlohmann::json::parse(sc.studio);
+      // Read first: its views are checked before anything is opened, and the model as the file names it
+      // (before the resolver replaces a mesh file by its cage folder) is what a saved session names.
+      const Scenario file = read_scenario(path);
+      rec.source = std::filesystem::absolute(file.model_dir).lexically_normal().string();
+      if (!file.studio.empty()) {
+        const auto j = nlohmann::json::parse(file.studio);
         if (j.contains("views")) {
-          settings_from_json(j.at("views"), settings_, path);
-          refresh_view_panel();
+          rec.views = settings_;
+          settings_from_json(j.at("views"), rec.views, path);
+          rec.has_views = true;
         }
       }
-      params_->set_params(sc.params);
-      plots_->set_bound_tolerance(sc.params.bound_tolerance);
+      session_->open_scenario(path);
+      const Scenario sc = session_->scenario();
+      rec.name = sc.name;
+      rec.camera = sc.studio;
+      rec.params = sc.params;
     }
+  } catch (const Cancelled&) {
+    status_->setText(QString::fromStdString("opening " + path + " cancelled" +
+                                            (shown_model_ ? "; " + shown_name_ + " stays open" : "")));
+    return false;
   } catch (const std::exception& e) {
     report_error("Cannot open " + path, e.what());
     return false;
   }
-  const Scenario sc = session_->scenario();
-  sources_ = sc.sources;
-  targets_ = sc.targets;
+  rec.model = session_->model();
+  rec.note = model_note_;
+  opens_.push_back(rec);
+  add_recent(path);
+  sync_widgets();  // no handle drags while the model before is only on show
+  status_->setText(QString::fromStdString(
+      "opening " + path + (model_note_.empty() ? "" : " (" + model_note_ + ")") +
+      (shown_model_ ? ": " + shown_name_ + " stays on screen until it is ready" : "")));
+  return true;
+}
+
+// Openings the engine no longer prepares: it names another model now (a cancel or a failure restored the
+// one before, or a newer opening replaced it). Their model never reaches the screen.
+void StudioWindow::forget_dropped_opens() {
+  if (opens_.empty()) return;
+  const auto current = session_->model();
+  std::string dropped;
+  for (auto it = opens_.begin(); it != opens_.end();) {
+    if (it->model == current) {
+      ++it;
+      continue;
+    }
+    dropped = it->name;
+    it = opens_.erase(it);
+  }
+  if (!dropped.empty() && opens_.empty()) {
+    status_->setText(
+        QString::fromStdString("opening " + dropped + " did not complete (cancelled or failed); " +
+                               (shown_model_ ? shown_name_ + " stays open" : "no model is open")));
+    sync_widgets();
+  }
+}
+
+// The engine holds a model the window does not show yet: adopt everything of it at once.
+void StudioWindow::adopt_shown_model(const SessionFrame& f) {
+  OpenRecord rec;
+  bool found = false;
+  for (size_t k = 0; k < opens_.size(); ++k)
+    if (opens_[k].model == f.model) {
+      rec = opens_[k];
+      opens_.erase(opens_.begin(), opens_.begin() + static_cast<long>(k) + 1);  // older ones were replaced
+      found = true;
+      break;
+    }
+  if (!found && f.model) {
+    rec.name = std::filesystem::path(f.model->dir).filename().string();
+    rec.source = f.model->dir;
+    rec.params = session_->scenario().params;
+  }
+  shown_model_ = f.model;
+  shown_name_ = f.model ? rec.name : "";
+  shown_source_ = f.model ? rec.source : "";
+  scenario_name_ = shown_name_;
+  setWindowTitle(QString::fromStdString(f.model ? "lidef-studio — " + shown_name_ : "lidef-studio"));
+  if (rec.has_views) {
+    settings_ = rec.views;
+    refresh_view_panel();
+    session_->set_extras(extras_for(settings_));
+  }
+  if (found) {
+    params_->set_params(rec.params);
+    plots_->set_bound_tolerance(rec.params.bound_tolerance);
+  }
+  sources_ = f.sources;
+  targets_ = f.targets;
   undo_.clear();
   redo_.clear();
-  sync_widgets();
-  session_->set_extras(extras_for(settings_));
-  setWindowTitle(QString::fromStdString("lidef-studio — " + scenario_name_));
-  status_->setText(
-      QString::fromStdString("opened " + path + (model_note_.empty() ? "" : " (" + model_note_ + ")")));
-  return true;
+  picked_ = PickedValues{};
+  picked_map_version_ = -1;
+  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  scene_->set_picked(false, Vec3::Zero(), Vec3::Zero());
+  plots_->clear_verification();
+  plots_->set_model_name(QString::fromStdString(shown_name_));
+  scene_->set_model_name(shown_name_);
+  shown_verification_version_ = -1;
+  pending_camera_ = rec.camera;
+  camera_to_reset_ = f.model != nullptr;
+  if (found)
+    status_->setText(
+        QString::fromStdString("opened " + rec.path + (rec.note.empty() ? "" : " (" + rec.note + ")")));
+}
+
+bool StudioWindow::edits_allowed() {
+  if (opens_.empty()) return true;
+  status_->setText(QString::fromStdString("handles are locked while " + opens_.back().name +
+                                          " is being prepared (Cancel keeps " +
+                                          (shown_model_ ? shown_name_ : std::string("no model")) + ")"));
+  return false;
+}
+
+long StudioWindow::drawn_mesh_points() const {
+  vtkPolyData* pd = scene_->mesh_data();
+  return pd && pd->GetPoints() ? static_cast<long>(pd->GetNumberOfPoints()) : 0;
 }
 
 std::string StudioWindow::camera_json() const {
@@ -734,16 +1014,39 @@ bool StudioWindow::paste_camera() {
 }
 
 void StudioWindow::reset_camera() {
-  vtkCamera* cam = renderer_->GetActiveCamera();
-  cam->SetPosition(0, 0, 1);
-  cam->SetFocalPoint(0, 0, 0);
-  cam->SetViewUp(0, 1, 0);
-  renderer_->ResetCamera();
-  cam->Azimuth(25);  // a three-quarter view shows depth
-  cam->Elevation(20);
-  cam->OrthogonalizeViewUp();
+  reset_camera_pose(false);
+  renderer_->GetActiveCamera()->OrthogonalizeViewUp();
   renderer_->ResetCamera();
   window_->Render();
+}
+
+// A three-quarter view (it shows depth) with the chosen up axis pointing up, of what is drawn or (rest_cage)
+// of the shown model's rest cage: an opened model gets the same view whichever of its frames comes first.
+void StudioWindow::reset_camera_pose(bool rest_cage) {
+  vtkCamera* cam = renderer_->GetActiveCamera();
+  double up[3] = {0, 0, 0}, eye[3] = {0, 0, 0};
+  up[up_axis_] = 1;
+  eye[(up_axis_ + 1) % 3] = 1;  // y up: from +z; z up: from +x; x up: from +y
+  cam->SetFocalPoint(0, 0, 0);
+  cam->SetPosition(eye);
+  cam->SetViewUp(up);
+  double bounds[6];
+  const bool fit_cage = rest_cage && shown_model_;
+  if (fit_cage)
+    for (int a = 0; a < 3; ++a) {
+      bounds[2 * a] = shown_model_->cage.bbox_min(a);
+      bounds[2 * a + 1] = shown_model_->cage.bbox_max(a);
+    }
+  auto fit = [&] {
+    if (fit_cage)
+      renderer_->ResetCamera(bounds);
+    else
+      renderer_->ResetCamera();
+  };
+  fit();
+  cam->Azimuth(25);
+  cam->Elevation(20);
+  fit();
 }
 
 void StudioWindow::camera_preset(int axis, bool positive) {
@@ -791,13 +1094,15 @@ std::string StudioWindow::cheat_sheet() {
          "  R                 reset the camera\n"
          "  1 2 / 3 4 / 5 6   look from +X -X / +Y -Y / +Z -Z\n"
          "  O                 orthographic projection on/off\n"
+         "  E                 mesh edges on/off\n"
          "  Ctrl+Shift+C / V  copy / paste the camera as JSON\n"
          "  Ctrl+Z / Ctrl+Shift+Z  undo / redo handle edits\n"
          "  Esc               stop the solver\n"
          "  Ctrl+O / Ctrl+S   open / save a session\n"
          "  F1 or H           this sheet\n"
          "Panels (right): View (colour range per field), Parameters, Picked values, Plots, sigma3 explorer;\n"
-         "drag a panel's title to move it, double-click to float it; the layout is kept between runs.";
+         "drag a panel's title to move it, double-click to float it; the layout is kept between runs.\n"
+         "View menu: bring back a closed panel, up axis (X/Y/Z), orientation axes, mesh edges.";
 }
 
 void StudioWindow::show_cheat_sheet() {
@@ -836,8 +1141,11 @@ bool StudioWindow::save_session(const std::string& path) {
     sc.sources = sources_;
     sc.targets = targets_;
     sc.studio = studio_json();
-    // A model given as a relative name only resolves next to the original scenario: store the folder.
-    sc.model = std::filesystem::absolute(sc.model_dir).lexically_normal().string();
+    if (!opens_.empty()) throw InputError(path, "wait until " + opens_.back().name + " is ready (or Cancel)");
+    // The file the shown model came from (a mesh file, not the cage cache folder it was caged into), as an
+    // absolute path: a relative name only resolves next to the original scenario.
+    sc.model = shown_source_.empty() ? std::filesystem::absolute(sc.model_dir).lexically_normal().string()
+                                     : shown_source_;
     if (sc.name.empty()) sc.name = scenario_name_;
     write_scenario(path, sc);
   } catch (const std::exception& e) {
@@ -871,7 +1179,13 @@ std::string write_window_png(vtkRenderWindow* window, const std::string& path, b
 }
 
 bool StudioWindow::save_screenshot(const std::string& path, int width, int height, bool transparent) {
-  const QSize min = view_->minimumSize(), max = view_->maximumSize(), window_size = size();
+  // A size larger than the window's view (1920x1080) grows the whole window: everything about the window
+  // (geometry, maximized state, dock sizes, the view's size limits) is put back afterwards.
+  const QSize min = view_->minimumSize(), max = view_->maximumSize();
+  const QByteArray state = saveState(1);
+  const Qt::WindowStates window_state = windowState();
+  const QSize window_size = size();
+  const QPoint position = pos();
   const bool resize_view = width > 0 && height > 0 && QSize(width, height) != view_->size();
   if (resize_view) {
     view_->setFixedSize(width, height);
@@ -894,8 +1208,16 @@ bool StudioWindow::save_screenshot(const std::string& path, int width, int heigh
   if (resize_view) {
     view_->setMinimumSize(min);
     view_->setMaximumSize(max);
-    resize(window_size);
+    // Position and size as they were (restoreGeometry would shift the window by a frame offset when no
+    // window manager reports one), then the docks.
+    setWindowState(window_state);
+    restoreState(state, 1);
     QApplication::processEvents();
+    if (!(window_state & (Qt::WindowMaximized | Qt::WindowFullScreen))) {
+      resize(window_size);
+      move(position);
+      QApplication::processEvents();
+    }
   }
   window_->Render();
   if (!why.empty()) report_error("Cannot save screenshot", why);
@@ -942,6 +1264,16 @@ bool StudioWindow::export_current(const std::string& dir) {
   return true;
 }
 
+void StudioWindow::show_range_used() {
+  if (!range_used_) return;
+  const auto r = scene_->shown_range();
+  const QString text =
+      r.first == r.second
+          ? QString("(no map shown)")
+          : QString::fromStdString("[" + format_g(r.first, 4) + ", " + format_g(r.second, 4) + "]");
+  if (range_used_->text() != text) range_used_->setText(text);
+}
+
 void StudioWindow::set_color_range(Field f, const ColorRange& r) {
   if (r.mode == ColorRange::Mode::kManual && !(r.min < r.max)) {
     report_error("Colour range", "min must be below max");
@@ -955,6 +1287,7 @@ void StudioWindow::set_color_range(Field f, const ColorRange& r) {
 QWidget* StudioWindow::build_range_controls() {
   auto* box = new QGroupBox("Colour range");
   auto* form = new QFormLayout(box);
+  range_used_ = nullptr;
   if (!has_range(settings_)) {
     form->addRow(new QLabel("(the octree view colours by depth or status)"));
     return box;
@@ -991,6 +1324,11 @@ QWidget* StudioWindow::build_range_controls() {
   auto* apply = new QPushButton("Apply range");
   apply->setObjectName("range_apply");
   form->addRow(apply);
+  // What the colour bar spans now (auto and percentile ranges follow the data, frame by frame).
+  range_used_ = new QLabel;
+  range_used_->setObjectName("range_used");
+  form->addRow("In use", range_used_);
+  show_range_used();
   connect(apply, &QPushButton::clicked, this, [this, fld, mode, pct, lo, hi] {
     ColorRange r;
     r.mode = static_cast<ColorRange::Mode>(mode->currentIndex());
@@ -1007,7 +1345,8 @@ bool StudioWindow::pick_at_display(int x, int y) {
   std::string where;
   if (!rest_point_at_display(x, y, rest, where, false)) return false;
   picked_ = picked_values(*shown_, rest, where);
-  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  picked_map_version_ = shown_->map_version;
+  show_picked(true);
   status_->setText(QString::fromStdString("picked " + where));
   return picked_.valid;
 }
@@ -1020,8 +1359,32 @@ bool StudioWindow::hover_at_display(int x, int y) {
   const PickedValues v = picked_values(*shown_, rest, "hover: " + where);
   if (!v.valid) return false;
   picked_ = v;
-  picked_label_->setText(QString::fromStdString(to_text(picked_)));
+  picked_map_version_ = shown_->map_version;
+  show_picked(true);
   return true;
+}
+
+void StudioWindow::refresh_picked(const SessionFrame& f) {
+  if (!picked_.valid || f.map_version == picked_map_version_ || !f.model || f.coefficients.rows() == 0)
+    return;
+  const std::string where = picked_.where;
+  picked_ = picked_values(f, picked_.rest, where);
+  picked_map_version_ = f.map_version;
+  show_picked(false);  // the frame being rendered draws the marker
+}
+
+void StudioWindow::show_picked(bool render) {
+  std::string text = to_text(picked_);
+  if (picked_.valid && shown_) text += "\n(of the map on screen; recomputed when it changes)";
+  picked_label_->setText(QString::fromStdString(text));
+  scene_->set_picked(picked_.valid, picked_.rest, picked_.image);
+  if (!render) return;
+  if (shown_) {
+    std::lock_guard<std::mutex> lk(pending_mutex_);
+    if (!pending_) pending_ = shown_;
+  }
+  QMetaObject::invokeMethod(
+      this, [this] { render_pending(); }, Qt::QueuedConnection);
 }
 
 void StudioWindow::set_hover(bool on) {
@@ -1119,6 +1482,7 @@ bool StudioWindow::open_comparison(const std::string& dir) {
 // ------------------------------------------------------------------------------------------------- frames
 
 void StudioWindow::on_frame(std::shared_ptr<const SessionFrame> f) {
+  last_frame_ns_.store(std::chrono::steady_clock::now().time_since_epoch().count());
   {
     std::lock_guard<std::mutex> lk(pending_mutex_);
     pending_ = std::move(f);  // a frame not yet rendered is replaced: only the newest is worth drawing
@@ -1138,23 +1502,36 @@ void StudioWindow::render_pending() {
     render_scheduled_ = false;
   }
   if (!f) return;
+  // A preparing frame is progress only: the view, badge and panels keep the model the engine's solver holds
+  // until the preparation succeeds (then a frame of the new model follows) or is cancelled.
+  if (f->state == SessionState::kPreparing) {
+    preparing_ = f;
+    update_status(*f);
+    emit frame_shown();
+    return;
+  }
+  preparing_.reset();
+  forget_dropped_opens();
+  const bool new_model = f->model != shown_model_;
+  if (new_model) adopt_shown_model(*f);
+  refresh_picked(*f);
+  scene_->set_handle_tolerance(params_->params().handle_tolerance);
   const auto t0 = std::chrono::steady_clock::now();
   scene_->set_certified_domain(session_->scenario().params.domain);
   scene_->show(*f, settings_);
-  if (f->model && f->mesh_V.rows() > 0 && f->model_version != shown_model_version_) {
+  if (camera_to_reset_ && f->mesh_V.rows() > 0) {
+    camera_to_reset_ = false;
     shown_model_version_ = f->model_version;
-    renderer_->ResetCamera();
-    renderer_->GetActiveCamera()->Azimuth(25);  // a three-quarter view shows depth
-    renderer_->GetActiveCamera()->Elevation(20);
-    renderer_->ResetCamera();
+    reset_camera_pose(true);
     apply_camera_json(pending_camera_);
     pending_camera_.clear();
-    sync_widgets();
   }
+  if (new_model) sync_widgets();
+  shown_ = f;
   window_->Render();
   last_render_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  shown_ = f;
   ++rendered_;
+  show_range_used();
   update_status(*f);
   plots_->set_history(f->history);
   if (f->verification && f->verification_version != shown_verification_version_) {
@@ -1164,39 +1541,88 @@ void StudioWindow::render_pending() {
   emit frame_shown();
 }
 
+std::string stop_reason_in_words(const std::string& status) {
+  static const std::pair<const char*, const char*> words[] = {
+      {"targets_unreachable", "targets unreachable (proven: no map of the subspace reaches them)"},
+      {"blocked_by_certificate", "blocked by the certificate (at the injectivity boundary)"},
+      {"no_certified_step", "no certified step"},
+      {"reached_not_converged", "targets reached (energy not stationary)"},
+      {"max_iterations", "iteration limit reached (Solver > Solve continues)"},
+  };
+  for (const auto& [key, text] : words)
+    if (status.rfind(key, 0) == 0) return text + status.substr(std::string(key).size());
+  return status;
+}
+
+void StudioWindow::update_long_wait(SessionState state, double seconds_since_frame) {
+  const bool show = state == SessionState::kIterating && seconds_since_frame >= kLongWaitSeconds;
+  if (show) {
+    wait_bar_->setFormat(
+        QString("solver iteration running for %1 s").arg(static_cast<int>(seconds_since_frame)));
+    wait_bar_->setToolTip(
+        "No new iterate for a while: the Newton step or its certified line search takes long");
+  }
+  if (wait_bar_->isVisible() != show) {
+    wait_bar_->setVisible(show);
+    wait_stop_->setVisible(show);
+  }
+}
+
+void StudioWindow::set_status_line(const std::string& text) {
+  // The status line is cut where the badge begins: the whole text is its tooltip.
+  status_->setText(QString::fromStdString(text));
+  status_->setToolTip(QString::fromStdString(text));
+}
+
 void StudioWindow::update_status(const SessionFrame& f) {
   const bool preparing = f.state == SessionState::kPreparing;
-  prepare_bar_->setVisible(preparing);
-  prepare_cancel_->setVisible(preparing);
-  if (preparing) {
-    prepare_bar_->setValue(static_cast<int>(1000 * std::max(0.0, f.progress)));
+  const bool busy = preparing || f.progress >= 0;  // preparing, or verifying the map on screen
+  prepare_bar_->setVisible(busy);
+  prepare_cancel_->setVisible(busy);
+  if (busy && !preparing) {
+    prepare_bar_->setValue(static_cast<int>(1000 * f.progress));
     prepare_bar_->setFormat(QString::fromStdString(f.stage) + " %p%");
-    badge_->setText(" preprocessing ");
-    badge_->setStyleSheet("");
-    status_->setText(QString::fromStdString(f.status));
+  }
+  if (preparing) {
+    // The badge stays as it is: it describes the map on screen, which the engine still holds.
+    const std::string what = opens_.empty() ? shown_name_ + " (new parameters)" : opens_.back().name;
+    prepare_bar_->setValue(static_cast<int>(1000 * std::max(0.0, f.progress)));
+    prepare_bar_->setFormat(QString::fromStdString("preparing " + what + ": " + f.stage) + " %p%");
+    set_status_line(
+        "preparing " + what + ": " + f.status +
+        (shown_model_ ? " | on screen until it is ready: " + shown_name_ + " and its certified map" : ""));
     return;
   }
+  const std::string name = shown_name_.empty() ? "" : shown_name_ + ": ";
   if (f.mesh_V.rows() == 0) {
     badge_->setText(" no map ");
     badge_->setStyleSheet("");
-    status_->setText(QString::fromStdString(f.status));
+    badge_->setToolTip("");
+    set_status_line(f.status);
     return;
   }
-  badge_->setText(f.certified ? " CERTIFIED locally injective " : " NOT certified ");
+  badge_->setText(QString::fromStdString(" " + name) +
+                  (f.certified ? "CERTIFIED locally injective " : "NOT certified "));
+  badge_->setToolTip(QString::fromStdString("the certificate of the map of " + shown_name_ + " on screen" +
+                                            (f.certified ? "" : ": " + f.not_certified_reason)));
   badge_->setStyleSheet(f.certified ? "background:#2e7d32; color:white; font-weight:bold"
                                     : "background:#c62828; color:white; font-weight:bold");
   std::ostringstream s;
-  s << to_string(f.state) << " | iteration " << f.history.size() << " | energy "
-    << format_g(f.energy.total, 4) << " | min sigma3 LB " << format_g(f.min_lower_bound, 4)
-    << " | handle error " << format_g(f.max_handle_error, 3) << " | " << f.status;
-  status_->setText(QString::fromStdString(s.str()));
+  s << name << to_string(f.state) << " | " << stop_reason_in_words(f.status) << " | iteration "
+    << f.history.size() << " | energy " << format_g(f.energy.total, 4) << " | min sigma3 LB "
+    << format_g(f.min_lower_bound, 4) << " | handle error " << format_g(f.max_handle_error, 3);
+  const int unreached = scene_->unreached_handles();
+  if (unreached > 0)
+    s << " | " << unreached << " handle" << (unreached > 1 ? "s" : "")
+      << " not at the target (red line: image to target)";
+  set_status_line(s.str());
 }
 
 // ------------------------------------------------------------------------------------------------ handles
 
 void StudioWindow::sync_widgets() {
   vtkRenderWindowInteractor* iren = window_->GetInteractor();
-  const auto m = session_->model();
+  const auto& m = shown_model_;
   const double diag = m ? (m->cage.bbox_max - m->cage.bbox_min).norm() : 1.0;
   while (static_cast<int>(widgets_.size()) > num_handles()) {
     widgets_.back()->widget->Off();
@@ -1239,7 +1665,7 @@ void StudioWindow::sync_widgets() {
     double p[3] = {targets_(i, 0), targets_(i, 1), targets_(i, 2)};
     widgets_[i]->rep->SetSphereRadius(0.018 * diag);
     widgets_[i]->rep->SetWorldPosition(p);
-    widgets_[i]->widget->SetEnabled(shown_model_version_ >= 0 && settings_.view == View::kMesh ? 1 : 0);
+    widgets_[i]->widget->SetEnabled(shown_model_ && opens_.empty() && settings_.view == View::kMesh ? 1 : 0);
   }
 }
 
@@ -1259,6 +1685,7 @@ void StudioWindow::send_handles() {
 }
 
 bool StudioWindow::add_handle(const Vec3& source) {
+  if (!edits_allowed()) return false;
   const std::string why = session_->check_source(source);
   if (!why.empty()) {
     status_->setText(QString::fromStdString("handle not added: " + why));
@@ -1313,7 +1740,7 @@ bool StudioWindow::add_handle_at_display(int x, int y) {
 }
 
 void StudioWindow::delete_handle(int i) {
-  if (i < 0 || i >= num_handles()) return;
+  if (i < 0 || i >= num_handles() || !edits_allowed()) return;
   push_undo();
   auto drop = [i](MatX3d& M) {
     MatX3d R(M.rows() - 1, 3);
@@ -1327,7 +1754,7 @@ void StudioWindow::delete_handle(int i) {
 }
 
 void StudioWindow::move_target(int i, const Vec3& target) {
-  if (i < 0 || i >= num_handles()) return;
+  if (i < 0 || i >= num_handles() || !edits_allowed()) return;
   push_undo();
   targets_.row(i) = target.transpose();
   try {
@@ -1339,7 +1766,7 @@ void StudioWindow::move_target(int i, const Vec3& target) {
 }
 
 void StudioWindow::undo() {
-  if (undo_.empty()) return;
+  if (undo_.empty() || !edits_allowed()) return;
   redo_.push_back({sources_, targets_});
   sources_ = undo_.back().sources;
   targets_ = undo_.back().targets;
@@ -1348,7 +1775,7 @@ void StudioWindow::undo() {
 }
 
 void StudioWindow::redo() {
-  if (redo_.empty()) return;
+  if (redo_.empty() || !edits_allowed()) return;
   undo_.push_back({sources_, targets_});
   sources_ = redo_.back().sources;
   targets_ = redo_.back().targets;

@@ -3,7 +3,11 @@
 // to it and renders the newest certified frame it publishes (older frames that arrive while a render is
 // pending are dropped, so neither side waits for the other).
 #pragma once
+#include <vtkSmartPointer.h>
+
 #include <QMainWindow>
+#include <QStringList>
+#include <atomic>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -14,6 +18,8 @@
 #include "scene.h"
 
 class QCheckBox;
+class QMenu;
+class vtkOrientationMarkerWidget;
 class QLabel;
 class QTimer;
 class QDockWidget;
@@ -41,8 +47,25 @@ class StudioWindow : public QMainWindow {
 
   // Opens a model folder, a mesh file (.obj/.off/.ply/.stl: its automatic cage, made once and cached,
   // docs/cages.md) or a scenario/session JSON (by what `path` is). Returns false after reporting the loader's
-  // message (error dialog, or the error sink); the current session is kept.
+  // message (error dialog, or the error sink), or when the cage making was cancelled; the current session is
+  // kept. On true the engine prepares the model; the window goes on showing the model before (mesh, cage,
+  // handles, title, camera, panels) until the engine has the new one ready, then swaps all of it at once. A
+  // cancelled or failed preparation leaves the window as it was: what is on screen is always the model the
+  // engine's solver holds (InteractiveSession::solver_model()).
   bool open_path(const std::string& path);
+  // Cancel (status bar, cage dialog): stops the cage maker at its next step, else the engine's preparation.
+  void cancel_opening();
+  // Test hook: called on the cage maker's thread with each of its progress lines, before the cancel is
+  // polled there (cancel_opening() from inside lands the cancel at that line).
+  void set_cage_line_hook(std::function<void(const std::string&)> hook) { cage_line_hook_ = std::move(hook); }
+  // The model the view shows (nullptr: none), its name (title, badge, caption, plots), whether an opening is
+  // being prepared, and the newest preparing frame while one is (progress; nullptr otherwise).
+  std::shared_ptr<const Model> shown_model() const { return shown_model_; }
+  const std::string& shown_name() const { return shown_name_; }
+  bool opening() const { return !opens_.empty(); }
+  std::shared_ptr<const SessionFrame> preparing_frame() const { return preparing_; }
+  // Points of the drawn mesh (the scene's polydata), to check it against the shown model.
+  long drawn_mesh_points() const;
   // What the last opening said about the model (e.g. "reused cached cage ...", "cage: 498 faces ..."); empty
   // for a model folder.
   const std::string& model_note() const { return model_note_; }
@@ -65,6 +88,16 @@ class StudioWindow : public QMainWindow {
 
   // Camera (View > Camera). Presets look along -axis (positive = from the + side).
   void reset_camera();
+  // Which axis points up (0 x, 1 y, 2 z; View > Up axis): the camera's up after R or opening a model. Kept
+  // between runs (QSettings). Meshes modelled with z up (dino, bull, elk) stand upright with 2.
+  void set_up_axis(int axis);
+  int up_axis() const { return up_axis_; }
+  // The orientation axes in the lower-left corner (View > Orientation axes; off in view-only mode).
+  void set_orientation_axes(bool on);
+  bool orientation_axes() const;
+  // File > Open recent: the last kRecentFiles paths opened (QSettings), newest first.
+  static constexpr int kRecentFiles = 8;
+  QStringList recent_files() const;
   void camera_preset(int axis, bool positive);
   void set_orthographic(bool on);
   bool orthographic() const;
@@ -122,10 +155,16 @@ class StudioWindow : public QMainWindow {
   vtkRenderWindow* render_window() const;
   QVTKOpenGLNativeWidget* view_widget() const { return view_; }
   std::string caption() const { return scene_->caption(); }
+  // Handles of the shown frame whose image misses the target (red lines in the mesh view).
+  int unreached_handles() const { return scene_->unreached_handles(); }
   // MSAA samples of the 3D view (0 by default: interaction speed; call before the window is first shown).
   void set_multisamples(int n);
   // Headless use (--screenshot): only the 3D view, no docks or bars.
   void set_view_only(bool on);
+  // A solver iteration with no new frame for kLongWaitSeconds shows a busy bar and Stop in the status bar
+  // (a timer calls this with the engine's state and the seconds since its last frame; tests call it too).
+  static constexpr double kLongWaitSeconds = 1.5;
+  void update_long_wait(SessionState state, double seconds_since_frame);
   // Where error messages go: by default a modal dialog; tests collect them instead.
   void set_error_sink(std::function<void(const std::string&)> sink) { error_sink_ = std::move(sink); }
   // The one place the studio reports a problem to the user.
@@ -143,7 +182,43 @@ class StudioWindow : public QMainWindow {
   struct HandleSet {
     MatX3d sources, targets;
   };
+  // An opening the engine is preparing: what the window adopts when its model arrives.
+  struct OpenRecord {
+    std::shared_ptr<const Model> model;
+    std::string path, name, note;
+    std::string
+        source;  // the file the model came from (a mesh file, not the cage cache folder it was caged into)
+    std::string camera;  // a session's "studio" object
+    bool has_views = false;
+    ViewSettings views;
+    DeformParams params;
+  };
+  std::vector<OpenRecord> opens_;
+  std::shared_ptr<const Model> shown_model_;
+  std::string shown_name_, shown_source_;
+  std::shared_ptr<const SessionFrame> preparing_;
+  bool camera_to_reset_ = false;
+  std::atomic<bool> cage_cancel_{false};
+  std::atomic<bool> cage_running_{false};
+  std::function<void(const std::string&)> cage_line_hook_;
+  void forget_dropped_opens();
+  void adopt_shown_model(const SessionFrame& f);  // title, handles, panels, camera of f's model at once
+  // False (and a status message) while an opening is pending: handles belong to the shown model, and the
+  // engine has already switched its handle checks to the model being prepared.
+  bool edits_allowed();
+  void set_status_line(const std::string& text);  // the status bar's text, whole in its tooltip
+  void reset_camera_pose(bool rest_cage);         // three-quarter view with up_axis_ up (no render)
+  // Picked values follow the map: recomputed at the same rest point for frame f when its map differs
+  // from the one they were computed for; the marker moves with them.
+  void refresh_picked(const SessionFrame& f);
+  void show_picked(bool render);  // the panel's text and the marker from picked_; render: draw now
+  long picked_map_version_ = -1;
+  int up_axis_ = 1;  // 0 x, 1 y, 2 z: what points up after R or opening a model
   void build_ui();
+  void build_view_menu(QMenu* before);
+  void add_recent(const std::string& path);
+  void fill_recent_menu(QMenu* menu);
+  vtkSmartPointer<vtkOrientationMarkerWidget> axes_widget_;
   QWidget* build_view_panel();
   void refresh_view_panel();
   void on_frame(std::shared_ptr<const SessionFrame> f);  // any thread
@@ -156,6 +231,9 @@ class StudioWindow : public QMainWindow {
   void apply_camera_json(const std::string& studio_json);
   void apply_camera_object(const nlohmann::json& camera);  // throws
   QWidget* build_range_controls();
+  QLabel* range_used_ = nullptr;  // the range the colour bar spans now (View panel)
+  void show_range_used();
+  QObject* wheel_guard_ = nullptr;
   // The rest-space point under display (x, y) on the deformed mesh (barycentric pull-back); needs a frame.
   bool mesh_rest_point_at_display(int x, int y, Vec3& rest);
   std::string studio_json() const;
@@ -184,7 +262,10 @@ class StudioWindow : public QMainWindow {
   // Preprocessing of an opened model: stage and percent, and Cancel (shown only while preparing).
   QProgressBar* prepare_bar_ = nullptr;
   QPushButton* prepare_cancel_ = nullptr;
-  std::vector<QWidget*> chrome_;  // docks and bars hidden in view-only mode
+  QProgressBar* wait_bar_ = nullptr;
+  QPushButton* wait_stop_ = nullptr;
+  std::atomic<long long> last_frame_ns_{0};  // steady clock of the newest frame (set on the engine thread)
+  std::vector<QWidget*> chrome_;             // docks and bars hidden in view-only mode
   QWidget* view_panel_ = nullptr;
   ViewSettings settings_;
   MatX3d sources_, targets_;

@@ -33,6 +33,7 @@
 
 #include "lidef/certificate_report.h"
 #include "lidef/scenario.h"
+#include "studio_fixture.h"
 #include "studio_window.h"
 #include "test_support.h"
 
@@ -40,62 +41,6 @@ namespace {
 using namespace lidef;
 using namespace lidef::test;
 using lidef::studio::StudioWindow;
-
-bool pump_until(const std::function<bool()>& cond, double seconds) {
-  const auto t0 = std::chrono::steady_clock::now();
-  while (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < seconds) {
-    QApplication::processEvents(QEventLoop::AllEvents, 20);
-    if (cond()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return cond();
-}
-
-// The engine rests and the window shows its newest frame.
-bool settled(StudioWindow& w, double seconds = 120) {
-  return pump_until(
-      [&] {
-        if (!w.session().wait_until_resting(0.0)) return false;
-        const auto f = w.session().latest_frame();
-        const auto s = w.shown_frame();
-        return f && s && f->serial == s->serial && f->mesh_V.rows() > 0;
-      },
-      seconds);
-}
-
-void display_of(StudioWindow& w, const Vec3& p, double xy[2]) {
-  vtkRenderer* r = w.render_window()->GetRenderers()->GetFirstRenderer();
-  r->SetWorldPoint(p.x(), p.y(), p.z(), 1.0);
-  r->WorldToDisplay();
-  xy[0] = r->GetDisplayPoint()[0];
-  xy[1] = r->GetDisplayPoint()[1];
-}
-
-void mouse(StudioWindow& w, unsigned long event, double x, double y) {
-  vtkRenderWindowInteractor* iren = w.render_window()->GetInteractor();
-  iren->SetEventInformation(static_cast<int>(x), static_cast<int>(y), 0, 0, 0, 0);
-  iren->InvokeEvent(event, nullptr);
-  QApplication::processEvents();
-}
-
-DeformParams small_params() {
-  DeformParams p;
-  p.reduced_dof = 60;
-  p.samples = 4000;
-  return p;
-}
-
-struct Fixture {
-  StudioWindow win;
-  std::vector<std::string> errors;
-  Fixture() {
-    win.set_error_sink([this](const std::string& e) { errors.push_back(e); });
-    win.resize(1100, 750);
-    win.show();
-    pump_until([] { return false; }, 0.3);
-    win.set_params(small_params());
-  }
-};
 
 TEST(StudioInteraction, AddDragDeleteUndoRedo) {
   Fixture fx;
@@ -645,8 +590,8 @@ TEST(StudioInteraction, ScreenshotAtSizeWithTransparentBackground) {
 
 namespace {
 
-// Opening shows the model at rest at once with a progress bar and Cancel; Cancel stops the preprocessing and
-// the window returns to the model before (here: none).
+// Opening shows a progress bar and Cancel while the engine prepares; the view keeps what it showed before
+// (here: nothing) until the model is ready. Cancel stops the preprocessing and the window stays as it was.
 TEST(StudioInteraction, PreprocessingShowsProgressAndCancelReturnsToACleanState) {
   Fixture fx;
   StudioWindow& win = fx.win;
@@ -658,19 +603,22 @@ TEST(StudioInteraction, PreprocessingShowsProgressAndCancelReturnsToACleanState)
   QPushButton* cancel = nullptr;
   for (QPushButton* b : win.findChildren<QPushButton*>())
     if (b->text() == "Cancel") cancel = b;
-  bar = win.statusBar()->findChild<QProgressBar*>();
+  bar = win.statusBar()->findChild<QProgressBar*>("prepare_bar");
   ASSERT_TRUE(cancel && bar);
   ASSERT_TRUE(pump_until(
       [&] {
-        const auto s = win.shown_frame();
+        const auto s = win.preparing_frame();
         return s && s->state == SessionState::kPreparing && s->progress > 0.05;
       },
       120));
-  // The rest mesh is on screen while preparing, with the stage on the bar.
-  EXPECT_GT(win.shown_frame()->mesh_V.rows(), 0);
+  // Nothing was open: nothing is drawn while preparing, the stage is on the bar.
+  EXPECT_FALSE(win.shown_model());
+  EXPECT_EQ(win.drawn_mesh_points(), 0);
+  EXPECT_TRUE(win.opening());
   EXPECT_TRUE(bar->isVisible());
   EXPECT_TRUE(cancel->isVisible());
   EXPECT_FALSE(bar->format().isEmpty());
+  EXPECT_NE(bar->format().toStdString().find("beam"), std::string::npos) << bar->format().toStdString();
   cancel->click();
   ASSERT_TRUE(pump_until(
       [&] {
@@ -684,6 +632,9 @@ TEST(StudioInteraction, PreprocessingShowsProgressAndCancelReturnsToACleanState)
   EXPECT_NE(win.shown_frame()->status.find("cancelled"), std::string::npos) << win.shown_frame()->status;
   EXPECT_FALSE(bar->isVisible());
   EXPECT_FALSE(cancel->isVisible());
+  EXPECT_FALSE(win.opening());
+  EXPECT_FALSE(win.shown_model());
+  EXPECT_FALSE(win.preparing_frame());
   EXPECT_TRUE(fx.errors.empty());  // a cancel is not an error
 }
 

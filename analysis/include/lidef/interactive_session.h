@@ -46,9 +46,11 @@ struct SessionFrame {
   long model_version = 0;  // changes when a model is (re)loaded or the solver rebuilt
   SessionState state = SessionState::kEmpty;
   std::string status;  // one line: what happened last ("converged: ...", "preprocessing: ...")
-  // While preparing: the preprocessing stage running and the fraction of the whole done (0..1); else -1.
+  // While preparing, or verifying (verify(): state resting, the map's frame): the stage running and the
+  // fraction of the whole done (0..1); else -1.
   // A preparing frame already carries the new model at rest (mesh_V, cage_V = the rest pose, the identity
-  // map's fields, no certificate yet) so that the views show it at once.
+  // map's fields, no certificate yet); the studio shows only its progress and keeps drawing the model of
+  // the last frame that was not preparing (the model solver_model() names) until the preparation ends.
   std::string stage;
   double progress = -1;
   std::shared_ptr<const Model> model;    // the model this frame belongs to (rest mesh, cage)
@@ -123,6 +125,10 @@ class InteractiveSession {
   Scenario scenario() const;
   // The loaded model (nullptr when none). Constant for a model_version; safe to read from any thread.
   std::shared_ptr<const Model> model() const;
+  // The model of the solver the engine runs now (nullptr when none): what every frame that is not a
+  // preparing frame shows. Unlike model(), which names a model from the moment it is opened, this changes
+  // only when a preparation succeeds, so a view that shows this model shows what was certified.
+  std::shared_ptr<const Model> solver_model() const;
 
   // --- Handles (#h by 3 each; sources in rest space). Checked here against the cage (inside, not on it) and
   // thrown as InputError before anything is queued.
@@ -140,8 +146,15 @@ class InteractiveSession {
   // folder. The destructor waits for them too.
   std::string wait_for_cache_store() const;
   // Stops a running preprocessing (a load or a parameter change) at its next chunk of work: the model and map
-  // before it stay (or the session stays empty), the frame's status says "cancelled". No effect otherwise.
+  // before it stay (or the session stays empty), the frame's status says "cancelled". Also stops a running
+  // verification (verify()) at its next chunk of leaves: no verification result. No effect otherwise.
   void cancel_preparation();
+  // Test hook: called on the engine thread at every progress point of a preprocessing (`stage`, before the
+  // cancel is polled there) and once with stage "ready" when the new solver is committed. A test may call
+  // cancel_preparation() or block in it (to look at the window while the engine stands at that point), so
+  // a cancel lands at a chosen stage without sleeps. Set it while the engine is idle.
+  using StageHook = std::function<void(const std::string& stage)>;
+  void set_stage_hook(StageHook hook) { stage_hook_ = std::move(hook); }
 
   // --- Solver control.
   void set_params(const DeformParams& params);  // rebuilds the solver when a precomputation parameter changed
@@ -169,6 +182,7 @@ class InteractiveSession {
   ErrorCallback on_error_;
   BackendFactory backends_;
   ModelResolver resolver_;
+  StageHook stage_hook_;
   std::unique_ptr<Engine> engine_;  // touched by the engine thread only (after construction)
   mutable std::mutex mutex_;
   std::condition_variable wake_;
@@ -181,8 +195,9 @@ class InteractiveSession {
   SessionState state_ = SessionState::kEmpty;
   bool idle_ = true;  // engine waiting with an empty queue and nothing to do
   std::shared_ptr<const Model> model_;
-  Scenario scenario_;      // handles and parameters as last set (guarded by mutex_)
-  std::string cache_dir_;  // guarded by mutex_
+  std::shared_ptr<const Model> solver_model_;  // the engine's committed model (guarded by mutex_)
+  Scenario scenario_;                          // handles and parameters as last set (guarded by mutex_)
+  std::string cache_dir_;                      // guarded by mutex_
   // Background stores of cache entries (guarded by mutex_). Declared before thread_, so destroyed after the
   // engine thread is joined: the destruction of the last copy of an async future waits for its write.
   std::vector<std::shared_future<std::string>> cache_stores_;
