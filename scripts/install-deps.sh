@@ -14,6 +14,7 @@ PKGS=(
   libcgal-demo
   libvtk9-dev libvtk9-qt-dev qtbase5-dev
   gnuplot-nox
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
   xvfb xauth
 )
 missing=()
