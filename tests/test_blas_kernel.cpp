@@ -20,7 +20,9 @@ TEST(BlasKernel, TheTestProcessRunsKernelsItsCpuSupports) {
   EXPECT_FALSE(info.core.empty());
   EXPECT_TRUE(info.recommended.empty())
       << "OpenBLAS runs " << info.core << " on a CPU that supports " << info.recommended;
-  if (!info.replaced.empty()) EXPECT_NE(info.core, info.replaced);
+  if (!info.replaced.empty()) {
+    EXPECT_NE(info.core, info.replaced);
+  }
   // Nothing left for a re-executed process to set.
   EXPECT_TRUE(lidef::blas_environment().empty());
 }

@@ -24,7 +24,8 @@ def test_identity_is_certified_with_consistent_leaves(beam):
     # The certificate's bound is the smallest leaf bound; the identity has sigma3 = 1 everywhere.
     assert cert.min_lower_bound == pytest.approx(leaves["lower_bound"].min(), rel=1e-12)
     assert 0 < cert.min_lower_bound <= 1
-    np.testing.assert_allclose(leaves["sigma3"], 1.0, atol=1e-9)
+    # (refined leaves are evaluated by a far-field expansion whose error the bound includes: ~1e-7 here)
+    np.testing.assert_allclose(leaves["sigma3"], 1.0, atol=1e-6)
 
 
 def test_a_mirrored_map_is_not_certified(beam):

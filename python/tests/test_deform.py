@@ -25,10 +25,14 @@ def test_bend_reaches_its_targets_with_a_certified_map(beam, bend, bend_result):
     assert np.abs(f - bend.targets).max() == pytest.approx(r.max_handle_error, abs=1e-7)
     # Certified locally injective: det J > 0 wherever we look inside (here: at the mesh's vertices).
     assert (np.linalg.det(beam.evaluate(Y, beam.mesh_vertices)[1]) > 0).all()
-    # The certificate is the same as certify() finds for the map with the solver's sampling parameters.
+    # certify() of the map with the solver's sampling parameters certifies it too, on the same leaves. Its bound
+    # is close to the solver's but not equal: the solver certifies from its reduced coefficients, certify()
+    # from the full ones (`lidef certify` on the CLI's coefficients.txt differs from its certificate.json the
+    # same way); both are lower bounds.
     again = lidef.certify(beam, Y, samples=SMALL["samples"])
     assert again.certified
-    assert again.min_lower_bound == pytest.approx(r.certificate.min_lower_bound, rel=1e-9)
+    assert len(again.leaves["side"]) == len(r.certificate.leaves["side"])
+    assert again.min_lower_bound == pytest.approx(r.certificate.min_lower_bound, rel=1e-2)
 
 
 def test_outputs_are_the_cli_files_and_the_same_map(bend_result, cli, tmp_path):
