@@ -79,7 +79,7 @@ bench: build
 	@bash scripts/bench.sh $(BUILD)
 
 format:
-	@find deform analysis app opencl gui tests bench -name '*.cpp' -o -name '*.h' | xargs clang-format -i
+	@find deform analysis app opencl gui tests bench python/src examples/cpp -name '*.cpp' -o -name '*.h' | xargs clang-format -i
 
 clean:
 	rm -rf $(BUILD)

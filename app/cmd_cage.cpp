@@ -10,7 +10,7 @@
 #include "lidef/cage/auto_cage.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
-#include "staged_outputs.h"
+#include "lidef/staged_outputs.h"
 
 namespace lidef::cli {
 namespace {

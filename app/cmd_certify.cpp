@@ -24,10 +24,10 @@
 #include "lidef/octree_certifier.h"
 #include "lidef/opencl_backend.h"
 #include "lidef/sampling.h"
+#include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
 #include "lidef/vtk_export.h"
 #include "param_flags.h"
-#include "staged_outputs.h"
 
 namespace lidef::cli {
 namespace {

@@ -20,9 +20,9 @@
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/scenario.h"
+#include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
 #include "param_flags.h"
-#include "staged_outputs.h"
 
 namespace lidef::cli {
 

@@ -19,24 +19,17 @@
 
 #include "cache_flags.h"
 #include "commands.h"
-#include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
-#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
-#include "lidef/continuation.h"
+#include "lidef/deform.h"
+#include "lidef/deform_outputs.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
-#include "lidef/mesh_export.h"
-#include "lidef/mesh_fields.h"
-#include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl_backend.h"
-#include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
-#include "lidef/vtk_export.h"
 #include "param_flags.h"
-#include "staged_outputs.h"
 
 namespace lidef::cli {
 namespace {
@@ -50,37 +43,6 @@ std::atomic<bool> g_stop{false};
 extern "C" void on_sigint(int) {
   g_stop.store(true);
   std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C kills at once
-}
-
-// Signed volume of a closed triangle mesh (divergence theorem); the ratio deformed/rest is the global volume
-// ratio of Fig. 12.
-double mesh_volume(const MatX3d& V, const MatX3i& F) {
-  double v = 0;
-  for (Eigen::Index t = 0; t < F.rows(); ++t)
-    v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
-  return v;
-}
-
-const char* kIterationsHeader =
-    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
-    "norm,"
-    "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
-    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
-    "cg_steps,cg_scale";
-
-std::string iteration_row(const IterationRecord& r) {
-  std::ostringstream s;
-  auto d = [](double x) { return format_double(x); };
-  s << r.iteration << ',' << d(r.energy_before) << ',' << d(r.terms.total) << ',' << d(r.terms.dis) << ','
-    << d(r.terms.p2p) << ',' << d(r.terms.smooth) << ',' << d(r.lambda_p2p) << ',' << d(r.lambda_smooth)
-    << ',' << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections
-    << ',' << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
-    << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error)
-    << ',' << '"' << r.weight_action << '"' << ',' << format_g(r.ms_gradient, 6) << ','
-    << format_g(r.ms_hessian, 6) << ',' << format_g(r.ms_solve, 6) << ',' << format_g(r.ms_line_search, 6)
-    << ',' << format_g(r.ms_certificate, 6) << ',' << format_g(r.ms_total, 6) << ',' << r.cg_steps << ','
-    << d(r.cg_scale);
-  return s.str();
 }
 
 }  // namespace
@@ -165,37 +127,33 @@ void add_deform_command(CLI::App& app, Action& action) {
       auto log = [&](const std::string& s) {
         if (!o.quiet) std::cerr << "lidef deform: " << s << "\n";
       };
-      const std::string cache = o.cache.folder();
-      PrecomputeSetup setup;
-      setup.cache_dir = cache;
-      setup.cache_max_bytes = o.cache.max_bytes();
-      setup.log = log;
-      setup.mesh = &model.mesh;  // the certified domain (params.domain "mesh": its triangles and solid)
-      std::string backend_msg;
-      const auto backend = select_backend(sc.params, cache, &backend_msg);
-      std::cerr << "lidef deform: " << backend_msg << "\n";
-      std::unique_ptr<DeformationSolver> solver_ptr;
-      try {
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, setup, backend);
-      } catch (const OpenCLError& e) {
-        // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
-        if (sc.params.backend != BackendKind::kAuto) throw;
-        std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
-        solver_ptr = std::make_unique<DeformationSolver>(model.cage, sc.params, setup, cpu_backend());
+      DeformOptions options;
+      options.cache_dir = o.cache.folder();
+      options.cache_max_bytes = o.cache.max_bytes();
+      options.log = log;
+      options.waypoints = sc.waypoints;
+      options.groups = sc.groups;
+      options.handles_source = sc.path;
+      if (!o.init.empty()) {
+        options.initial_map = read_coefficients(o.init, model.cage);
+        options.initial_map_source = o.init;
       }
-      DeformationSolver& solver = *solver_ptr;
-      solver.set_handles(sc.sources, sc.targets, sc.path);
-      if (!o.init.empty()) solver.set_initial_map(read_coefficients(o.init, model.cage), o.init);
+      std::string backend_msg;
+      options.backend = select_backend(sc.params, options.cache_dir, &backend_msg);
+      std::cerr << "lidef deform: " << backend_msg << "\n";
 
       // --- Solve, one progress line per iteration; Ctrl-C stops cleanly.
       g_stop.store(false);
       std::signal(SIGINT, on_sigint);
+      options.stop = &g_stop;
       // Test hook (parameter test_interrupt_after): a real SIGINT after this many iterations.
       const int interrupt_after = sc.params.test_interrupt_after;
       if (!o.quiet)
         std::cout
             << "  it       energy      step   min sigma3 LB  cert  handle err   lambda1   lambda2      ms\n";
-      auto on_iter = [&](const IterationRecord& r) {
+      bool iterated = false;
+      options.on_iteration = [&](const IterationRecord& r) {
+        iterated = true;
         if (!o.quiet) {
           char line[256];
           std::snprintf(
@@ -207,119 +165,36 @@ void add_deform_command(CLI::App& app, Action& action) {
         if (interrupt_after > 0 && r.iteration == interrupt_after) std::raise(SIGINT);
         return !g_stop.load();
       };
-      auto on_stage = [&](const std::string& line) {
+      options.on_stage = [&](const std::string& line) {
         if (!o.quiet) std::cout << "  -- " << line << "\n" << std::flush;
       };
-      PathSolveReport path_report;
-      const SolveResult res = solve_to_targets(solver, sc.waypoints, sc.targets, sc.groups, on_iter, &g_stop,
-                                               on_stage, &path_report);
+      // The solver, the solve (continuation as needed) and the final certificate with leaves: lidef/deform.h.
+      DeformResult result;
+      try {
+        result = deform(model, sc.sources, sc.targets, sc.params, options);
+      } catch (const OpenCLError& e) {
+        // The device was found but cannot hold this problem (or failed while uploading it): auto falls back.
+        if (sc.params.backend != BackendKind::kAuto || iterated) throw;
+        std::cerr << "lidef deform: backend: cpu (auto: " << e.what() << ")\n";
+        options.backend = cpu_backend();
+        result = deform(model, sc.sources, sc.targets, sc.params, options);
+      }
       std::signal(SIGINT, SIG_DFL);
+      const SolveResult& res = result.solve;
+      const Certificate& cert = result.certificate;
+      const UnreachabilityProof& un = result.path.unreachable;
+      const double max_err = result.max_handle_error;
+      const double tolerance = result.handle_tolerance;
 
-      // --- The written map is the solver's current (last certified) one; certify it again with leaves.
-      auto t0 = Clock::now();
-      const MatX3d y = solver.coefficients();
-      const Certificate cert = solver.certify_current(true);
-      if (!cert.certified)
-        throw NumericalError("internal: the final map is not certified although every accepted step was (" +
-                             cert.reason + ")");
-      const SamplingParams sp = solver.sampling_params();
-      CertificateReport report =
-          make_certificate_report(cert, model.cage, model.mesh, y, sc.model_dir, "coefficients.txt", sp,
-                                  solver.sampling(), solver.certify_params(false, true));
-      // Evaluated in the solver's normalized frame (a model far from the origin would otherwise lose the
-      // Jacobian's digits to the cancellation of large vertex coefficients), positions mapped back.
-      const Frame& frame = solver.frame();
-      MeshFields mf =
-          mesh_fields(solver.normalized_basis(), solver.subspace().basis * solver.reduced_coefficients(),
-                      frame.points_to_normalized(model.mesh.V), {/*sigma3=*/true});
-      mf.V = frame.points_from_normalized(mf.V);
-      const double ms_final = ms_since(t0);
-      const VecXd herr = solver.handle_errors();
-      const double max_err = herr.size() ? herr.maxCoeff() : 0.0;
-      // handle_tolerance is relative to the model's size (deform_params.h).
-      const double tolerance = sc.params.handle_tolerance * frame.scale;
-      const double vol_ratio = mesh_volume(mf.V, model.mesh.F) / mesh_volume(model.mesh.V, model.mesh.F);
-
-      // --- Outputs, all or nothing.
-      StagedOutputs out(o.out);
-      write_file_atomic(out.path("coefficients.txt"), [&](std::ostream& s) { write_coefficients(s, y); });
-      write_file_atomic(out.path("deformed.obj"), [&](std::ostream& s) {
-        write_obj(s, mf.V, model.mesh.F, "lidef deform " + sc.name + ": last certified map");
-      });
-      write_mesh_vtp(out.path("deformed.vtp"), mf.V, model.mesh.F,
-                     {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
-      out.path("certificate.json");
-      out.path("voxels.csv");
-      write_certificate_files(out.staging_dir(), report);
-      write_leaves_vtu(out.path("leaves.vtu"), cert.leaves);
-      if (o.grid > 0)
-        write_field_vti(out.path("field.vti"), model.cage, solver.basis(), y, solver.sampling(), o.grid);
-      write_file_atomic(out.path("iterations.csv"), [&](std::ostream& s) {
-        s << kIterationsHeader << "\n";
-        for (const IterationRecord& r : solver.history()) s << iteration_row(r) << "\n";
-      });
-      Scenario used = sc;
-      write_scenario(out.path("scenario.json"), used);
-      const EnergyTerms et = solver.energy();
-      nlohmann::ordered_json sj;
-      sj["scenario"] = sc.name;
-      sj["model"] = sc.model;
-      sj["converged"] = res.converged();
-      sj["stop_reason"] = to_string(res.reason);
-      sj["continuation"] = {{"strategies", path_report.strategies},
-                            {"intermediate_stages", path_report.stages},
-                            {"shortened_stages", path_report.stage_retries},
-                            {"max_group_rotation_deg", path_report.max_angle_deg},
-                            {"path_segments", path_report.segments},
-                            {"path_reached", path_report.path_reached}};
-      const UnreachabilityProof& un = path_report.unreachable;
-      sj["unreachable"] = {{"proven", un.proven},
-                           {"kind", un.kind},
-                           {"reason", un.reason},
-                           {"handle_matrix_condition", un.condition},
-                           {"least_squares_residual", un.residual},
-                           {"least_squares_residual_lower_bound", un.residual_lower},
-                           {"least_squares_residual_upper_bound", un.residual_upper},
-                           {"residual_rounding_floor", un.rounding_floor}};
-      if (un.kind == "orientation")
-        sj["unreachable"]["fold"] = {{"point", {un.point.x(), un.point.y(), un.point.z()}},
-                                     {"sigma_min_least_squares", un.sigma_min},
-                                     {"jacobian_change_bound", un.jacobian_bound}};
-      sj["message"] = res.message;
-      sj["iterations"] = static_cast<int>(solver.history().size());
-      sj["certified"] = cert.certified;
-      sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
-      sj["min_sigma3_sampled"] = cert.min_sigma3_center;
-      sj["mesh_coverage"] = report.mesh_coverage;
-      sj["domain"] = report.domain;
-      sj["max_handle_error"] = max_err;
-      sj["handles_reached"] = max_err <= tolerance;
-      sj["handle_tolerance"] = sc.params.handle_tolerance;
-      sj["handle_tolerance_model_units"] = tolerance;
-      sj["frame"] = {{"center", {frame.center.x(), frame.center.y(), frame.center.z()}},
-                     {"scale", frame.scale}};
-      sj["global_volume_ratio"] = vol_ratio;
-      sj["energy"] = {{"total", et.total}, {"dis", et.dis}, {"p2p", et.p2p}, {"smooth", et.smooth}};
-      sj["final_weights"] = {{"lambda_p2p", solver.weights().p2p},
-                             {"lambda_smooth", solver.weights().smooth}};
-      sj["dof"] = 3 * solver.subspace().size();
-      sj["samples"] = solver.sampling().size();
-      sj["hessian_samples"] = static_cast<int>(solver.sampling().hessian_subset.size());
-      sj["handles"] = sc.num_handles();
-      sj["time_s"] = {{"preprocess", solver.preprocess_seconds()},
-                      {"solve", res.seconds},
-                      {"final_certificate_and_fields", ms_final / 1000},
-                      {"total", ms_since(t_start) / 1000}};
-      sj["threads"] = omp_get_max_threads();
-      sj["backend"] = solver.backend().name();
-      sj["parameters"] = params_to_json(sc.params);
-      const std::string summary = sj.dump(2) + "\n";
-      write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });
-      out.commit(o.grid > 0 ? std::vector<std::string>{} : std::vector<std::string>{"field.vti"});
+      // --- Outputs, all or nothing (lidef/deform_outputs.h).
+      DeformOutputOptions out_options;
+      out_options.grid = o.grid;
+      out_options.total_seconds = ms_since(t_start) / 1000;
+      const DeformOutputs out = write_deform_outputs(o.out, model, sc, result, out_options);
+      const double vol_ratio = out.volume_ratio;
 
       std::cout << "lidef deform: " << sc.name << ": " << to_string(res.reason) << " (" << res.message
-                << ") after " << solver.history().size() << " iterations, " << format_g(res.seconds, 3)
-                << " s\n"
+                << ") after " << result.iterations << " iterations, " << format_g(res.seconds, 3) << " s\n"
                 << "  max handle error " << format_g(max_err, 3)
                 << (max_err <= tolerance ? " (reached)" : " (NOT reached)") << ", global volume ratio "
                 << format_g(vol_ratio, 5) << "\n"
@@ -327,11 +202,11 @@ void add_deform_command(CLI::App& app, Action& action) {
                         ? ""
                         : std::string("  ") + (un.proven ? "PROVEN: " : "") + un.reason + "\n")
                 << "  CERTIFIED locally injective on "
-                << (solver.sampling().domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
-                << cert.voxels << (solver.sampling().domain == "mesh" ? " voxels)" : " voxels")
+                << (result.sampling.domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
+                << cert.voxels << (result.sampling.domain == "mesh" ? " voxels)" : " voxels")
                 << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
-                << format_g(100 * report.mesh_coverage, 3) << "%\n"
-                << "  wrote " << out.final_path("")
+                << format_g(100 * out.mesh_coverage, 3) << "%\n"
+                << "  wrote " << (std::filesystem::path(o.out) / "").string()
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"
                 << (o.grid > 0 ? ", field.vti" : "") << "}\n";

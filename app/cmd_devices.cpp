@@ -39,7 +39,10 @@ void add_devices_command(CLI::App& app, Action& action) {
       // The CPU backend's dense products run on OpenBLAS; which kernels it chose decides their speed.
       const BlasKernelInfo blas = blas_kernel_info();
       std::cout << "CPU backend: OpenBLAS kernels " << blas.core
-                << (blas.forced ? " (OPENBLAS_CORETYPE)" : " (chosen by OpenBLAS)")
+                << (blas.forced ? " (OPENBLAS_CORETYPE)"
+                    : blas.replaced.empty()
+                        ? " (chosen by OpenBLAS)"
+                        : " (chosen by lidef for this CPU; OpenBLAS chose " + blas.replaced + ")")
                 << (blas.recommended.empty() ? "" : "; this CPU supports " + blas.recommended) << "\n";
       return kOk;
     };

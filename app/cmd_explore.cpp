@@ -33,7 +33,7 @@
 #include "lidef/number_format.h"
 #include "lidef/procedural_models.h"
 #include "lidef/signed_svd.h"
-#include "staged_outputs.h"
+#include "lidef/staged_outputs.h"
 
 namespace lidef::cli {
 namespace {

@@ -13,9 +13,9 @@
 #include "gnuplot.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
+#include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
 #include "reproduce/reproduce.h"
-#include "staged_outputs.h"
 
 namespace lidef::cli {
 

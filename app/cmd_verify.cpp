@@ -25,8 +25,8 @@
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
+#include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
-#include "staged_outputs.h"
 
 namespace lidef::cli {
 namespace {

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <sstream>
 
-#include "staged_outputs.h"
+#include "lidef/staged_outputs.h"
 
 namespace lidef::cli {
 

@@ -2,6 +2,10 @@
 #pragma once
 #include <string>
 
+namespace lidef {
+class StagedOutputs;  // lidef/staged_outputs.h
+}  // namespace lidef
+
 namespace lidef::cli {
 
 // Single-quotes `s` for /bin/sh.
@@ -15,7 +19,6 @@ std::string find_gnuplot();
 bool run_gnuplot(const std::string& gnuplot, const std::string& dir, const std::string& script,
                  std::string* log);
 
-class StagedOutputs;
 // Draws NAME.png from the script NAME.gp already written into `out`'s staging folder (the PNG is staged as
 // an output of `out`). Returns "" when drawn, else why not ("gnuplot not found" + hint, or gnuplot's error);
 // a failed run leaves no PNG behind. The one place the commands that make pictures run gnuplot.

@@ -190,7 +190,6 @@ void usage() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   Options opt;
   if (const char* env = std::getenv("LIDEF_SHARED_DATA")) opt.data = env;
   if (opt.data.empty()) opt.data = LIDEF_SHARED_DATA_DIR;

@@ -51,7 +51,6 @@ std::string g(double x, int p = 3) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   std::string data, cache = "/tmp/lidef-bench-cache";
   std::vector<std::string> only;
   lidef::CompareOptions opt;

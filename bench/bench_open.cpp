@@ -88,7 +88,6 @@ std::string stages_text(const Timing& t) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   if (argc < 2) {
     std::fprintf(stderr, "usage: bench_open DATA_DIR [MODEL...] [--threads T]\n");
     return 2;

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs every Debian package lidef needs (libcgal-demo: real meshes in its data.tar.gz, elephant, armadillo,
 # ..., which the automatic-cage tests extract at test time). clang, libclang-rt-14-dev (libFuzzer, clang's
-# ASan/UBSan runtimes) and libomp-dev (OpenMP for clang) are for `make check-sanitize-ci` (CI) and `make fuzz`. Idempotent: returns at once
+# ASan/UBSan runtimes) and libomp-dev (OpenMP for clang) are for `make check-sanitize-ci` (CI) and `make fuzz`.
+# pybind11-dev, python3-dev, python3-numpy, python3-pytest, python3-matplotlib: the Python module and its tests
+# (python/, examples/python/). Idempotent: returns at once
 # when all are present.
 set -euo pipefail
 PKGS=(
@@ -14,6 +16,7 @@ PKGS=(
   libcgal-demo
   libvtk9-dev libvtk9-qt-dev qtbase5-dev
   gnuplot-nox
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
   xvfb xauth
 )
 missing=()

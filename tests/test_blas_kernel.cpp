@@ -1,9 +1,11 @@
-// The OpenBLAS kernel choice (lidef/blas_kernel.h): every program of the project re-executes itself once so
-// that OpenBLAS does not run its SSE3 fallback on a CPU it does not know.
+// The OpenBLAS kernel choice (lidef/blas_kernel.h): lidef_core selects OpenBLAS's kernels again in-process
+// when OpenBLAS ran its SSE3 fallback on a CPU it does not know, so no program re-executes itself for it.
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <cstdlib>
 #include <random>
+#include <string>
 
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
@@ -12,14 +14,45 @@
 namespace {
 
 TEST(BlasKernel, TheTestProcessRunsKernelsItsCpuSupports) {
-  // test_main.cpp re-executes like every main(): were the re-exec missing or ignored on a CPU model OpenBLAS
-  // does not know, the core would be the fallback "Prescott" and `recommended` would name a better one.
+  // test_main.cpp does not re-execute: were the in-process selection missing on a CPU model OpenBLAS does not
+  // know, the core would be the fallback "Prescott" and `recommended` would name a better one.
   const lidef::BlasKernelInfo info = lidef::blas_kernel_info();
   EXPECT_FALSE(info.core.empty());
   EXPECT_TRUE(info.recommended.empty())
       << "OpenBLAS runs " << info.core << " on a CPU that supports " << info.recommended;
-  // Nothing left to set: a second call finds the variable set (and so never loops).
+  if (!info.replaced.empty()) {
+    EXPECT_NE(info.core, info.replaced);
+  }
+  // Nothing left for a re-executed process to set.
   EXPECT_TRUE(lidef::blas_environment().empty());
+}
+
+// The mechanism itself, on any CPU with AVX2/FMA (so also where OpenBLAS knows the CPU and nothing needed
+// replacing): selecting Haswell's kernels in-process takes effect at once, the products stay right, the
+// environment is left as it was, and the process's own choice comes back.
+TEST(BlasKernel, SelectingACoreInProcessSwitchesTheKernels) {
+  __builtin_cpu_init();
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) GTEST_SKIP() << "no AVX2/FMA";
+  const std::string before = lidef::blas_kernel_info().core;
+  const char* env = std::getenv("OPENBLAS_CORETYPE");
+  const std::string env_before = env ? env : "<unset>";
+  const std::string other = before == "Haswell" ? "Sandybridge" : "Haswell";
+  ASSERT_TRUE(lidef::select_blas_core(other)) << "OpenBLAS runs " << lidef::blas_kernel_info().core;
+  EXPECT_EQ(lidef::blas_kernel_info().core, other);
+  env = std::getenv("OPENBLAS_CORETYPE");
+  EXPECT_EQ(env ? env : "<unset>", env_before);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N01;
+  lidef::MatXdR A(64, 70), C;
+  lidef::MatXd B(70, 33);
+  for (Eigen::Index i = 0; i < A.size(); ++i) A.data()[i] = N01(rng);
+  for (Eigen::Index i = 0; i < B.size(); ++i) B.data()[i] = N01(rng);
+  lidef::blas_product(A, B, C);
+  const lidef::MatXd ref = A * B;
+  EXPECT_LT((C - ref).cwiseAbs().maxCoeff(), 1e-12 * (A.cwiseAbs() * B.cwiseAbs()).maxCoeff());
+  EXPECT_FALSE(lidef::select_blas_core("NoSuchCore"));
+  ASSERT_TRUE(lidef::select_blas_core(before));
+  EXPECT_EQ(lidef::blas_kernel_info().core, before);
 }
 
 TEST(BlasKernel, TheCliReportsItsKernelsAndKeepsTheUsersChoice) {

@@ -31,7 +31,7 @@ using lidef::test::TempDir;
 using lidef::test::write_text;
 using Files = std::map<std::string, std::string>;
 
-// What a killed run may leave behind under a name no reader opens (app/staged_outputs.h,
+// What a killed run may leave behind under a name no reader opens (deform/include/lidef/staged_outputs.h,
 // lidef/atomic_file.h).
 bool is_leftover(const std::string& name) {
   return name.rfind(".lidef-staging-", 0) == 0 || name.find(".tmp.") != std::string::npos;

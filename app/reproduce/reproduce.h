@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "../staged_outputs.h"
 #include "lidef/deform_params.h"
 #include "lidef/scenario.h"
+#include "lidef/staged_outputs.h"
 
 namespace lidef::cli::reproduce {
 

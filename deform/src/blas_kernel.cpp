@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <iterator>
 #include <mutex>
 #include <type_traits>
 
@@ -13,6 +14,12 @@
 
 extern "C" char* openblas_get_corename(void);
 extern "C" void openblas_set_num_threads(int);
+// OpenBLAS's kernel selection (driver/others/dynamic.c), exported by DYNAMIC_ARCH builds only: weak, so that
+// lidef links against any OpenBLAS and simply cannot select a core where these are missing. quit forgets the
+// selection; init selects again (OPENBLAS_CORETYPE if set, else the CPU model) and initializes the chosen
+// kernel table's blocking parameters.
+extern "C" void gotoblas_dynamic_init(void) __attribute__((weak));
+extern "C" void gotoblas_dynamic_quit(void) __attribute__((weak));
 
 namespace lidef {
 
@@ -32,13 +39,73 @@ std::string core_for_cpu_features() {
   return "";
 }
 
+std::mutex& selection_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::string& replaced_core() {  // guarded by selection_mutex()
+  static std::string s;
+  return s;
+}
+
+std::string current_core() {
+  const char* name = openblas_get_corename();
+  return name ? name : "";
+}
+
+}  // namespace
+
+bool select_blas_core(const std::string& core) {
+  // OpenBLAS 0.3.21's x86-64 kernel tables (its corename[] spelling). A name it does not know would make it
+  // fall back to its own choice, so such a name is refused before OpenBLAS is touched.
+  static const char* const kCores[] = {
+      "Prescott",  "Core2",      "Penryn",  "Dunnington",  "Nehalem",   "Opteron", "Barcelona", "Sandybridge",
+      "Bulldozer", "Piledriver", "Haswell", "Steamroller", "Excavator", "Zen",     "SkylakeX",  "Cooperlake"};
+  if (std::find(std::begin(kCores), std::end(kCores), core) == std::end(kCores)) return false;
+  if (!gotoblas_dynamic_init || !gotoblas_dynamic_quit) return false;
+  std::lock_guard<std::mutex> lock(selection_mutex());
+  const char* user = std::getenv("OPENBLAS_CORETYPE");
+  const std::string saved = user ? user : "";
+  const bool had = user != nullptr;
+  setenv("OPENBLAS_CORETYPE", core.c_str(), 1);
+  gotoblas_dynamic_quit();
+  gotoblas_dynamic_init();
+  if (had)
+    setenv("OPENBLAS_CORETYPE", saved.c_str(), 1);
+  else
+    unsetenv("OPENBLAS_CORETYPE");
+  return current_core() == core;
+}
+
+void fix_blas_kernel() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    if (std::getenv("OPENBLAS_CORETYPE")) return;  // the user's choice stands
+    const std::string before = current_core();
+    if (before != "Prescott") return;
+    const std::string better = core_for_cpu_features();
+    if (!better.empty() && select_blas_core(better)) {
+      std::lock_guard<std::mutex> lock(selection_mutex());
+      replaced_core() = before;
+    }
+  });
+}
+
+namespace {
+// When lidef_core is loaded (before main(), or when the Python module is imported): OpenBLAS, a library this
+// one depends on, is initialized by then, and no thread of this library runs BLAS yet.
+[[maybe_unused]] const bool kBlasKernelFixedAtLoad = (fix_blas_kernel(), true);
 }  // namespace
 
 BlasKernelInfo blas_kernel_info() {
+  fix_blas_kernel();
   BlasKernelInfo info;
-  const char* name = openblas_get_corename();
-  info.core = name ? name : "";
+  info.core = current_core();
   info.forced = std::getenv("OPENBLAS_CORETYPE") != nullptr;
+  {
+    std::lock_guard<std::mutex> lock(selection_mutex());
+    info.replaced = replaced_core();
+  }
   // "Prescott" is what 0.3.21 picks for an Intel model it does not know; on a CPU that really is that old
   // there is nothing better (core_for_cpu_features() is then empty).
   if (info.core == "Prescott") info.recommended = core_for_cpu_features();
@@ -78,7 +145,10 @@ bool prepare_product(const MA& A, const MatXd& B, MC& C) {
 
 void use_blas_in_calling_thread() {
   static std::once_flag once;
-  std::call_once(once, [] { openblas_set_num_threads(1); });
+  std::call_once(once, [] {
+    fix_blas_kernel();
+    openblas_set_num_threads(1);
+  });
 }
 
 namespace {

@@ -3,9 +3,11 @@
 // Debian 12's OpenBLAS 0.3.21 (DYNAMIC_ARCH) picks its kernels from the CPU model number; a model newer than
 // the library (seen: family 6 model 207, a 2-core Xeon VM) falls back to "Prescott", its SSE3 kernels,
 // although the CPU has AVX-512. The reduced Hessian's sgemm then runs 2-4x slower (bar_bend: 312 instead of
-// 151 ms per Newton iteration; docs/benchmarks.md, "OpenBLAS kernels"). OpenBLAS chooses once, when it is
-// loaded, before main(), reading OPENBLAS_CORETYPE: so a program re-executes itself once with that variable
-// set.
+// 151 ms per Newton iteration; docs/benchmarks.md, "OpenBLAS kernels"). OpenBLAS chooses when it is loaded,
+// reading OPENBLAS_CORETYPE, but a DYNAMIC_ARCH build exports the choice itself (gotoblas_dynamic_quit /
+// gotoblas_dynamic_init, which read OPENBLAS_CORETYPE again): lidef_core makes the choice again in-process
+// when it is loaded (select_blas_core), so every program, an embedding program and the Python module run the
+// CPU's kernels without re-executing themselves.
 #pragma once
 #include <string>
 #include <utility>
@@ -20,17 +22,34 @@ struct BlasKernelInfo {
   std::string
       recommended;      // the core this CPU's features support, when `core` is OpenBLAS's fallback; else ""
   bool forced = false;  // OPENBLAS_CORETYPE is set in this process's environment
+  // OpenBLAS's own choice that lidef replaced in this process (fix_blas_kernel: "Prescott"), else "".
+  std::string replaced;
 };
 BlasKernelInfo blas_kernel_info();
 
+// Makes OpenBLAS run the kernels of `core` (a name OPENBLAS_CORETYPE takes: "Haswell", "SkylakeX",
+// "Cooperlake", ...) in this process, without re-executing it: OpenBLAS's DYNAMIC_ARCH selection runs again
+// with OPENBLAS_CORETYPE = core for its duration (the environment is restored afterwards). Returns whether
+// OpenBLAS now runs `core`: false (and OpenBLAS untouched) for a name that is not one of OpenBLAS 0.3.21's
+// x86-64 cores or when the OpenBLAS linked is not a DYNAMIC_ARCH build (it exports no selection). Call it
+// while no other thread runs BLAS: the kernel table is swapped under the caller's feet otherwise.
+bool select_blas_core(const std::string& core);
+
+// When OpenBLAS fell back to Prescott on a CPU with AVX2/FMA (Haswell), AVX-512 (SkylakeX) or AVX-512 BF16
+// (Cooperlake) and the user did not set OPENBLAS_CORETYPE: selects the core the CPU supports (once per
+// process). lidef_core calls it when it is loaded (a static initializer of blas_kernel.cpp) and before its
+// first product, so callers need not.
+void fix_blas_kernel();
+
 // The environment a re-executed process should have so that OpenBLAS uses the kernels the CPU supports:
-// {"OPENBLAS_CORETYPE", core} when OpenBLAS fell back to Prescott on a CPU with AVX2/FMA (Haswell), AVX-512
-// (SkylakeX) or AVX-512 BF16 (Cooperlake) and the user did not set OPENBLAS_CORETYPE; else nothing.
+// {"OPENBLAS_CORETYPE", core} when OpenBLAS still runs its Prescott fallback on a CPU with better kernels
+// (fix_blas_kernel could not replace it) and the user did not set OPENBLAS_CORETYPE; else nothing.
 std::vector<std::pair<std::string, std::string>> blas_environment();
 
 // Sets each variable of `env` that is not already set and, when one was set, re-executes /proc/self/exe with
 // `argv` (returns only when there was nothing to set, or when exec failed: the program then runs as it is).
-// Call first thing in main(), before any thread starts.
+// Call first thing in main(), before any thread starts. For variables a library reads only when it is loaded
+// (the studio's OMP_WAIT_POLICY, gui/src/omp_wait.h); OpenBLAS's kernels need none (fix_blas_kernel).
 void reexec_with_environment(char** argv, const std::vector<std::pair<std::string, std::string>>& env);
 
 // OpenBLAS runs in the calling thread (openblas_set_num_threads(1), set once by the first call of any

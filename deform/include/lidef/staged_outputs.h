@@ -14,7 +14,7 @@
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 
-namespace lidef::cli {
+namespace lidef {
 
 // Whether `name` (a folder entry) is what a killed run may leave behind: a staging folder
 // (".lidef-staging-XXXXXX") or an atomic write's temporary ("NAME.tmp.PID.N"). No reader opens these names.
@@ -101,4 +101,4 @@ class StagedOutputs {
   bool committed_ = false;
 };
 
-}  // namespace lidef::cli
+}  // namespace lidef

@@ -1,0 +1,37 @@
+// The files of a deformation (`lidef deform --out DIR`, the Python module's DeformResult.write): the map, the
+// deformed mesh, its certificate with leaves, the iteration log, the scenario as run and summary.json. All of
+// them appear together or none (staged_outputs.h). docs/certificate-outputs.md describes them.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "lidef/deform.h"
+#include "lidef/model_check.h"
+#include "lidef/scenario.h"
+
+namespace lidef {
+
+struct DeformOutputOptions {
+  int grid = 0;               // > 0: also field.vti with this many points along the longest axis
+  double total_seconds = -1;  // summary.json's time_s.total (< 0: preprocess + solve + finish)
+};
+
+// Writes into `dir` (created if missing): coefficients.txt, deformed.obj, deformed.vtp (E_iso_minus_6, detJ,
+// sigma3), certificate.json + voxels.csv + leaves.vtu, iterations.csv, summary.json, scenario.json
+// (`scenario` with the parameters used), and field.vti when options.grid > 0 (a field.vti of an earlier run
+// is removed otherwise). `scenario.model_dir` names the model in the certificate. Throws InputError naming
+// `dir` when it cannot be a folder.
+struct DeformOutputs {
+  std::string dir;
+  std::vector<std::string> files;  // the names written, in the order above
+  double mesh_coverage = 0;        // fraction of mesh vertices inside the certified voxels
+  double volume_ratio = 0;         // signed volume of the deformed mesh over the rest mesh's
+};
+DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
+                                   const DeformResult& result, const DeformOutputOptions& options = {});
+
+// The CSV header and row of iterations.csv.
+extern const char* const kIterationsHeader;
+std::string iteration_row(const IterationRecord& r);
+
+}  // namespace lidef

@@ -1,0 +1,149 @@
+#include "lidef/deform_outputs.h"
+
+#include <omp.h>
+
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "lidef/atomic_file.h"
+#include "lidef/certificate_report.h"
+#include "lidef/coefficients.h"
+#include "lidef/geometry.h"
+#include "lidef/green_coordinates.h"
+#include "lidef/mesh_export.h"
+#include "lidef/mesh_io.h"
+#include "lidef/number_format.h"
+#include "lidef/staged_outputs.h"
+#include "lidef/vtk_export.h"
+
+namespace lidef {
+
+const char* const kIterationsHeader =
+    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
+    "norm,"
+    "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
+    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
+    "cg_steps,cg_scale";
+
+std::string iteration_row(const IterationRecord& r) {
+  std::ostringstream s;
+  auto d = [](double x) { return format_double(x); };
+  s << r.iteration << ',' << d(r.energy_before) << ',' << d(r.terms.total) << ',' << d(r.terms.dis) << ','
+    << d(r.terms.p2p) << ',' << d(r.terms.smooth) << ',' << d(r.lambda_p2p) << ',' << d(r.lambda_smooth)
+    << ',' << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections
+    << ',' << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
+    << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error)
+    << ',' << '"' << r.weight_action << '"' << ',' << format_g(r.ms_gradient, 6) << ','
+    << format_g(r.ms_hessian, 6) << ',' << format_g(r.ms_solve, 6) << ',' << format_g(r.ms_line_search, 6)
+    << ',' << format_g(r.ms_certificate, 6) << ',' << format_g(r.ms_total, 6) << ',' << r.cg_steps << ','
+    << d(r.cg_scale);
+  return s.str();
+}
+
+namespace {
+
+nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
+                                    const CertificateReport& report, double volume_ratio,
+                                    double total_seconds) {
+  const Certificate& cert = r.certificate;
+  nlohmann::ordered_json sj;
+  sj["scenario"] = sc.name;
+  sj["model"] = sc.model;
+  sj["converged"] = r.solve.converged();
+  sj["stop_reason"] = to_string(r.solve.reason);
+  const PathSolveReport& path = r.path;
+  sj["continuation"] = {
+      {"strategies", path.strategies},          {"intermediate_stages", path.stages},
+      {"shortened_stages", path.stage_retries}, {"max_group_rotation_deg", path.max_angle_deg},
+      {"path_segments", path.segments},         {"path_reached", path.path_reached}};
+  const UnreachabilityProof& un = path.unreachable;
+  sj["unreachable"] = {{"proven", un.proven},
+                       {"kind", un.kind},
+                       {"reason", un.reason},
+                       {"handle_matrix_condition", un.condition},
+                       {"least_squares_residual", un.residual},
+                       {"least_squares_residual_lower_bound", un.residual_lower},
+                       {"least_squares_residual_upper_bound", un.residual_upper},
+                       {"residual_rounding_floor", un.rounding_floor}};
+  if (un.kind == "orientation")
+    sj["unreachable"]["fold"] = {{"point", {un.point.x(), un.point.y(), un.point.z()}},
+                                 {"sigma_min_least_squares", un.sigma_min},
+                                 {"jacobian_change_bound", un.jacobian_bound}};
+  sj["message"] = r.solve.message;
+  sj["iterations"] = r.iterations;
+  sj["certified"] = cert.certified;
+  sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
+  sj["min_sigma3_sampled"] = cert.min_sigma3_center;
+  sj["mesh_coverage"] = report.mesh_coverage;
+  sj["domain"] = report.domain;
+  sj["max_handle_error"] = r.max_handle_error;
+  sj["handles_reached"] = r.handles_reached;
+  sj["handle_tolerance"] = sc.params.handle_tolerance;
+  sj["handle_tolerance_model_units"] = r.handle_tolerance;
+  sj["frame"] = {{"center", {r.frame.center.x(), r.frame.center.y(), r.frame.center.z()}},
+                 {"scale", r.frame.scale}};
+  sj["global_volume_ratio"] = volume_ratio;
+  sj["energy"] = {
+      {"total", r.energy.total}, {"dis", r.energy.dis}, {"p2p", r.energy.p2p}, {"smooth", r.energy.smooth}};
+  sj["final_weights"] = {{"lambda_p2p", r.weights.p2p}, {"lambda_smooth", r.weights.smooth}};
+  sj["dof"] = r.dof;
+  sj["samples"] = r.sampling.size();
+  sj["hessian_samples"] = r.hessian_samples;
+  sj["handles"] = static_cast<int>(r.handle_errors.size());
+  sj["time_s"] = {{"preprocess", r.preprocess_seconds},
+                  {"solve", r.solve.seconds},
+                  {"final_certificate_and_fields", r.finish_seconds},
+                  {"total", total_seconds >= 0 ? total_seconds
+                                               : r.preprocess_seconds + r.solve.seconds + r.finish_seconds}};
+  sj["threads"] = omp_get_max_threads();
+  sj["backend"] = r.backend;
+  sj["parameters"] = params_to_json(sc.params);
+  return sj;
+}
+
+}  // namespace
+
+DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
+                                   const DeformResult& r, const DeformOutputOptions& options) {
+  const MatX3d& y = r.coefficients;
+  CertificateReport report =
+      make_certificate_report(r.certificate, model.cage, model.mesh, y, scenario.model_dir,
+                              "coefficients.txt", r.sampling_params, r.sampling, r.certify_params);
+  const double volume_ratio =
+      signed_volume(r.deformed_vertices, model.mesh.F) / signed_volume(model.mesh.V, model.mesh.F);
+  DeformOutputs written;
+  written.mesh_coverage = report.mesh_coverage;
+  written.volume_ratio = volume_ratio;
+  written.dir = dir;
+  std::vector<std::string>& names = written.files;
+  names = {"coefficients.txt", "deformed.obj",   "deformed.vtp", "certificate.json", "voxels.csv",
+           "leaves.vtu",       "iterations.csv", "summary.json", "scenario.json"};
+  StagedOutputs out(dir);
+  write_file_atomic(out.path("coefficients.txt"), [&](std::ostream& s) { write_coefficients(s, y); });
+  write_file_atomic(out.path("deformed.obj"), [&](std::ostream& s) {
+    write_obj(s, r.deformed_vertices, model.mesh.F, "lidef deform " + scenario.name + ": last certified map");
+  });
+  write_mesh_vtp(out.path("deformed.vtp"), r.deformed_vertices, model.mesh.F,
+                 {{"E_iso_minus_6", r.e_iso}, {"detJ", r.det_j}, {"sigma3", r.sigma3}});
+  out.path("certificate.json");
+  out.path("voxels.csv");
+  write_certificate_files(out.staging_dir(), report);
+  write_leaves_vtu(out.path("leaves.vtu"), r.certificate.leaves);
+  if (options.grid > 0) {
+    write_field_vti(out.path("field.vti"), model.cage, HarmonicBasis(model.cage), y, r.sampling,
+                    options.grid);
+    names.push_back("field.vti");
+  }
+  write_file_atomic(out.path("iterations.csv"), [&](std::ostream& s) {
+    s << kIterationsHeader << "\n";
+    for (const IterationRecord& rec : r.history) s << iteration_row(rec) << "\n";
+  });
+  write_scenario(out.path("scenario.json"), scenario);
+  const std::string summary =
+      summary_json(scenario, r, report, volume_ratio, options.total_seconds).dump(2) + "\n";
+  write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });
+  out.commit(options.grid > 0 ? std::vector<std::string>{} : std::vector<std::string>{"field.vti"});
+  return written;
+}
+
+}  // namespace lidef

@@ -1,0 +1,82 @@
+# lidef.certify: the verdict, the leaves as arrays, the files, and agreement with `lidef certify`.
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+import lidef
+from conftest import BEAM
+
+PARAMS = {"samples": 3000}
+
+
+def test_identity_is_certified_with_consistent_leaves(beam):
+    cert = lidef.certify(beam, beam.identity(), **PARAMS)
+    assert cert.certified and cert.reason == ""
+    leaves = cert.leaves
+    n = len(leaves["side"])
+    assert n >= cert.voxels > 0
+    assert leaves["center"].shape == (n, 3)
+    for key in ("side", "sigma3", "lipschitz", "lower_bound", "depth", "certified"):
+        assert leaves[key].shape == (n,), key
+    assert leaves["certified"].all()
+    # The certificate's bound is the smallest leaf bound; the identity has sigma3 = 1 everywhere.
+    assert cert.min_lower_bound == pytest.approx(leaves["lower_bound"].min(), rel=1e-12)
+    assert 0 < cert.min_lower_bound <= 1
+    # (refined leaves are evaluated by a far-field expansion whose error the bound includes: ~1e-7 here)
+    np.testing.assert_allclose(leaves["sigma3"], 1.0, atol=1e-6)
+
+
+def test_a_mirrored_map_is_not_certified(beam):
+    # x -> -x folds orientation everywhere: sigma3 = -1 at every voxel.
+    Y = beam.identity().copy()
+    Y[:, 0] *= -1
+    cert = lidef.certify(beam, Y, **PARAMS)
+    assert not cert.certified
+    assert cert.reason
+    assert cert.min_lower_bound < 0
+
+
+def test_certificate_files_match_the_cli(beam, cli, tmp_path):
+    # The same map through the Python module and through `lidef certify`: the same certificate (both call the
+    # same library functions; certificate.json is deterministic).
+    A = np.array([[1.1, 0.2, 0.0], [0.0, 0.9, 0.1], [0.1, 0.0, 1.0]])
+    Y = beam.identity().copy()
+    nv = len(beam.cage_vertices)
+    Y[:nv] = beam.cage_vertices @ A.T
+    Y[nv:] = Y[nv:] @ A.T
+    cert = lidef.certify(beam, Y, **PARAMS)
+    cert.write(str(tmp_path / "py"))
+    np.savetxt(tmp_path / "y.txt", Y, fmt="%.17g")
+    subprocess.run([cli, "certify", str(BEAM), "--coeffs", str(tmp_path / "y.txt"), "--out", str(tmp_path / "cli"),
+                    "--samples", "3000", "--grid", "0"], check=True, capture_output=True)
+    py = json.loads((tmp_path / "py" / "certificate.json").read_text())
+    ref = json.loads((tmp_path / "cli" / "certificate.json").read_text())
+    for key in ("certified", "min_lower_bound", "voxels", "leaves", "coefficients_fnv1a64", "cage"):
+        assert _find(py, key) == _find(ref, key), key
+    assert (tmp_path / "py" / "voxels.csv").read_bytes() == (tmp_path / "cli" / "voxels.csv").read_bytes()
+    assert (tmp_path / "py" / "leaves.vtu").exists()
+
+
+def _find(obj, key):
+    """The first value of `key` anywhere in a JSON object (the report nests its sections)."""
+    if isinstance(obj, dict):
+        if key in obj:
+            return obj[key]
+        for v in obj.values():
+            found = _find(v, key)
+            if found is not None:
+                return found
+    return None
+
+
+def test_bad_coefficients_and_parameters_raise_input_error(beam):
+    with pytest.raises(lidef.InputError, match=r"^Y: has 4 rows; a map of this cage has #V\+#F"):
+        lidef.certify(beam, np.zeros((4, 3)))
+    with pytest.raises(lidef.InputError, match="max_depth"):
+        lidef.certify(beam, beam.identity(), max_depth=-3)
+    with pytest.raises(lidef.InputError, match="no_such_parameter"):
+        lidef.certify(beam, beam.identity(), no_such_parameter=1)
+    with pytest.raises(lidef.InputError, match="bound"):
+        lidef.certify(beam, beam.identity(), bound="fifth")
