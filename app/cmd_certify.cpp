@@ -46,7 +46,8 @@ constexpr int kMaxGrid = 1024;
 bool certify_param(const ParamInfo& p) {
   static const std::set<std::string> names = {"samples", "voxel_side",      "safety",    "max_depth",
                                               "domain",  "max_refined",     "bound",     "threads",
-                                              "backend", "bound_tolerance", "refinement"};
+                                              "backend", "bound_tolerance", "refinement",
+                                              "max_distortion"};
   return names.count(p.name) > 0;
 }
 

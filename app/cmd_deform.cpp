@@ -113,7 +113,7 @@ void add_deform_command(CLI::App& app, Action& action) {
   add_param_flags(sub, &opts->overrides, "Parameters: ");
   sub->footer(
       "Writes into --out (all files appear together, or none): coefficients.txt (#V+#F rows, readable by\n"
-      "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3),\n"
+      "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3, sigma1, distortion = sigma1/sigma3),\n"
       "certificate.json + voxels.csv + leaves.vtu (certificate of the written map), iterations.csv, "
       "summary.json,\n"
       "scenario.json (the scenario with the parameters used). Ctrl-C stops after the current line-search "
@@ -247,7 +247,11 @@ void add_deform_command(CLI::App& app, Action& action) {
         write_obj(s, mf.V, model.mesh.F, "lidef deform " + sc.name + ": last certified map");
       });
       write_mesh_vtp(out.path("deformed.vtp"), mf.V, model.mesh.F,
-                     {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
+                     {{"E_iso_minus_6", mf.e_iso},
+                      {"detJ", mf.det_j},
+                      {"sigma3", mf.sigma3},
+                      {"sigma1", mf.sigma1},
+                      {"distortion", mf.distortion}});
       out.path("certificate.json");
       out.path("voxels.csv");
       write_certificate_files(out.staging_dir(), report);
@@ -287,6 +291,15 @@ void add_deform_command(CLI::App& app, Action& action) {
       sj["certified"] = cert.certified;
       sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
       sj["min_sigma3_sampled"] = cert.min_sigma3_center;
+      // Bounded distortion: the certified upper bounds over the leaves, the sampled maximum over the mesh
+      // vertices, and the target (max_distortion, 0: none).
+      sj["max_sigma1_upper_bound"] = cert.max_sigma1_upper_bound;
+      sj["max_distortion_upper_bound"] = cert.max_distortion_upper_bound;
+      double max_k_vertices = 0;  // NaN (σ3 ≤ 0) never occurs at a certified map's covered vertices
+      for (Eigen::Index i = 0; i < mf.distortion.size(); ++i)
+        if (std::isfinite(mf.distortion(i))) max_k_vertices = std::max(max_k_vertices, mf.distortion(i));
+      sj["max_distortion_vertices"] = max_k_vertices;
+      sj["max_distortion"] = sc.params.max_distortion;
       sj["mesh_coverage"] = report.mesh_coverage;
       sj["domain"] = report.domain;
       sj["max_handle_error"] = max_err;

@@ -7,6 +7,7 @@
 // back. Decisions (Armijo, the certificate's condition (6) with its rounding allowance, refinement, budgets)
 // are taken on the host from the values the backend returns, with the same code for every backend.
 #pragma once
+#include <limits>
 #include <array>
 #include <functional>
 #include <memory>
@@ -75,6 +76,10 @@ struct NodeValues {
   // Far-field refinement (CPU): sigma3 and hnorm are those of an approximate J̃ and H̃ with |J − J̃|₂ ≤ eps_J
   // and ‖H − H̃‖_F ≤ eps_H at the center (docs/certificate.md, Step 4d); 0 for an exact evaluation.
   double eps_J = 0, eps_H = 0;
+  // Bounded distortion (CPU): σ1 at the center (NaN: not computed, no σ1 bound) and, for the spectral bound,
+  // the operator-norm bound of H(c) before the σ3-specific Taylor term replaced it (a bound on J's change).
+  double sigma1 = std::numeric_limits<double>::quiet_NaN();
+  double hnorm_op_j = 0;
 };
 
 class CertifierKernels {
