@@ -19,6 +19,7 @@
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
 #include "lidef/interval_verification.h"
+#include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"
 #include "lidef/sampling.h"
@@ -94,7 +95,7 @@ TEST(DistortionBound, NeverBelowDenseSamplingOnRandomMapsAndEveryBound) {
       p.bound = b;
       p.max_depth = 2;
       const Certificate c = cert.certify(maps[mi], p);
-      check_against_sampling(cert.basis(), maps[mi], c);
+      check_against_sampling(cert.basis(), maps[mi], c, 4);
       certified += c.certified;
       // Every certified leaf has a finite bound at least σ1(c) (the center is in the leaf).
       for (const CertLeaf& l : c.leaves)
@@ -293,10 +294,15 @@ TEST(DistortionCli, ConstrainedBeamBendIsCertifiedBelowTheTargetAndSamplingAgree
   const double k_free_bound = free["max_distortion_upper_bound"].get<double>();
   EXPECT_GE(k_free_bound, k_free);
   ASSERT_GT(k_free, 1.05) << "beam_bend should distort the beam";
-  const double K = 1 + 0.8 * (k_free - 1);
+  const std::string k_text = format_double(1 + 0.8 * (k_free - 1));  // shortest round trip: K is exact
+  const double K = std::stod(k_text);
 
   output.clear();
-  const int rc = deform(tmp / "k", "--max-distortion " + std::to_string(K), &output);
+  // A few iterations of the direct solve suffice for the claim (every accepted map satisfies the bound): the
+  // whole run, blocked after the continuation's strategies, takes minutes (docs/benchmarks.md, "Bounded
+  // distortion").
+  const int rc =
+      deform(tmp / "k", "--max-distortion " + k_text + " --max-iterations 3 --continuation false", &output);
   EXPECT_TRUE(rc == 0 || rc == 1) << output;  // reached (0) or stopped short by the bound (1)
   const nlohmann::json s = read_json(tmp / "k/summary.json");
   EXPECT_EQ(s["certified"], true) << output;
@@ -306,8 +312,9 @@ TEST(DistortionCli, ConstrainedBeamBendIsCertifiedBelowTheTargetAndSamplingAgree
   const nlohmann::json c = read_json(tmp / "k/certificate.json");
   EXPECT_EQ(c["distortion_met"], true);
   EXPECT_LE(c["max_distortion_upper_bound"].get<double>(), K);
-  if (s["handles_reached"] == false)
+  if (s["stop_reason"] == "blocked_by_certificate" || s["stop_reason"] == "no_certified_step") {
     EXPECT_NE(s["message"].get<std::string>().find("distortion bound"), std::string::npos) << s["message"];
+  }
 
   output.clear();
   ASSERT_EQ(lidef::test::run_command(q(lidef::test::cli()) + " verify " + q(model) + " --coeffs " +

@@ -1482,15 +1482,18 @@ struct OctreeCertifier::Run {
     std::vector<char> settled(c.leaves.size(), 0);
     std::vector<int> batch;
     std::vector<NodeValues> vals;
-    for (;;) {
+    for (bool hopeless = false; !hopeless;) {
       std::vector<size_t> split;
-      for (size_t i = 0; i < c.leaves.size(); ++i) {
+      for (size_t i = 0; i < c.leaves.size() && !hopeless; ++i) {
         const CertLeaf& l = c.leaves[i];
-        if (!settled[i] && !(l.distortion_upper <= K) && l.depth - level(l.base) < p.max_depth &&
+        if (l.distortion_upper <= K) continue;
+        if (!settled[i] && l.depth - level(l.base) < p.max_depth &&
             budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
           split.push_back(i);
+        else
+          hopeless = p.stop_on_failure;  // a line search trial fails here whatever the others give: stop
       }
-      if (split.empty()) break;
+      if (split.empty() || hopeless) break;
       tree.clear();
       batch.clear();
       for (size_t i : split) {
