@@ -90,7 +90,8 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Cage& cage, con
             << "{interval.csv, interval.json}\n";
   std::cout << "  distortion: " << v.distortion_proven << " of " << checked
             << " certified leaves' sigma1 and sigma1/sigma3 bounds re-proven (max sigma1 <= "
-            << format_g(v.max_sigma1_hi) << ", max sigma1/sigma3 <= " << format_g(v.max_distortion_hi) << ")\n";
+            << format_g(v.max_sigma1_hi) << ", max sigma1/sigma3 <= " << format_g(v.max_distortion_hi)
+            << ")\n";
   if (!rep.cert.certified)
     std::cout << "  note: the certificate itself says 'not certified' (" << rep.cert.reason
               << "); only its certified leaves were re-proved, which certifies nothing about the others\n";
@@ -106,8 +107,9 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Cage& cage, con
                 << ", " << format_g(l.center.z()) << "), side " << format_g(l.side)
                 << ": sigma3 >= " << format_g(r.sigma3_lo) << ", L <= " << format_g(r.L_hi)
                 << ", margin >= " << format_g(r.margin_lo) << ", sigma1 <= " << format_g(r.sigma1_hi)
-                << ", sigma1/sigma3 <= " << format_g(r.distortion_hi) << " (certificate: "
-                << format_g(l.sigma1_upper) << ", " << format_g(l.distortion_upper) << ")\n";
+                << ", sigma1/sigma3 <= " << format_g(r.distortion_hi)
+                << " (certificate: " << format_g(l.sigma1_upper) << ", " << format_g(l.distortion_upper)
+                << ")\n";
     }
   }
   return ok ? kOk : kNotCertified;
@@ -151,12 +153,14 @@ void add_verify_command(CLI::App& app, Action& action) {
       "a\n"
       "warning. The distortion bounds are checked too: no sample's sigma1 or sigma1/sigma3 above its leaf's\n"
       "sigma1_upper / distortion_upper (voxels.csv; verify.csv: max_sigma1, max_distortion,\n"
-      "distortion_violations). Exit code: 0 no violation and no sigma3 <= 0 in certified leaves, 1 otherwise,\n"
+      "distortion_violations). Exit code: 0 no violation and no sigma3 <= 0 in certified leaves, 1 "
+      "otherwise,\n"
       "2 error.\n"
       "\n"
       "--interval: a rigorous re-proof instead of sampling (docs/certificate.md, 'Interval re-proof'). For\n"
       "every certified leaf, J and the Hessian at its center (closed-form Green-coordinate derivatives), a\n"
-      "lower bound of sigma3, the certificate's Lipschitz constant L (first order, third order or combined, as certified) "
+      "lower bound of sigma3, the certificate's Lipschitz constant L (first order, third order or combined, "
+      "as certified) "
       "and\n"
       "the margin sigma3 - r L are enclosed in intervals with outward rounding (log/atan widened by 4 "
       "ulps);\n"
@@ -284,8 +288,9 @@ void add_verify_command(CLI::App& app, Action& action) {
       std::cout << "  max tightness (sampled Lipschitz / L) " << format_g(max_tight) << "\n";
       std::cout << "  distortion: sampled max sigma1 " << format_g(v.max_sigma1) << " (certified bound "
                 << format_g(rep.cert.max_sigma1_upper_bound) << "), sampled max sigma1/sigma3 "
-                << format_g(v.max_distortion) << " (certified bound " << format_g(rep.cert.max_distortion_upper_bound)
-                << "), samples above their leaf's bounds " << v.distortion_violations << "\n";
+                << format_g(v.max_distortion) << " (certified bound "
+                << format_g(rep.cert.max_distortion_upper_bound) << "), samples above their leaf's bounds "
+                << v.distortion_violations << "\n";
       std::cout << "  wrote " << out.final_path("")
                 << "{verify.csv, violations.csv, verify_plot.gp, verify_plot.dat"
                 << (have_png ? ", verify_plot.png" : "") << "}\n";

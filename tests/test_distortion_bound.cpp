@@ -1,8 +1,8 @@
 // Bounded distortion (docs/certificate.md, "Bounded distortion"): the per-leaf upper bounds of σ1 and of
-// K = σ1/σ3 against dense sampling of the exact map (random maps, every bound, on the fly and from stored float
-// derivatives, chains of certificates by perturbation), the interval re-proof of the same bounds, the target
-// K (refined until proven, or not certified with its reason), voxels.csv's new columns, and a constrained
-// solve of beam_bend through the CLI checked by `lidef verify`.
+// K = σ1/σ3 against dense sampling of the exact map (random maps, every bound, on the fly and from stored
+// float derivatives, chains of certificates by perturbation), the interval re-proof of the same bounds, the
+// target K (refined until proven, or not certified with its reason), voxels.csv's new columns, and a
+// constrained solve of beam_bend through the CLI checked by `lidef verify`.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -74,10 +74,9 @@ double check_against_sampling(const HarmonicBasis& basis, const MatX3d& y, const
 TEST(DistortionBound, NeverBelowDenseSamplingOnRandomMapsAndEveryBound) {
   const Sphere& s = sphere();
   OctreeCertifier cert(s.cage, s.sampling);
-  std::vector<MatX3d> maps = {lidef::test::perturbed_map(s.cage, 0.01, 3),
-                              lidef::test::anisotropic_perturbed_map(s.cage, 0.01, 4),
-                              lidef::test::smooth_map(s.cage, s.sub, 0.45, 11),
-                              lidef::test::smooth_map(s.cage, s.sub, 0.9, 12)};
+  std::vector<MatX3d> maps = {
+      lidef::test::perturbed_map(s.cage, 0.01, 3), lidef::test::anisotropic_perturbed_map(s.cage, 0.01, 4),
+      lidef::test::smooth_map(s.cage, s.sub, 0.45, 11), lidef::test::smooth_map(s.cage, s.sub, 0.9, 12)};
   {  // an orientation-preserving affine map composed with a bend: K well above 1 everywhere
     Mat3 A;
     A << 1.6, 0.3, 0, -0.2, 0.8, 0.1, 0.05, 0, 0.5;

@@ -22,7 +22,8 @@ VerificationResult verify_certificate(const HarmonicBasis& basis, const MatX3d& 
     auto sigmas_at = [&](const Vec3& p) {
       basis.evaluate(p, 1, nullptr, gb.data(), nullptr);
       Mat3 J = Mat3::Zero();
-      for (int k = 0; k < n; ++k) J.noalias() += y.row(k).transpose() * Eigen::Map<const Eigen::RowVector3d>(&gb[3 * k]);
+      for (int k = 0; k < n; ++k)
+        J.noalias() += y.row(k).transpose() * Eigen::Map<const Eigen::RowVector3d>(&gb[3 * k]);
       return Vec3(signed_singular_values(J));
     };
 #pragma omp for schedule(dynamic, 16)

@@ -462,7 +462,7 @@ struct IntervalVerifier::Impl {
   }
 };
 
-// ---- Bounded distortion (docs/certificate.md, "Bounded distortion", interval re-proof) ----------------------
+// ---- Bounded distortion (docs/certificate.md, "Bounded distortion", interval re-proof) ----
 namespace {
 
 // Upper bound of σ1 for every matrix in the enclosure: sqrt(λmax(JᵀJ)) with λmax proven by lambda_max_hi
@@ -506,7 +506,7 @@ void summarize_distortion_i(IntervalVerification& out, const std::vector<CertLea
 }
 
 }  // namespace
-// ---- end of bounded distortion ------------------------------------------------------------------------------
+// ---- end of bounded distortion ----
 
 IntervalVerifier::IntervalVerifier(const Cage& cage, const MatX3d& y, LipschitzBound bound)
     : impl_(std::make_unique<Impl>()) {

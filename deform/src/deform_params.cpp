@@ -398,8 +398,10 @@ void validate_params(const DeformParams& params, const std::string& where) {
   }
   // σ1/σ3 ≥ 1 for every matrix: a target below 1 can never be proven.
   if (params.max_distortion > 0 && params.max_distortion < 1)
-    throw InputError(where, "parameter \"max_distortion\" must be 0 (off) or >= 1 (sigma1/sigma3 >= 1 "
-                            "always), got " + format_g(params.max_distortion));
+    throw InputError(where,
+                     "parameter \"max_distortion\" must be 0 (off) or >= 1 (sigma1/sigma3 >= 1 "
+                     "always), got " +
+                         format_g(params.max_distortion));
 }
 
 nlohmann::ordered_json params_to_json(const DeformParams& params) {

@@ -307,7 +307,7 @@ struct OctreeCertifier::Run {
   Certificate cert;
   // Base voxels.
   VecXd scaleJ, scaleH, hnorm, sigma3, T, delta;
-  VecXd sigma1;  // σ1 at the base centers (NaN: not computed, e.g. on a backend's base stage)
+  VecXd sigma1;   // σ1 at the base centers (NaN: not computed, e.g. on a backend's base stage)
   VecXd hop, T1;  // combined: operator-norm bound of H(c) and the first-order Σ δ Γ
   VecXd lb2;      // spectral: taylor_sigma3_lower_bound at the base centers (−∞: none)
   std::vector<Mat3> Jc;
@@ -1552,7 +1552,8 @@ struct OctreeCertifier::Run {
           if (static_cast<int>(c.failing.size()) >= p.max_failing_reported) break;
         }
       std::sort(c.failed_voxels.begin(), c.failed_voxels.end());
-      c.failed_voxels.erase(std::unique(c.failed_voxels.begin(), c.failed_voxels.end()), c.failed_voxels.end());
+      c.failed_voxels.erase(std::unique(c.failed_voxels.begin(), c.failed_voxels.end()),
+                            c.failed_voxels.end());
       c.certified = false;
       c.distortion_failed = true;
       c.reason = distortion_reason(K, c.failing.front().center);

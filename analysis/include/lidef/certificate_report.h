@@ -63,7 +63,8 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
                                           const VoxelSampling& sampling, const CertifyParams& params);
 
 // voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,
-// distortion_upper`, one row per leaf in leaf order (base-voxel order, children depth-first), certified = 1/0.
+// distortion_upper`, one row per leaf in leaf order (base-voxel order, children depth-first), certified =
+// 1/0.
 const char* voxels_csv_header();
 std::string voxels_csv(const std::vector<CertLeaf>& leaves);
 // Parses voxels.csv (strictly: header, 13 fields per row — or 9 / 10 under the headers written before

@@ -7,9 +7,9 @@
 // back. Decisions (Armijo, the certificate's condition (6) with its rounding allowance, refinement, budgets)
 // are taken on the host from the values the backend returns, with the same code for every backend.
 #pragma once
-#include <limits>
 #include <array>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>

@@ -73,8 +73,9 @@ struct CertifyParams {
   double direction_step = 0;
   double direction_scale = 0;
   // Bounded distortion (docs/certificate.md, "Bounded distortion"): above 0, a certified map must also have
-  // every leaf's upper bound of K = σ1/σ3 at most this; leaves above it are split (depth and max_refined_voxels
-  // permitting) and a bound still above it makes the map not certified ("distortion bound K not proven at
+  // every leaf's upper bound of K = σ1/σ3 at most this; leaves above it are split (depth and
+  // max_refined_voxels permitting) and a bound still above it makes the map not certified ("distortion bound
+  // K not proven at
   // ..."). 0: off (the bounds are still computed and reported).
   double max_distortion = 0;
   // With previous_y/previous_lower: that certificate's Certificate::base_upper (per base voxel an upper bound
@@ -138,7 +139,8 @@ struct Certificate {
   // When certified: per base voxel the smallest lower bound of σ3 over its leaves
   // (CertifyParams::previous_lower of a later certificate); empty otherwise.
   std::vector<double> base_lower;
-  // When certified: per base voxel the largest upper bound of σ1 over its leaves (CertifyParams::previous_upper).
+  // When certified: per base voxel the largest upper bound of σ1 over its leaves
+  // (CertifyParams::previous_upper).
   std::vector<double> base_upper;
   // Over the leaves: the largest upper bound of σ1 and of K = σ1/σ3 (+∞ when a leaf has none, e.g. one not
   // certified). The distortion target asked for (CertifyParams::max_distortion, 0: none) and whether every
