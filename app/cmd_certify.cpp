@@ -44,9 +44,9 @@ constexpr int kMaxGrid = 1024;
 
 // The rows of the parameter table that shape a certificate (the others belong to the solver).
 bool certify_param(const ParamInfo& p) {
-  static const std::set<std::string> names = {"samples", "voxel_side",      "safety",    "max_depth",
-                                              "domain",  "max_refined",     "bound",     "threads",
-                                              "backend", "bound_tolerance", "refinement"};
+  static const std::set<std::string> names = {"samples", "voxel_side",      "safety",     "max_depth",
+                                              "domain",  "max_refined",     "bound",      "threads",
+                                              "backend", "bound_tolerance", "refinement", "max_distortion"};
   return names.count(p.name) > 0;
 }
 

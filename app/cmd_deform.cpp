@@ -75,7 +75,8 @@ void add_deform_command(CLI::App& app, Action& action) {
   add_param_flags(sub, &opts->overrides, "Parameters: ");
   sub->footer(
       "Writes into --out (all files appear together, or none): coefficients.txt (#V+#F rows, readable by\n"
-      "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3),\n"
+      "'lidef eval/certify'), deformed.obj, deformed.vtp (point data E_iso_minus_6, detJ, sigma3, sigma1, "
+      "distortion = sigma1/sigma3),\n"
       "certificate.json + voxels.csv + leaves.vtu (certificate of the written map), iterations.csv, "
       "summary.json,\n"
       "scenario.json (the scenario with the parameters used). Ctrl-C stops after the current line-search "

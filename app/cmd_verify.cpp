@@ -36,6 +36,12 @@ namespace fs = std::filesystem;
 constexpr int kPlotLeaves = 500;    // as in the paper's Fig. 5
 constexpr int kListedUnproven = 5;  // leaves named on the console when some is not proven
 
+// A leaf whose certified σ1 or σ1/σ3 bound the intervals did not confirm (interval_verification.h).
+bool distortion_unproven(const IntervalLeaf& r, const CertLeaf& l) {
+  return (std::isfinite(l.sigma1_upper) && !(r.sigma1_hi <= l.sigma1_upper)) ||
+         (std::isfinite(l.distortion_upper) && !(r.distortion_hi <= l.distortion_upper));
+}
+
 // `lidef verify --interval`: the rigorous re-proof of every certified leaf (interval_verification.h).
 // Writes interval.csv (deterministic) and interval.json (with the wall time), prints one summary line.
 // PROVEN needs three things: the certificate says certified, its leaves cover what it claims
@@ -48,12 +54,15 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
       verify_certificate_intervals(model.cage, y, leaves, rep.cert.bound, coverage.radius_slack);
   StagedOutputs out(out_dir);
   write_file_atomic(out.path("interval.csv"), [&](std::ostream& s) {
-    s << "leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin\n";
+    s << "leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin,sigma1_hi,distortion_hi,"
+         "certificate_distortion\n";
     for (size_t q = 0; q < v.results.size(); ++q) {
       const IntervalLeaf& r = v.results[q];
       s << v.leaf_index[q] << ',' << (r.proven ? 1 : 0) << ',' << format_double(r.sigma3_lo) << ','
         << format_double(r.L_hi) << ',' << format_double(r.margin_lo) << ','
-        << format_double(leaves[v.leaf_index[q]].margin) << '\n';
+        << format_double(leaves[v.leaf_index[q]].margin) << ',' << format_double(r.sigma1_hi) << ','
+        << format_double(r.distortion_hi) << ',' << format_double(leaves[v.leaf_index[q]].distortion_upper)
+        << '\n';
     }
   });
   const long checked = static_cast<long>(v.results.size());
@@ -73,13 +82,17 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
       << "  \"proven\": " << v.proven << ",\n"
       << "  \"not_proven\": " << v.not_proven << ",\n"
       << "  \"worst_slack\": " << num(v.worst_slack) << ",\n"
+      << "  \"distortion_proven\": " << v.distortion_proven << ",\n"
+      << "  \"distortion_not_proven\": " << v.distortion_not_proven << ",\n"
+      << "  \"max_sigma1_hi\": " << num(v.max_sigma1_hi) << ",\n"
+      << "  \"max_distortion_hi\": " << num(v.max_distortion_hi) << ",\n"
       << "  \"transcendental_ulps\": " << kTranscendentalUlps << ",\n"
       << "  \"time_s\": " << num(v.seconds) << ",\n"
       << "  \"leaves_per_s\": " << num(leaves_per_s) << "\n"
       << "}\n";
   });
   out.commit();
-  const bool leaves_ok = v.not_proven == 0;
+  const bool leaves_ok = v.not_proven == 0 && v.distortion_not_proven == 0;
   const bool ok = leaves_ok && coverage.proven && rep.cert.certified;
   std::cout << "lidef verify --interval: " << (ok ? "PROVEN" : "NOT PROVEN") << ": " << v.proven << " of "
             << checked << " certified leaves proven in interval arithmetic (" << leaves.size()
@@ -87,6 +100,10 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
             << " s (" << format_g(leaves_per_s, 3) << " leaves/s); wrote " << out.final_path("")
             << "{interval.csv, interval.json}\n";
   std::cout << "  coverage: " << coverage.reason << "\n";
+  std::cout << "  distortion: " << v.distortion_proven << " of " << checked
+            << " certified leaves' sigma1 and sigma1/sigma3 bounds re-proven (max sigma1 <= "
+            << format_g(v.max_sigma1_hi) << ", max sigma1/sigma3 <= " << format_g(v.max_distortion_hi)
+            << ")\n";
   if (!rep.cert.certified)
     std::cout << "  the certificate itself says 'not certified' (" << rep.cert.reason
               << "): only its certified leaves were re-proved, which certifies nothing about the others\n";
@@ -94,14 +111,17 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
     int listed = 0;
     for (size_t q = 0; q < v.results.size() && listed < kListedUnproven; ++q) {
       const IntervalLeaf& r = v.results[q];
-      if (r.proven) continue;
+      if (r.proven && !distortion_unproven(r, leaves[v.leaf_index[q]])) continue;
       ++listed;
       const CertLeaf& l = leaves[v.leaf_index[q]];
       std::cout << "  not proven: leaf " << v.leaf_index[q] << " (row " << v.leaf_index[q] + 2
                 << " of voxels.csv), center (" << format_g(l.center.x()) << ", " << format_g(l.center.y())
                 << ", " << format_g(l.center.z()) << "), side " << format_g(l.side)
                 << ": sigma3 >= " << format_g(r.sigma3_lo) << ", L <= " << format_g(r.L_hi)
-                << ", margin >= " << format_g(r.margin_lo) << "\n";
+                << ", margin >= " << format_g(r.margin_lo) << ", sigma1 <= " << format_g(r.sigma1_hi)
+                << ", sigma1/sigma3 <= " << format_g(r.distortion_hi)
+                << " (certificate: " << format_g(l.sigma1_upper) << ", " << format_g(l.distortion_upper)
+                << ")\n";
     }
   }
   return ok ? kOk : kNotCertified;
@@ -143,7 +163,11 @@ void add_verify_command(CLI::App& app, Action& action) {
       "sampled Lipschitz estimate, log scale; paper Fig. 5) and the gnuplot script/data that draw it\n"
       "(verify_plot.gp, verify_plot.dat). Without gnuplot ($LIDEF_GNUPLOT or PATH) the PNG is skipped with "
       "a\n"
-      "warning. Exit code: 0 no violation and no sigma3 <= 0 in certified leaves, 1 otherwise, 2 error.\n"
+      "warning. The distortion bounds are checked too: no sample's sigma1 or sigma1/sigma3 above its leaf's\n"
+      "sigma1_upper / distortion_upper (voxels.csv; verify.csv: max_sigma1, max_distortion,\n"
+      "distortion_violations). Exit code: 0 no violation and no sigma3 <= 0 in certified leaves, 1 "
+      "otherwise,\n"
+      "2 error.\n"
       "\n"
       "--interval: a rigorous re-proof instead of sampling (docs/certificate.md, 'Interval re-proof'). For\n"
       "every certified leaf, J and the Hessian at its center (closed-form Green-coordinate derivatives), a\n"
@@ -155,14 +179,16 @@ void add_verify_command(CLI::App& app, Action& action) {
       "the leaf is proven when the lower end of the margin is > 0 (no rounding allowance). Writes "
       "interval.csv\n"
       "(leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin; leaf = 0-based row of voxels.csv) and\n"
-      "interval.json (leaves, proven, not_proven, worst_slack = min margin_lo, coverage, time). It also "
-      "proves\n"
-      "that the leaves cover the domain the certificate claims (every leaf a cell of the certificate's "
-      "grid,\n"
-      "every grid cell meeting the mesh's triangles or solid covered by certified leaves; 'voxels' domain:\n"
-      "every base voxel tiled), and widens each ball to hold its exact cell. Exit code: 0 the certificate\n"
-      "says certified, the coverage is proven and every certified leaf is proven; 1 otherwise (the first\n"
-      "unproven leaves or the coverage gap are listed); 2 error.");
+      "interval.json (leaves, proven, not_proven, worst_slack = min margin_lo, coverage, time). The\n"
+      "distortion bounds are re-proved too: per leaf sigma1_hi = an upper bound of sigma1 on the ball and\n"
+      "distortion_hi of sigma1/sigma3, each at most voxels.csv's sigma1_upper / distortion_upper\n"
+      "(interval.csv: sigma1_hi, distortion_hi, certificate_distortion; interval.json: distortion_proven,\n"
+      "distortion_not_proven). It also proves that the leaves cover the domain the certificate claims (every\n"
+      "leaf a cell of the certificate's grid, every grid cell meeting the mesh's triangles or solid covered\n"
+      "by certified leaves; 'voxels' domain: every base voxel tiled), and widens each ball to hold its exact\n"
+      "cell. Exit code: 0 the certificate says certified, the coverage is proven and every certified leaf\n"
+      "and its distortion bounds are proven; 1 otherwise (the first unproven leaves or the coverage gap are\n"
+      "listed); 2 error.");
   sub->callback([opts, &action] {
     action = [opts] {
       const Opts& o = *opts;
@@ -191,7 +217,8 @@ void add_verify_command(CLI::App& app, Action& action) {
       // --- verify.csv and violations.csv.
       StagedOutputs out(out_dir);
       write_file_atomic(out.path("verify.csv"), [&](std::ostream& s) {
-        s << "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified\n";
+        s << "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified,"
+             "max_sigma1,max_distortion,distortion_violations\n";
         for (size_t i = 0; i < leaves.size(); ++i) {
           const CertLeaf& l = leaves[i];
           const VoxelVerification& vv = v.voxels[i];
@@ -199,7 +226,9 @@ void add_verify_command(CLI::App& app, Action& action) {
             << format_double(l.center.z()) << ',' << format_double(l.side) << ',' << l.depth << ','
             << format_double(l.L) << ',' << format_double(vv.sigma3_center) << ','
             << format_double(vv.min_sigma3) << ',' << format_double(vv.max_quotient) << ','
-            << format_double(vv.tightness) << ',' << vv.violations << ',' << (l.certified ? 1 : 0) << '\n';
+            << format_double(vv.tightness) << ',' << vv.violations << ',' << (l.certified ? 1 : 0) << ','
+            << format_double(vv.max_sigma1) << ',' << format_double(vv.max_distortion) << ','
+            << vv.distortion_violations << '\n';
         }
       });
       write_file_atomic(out.path("violations.csv"), [&](std::ostream& s) {
@@ -266,7 +295,7 @@ void add_verify_command(CLI::App& app, Action& action) {
         certified_leaves += leaves[i].certified;
         if (std::isfinite(v.voxels[i].tightness)) max_tight = std::max(max_tight, v.voxels[i].tightness);
       }
-      const bool ok = v.violations == 0 && v.nonpositive_in_certified == 0;
+      const bool ok = v.violations == 0 && v.nonpositive_in_certified == 0 && v.distortion_violations == 0;
       std::cout << "lidef verify: " << (ok ? "OK" : "FAILED") << ": " << v.points << " points in "
                 << leaves.size() << " leaves (" << certified_leaves << " certified; certificate says "
                 << (rep.cert.certified ? "certified" : "not certified") << ")\n";
@@ -274,6 +303,11 @@ void add_verify_command(CLI::App& app, Action& action) {
       std::cout << "  bound violations " << v.violations << ", samples with sigma3 <= 0 in certified leaves "
                 << v.nonpositive_in_certified << "\n";
       std::cout << "  max tightness (sampled Lipschitz / L) " << format_g(max_tight) << "\n";
+      std::cout << "  distortion: sampled max sigma1 " << format_g(v.max_sigma1) << " (certified bound "
+                << format_g(rep.cert.max_sigma1_upper_bound) << "), sampled max sigma1/sigma3 "
+                << format_g(v.max_distortion) << " (certified bound "
+                << format_g(rep.cert.max_distortion_upper_bound) << "), samples above their leaf's bounds "
+                << v.distortion_violations << "\n";
       std::cout << "  wrote " << out.final_path("")
                 << "{verify.csv, violations.csv, verify_plot.gp, verify_plot.dat"
                 << (have_png ? ", verify_plot.png" : "") << "}\n";

@@ -38,7 +38,8 @@ using lidef::test::TempDir;
 
 namespace {
 
-const char* const kVoxelsHeader = "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error";
+const char* const kVoxelsHeader =
+    "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,distortion_upper";
 const char* const kVerifyHeader =
     "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified";
 
@@ -177,7 +178,7 @@ TEST_F(CertifyCli, IdentityCertifiesAtDepthZeroAndIsDeterministic) {
   EXPECT_EQ(j["domain"]["uncleared_voxels"], 0);
   // voxels.csv: exact header, one row per leaf, all certified; no refinement, so each leaf is a sampling leaf
   // of side base side / 2^depth (the mesh domain's levels toward the cage).
-  const auto rows = read_csv(tmp / "a/voxels.csv", kVoxelsHeader, 10);
+  const auto rows = read_csv(tmp / "a/voxels.csv", kVoxelsHeader, 13);
   ASSERT_EQ(static_cast<long>(rows.size()), j["leaves"].get<long>());
   for (const auto& r : rows) {
     EXPECT_EQ(r[3], std::ldexp(j["voxel_side"].get<double>(), -static_cast<int>(r[4])));
@@ -191,7 +192,7 @@ TEST_F(CertifyCli, IdentityCertifiesAtDepthZeroAndIsDeterministic) {
   const nlohmann::json g = read_json(tmp / "grid/certificate.json");
   EXPECT_EQ(g["domain"]["kind"], "voxels");
   EXPECT_LT(g["mesh_coverage"].get<double>(), 0.5);
-  for (const auto& r : read_csv(tmp / "grid/voxels.csv", kVoxelsHeader, 10)) {
+  for (const auto& r : read_csv(tmp / "grid/voxels.csv", kVoxelsHeader, 13)) {
     EXPECT_EQ(r[3], g["voxel_side"].get<double>());
     EXPECT_EQ(r[4], 0);
   }
@@ -235,7 +236,7 @@ TEST_F(CertifyCli, VtkFilesParseWithTheDocumentedArrays) {
   // Cell 0 is the cube of the first voxels.csv row: its volume is side³ (hexahedron corner order is right).
   double b[6];
   ug->GetCell(0)->GetBounds(b);
-  const double side = read_csv(tmp / "c/voxels.csv", kVoxelsHeader, 10).front()[3];  // its own (mesh domain)
+  const double side = read_csv(tmp / "c/voxels.csv", kVoxelsHeader, 13).front()[3];  // its own (mesh domain)
   EXPECT_NEAR(b[1] - b[0], side, 1e-12);
   EXPECT_NEAR(b[3] - b[2], side, 1e-12);
   EXPECT_NEAR(b[5] - b[4], side, 1e-12);
@@ -297,7 +298,7 @@ TEST_F(CertifyCli, FoldedMapIsNotCertified) {
   EXPECT_EQ(f["center"].size(), 3u);
   EXPECT_LE(f["margin"].get<double>(), 0);
   EXPECT_LT(j["min_sigma3_center"].get<double>(), 0);
-  const auto rows = read_csv(tmp / "out/voxels.csv", kVoxelsHeader, 10);
+  const auto rows = read_csv(tmp / "out/voxels.csv", kVoxelsHeader, 13);
   ASSERT_EQ(static_cast<long>(rows.size()), j["leaves"].get<long>());
   long failing = 0;
   for (const auto& r : rows) failing += r[8] == 0;
@@ -367,7 +368,7 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
       << output;
   const auto rows = read_csv(tmp / "cert/verify.csv", kVerifyHeader, 12);
   ASSERT_EQ(static_cast<long>(rows.size()), leaves);
-  const auto cert_rows = read_csv(tmp / "cert/voxels.csv", kVoxelsHeader, 10);
+  const auto cert_rows = read_csv(tmp / "cert/voxels.csv", kVoxelsHeader, 13);
   double max_tight = 0;
   for (size_t i = 0; i < rows.size(); ++i) {
     EXPECT_EQ(rows[i][0], cert_rows[i][0]);  // same leaf order, exact centers

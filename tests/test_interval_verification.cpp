@@ -322,7 +322,9 @@ TEST(IntervalVerification, CliExitCodes) {
     std::istringstream csv(lidef::test::read_text(tmp / "cert/interval.csv"));
     std::string line;
     std::getline(csv, line);
-    EXPECT_EQ(line, "leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin");
+    EXPECT_EQ(line,
+              "leaf,proven,sigma3_lo,L_hi,margin_lo,certificate_margin,sigma1_hi,distortion_hi,"
+              "certificate_distortion");
     long rows = 0;
     while (std::getline(csv, line)) {
       ++rows;
@@ -349,7 +351,7 @@ TEST(IntervalVerification, CliExitCodes) {
     std::istringstream r(vox.substr(row1, end1 - row1));
     for (std::string x; std::getline(r, x, ',');) f.push_back(x);
   }
-  ASSERT_EQ(f.size(), 10u);
+  ASSERT_EQ(f.size(), 13u);
   ASSERT_EQ(f[8], "1");
   f[3] = format_double(8 * std::stod(f[3]));
   std::string row;

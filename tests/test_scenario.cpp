@@ -38,7 +38,7 @@ std::string input_error(F&& f) {
 TEST(DeformParams, TableListsEveryFieldOnce) {
   // Counted by hand in deform_params.h: 6 sampling + 2 energy + 13 newton (3 of them continuation) +
   // 6 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 44;
+  const int kFields = 45;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -78,7 +78,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "refinement",
                                              "max_refined",
                                              "line_search_max_refined",
-                                             "bound_tolerance",  // certificate
+                                             "bound_tolerance",
+                                             "max_distortion",  // certificate
                                              "dynamic_weighting",
                                              "e0",
                                              "kappa1",

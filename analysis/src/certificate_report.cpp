@@ -41,6 +41,9 @@ ojson leaf_json(const CertLeaf& l) {
   j["L"] = num(l.L);
   j["margin"] = num(l.margin);
   j["sigma3_error"] = num(l.sigma3_error);
+  j["sigma1"] = num(l.sigma1);
+  j["sigma1_upper"] = num(l.sigma1_upper);
+  j["distortion_upper"] = num(l.distortion_upper);
   return j;
 }
 
@@ -167,13 +170,16 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
   return r;
 }
 
-// sigma3_error (since the far-field refinement): |sigma3 − the true σ3 at the center| ≤ it (0: exact). Files
-// written before it have the first 9 columns only; they are still read.
+// sigma3_error (since the far-field refinement): |sigma3 − the true σ3 at the center| ≤ it (0: exact).
+// sigma1, sigma1_upper, distortion_upper (since the distortion bounds): σ1 at the center and the leaf's upper
+// bounds of σ1 and σ1/σ3 ("inf" where none). Files written before them have the first 9 or 10 columns only;
+// they are still read.
 const char* voxels_csv_header() {
-  return "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error";
+  return "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,distortion_upper";
 }
 namespace {
 const char* kVoxelsCsvHeader9 = "cx,cy,cz,side,depth,sigma3,L,margin,certified";
+const char* kVoxelsCsvHeader10 = "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error";
 }
 
 std::string voxels_csv(const std::vector<CertLeaf>& leaves) {
@@ -184,7 +190,8 @@ std::string voxels_csv(const std::vector<CertLeaf>& leaves) {
     for (int k = 0; k < 3; ++k) s += format_double(l.center(k)) + ',';
     s += format_double(l.side) + ',' + std::to_string(l.depth) + ',' + format_double(l.sigma3) + ',' +
          format_double(l.L) + ',' + format_double(l.margin) + ',' + (l.certified ? "1" : "0") + ',' +
-         format_double(l.sigma3_error) + '\n';
+         format_double(l.sigma3_error) + ',' + format_double(l.sigma1) + ',' + format_double(l.sigma1_upper) +
+         ',' + format_double(l.distortion_upper) + '\n';
   }
   return s;
 }
@@ -194,14 +201,15 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
   std::istringstream in(text);
   std::string line;
   long lineno = 1;
-  if (!std::getline(in, line) || (line != voxels_csv_header() && line != kVoxelsCsvHeader9))
+  if (!std::getline(in, line) ||
+      (line != voxels_csv_header() && line != kVoxelsCsvHeader9 && line != kVoxelsCsvHeader10))
     throw InputError(path, std::string("bad header (expected '") + voxels_csv_header() + "')", 1);
-  const int nfields = line == kVoxelsCsvHeader9 ? 9 : 10;
+  const int nfields = line == kVoxelsCsvHeader9 ? 9 : line == kVoxelsCsvHeader10 ? 10 : 13;
   std::vector<CertLeaf> leaves;
   while (std::getline(in, line)) {
     ++lineno;
     if (line.empty()) throw InputError(path, "empty line", lineno);
-    double f[10] = {};
+    double f[13] = {};
     int k = 0;
     size_t start = 0;
     while (true) {
@@ -233,6 +241,14 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
     l.margin = f[7];
     l.certified = f[8] == 1;
     l.sigma3_error = f[9];
+    if (nfields == 13) {
+      // An upper bound is a number or inf, never below 0 or NaN; σ1 at the center is NaN where not evaluated.
+      if (!(f[11] >= 0) || !(f[12] >= 0))
+        throw InputError(path, "sigma1_upper and distortion_upper must be numbers >= 0 or inf", lineno);
+      l.sigma1 = f[10];
+      l.sigma1_upper = f[11];
+      l.distortion_upper = f[12];
+    }
     l.base = -1;  // not stored
     leaves.push_back(l);
   }
@@ -287,6 +303,12 @@ std::string certificate_json(const CertificateReport& r) {
   // The tight-lower-bound stage (bound_tolerance > 0): the tolerance asked for and whether it was reached.
   j["bound_tolerance"] = num(c.bound_tolerance);
   j["bound_tolerance_met"] = c.bound_tolerance > 0 ? ojson(c.bound_tolerance_met) : ojson();
+  // Bounded distortion: over the leaves, the largest upper bound of σ1 and of σ1/σ3 ("inf" when a leaf has
+  // none), and the target asked for (max_distortion, 0: none) with whether it was proven.
+  j["max_sigma1_upper_bound"] = num(c.max_sigma1_upper_bound);
+  j["max_distortion_upper_bound"] = num(c.max_distortion_upper_bound);
+  j["max_distortion"] = num(c.max_distortion);
+  j["distortion_met"] = c.max_distortion > 0 ? ojson(c.distortion_met) : ojson();
   j["mesh_vertices"] = r.mesh_vertices;
   j["mesh_coverage"] = num(r.mesh_coverage);
   j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
@@ -373,6 +395,12 @@ CertificateReport read_certificate_json(const std::string& path) {
   if (root.contains("bound_tolerance")) {  // absent in certificates written before it
     c.bound_tolerance = rd.number(root, "bound_tolerance");
     c.bound_tolerance_met = c.bound_tolerance > 0 && rd.boolean(root, "bound_tolerance_met");
+  }
+  if (root.contains("max_sigma1_upper_bound")) {  // absent in certificates written before the bounds
+    c.max_sigma1_upper_bound = rd.number(root, "max_sigma1_upper_bound");
+    c.max_distortion_upper_bound = rd.number(root, "max_distortion_upper_bound");
+    c.max_distortion = rd.number(root, "max_distortion");
+    c.distortion_met = c.max_distortion > 0 && rd.boolean(root, "distortion_met");
   }
   r.mesh_vertices = rd.integer(root, "mesh_vertices");
   r.mesh_coverage = rd.number(root, "mesh_coverage");

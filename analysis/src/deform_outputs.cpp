@@ -74,6 +74,15 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   sj["certified"] = cert.certified;
   sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
   sj["min_sigma3_sampled"] = cert.min_sigma3_center;
+  // Bounded distortion: the certified upper bounds over the leaves, the sampled maximum over the mesh
+  // vertices, and the target (max_distortion, 0: none).
+  sj["max_sigma1_upper_bound"] = cert.max_sigma1_upper_bound;
+  sj["max_distortion_upper_bound"] = cert.max_distortion_upper_bound;
+  double max_k_vertices = 0;  // NaN (σ3 ≤ 0) never occurs at a certified map's covered vertices
+  for (Eigen::Index i = 0; i < r.distortion.size(); ++i)
+    if (std::isfinite(r.distortion(i))) max_k_vertices = std::max(max_k_vertices, r.distortion(i));
+  sj["max_distortion_vertices"] = max_k_vertices;
+  sj["max_distortion"] = sc.params.max_distortion;
   sj["mesh_coverage"] = report.mesh_coverage;
   sj["domain"] = report.domain;
   sj["max_handle_error"] = r.max_handle_error;
@@ -124,7 +133,11 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
     write_obj(s, r.deformed_vertices, model.mesh.F, "lidef deform " + scenario.name + ": last certified map");
   });
   write_mesh_vtp(out.path("deformed.vtp"), r.deformed_vertices, model.mesh.F,
-                 {{"E_iso_minus_6", r.e_iso}, {"detJ", r.det_j}, {"sigma3", r.sigma3}});
+                 {{"E_iso_minus_6", r.e_iso},
+                  {"detJ", r.det_j},
+                  {"sigma3", r.sigma3},
+                  {"sigma1", r.sigma1},
+                  {"distortion", r.distortion}});
   out.path("certificate.json");
   out.path("voxels.csv");
   write_certificate_files(out.staging_dir(), report);

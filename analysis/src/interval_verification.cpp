@@ -462,6 +462,52 @@ struct IntervalVerifier::Impl {
   }
 };
 
+// ---- Bounded distortion (docs/certificate.md, "Bounded distortion", interval re-proof) ----
+namespace {
+
+// Upper bound of σ1 for every matrix in the enclosure: sqrt(λmax(JᵀJ)) with λmax proven by lambda_max_hi
+// (Sylvester's criterion), else the Frobenius norm.
+double sigma1_upper_bound_i(const IM3& J) {
+  IM3 G = zero_m3();
+  for (int k = 0; k < 3; ++k)
+    for (int l = 0; l < 3; ++l)
+      for (int a = 0; a < 3; ++a) G[k][l] += J[a][k] * J[a][l];
+  std::array<I, 9> entries;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) entries[3 * a + b] = pt(abs_hi(J[a][b]));
+  const double frob = frobenius_hi(entries.begin(), entries.end());
+  const double mu = lambda_max_hi(G);
+  return std::isfinite(mu) ? std::min(frob, hi(isqrt(pt(mu)))) : frob;
+}
+
+// σ1(q) ≤ σ1(J(c)) + ‖J(q) − J(c)‖₂ ≤ sigma1_upper_bound_i(J) + r·L on the ball (Weyl; r·L bounds J's change,
+// L the first, third-order or combined constant), and σ1/σ3 ≤ that / margin_lo where margin_lo > 0.
+void add_distortion_bound_i(IntervalLeaf& res, const IM3& J, double r, double L_jacobian_hi) {
+  const I s1 = pt(sigma1_upper_bound_i(J)) + pt(r) * pt(L_jacobian_hi);
+  res.sigma1_hi = std::isnan(hi(s1)) ? kInf : hi(s1);
+  res.distortion_hi = kInf;
+  if (res.margin_lo > 0 && std::isfinite(res.sigma1_hi)) {
+    const double k = hi(pt(res.sigma1_hi) / pt(res.margin_lo));
+    if (!std::isnan(k)) res.distortion_hi = k;
+  }
+}
+
+// The distortion summary of a re-proof: each checked leaf's interval bounds against voxels.csv's.
+void summarize_distortion_i(IntervalVerification& out, const std::vector<CertLeaf>& leaves) {
+  for (size_t q = 0; q < out.results.size(); ++q) {
+    const IntervalLeaf& r = out.results[q];
+    const CertLeaf& l = leaves[out.leaf_index[q]];
+    const bool ok = (!std::isfinite(l.sigma1_upper) || r.sigma1_hi <= l.sigma1_upper) &&
+                    (!std::isfinite(l.distortion_upper) || r.distortion_hi <= l.distortion_upper);
+    (ok ? out.distortion_proven : out.distortion_not_proven) += 1;
+    out.max_sigma1_hi = std::max(out.max_sigma1_hi, r.sigma1_hi);
+    out.max_distortion_hi = std::max(out.max_distortion_hi, r.distortion_hi);
+  }
+}
+
+}  // namespace
+// ---- end of bounded distortion ----
+
 IntervalVerifier::IntervalVerifier(const Cage& cage, const MatX3d& y, LipschitzBound bound)
     : impl_(std::make_unique<Impl>()) {
   Impl& im = *impl_;
@@ -579,6 +625,7 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double ra
     }
   }
   res.L_hi = std::isnan(hi(L)) ? kInf : hi(L);
+  const double L_jacobian_hi = res.L_hi;  // bounds J's change too (the spectral term below is σ3's only)
   const I margin = pt(res.sigma3_lo) - pt(r) * pt(res.L_hi);
   res.margin_lo = std::isnan(lo(margin)) ? -kInf : lo(margin);
   // Spectral (Step 3c): σ3 ≥ ℓ − ½ r² Σ δ Θ on the ball; where that is the better margin, L_hi is the loss
@@ -592,6 +639,7 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double ra
     }
   }
   res.proven = res.margin_lo > 0;
+  add_distortion_bound_i(res, J, r, L_jacobian_hi);
   return res;
 }
 
@@ -615,6 +663,7 @@ IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d
     (r.proven ? out.proven : out.not_proven) += 1;
     out.worst_slack = std::min(out.worst_slack, r.margin_lo);
   }
+  summarize_distortion_i(out, leaves);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

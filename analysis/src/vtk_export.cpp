@@ -56,6 +56,7 @@ void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leav
   depth->SetNumberOfTuples(n);
   auto side = double_array("side", n), sigma3 = double_array("sigma3", n), L = double_array("L", n),
        margin = double_array("margin", n);
+  auto sigma1_upper = double_array("sigma1_upper", n), distortion_upper = double_array("distortion_upper", n);
   auto status = vtkSmartPointer<vtkUnsignedCharArray>::New();
   status->SetName("status");
   status->SetNumberOfTuples(n);
@@ -76,6 +77,8 @@ void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leav
     sigma3->SetValue(i, l.sigma3);
     L->SetValue(i, l.L);
     margin->SetValue(i, l.margin);
+    sigma1_upper->SetValue(i, l.sigma1_upper);
+    distortion_upper->SetValue(i, l.distortion_upper);
     status->SetValue(i, l.certified ? 1 : 0);
   }
   offsets->SetValue(n, 8 * n);
@@ -90,6 +93,8 @@ void write_leaves_vtu(const std::string& path, const std::vector<CertLeaf>& leav
   cd->AddArray(sigma3);
   cd->AddArray(L);
   cd->AddArray(margin);
+  cd->AddArray(sigma1_upper);
+  cd->AddArray(distortion_upper);
   cd->AddArray(status);
   cd->SetActiveScalars("margin");
   vtkNew<vtkXMLUnstructuredGridWriter> writer;

@@ -29,6 +29,8 @@ DeformResult deform_result(const DeformationSolver& solver, const TriMesh& mesh,
   r.e_iso = std::move(mf.e_iso);
   r.det_j = std::move(mf.det_j);
   r.sigma3 = std::move(mf.sigma3);
+  r.sigma1 = std::move(mf.sigma1);
+  r.distortion = std::move(mf.distortion);
   r.handle_errors = solver.handle_errors();
   r.max_handle_error = r.handle_errors.size() ? r.handle_errors.maxCoeff() : 0.0;
   // handle_tolerance is relative to the model's size (deform_params.h).

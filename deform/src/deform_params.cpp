@@ -89,6 +89,10 @@ std::vector<ParamInfo> make_table() {
       {"bound_tolerance", "certificate", &D::bound_tolerance, 0, 0.99,
        "above 0: refine a certified map until its lower bound of sigma3 is within this fraction of the "
        "smallest sampled sigma3 (0.1 = 10%); never changes the verdict"},
+      {"max_distortion", "certificate", &D::max_distortion, 0, 1e12,
+       "above 0: a bound K on the distortion sigma1/sigma3: a map is certified only when every leaf's upper "
+       "bound of sigma1/sigma3 is <= K (leaves above it are refined); the line search accepts only such maps "
+       "(0 = off; docs/certificate.md, 'Bounded distortion')"},
       // --- Dynamic weighting
       {"dynamic_weighting", "weighting", &D::dynamic_weighting, 0, 0,
        "adapt lambda1 and lambda2 during the solve (Sec. 7.3; kappa1, kappa2 below)"},
@@ -392,6 +396,12 @@ void validate_params(const DeformParams& params, const std::string& where) {
         },
         p.member);
   }
+  // σ1/σ3 ≥ 1 for every matrix: a target below 1 can never be proven.
+  if (params.max_distortion > 0 && params.max_distortion < 1)
+    throw InputError(where,
+                     "parameter \"max_distortion\" must be 0 (off) or >= 1 (sigma1/sigma3 >= 1 "
+                     "always), got " +
+                         format_g(params.max_distortion));
 }
 
 nlohmann::ordered_json params_to_json(const DeformParams& params) {
@@ -437,6 +447,7 @@ CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure
   cp.stop_on_failure = stop_on_failure;
   cp.keep_leaves = keep_leaves;
   cp.bound_tolerance = params.bound_tolerance;
+  cp.max_distortion = params.max_distortion;
   return cp;
 }
 

@@ -4,6 +4,7 @@
 
 #include "lidef/compute_backend.h"
 #include "lidef/errors.h"
+#include "lidef/octree_certifier.h"
 
 namespace lidef {
 
@@ -70,6 +71,9 @@ Certificate Frame::from_normalized(Certificate c) const {
       l.side = length_from_normalized(l.side);
       l.L /= scale;  // a Lipschitz constant of σ3 (dimensionless) per unit length
     }
+  // The distortion stage names its worst leaf in the certifier's frame: name it in the model's.
+  if (c.distortion_failed && !c.failing.empty())
+    c.reason = distortion_reason(c.max_distortion, c.failing.front().center);
   return c;
 }
 

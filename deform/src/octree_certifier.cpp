@@ -13,6 +13,7 @@
 #include "lidef/errors.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/mesh_queries.h"
+#include "lidef/number_format.h"
 #include "lidef/signed_svd.h"
 
 namespace lidef {
@@ -306,6 +307,7 @@ struct OctreeCertifier::Run {
   Certificate cert;
   // Base voxels.
   VecXd scaleJ, scaleH, hnorm, sigma3, T, delta;
+  VecXd sigma1;   // σ1 at the base centers (NaN: not computed, e.g. on a backend's base stage)
   VecXd hop, T1;  // combined: operator-norm bound of H(c) and the first-order Σ δ Γ
   VecXd lb2;      // spectral: taylor_sigma3_lower_bound at the base centers (−∞: none)
   std::vector<Mat3> Jc;
@@ -315,7 +317,7 @@ struct OctreeCertifier::Run {
   std::vector<long> failing_base;
   // Certifying by perturbation: per base voxel 1 when certified from the previous map, and that bound.
   std::vector<char> perturbed;
-  VecXd perturbed_lower;
+  VecXd perturbed_lower, perturbed_upper;
   bool evaluated(long i) const { return perturbed.empty() || !perturbed[i]; }
   // Refinement.
   std::vector<VoxelState> vs;
@@ -377,6 +379,26 @@ struct OctreeCertifier::Run {
   static double tolerance(double sJ, double sH, double s3, double L, double rad, double storage) {
     return kRoundingRel * (sJ + rad * sH + std::abs(s3) + rad * L) + storage * (sJ + rad * sH);
   }
+  // Bounded distortion (docs/certificate.md, "Bounded distortion"). On the leaf's ball σ1(q) ≤ σ1(J̃(c)) +
+  // eps_J + rad·L1 + τ1: σ1 is 1-Lipschitz in the spectral norm (Weyl), |σ1(J(c)) − σ1(J̃(c))| ≤ eps_J, and
+  // rad·L1 bounds ‖J(q) − J(c)‖ over the ball (every bound's L except the spectral one's Taylor term, which
+  // is specific to σ3); τ1 is the allowance τ with σ1 and L1 in place of σ3 and L. The factor 1 + 1e-15
+  // covers the rounding of the four additions (each ≤ u relative, all terms ≥ 0). σ1 NaN (not computed):
+  // no bound (+∞).
+  static void set_distortion(CertLeaf& l, double s1, double eps_J, double L1, double rad, double sJ,
+                             double sH, double storage) {
+    l.sigma1 = s1;
+    const double up = (s1 + eps_J + rad * L1 + tolerance(sJ, sH, s1, L1, rad, storage)) * (1 + 1e-15);
+    l.sigma1_upper = std::isfinite(up) && s1 >= 0 ? up : kInf;
+    l.distortion_upper = distortion_of(l.sigma1_upper, l.margin);
+  }
+  // An upper bound of σ1/σ3 from an upper bound of σ1 and a positive lower bound of σ3 (the quotient rounded
+  // up by 1e-15 relative); +∞ without a positive lower bound.
+  static double distortion_of(double upper, double lower) {
+    if (!(lower > 0) || !(upper >= 0)) return kInf;
+    const double k = upper / lower * (1 + 1e-15);
+    return std::isfinite(k) ? k : kInf;
+  }
 
   // --- 0. Certifying by perturbation (Step 4e): base voxels whose bound at the previous certified map ỹ₀
   // exceeds Γ_i ‖ỹ − ỹ₀‖_F are certified without evaluation. Reduced mode on the CPU only.
@@ -399,6 +421,9 @@ struct OctreeCertifier::Run {
     const double t = p.direction_step, kDir = 0x1p-30 * t * p.direction_scale + 0x1p-23 * dn;
     perturbed.assign(N, 0);
     perturbed_lower.setConstant(N, -kInf);
+    perturbed_upper.setConstant(N, kInf);
+    const std::vector<double>* upper =
+        p.previous_upper && static_cast<long>(p.previous_upper->size()) == N ? p.previous_upper : nullptr;
     for (long i = 0; i < N; ++i) {
       double center = pc.g2(i) * dn;
       if (D) {
@@ -408,10 +433,15 @@ struct OctreeCertifier::Run {
       }
       // The factor 1 + 1e-9 covers the rounding of dn, Γ_i, ‖D_i‖ and these products (each ≤ ~1e-13
       // relative).
-      const double lb = lower[i] - (center + pc.rest(i) * dn) * (1 + 1e-9);
-      if (im.clear[i] && lb > 0 && lb > p.perturbation_floor) {
+      const double change = (center + pc.rest(i) * dn) * (1 + 1e-9);
+      const double lb = lower[i] - change;
+      // σ1 moves by at most the same ‖ΔJ‖₂ (Weyl), so σ1 ≤ base_upper + change on the voxel.
+      const double ub = upper ? (*upper)[i] + change : kInf;
+      const bool distortion_ok = !(p.max_distortion > 0) || distortion_of(ub, lb) <= p.max_distortion;
+      if (im.clear[i] && lb > 0 && lb > p.perturbation_floor && distortion_ok) {
         perturbed[i] = 1;
         perturbed_lower(i) = lb;
+        perturbed_upper(i) = ub;
       }
     }
   }
@@ -616,6 +646,7 @@ struct OctreeCertifier::Run {
   void base_sigma3() {
     const auto t0 = Clock::now();
     sigma3.resize(N);
+    sigma1.setConstant(N, std::numeric_limits<double>::quiet_NaN());
     sign_unresolved.assign(N, 0);
     if (device_Y.empty()) {
 #pragma omp parallel for schedule(static)
@@ -625,7 +656,9 @@ struct OctreeCertifier::Run {
           continue;
         }
         bool resolved = true;
-        sigma3(i) = signed_singular_values(Jc[i], &resolved)(2);
+        const Vec3 sv = signed_singular_values(Jc[i], &resolved);
+        sigma3(i) = sv(2);
+        sigma1(i) = sv(0);
         sign_unresolved[i] = !resolved;
       }
     }
@@ -679,6 +712,8 @@ struct OctreeCertifier::Run {
                    true,
                    static_cast<int>(i),
                    false};
+        base[i].sigma1_upper = perturbed_upper(i);
+        base[i].distortion_upper = distortion_of(perturbed_upper(i), perturbed_lower(i));
         continue;
       }
       const double r = oc.sampling_.radius_of(static_cast<int>(i));
@@ -699,6 +734,9 @@ struct OctreeCertifier::Run {
                  // σ3 from the float-stored derivatives: within the storage allowance of the exact one
                  // (Step 5), which the margin already subtracts; reported like the far field's eps_J.
                  base_storage * scaleJ(i)};
+      // J's Lipschitz constant: L without the spectral bound's σ3-specific Taylor term (hop(i) is ‖H‖_op).
+      const double L1 = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
+      set_distortion(base[i], sigma1(i), 0.0, L1, r, scaleJ(i), scaleH(i), base_storage);
       if (!(margin > 0)) failing_base.push_back(i);
     }
     cert.ms_bound = ms_since(t0) - device_ms;
@@ -901,8 +939,11 @@ struct OctreeCertifier::Run {
       double lb = -kInf;
       eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H, &v.hnorm_op, rad, &lb);
       bool resolved = true;
-      v.sigma3 = signed_singular_values(J, &resolved)(2);
+      const Vec3 sv = signed_singular_values(J, &resolved);
+      v.sigma3 = sv(2);
+      v.sigma1 = sv(0);
       v.sign_unresolved = !resolved;
+      v.hnorm_op_j = v.hnorm_op;
       v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, lb, rad);
       double own = 0;
       for (long e = 0; e < E; ++e)
@@ -930,10 +971,13 @@ struct OctreeCertifier::Run {
     v.scale_J = ev.scale_J;
     v.scale_H = ev.scale_H;
     bool resolved = true;
-    v.sigma3 = signed_singular_values(ev.J, &resolved)(2);
+    const Vec3 sv = signed_singular_values(ev.J, &resolved);
+    v.sigma3 = sv(2);
+    v.sigma1 = sv(0);
     v.sign_unresolved = !resolved;
     if (third) v.hnorm = std::sqrt(ev.H[0].squaredNorm() + ev.H[1].squaredNorm() + ev.H[2].squaredNorm());
     if (combined) v.hnorm_op = hessian_operator_norm(ev.H);
+    v.hnorm_op_j = v.hnorm_op;
     if (spectral)
       v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, taylor_sigma3_lower_bound(ev.J, ev.H, rad), rad);
     v.own_bound = third ? ev.T_third : ev.T_first;
@@ -1072,7 +1116,9 @@ struct OctreeCertifier::Run {
       jet.H[a] = ev.H[a] + ff.H[a];
     }
     bool resolved = true;
-    v.sigma3 = signed_singular_values(jet.J, &resolved)(2);
+    const Vec3 sv = signed_singular_values(jet.J, &resolved);
+    v.sigma3 = sv(2);
+    v.sigma1 = sv(0);
     v.sign_unresolved = !resolved;
     v.hnorm = std::sqrt(jet.H[0].squaredNorm() + jet.H[1].squaredNorm() + jet.H[2].squaredNorm());
     v.eps_J = ff.eps_J + dn * ff.eps_H + 0.5 * dn * dn * ff.T;
@@ -1224,10 +1270,13 @@ struct OctreeCertifier::Run {
       const double margin = node_margin(v, v.eps_J, L, rad);
       const int bi = static_cast<int>(failing_base[fi]);
       const int leaf_depth = level(bi) + depth;
+      const double L1 = lipschitz(v.hnorm + v.eps_H, v.hnorm_op_j, bnd1, bnd, rad);
       if (margin > 0) {
         tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, true, bi, v.sign_unresolved, v.eps_J};
+        set_distortion(tree[id].leaf, v.sigma1, v.eps_J, L1, rad, v.scale_J, v.scale_H, 0.0);
       } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
         tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, false, bi, v.sign_unresolved, v.eps_J};
+        set_distortion(tree[id].leaf, v.sigma1, v.eps_J, L1, rad, v.scale_J, v.scale_H, 0.0);
         st.ok = false;
         if (v.sigma3 <= 0 || depth >= p.max_depth) st.failed_here = true;
         // σ3 ≤ 0 (or a sign not resolved, σ3 = 0) at a center settles this voxel: refining its other nodes
@@ -1267,9 +1316,17 @@ struct OctreeCertifier::Run {
     cert.min_lower_bound = kInf;
     long leaves = 0;
     cert.base_lower.assign(N, kInf);
+    cert.base_upper.assign(N, 0.0);
+    cert.max_sigma1_upper_bound = 0;
+    cert.max_distortion_upper_bound = 0;
     auto emit = [&](const CertLeaf& l) {
       ++leaves;
-      if (l.base >= 0 && l.base < N) cert.base_lower[l.base] = std::min(cert.base_lower[l.base], l.margin);
+      if (l.base >= 0 && l.base < N) {
+        cert.base_lower[l.base] = std::min(cert.base_lower[l.base], l.margin);
+        cert.base_upper[l.base] = std::max(cert.base_upper[l.base], l.sigma1_upper);
+      }
+      cert.max_sigma1_upper_bound = std::max(cert.max_sigma1_upper_bound, l.sigma1_upper);
+      cert.max_distortion_upper_bound = std::max(cert.max_distortion_upper_bound, l.distortion_upper);
       cert.min_margin = std::min(cert.min_margin, l.margin);
       // σ3 − r L − τ: the rounding allowance τ belongs to the bound (σ3 and L are computed in floating
       // point), so this is a lower bound of the true σ3 on the leaf; a leaf left unevaluated counts as −∞.
@@ -1282,7 +1339,8 @@ struct OctreeCertifier::Run {
           resolved_nonpositive = true;
         if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
       }
-      if (p.keep_leaves || p.bound_tolerance > 0) cert.leaves.push_back(l);  // tighten() needs them
+      // tighten() and enforce_distortion() need them
+      if (p.keep_leaves || p.bound_tolerance > 0 || p.max_distortion > 0) cert.leaves.push_back(l);
     };
     std::vector<int> stack;
     size_t fi = 0;
@@ -1316,7 +1374,10 @@ struct OctreeCertifier::Run {
     }
     cert.certified = all_ok;
     cert.num_leaves = leaves;
-    if (!cert.certified) cert.base_lower.clear();
+    if (!cert.certified) {
+      cert.base_lower.clear();
+      cert.base_upper.clear();
+    }
     cert.perturbed_voxels = perturbed.empty() ? 0 : std::count(perturbed.begin(), perturbed.end(), 1);
     for (size_t k = 0; k < vs.size() && cert.failed_voxels.size() < 64; ++k)
       if (vs[k].failed_here) cert.failed_voxels.push_back(failing_base[k]);
@@ -1332,10 +1393,7 @@ struct OctreeCertifier::Run {
   // children's σ3 are sampled values of σ3 and lower min_sigma3_center with them.
   void tighten(Certificate& c) {
     c.bound_tolerance = p.bound_tolerance;
-    if (p.bound_tolerance <= 0 || !c.certified) {
-      if (!p.keep_leaves) c.leaves.clear();
-      return;
-    }
+    if (p.bound_tolerance <= 0 || !c.certified) return;
     const auto t0 = Clock::now();
     std::vector<char> settled(c.leaves.size(), 0);
     std::vector<int> batch;
@@ -1374,13 +1432,9 @@ struct OctreeCertifier::Run {
         CertLeaf kids[8];
         double worst = kInf;
         for (int k = 0; k < 8; ++k) {
-          const Node& nd = tree[8 * si + k];
+          kids[k] = child_leaf(tree[8 * si + k], vals[8 * si + k], l.base);
           const NodeValues& v = vals[8 * si + k];
-          const double rad = 0.5 * std::sqrt(3.0) * nd.side;
-          const double L =
-              lipschitz(v.hnorm, v.hnorm_op, combined ? v.own_first : v.own_bound, v.own_bound, rad);
-          const double margin = node_margin(v, 0.0, L, rad);
-          kids[k] = {nd.c, nd.side, nd.depth, v.sigma3, L, margin, margin > 0, l.base, v.sign_unresolved};
+          const double margin = kids[k].margin;
           worst = std::min(worst, margin);
           c.min_sigma3_center = std::min(c.min_sigma3_center, v.sigma3);
         }
@@ -1399,16 +1453,138 @@ struct OctreeCertifier::Run {
       c.leaves.swap(next);
       settled.swap(next_settled);
     }
+    summarize_leaves(c);
+    c.num_leaves = static_cast<long>(c.leaves.size());
+    c.bound_tolerance_met = c.min_lower_bound >= (1 - p.bound_tolerance) * c.min_sigma3_center;
+    c.ms_refine += ms_since(t0);
+  }
+  // A leaf from a node evaluated exactly with its own bound only (the tightening and distortion stages).
+  CertLeaf child_leaf(const Node& nd, const NodeValues& v, int base_index) const {
+    const double rad = 0.5 * std::sqrt(3.0) * nd.side;
+    const double L = lipschitz(v.hnorm, v.hnorm_op, combined ? v.own_first : v.own_bound, v.own_bound, rad);
+    const double margin = node_margin(v, 0.0, L, rad);
+    CertLeaf leaf{nd.c, nd.side, nd.depth, v.sigma3, L, margin, margin > 0, base_index, v.sign_unresolved};
+    const double L1 =
+        lipschitz(v.hnorm, v.hnorm_op_j, combined ? v.own_first : v.own_bound, v.own_bound, rad);
+    set_distortion(leaf, v.sigma1, 0.0, L1, rad, v.scale_J, v.scale_H, 0.0);
+    return leaf;
+  }
+
+  // --- 7. Bounded distortion (CertifyParams::max_distortion; docs/certificate.md, "Bounded distortion"),
+  // only once the map is certified. Each round splits the leaves whose bound of K = σ1/σ3 exceeds the target
+  // into 8 children evaluated like the tightening stage's. A leaf is replaced by its children only when all
+  // are certified and their largest K bound is below the leaf's (both are valid bounds on the same voxel);
+  // the leaves still tile the base voxels. A bound still above the target when depth or budget runs out
+  // makes the map not certified, naming the leaf.
+  void enforce_distortion(Certificate& c) {
+    c.max_distortion = p.max_distortion;
+    c.distortion_met = false;
+    if (!(p.max_distortion > 0) || !c.certified) return;
+    const double K = p.max_distortion;
+    const auto t0 = Clock::now();
+    std::vector<char> settled(c.leaves.size(), 0);
+    std::vector<int> batch;
+    std::vector<NodeValues> vals;
+    for (bool hopeless = false; !hopeless;) {
+      std::vector<size_t> split;
+      for (size_t i = 0; i < c.leaves.size() && !hopeless; ++i) {
+        const CertLeaf& l = c.leaves[i];
+        if (l.distortion_upper <= K) continue;
+        if (!settled[i] && l.depth - level(l.base) < p.max_depth &&
+            budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
+          split.push_back(i);
+        else
+          hopeless = p.stop_on_failure;  // a line search trial fails here whatever the others give: stop
+      }
+      if (split.empty() || hopeless) break;
+      tree.clear();
+      batch.clear();
+      for (size_t i : split) {
+        const CertLeaf& l = c.leaves[i];
+        for (int k = 0; k < 8; ++k) {
+          const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
+          batch.push_back(static_cast<int>(tree.size()));
+          tree.push_back({l.center + l.side * off, l.side / 2, l.depth + 1, kInf, kInf, 0, -1, {}});
+        }
+      }
+      budget_used += static_cast<long>(batch.size());
+      evaluate_batch(batch, vals);
+      std::vector<CertLeaf> next;
+      std::vector<char> next_settled;
+      next.reserve(c.leaves.size() + 7 * split.size());
+      size_t si = 0;
+      for (size_t i = 0; i < c.leaves.size(); ++i) {
+        const CertLeaf& l = c.leaves[i];
+        if (si >= split.size() || split[si] != i) {
+          next.push_back(l);
+          next_settled.push_back(settled[i]);
+          continue;
+        }
+        CertLeaf kids[8];
+        double worst = 0;
+        bool all_certified = true;
+        for (int k = 0; k < 8; ++k) {
+          kids[k] = child_leaf(tree[8 * si + k], vals[8 * si + k], l.base);
+          worst = std::max(worst, kids[k].distortion_upper);
+          all_certified = all_certified && kids[k].certified;
+          c.min_sigma3_center = std::min(c.min_sigma3_center, kids[k].sigma3);
+        }
+        ++si;
+        if (all_certified && worst < l.distortion_upper) {
+          ++c.refined;
+          for (const CertLeaf& kid : kids) {
+            next.push_back(kid);
+            next_settled.push_back(0);
+          }
+        } else {
+          next.push_back(l);
+          next_settled.push_back(1);
+        }
+      }
+      c.leaves.swap(next);
+      settled.swap(next_settled);
+    }
+    c.num_leaves = static_cast<long>(c.leaves.size());
+    summarize_leaves(c);
+    c.distortion_met = c.max_distortion_upper_bound <= K;
+    if (!c.distortion_met) {
+      for (const CertLeaf& l : c.leaves)
+        if (!(l.distortion_upper <= K)) {
+          c.failing.push_back(l);
+          if (static_cast<long>(c.failed_voxels.size()) < 64) c.failed_voxels.push_back(l.base);
+          if (static_cast<int>(c.failing.size()) >= p.max_failing_reported) break;
+        }
+      std::sort(c.failed_voxels.begin(), c.failed_voxels.end());
+      c.failed_voxels.erase(std::unique(c.failed_voxels.begin(), c.failed_voxels.end()),
+                            c.failed_voxels.end());
+      c.certified = false;
+      c.distortion_failed = true;
+      c.reason = distortion_reason(K, c.failing.front().center);
+      c.base_lower.clear();
+      c.base_upper.clear();
+    }
+    c.ms_refine += ms_since(t0);
+  }
+  // The per-leaf summaries (bounds, per base voxel bounds, depth) from the leaves after a stage changed them.
+  void summarize_leaves(Certificate& c) const {
     c.min_margin = kInf;
+    c.max_sigma1_upper_bound = 0;
+    c.max_distortion_upper_bound = 0;
+    if (c.certified) {
+      c.base_lower.assign(N, kInf);
+      c.base_upper.assign(N, 0.0);
+    }
     for (const CertLeaf& l : c.leaves) {
       c.min_margin = std::min(c.min_margin, l.margin);
       c.max_depth_used = std::max(c.max_depth_used, l.depth);
+      c.max_sigma1_upper_bound = std::max(c.max_sigma1_upper_bound, l.sigma1_upper);
+      c.max_distortion_upper_bound = std::max(c.max_distortion_upper_bound, l.distortion_upper);
+      if (c.certified && l.base >= 0 && l.base < N) {
+        c.base_lower[l.base] = std::min(c.base_lower[l.base], l.margin);
+        c.base_upper[l.base] = std::max(c.base_upper[l.base], l.sigma1_upper);
+      }
     }
     c.min_lower_bound = c.min_margin;
-    c.num_leaves = static_cast<long>(c.leaves.size());
-    c.bound_tolerance_met = c.min_lower_bound >= (1 - p.bound_tolerance) * c.min_sigma3_center;
-    if (!p.keep_leaves) c.leaves.clear();
-    c.ms_refine += ms_since(t0);
   }
 
   // A resolved σ3 ≤ 0 at an evaluated center (every such center is a leaf): the map folds there.
@@ -1450,6 +1626,8 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   run.refine();
   Certificate cert = run.assemble();
   run.tighten(cert);
+  run.enforce_distortion(cert);
+  if (!p.keep_leaves) cert.leaves.clear();  // kept only for the stages above
   cert.ms_total = ms_since(t_start);
   return cert;
 }
@@ -1466,6 +1644,11 @@ const char* to_string(RefinementEval r) {
       return "far-field";
   }
   return "batched";
+}
+
+std::string distortion_reason(double max_distortion, const Vec3& where) {
+  return "distortion bound " + format_g(max_distortion) + " not proven at (" + format_g(where.x()) + ", " +
+         format_g(where.y()) + ", " + format_g(where.z()) + ")";
 }
 
 Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y,

@@ -166,6 +166,7 @@ struct DeformationSolver::Precompute {
     S.certifier_ = std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, 1.5e9,
                                                      [this](double f) { tick(f); });
     S.perturb_lower_.clear();  // bounds of another certifier's voxels
+    S.perturb_upper_.clear();
     say("certificate precomputation (basis gradients and Hessians at the samples): " +
         format_g(ms_since(t0), 4) + " ms");
   }
@@ -215,6 +216,7 @@ struct DeformationSolver::Precompute {
           std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, std::move(d));
       if (third.size() > 0) S.certifier_->adopt_third_factors(std::move(third), std::move(third_finite));
       S.perturb_lower_.clear();  // bounds of another certifier's voxels
+      S.perturb_upper_.clear();
     } catch (const CacheReader::Bad&) {
       return rejected(k, "malformed payload");
     } catch (const Error& e) {
@@ -348,6 +350,12 @@ DeformationSolver::~DeformationSolver() {
 
 SamplingParams DeformationSolver::sampling_params() const {
   return sampling_params_of(params_);
+}
+
+std::string DeformationSolver::distortion_note() const {
+  if (distortion_rejection_.empty()) return "";
+  return "; the distortion bound blocks it (max_distortion " + format_g(params_.max_distortion) +
+         ", last rejected trial: " + distortion_rejection_ + ")";
 }
 
 CertifyParams DeformationSolver::certify_params(bool stop_on_failure, bool keep_leaves) const {
@@ -546,6 +554,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     rec.lambda_p2p = weights_.p2p;
     rec.lambda_smooth = weights_.smooth;
     rec.armijo_rejections = rec.certificate_rejections = 0;
+    distortion_rejection_.clear();
 
     auto t0 = Clock::now();
     const EnergyTerms e0 = energy_->terms(kernels_->distortion_sum(0), y_, weights_);
@@ -632,6 +641,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
         cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
         cp.previous_lower = &perturb_lower_;
+        cp.previous_upper = &perturb_upper_;
         cp.perturbation_floor = params_.epsilon;  // condition (36) then decides as without them
         if (const MatJT* dJ = kernels_->direction_jacobians()) {  // the center term from G d (Step 4e)
           cp.direction = &delta;
@@ -641,7 +651,11 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
         }
       }
       Certificate c = certifier_->certify_reduced(yt, cp);
-      if (!c.certified) line_search_failed_ = c.failed_voxels;
+      if (!c.certified) {
+        line_search_failed_ = c.failed_voxels;
+        // The last rejection by the distortion bound, named in the model's frame (the stop message says it).
+        distortion_rejection_ = c.distortion_failed ? frame_.from_normalized(Certificate(c)).reason : "";
+      }
       rec.ms_certificate += ms_since(tc);
       if (trace)
         std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms\n", t,
@@ -663,6 +677,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       kernels_->accept(t);
       perturb_y_ = yt;
       perturb_lower_ = c.base_lower;
+      perturb_upper_ = c.base_upper;
       cert_ = frame_.from_normalized(std::move(c));
       break;
     }
@@ -826,7 +841,8 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
         res.reason = StopReason::kNoCertifiedStep;
         res.message = "no certified step of decreasing energy in " + std::to_string(params_.max_halvings) +
                       " halvings (" + std::to_string(rec.armijo_rejections) + " energy, " +
-                      std::to_string(rec.certificate_rejections) + " certificate rejections)";
+                      std::to_string(rec.certificate_rejections) + " certificate rejections)" +
+                      distortion_note();
         done = true;
       }
     } else {
@@ -838,7 +854,7 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
       if ((small_step || small_decrease) && rec.certificate_rejections > 0) {
         res.reason = StopReason::kBlocked;
         res.message = "the certificate limits the step to " + format_g(rec.step, 4) +
-                      ": the map is at the boundary of the certified region";
+                      ": the map is at the boundary of the certified region" + distortion_note();
         done = true;
       } else if (small_step || small_decrease) {
         const bool changed = weights_.p2p != params_.lambda_p2p || weights_.smooth != params_.lambda_smooth;

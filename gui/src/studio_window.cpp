@@ -1237,7 +1237,11 @@ bool StudioWindow::export_current(const std::string& dir) {
     const MeshFields mf =
         mesh_fields(HarmonicBasis(f->model->cage), f->coefficients, f->model->mesh.V, {true});
     write_mesh_vtp((d / "deformed.vtp").string(), mf.V, f->model->mesh.F,
-                   {{"E_iso_minus_6", mf.e_iso}, {"detJ", mf.det_j}, {"sigma3", mf.sigma3}});
+                   {{"E_iso_minus_6", mf.e_iso},
+                    {"detJ", mf.det_j},
+                    {"sigma3", mf.sigma3},
+                    {"sigma1", mf.sigma1},
+                    {"distortion", mf.distortion}});
     std::string also;
     if (f->leaves && f->leaves_version == f->map_version && f->leaves_sampling) {
       // certificate.json and voxels.csv as lidef deform writes them for its map (certificate_report.h): the

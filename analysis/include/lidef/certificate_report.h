@@ -62,12 +62,13 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
                                           const SamplingParams& sampling_params,
                                           const VoxelSampling& sampling, const CertifyParams& params);
 
-// voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error`, one row per leaf in leaf
-// order (base-voxel order, children depth-first), certified = 1/0.
+// voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,
+// distortion_upper`, one row per leaf in leaf order (base-voxel order, children depth-first), certified =
+// 1/0.
 const char* voxels_csv_header();
 std::string voxels_csv(const std::vector<CertLeaf>& leaves);
-// Parses voxels.csv (strictly: header, 10 fields per row — or 9 under the header written before
-// sigma3_error —, numbers). Throws InputError(path, message, line).
+// Parses voxels.csv (strictly: header, 13 fields per row — or 9 / 10 under the headers written before
+// sigma3_error / the distortion columns —, numbers). Throws InputError(path, message, line).
 std::vector<CertLeaf> read_voxels_csv(const std::string& path);
 
 // certificate.json text (2-space indented, keys in a fixed order, trailing newline). Sets nothing in `r`:

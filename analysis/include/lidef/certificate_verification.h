@@ -16,6 +16,11 @@ struct VoxelVerification {
   double L;                 // the certificate's Lipschitz constant
   double tightness;         // max_quotient / L (≤ 1 when the bound holds)
   long violations;          // samples with σ3(p) < σ3(c) − |p−c| L (the bound is wrong there)
+  // Bounded distortion: the largest sampled σ1 and σ1/σ3 (the latter over samples with σ3 > 0), and the
+  // samples above the leaf's sigma1_upper or distortion_upper (the bounds are wrong there).
+  double max_sigma1 = 0;
+  double max_distortion = 0;
+  long distortion_violations = 0;
 };
 
 struct BoundViolation {
@@ -30,12 +35,18 @@ struct VerificationResult {
   double min_sigma3 = 0;        // over all samples of certified leaves
   long nonpositive_in_certified = 0;  // samples with σ3 ≤ 0 inside leaves marked certified (must be 0)
   long violations = 0;          // bound violations over all leaves
+  // Over the samples of certified leaves: the largest σ1 and σ1/σ3; and over all leaves the samples above
+  // their leaf's σ1 or σ1/σ3 upper bound (must be 0).
+  double max_sigma1 = 0;
+  double max_distortion = 0;
+  long distortion_violations = 0;
   std::vector<VoxelVerification> voxels;  // one per leaf, in leaf order
   std::vector<BoundViolation> violation_list;  // the first violations (at most 100)
 };
 
 // Samples every leaf: its 8 corners, its center and `samples_per_voxel` uniform random points (seeded by
-// `seed` and the leaf index, so the result does not depend on the thread count). σ3 from the exact basis.
+// `seed` and the leaf index, so the result does not depend on the thread count). σ3 and σ1 from the exact
+// basis; σ1 and σ1/σ3 are checked against each leaf's sigma1_upper and distortion_upper.
 VerificationResult verify_certificate(const HarmonicBasis& basis, const MatX3d& y, const std::vector<CertLeaf>& leaves,
                                       int samples_per_voxel, unsigned seed = 1);
 

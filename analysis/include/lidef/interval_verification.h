@@ -17,6 +17,7 @@
 // the certified domain at all is proven separately by prove_leaf_coverage; `lidef verify --interval` runs both.
 #pragma once
 #include <array>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -45,6 +46,10 @@ struct IntervalLeaf {
   double L_hi = 0;       // rigorous upper bound of the certificate's Lipschitz constant on the ball
   double radius_hi = 0;  // radius of the ball that was proven (covers the leaf and the decimal round trip)
   double margin_lo = 0;  // lower bound of σ3(c) − r L: > 0 proves σ3 > 0 on the whole ball
+  // Bounded distortion (add_distortion_bound_i): upper bounds of σ1 and of σ1/σ3 on the whole ball (+∞ for
+  // the latter when margin_lo ≤ 0).
+  double sigma1_hi = std::numeric_limits<double>::infinity();
+  double distortion_hi = std::numeric_limits<double>::infinity();
 };
 
 // A rigorous lower bound of the signed σ3 of every matrix J with lo ≤ J ≤ hi (entrywise). −∞ when no bound
@@ -78,6 +83,10 @@ struct IntervalVerification {
   std::vector<IntervalLeaf> results;  // one per entry of leaf_index
   long proven = 0, not_proven = 0;
   double worst_slack = 0;  // min margin_lo over the checked leaves (+∞ when there is none)
+  // Bounded distortion: a checked leaf's bounds are proven when sigma1_hi ≤ its sigma1_upper and
+  // distortion_hi ≤ its distortion_upper (a bound of +∞ in voxels.csv claims nothing and is proven).
+  long distortion_proven = 0, distortion_not_proven = 0;
+  double max_sigma1_hi = 0, max_distortion_hi = 0;  // over the checked leaves
   double seconds = 0;
 };
 

@@ -9,6 +9,7 @@
 #pragma once
 #include <array>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -75,6 +76,10 @@ struct NodeValues {
   // Far-field refinement (CPU): sigma3 and hnorm are those of an approximate J̃ and H̃ with |J − J̃|₂ ≤ eps_J
   // and ‖H − H̃‖_F ≤ eps_H at the center (docs/certificate.md, Step 4d); 0 for an exact evaluation.
   double eps_J = 0, eps_H = 0;
+  // Bounded distortion (CPU): σ1 at the center (NaN: not computed, no σ1 bound) and, for the spectral bound,
+  // the operator-norm bound of H(c) before the σ3-specific Taylor term replaced it (a bound on J's change).
+  double sigma1 = std::numeric_limits<double>::quiet_NaN();
+  double hnorm_op_j = 0;
 };
 
 class CertifierKernels {

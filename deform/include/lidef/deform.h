@@ -50,6 +50,7 @@ struct DeformResult {
   Certificate certificate;     // of `coefficients`, with leaves (certified: always, see deform())
   MatX3d deformed_vertices;    // #Vm by 3: the mesh's vertices mapped
   VecXd e_iso, det_j, sigma3;  // #Vm each: E_iso − 6 (NaN where det J ≤ 0), det J, σ3 at the mesh vertices
+  VecXd sigma1, distortion;    // #Vm each: σ1 and σ1/σ3 (NaN where σ3 ≤ 0) at the mesh vertices
   VecXd handle_errors;         // #h: |f(source) − target|
   double max_handle_error = 0;
   double handle_tolerance = 0;   // params.handle_tolerance in model units (of the model's size)

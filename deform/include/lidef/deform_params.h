@@ -67,6 +67,8 @@ struct DeformParams {
                                          // rejected (sound: "not certified") and the step halved
   double bound_tolerance = 0;  // > 0: refine a certified map's leaves until the lower bound of σ3 is within
                                // this fraction of the smallest sampled σ3 (CertifyParams::bound_tolerance)
+  double max_distortion =
+      0;  // > 0: certified maps have σ1/σ3 ≤ this on every leaf (CertifyParams::max_distortion)
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
   bool dynamic_weighting = true;
   double e0 = 1e-4;                // E_P2P threshold, relative to the squared cage bounding-box diagonal

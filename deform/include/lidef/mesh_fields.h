@@ -1,6 +1,6 @@
 // Per-vertex fields of a map at the vertices of a mesh: deformed positions, E_iso − 6, det J and (optionally)
-// the smallest signed singular value σ3. The one computation behind `lidef deform`'s deformed.vtp, the
-// comparison driver's per-method fields and the studio's frames.
+// the smallest signed singular value σ3, the largest σ1 and the distortion σ1/σ3. The one computation behind
+// `lidef deform`'s deformed.vtp, the comparison driver's per-method fields and the studio's frames.
 #pragma once
 #include "lidef/green_coordinates.h"
 #include "lidef/types.h"
@@ -13,10 +13,12 @@ struct MeshFields {
                  //     is not finite), so that means over a mesh stay finite and a count of NaN says the rest
   VecXd det_j;   // #V: det J, the local volume ratio
   VecXd sigma3;  // #V: smallest signed singular value of J; empty unless MeshFieldOptions::sigma3
+  VecXd sigma1;  // #V: largest singular value of J (with sigma3)
+  VecXd distortion;  // #V: σ1/σ3, NaN where σ3 ≤ 0 (with sigma3)
 };
 
 struct MeshFieldOptions {
-  bool sigma3 = false;  // also σ3 (a signed SVD per vertex)
+  bool sigma3 = false;  // also σ3, σ1 and σ1/σ3 (a signed SVD per vertex)
 };
 
 // Fields from given positions and Jacobians.

@@ -13,6 +13,7 @@
 // precision (signed_svd.h) means NOT certified.
 #pragma once
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -71,6 +72,16 @@ struct CertifyParams {
   const Eigen::Matrix<double, Eigen::Dynamic, 3>* direction_jacobians = nullptr;
   double direction_step = 0;
   double direction_scale = 0;
+  // Bounded distortion (docs/certificate.md, "Bounded distortion"): above 0, a certified map must also have
+  // every leaf's upper bound of K = σ1/σ3 at most this; leaves above it are split (depth and
+  // max_refined_voxels permitting) and a bound still above it makes the map not certified ("distortion bound
+  // K not proven at
+  // ..."). 0: off (the bounds are still computed and reported).
+  double max_distortion = 0;
+  // With previous_y/previous_lower: that certificate's Certificate::base_upper (per base voxel an upper bound
+  // of σ1). A voxel taken over gets σ1 ≤ base_upper[i] + Γ_i ‖ỹ − ỹ₀‖_F; without it a taken-over voxel has no
+  // finite σ1 bound, and with max_distortion > 0 no voxel is taken over.
+  const std::vector<double>* previous_upper = nullptr;
 };
 
 // One leaf of the certification octree.
@@ -87,6 +98,12 @@ struct CertLeaf {
   // |sigma3 − the true σ3 at the center| ≤ sigma3_error: 0 where J was evaluated exactly, the far-field
   // remainder where it was not (RefinementEval::kFarField; margin already subtracts it).
   double sigma3_error = 0;
+  // Bounded distortion: σ1 at the center (NaN where not evaluated), an upper bound of σ1 on the leaf
+  // (σ1(c) + sigma3_error + r·L1 + τ1, L1 a Lipschitz constant of J in the spectral norm; +∞ when none) and
+  // of K = σ1/σ3 on the leaf (sigma1_upper / margin when margin > 0, else +∞).
+  double sigma1 = std::numeric_limits<double>::quiet_NaN();
+  double sigma1_upper = std::numeric_limits<double>::infinity();
+  double distortion_upper = std::numeric_limits<double>::infinity();
 };
 
 struct Certificate {
@@ -122,6 +139,18 @@ struct Certificate {
   // When certified: per base voxel the smallest lower bound of σ3 over its leaves
   // (CertifyParams::previous_lower of a later certificate); empty otherwise.
   std::vector<double> base_lower;
+  // When certified: per base voxel the largest upper bound of σ1 over its leaves
+  // (CertifyParams::previous_upper).
+  std::vector<double> base_upper;
+  // Over the leaves: the largest upper bound of σ1 and of K = σ1/σ3 (+∞ when a leaf has none, e.g. one not
+  // certified). The distortion target asked for (CertifyParams::max_distortion, 0: none) and whether every
+  // leaf's bound reached it.
+  double max_sigma1_upper_bound = std::numeric_limits<double>::infinity();
+  double max_distortion_upper_bound = std::numeric_limits<double>::infinity();
+  double max_distortion = 0;
+  bool distortion_met = false;
+  // σ3 > 0 was proven but the distortion target was not: the reason is distortion_reason(...).
+  bool distortion_failed = false;
   long perturbed_voxels = 0;  // base voxels certified by perturbation (σ3 and L not evaluated: NaN)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
@@ -210,6 +239,10 @@ class OctreeCertifier {
   std::unique_ptr<Impl> impl_;
   double precompute_seconds_ = 0;
 };
+
+// The reason of a certificate whose distortion bound K (CertifyParams::max_distortion) was not proven on the
+// leaf centered at `where`: "distortion bound K not proven at (x, y, z)".
+std::string distortion_reason(double max_distortion, const Vec3& where);
 
 // One-shot convenience: precompute and certify once.
 Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y,

@@ -207,6 +207,9 @@ class DeformationSolver {
   MatX3d coefficients() const;  // #V+#F by 3, model units
   // Of the current map (keep_leaves = false), model units (leaf centers, sides, L).
   const Certificate& certificate() const { return cert_; }
+  // The reason of the last line-search trial of the last iteration that the distortion bound
+  // (max_distortion) rejected: "distortion bound K not proven at (x, y, z)"; empty when none.
+  const std::string& distortion_rejection() const { return distortion_rejection_; }
   // A full certificate of the current map with leaves (for reports), model units.
   Certificate certify_current(bool keep_leaves = true) const;
   EnergyTerms energy() const;  // at the current map, current weights (E_P2P on normalized distances)
@@ -283,6 +286,11 @@ class DeformationSolver {
   // that map, bit for bit.
   MatS3 perturb_y_;
   std::vector<double> perturb_lower_;
+  std::vector<double> perturb_upper_;  // and per voxel upper bounds of σ1 (CertifyParams::previous_upper)
+  // The reason of the last line-search trial of this iteration rejected by the distortion bound
+  // (CertifyParams::max_distortion), in the model's frame; empty when none was.
+  std::string distortion_rejection_;
+  std::string distortion_note() const;  // "; the distortion bound blocks it (...)" or ""
   // ≥ ‖d‖_F for the kernels' direction d, bounding the rounding of its Jacobians (CertifyParams::
   // direction_scale): Σ_k |α_k| ‖p_k‖_F when they were combined from CG iterates.
   double direction_scale_ = 0;
