@@ -722,15 +722,8 @@ struct OctreeCertifier::Run {
       // Not clear of the cage: refused (the bound's argument needs the ball inside the cage's interior).
       const double margin =
           im.clear[i] ? lb - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, base_storage) : -kInf;
-      base[i] = {oc.sampling_.centers.row(i).transpose(),
-                 oc.sampling_.side_of(static_cast<int>(i)),
-                 level(i),
-                 sigma3(i),
-                 L,
-                 margin,
-                 margin > 0,
-                 static_cast<int>(i),
-                 sign_unresolved[i] != 0,
+      base[i] = {oc.sampling_.centers.row(i).transpose(), oc.sampling_.side_of(static_cast<int>(i)), level(i),
+                 sigma3(i), L, margin, margin > 0, static_cast<int>(i), sign_unresolved[i] != 0,
                  // σ3 from the float-stored derivatives: within the storage allowance of the exact one
                  // (Step 5), which the margin already subtracts; reported like the far field's eps_J.
                  base_storage * scaleJ(i)};
@@ -1309,6 +1302,25 @@ struct OctreeCertifier::Run {
   }
   std::vector<std::pair<int, int>> pending_far;  // (index into far, position in the batch)
 
+  // The 8 children of each leaf leaves[i], i in `split` (octant order, child k of split[j] at tree[8 j + k]),
+  // evaluated as refinement nodes with their own bound only; counted against the refinement budget. The
+  // tightening and the distortion stages refine leaves this way.
+  void evaluate_children(const std::vector<CertLeaf>& leaves, const std::vector<size_t>& split,
+                         std::vector<int>& batch, std::vector<NodeValues>& vals) {
+    tree.clear();
+    batch.clear();
+    for (size_t i : split) {
+      const CertLeaf& l = leaves[i];
+      for (int k = 0; k < 8; ++k) {
+        const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
+        batch.push_back(static_cast<int>(tree.size()));
+        tree.push_back({l.center + l.side * off, l.side / 2, l.depth + 1, kInf, kInf, 0, -1, {}});
+      }
+    }
+    budget_used += static_cast<long>(batch.size());
+    evaluate_batch(batch, vals);
+  }
+
   // --- 5. Assemble, in base-voxel order with each subtree depth-first (children in octant order).
   Certificate assemble() {
     bool all_ok = true;
@@ -1406,18 +1418,7 @@ struct OctreeCertifier::Run {
             budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
           split.push_back(i);
       if (split.empty()) break;
-      tree.clear();
-      batch.clear();
-      for (size_t i : split) {
-        const CertLeaf& l = c.leaves[i];
-        for (int k = 0; k < 8; ++k) {
-          const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
-          batch.push_back(static_cast<int>(tree.size()));
-          tree.push_back({l.center + l.side * off, l.side / 2, l.depth + 1, kInf, kInf, 0, -1, {}});
-        }
-      }
-      budget_used += static_cast<long>(batch.size());
-      evaluate_batch(batch, vals);
+      evaluate_children(c.leaves, split, batch, vals);
       std::vector<CertLeaf> next;
       std::vector<char> next_settled;
       next.reserve(c.leaves.size() + 7 * split.size());
@@ -1497,18 +1498,7 @@ struct OctreeCertifier::Run {
           hopeless = p.stop_on_failure;  // a line search trial fails here whatever the others give: stop
       }
       if (split.empty() || hopeless) break;
-      tree.clear();
-      batch.clear();
-      for (size_t i : split) {
-        const CertLeaf& l = c.leaves[i];
-        for (int k = 0; k < 8; ++k) {
-          const Vec3 off((k & 1 ? 0.25 : -0.25), (k & 2 ? 0.25 : -0.25), (k & 4 ? 0.25 : -0.25));
-          batch.push_back(static_cast<int>(tree.size()));
-          tree.push_back({l.center + l.side * off, l.side / 2, l.depth + 1, kInf, kInf, 0, -1, {}});
-        }
-      }
-      budget_used += static_cast<long>(batch.size());
-      evaluate_batch(batch, vals);
+      evaluate_children(c.leaves, split, batch, vals);
       std::vector<CertLeaf> next;
       std::vector<char> next_settled;
       next.reserve(c.leaves.size() + 7 * split.size());
