@@ -41,7 +41,8 @@ namespace {
 const char* const kVoxelsHeader =
     "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,distortion_upper";
 const char* const kVerifyHeader =
-    "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified";
+    "cx,cy,cz,side,depth,L,sigma3_center,min_sigma3,max_quotient,tightness,violations,certified,max_sigma1,"
+    "max_distortion,distortion_violations";
 
 using lidef::test::read_text;
 using lidef::test::write_text;
@@ -366,7 +367,7 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
   EXPECT_NE(output.find("bound violations 0, samples with sigma3 <= 0 in certified leaves 0"),
             std::string::npos)
       << output;
-  const auto rows = read_csv(tmp / "cert/verify.csv", kVerifyHeader, 12);
+  const auto rows = read_csv(tmp / "cert/verify.csv", kVerifyHeader, 15);
   ASSERT_EQ(static_cast<long>(rows.size()), leaves);
   const auto cert_rows = read_csv(tmp / "cert/voxels.csv", kVoxelsHeader, 13);
   double max_tight = 0;
@@ -374,6 +375,9 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
     EXPECT_EQ(rows[i][0], cert_rows[i][0]);  // same leaf order, exact centers
     EXPECT_EQ(rows[i][5], cert_rows[i][6]);  // the certificate's L
     EXPECT_EQ(rows[i][10], 0);               // no violation
+    EXPECT_EQ(rows[i][14], 0);               // no sample above the leaf's σ1 or σ1/σ3 bound
+    EXPECT_LE(rows[i][12], cert_rows[i][11]);  // sampled max σ1 ≤ sigma1_upper
+    EXPECT_LE(rows[i][13], cert_rows[i][12]);  // sampled max σ1/σ3 ≤ distortion_upper
     EXPECT_GT(rows[i][7], 0);                // min sampled σ3 > 0 in a certified leaf
     EXPECT_LE(rows[i][9], 1.0);              // sampled Lipschitz estimate ≤ L
     max_tight = std::max(max_tight, rows[i][9]);
@@ -421,7 +425,7 @@ TEST_F(VerifyCli, UnderstatedLipschitzConstantsAreCaught) {
     std::vector<std::string> f;
     std::istringstream ss(line);
     for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
-    ASSERT_EQ(f.size(), 10u);
+    ASSERT_EQ(f.size(), 13u);
     f[6] = format_double(std::strtod(f[6].c_str(), nullptr) / 1000);
     for (size_t k = 0; k < f.size(); ++k) forged += (k ? "," : "") + f[k];
     forged += "\n";

@@ -477,10 +477,17 @@ TEST(StudioInteraction, PickedValuesEqualLidefEval) {
     auto studio_json = slurp(dir / "export/certificate.json"), cli_json = slurp(dir / "cli/certificate.json");
     EXPECT_NEAR(studio_json.at("min_lower_bound").get<double>(), cli_json.at("min_lower_bound").get<double>(),
                 1e-4);
-    // Input paths, the L-dependent minima and the CSV's hash aside, certificate.json is the same.
+    // The distortion bounds follow σ1 and L (relative 1e-5 above) and divide by the leaves' σ3 lower bounds.
+    EXPECT_NEAR(studio_json.at("max_sigma1_upper_bound").get<double>(),
+                cli_json.at("max_sigma1_upper_bound").get<double>(),
+                1e-4 * cli_json.at("max_sigma1_upper_bound").get<double>());
+    EXPECT_NEAR(studio_json.at("max_distortion_upper_bound").get<double>(),
+                cli_json.at("max_distortion_upper_bound").get<double>(),
+                1e-2 * cli_json.at("max_distortion_upper_bound").get<double>());
+    // Input paths, the L-dependent minima and maxima and the CSV's hash aside, certificate.json is the same.
     for (auto* j : {&studio_json, &cli_json})
       for (const char* k : {"model", "coefficients", "min_lower_bound", "min_margin", "min_sigma3_center",
-                            "voxels_csv_fnv1a64"}) {
+                            "max_sigma1_upper_bound", "max_distortion_upper_bound", "voxels_csv_fnv1a64"}) {
         EXPECT_TRUE(j->contains(k)) << k;
         j->erase(k);
       }
