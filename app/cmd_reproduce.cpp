@@ -1,5 +1,5 @@
 // lidef reproduce NAME|all --out DIR: the paper's table and figures regenerated, one folder each, with the
-// paper's claims checked (issue 20, docs/reproduction.md). The work is in reproduce/ (one module per figure).
+// paper's claims checked (docs/reproduction.md). The work is in reproduce/ (one module per figure).
 #include <omp.h>
 
 #include <chrono>

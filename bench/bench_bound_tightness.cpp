@@ -1,4 +1,4 @@
-// Tightness of the Lipschitz bounds on σ3 per leaf (issue 15 §2; in the spirit of the paper's Fig. 5): for
+// Tightness of the Lipschitz bounds on σ3 per leaf (in the spirit of the paper's Fig. 5): for
 // each of the first-order (17), third-order (21) and combined (docs/certificate.md Step 3b) bounds, the loss
 // the certificate subtracts on a leaf, r·L, divided by the largest |σ3(q) − σ3(c)| sampled in the leaf's ball
 // (1 would be exact; a value below 1 would be an unsound bound and makes the program fail). Also L divided by

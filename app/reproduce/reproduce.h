@@ -1,5 +1,5 @@
-// `lidef reproduce NAME`: the paper's table and figures regenerated from the project's own code (issue 20;
-// docs/reproduction.md). One module per figure (reproduce_*.cpp) fills a FigureOutput; report.cpp writes the
+// `lidef reproduce NAME`: the paper's table and figures regenerated from the project's own code
+// (docs/reproduction.md). One module per figure (reproduce_*.cpp) fills a FigureOutput; report.cpp writes the
 // common files (summary.json, README.md) and cmd_reproduce.cpp is the command. Figures call the libraries
 // (solver, certifier, verification) directly and run lidef-compare / `lidef explore` as programs where those
 // own the work (lidef links neither TetGen nor CHOLMOD, docs/architecture.md).
