@@ -10,9 +10,10 @@
 
 #include "cache_flags.h"
 #include "commands.h"
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/vtk_export.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
-#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
@@ -22,11 +23,10 @@
 #include "lidef/normalization.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/sampling.h"
 #include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
-#include "lidef/vtk_export.h"
 #include "param_flags.h"
 
 namespace lidef::cli {

@@ -10,13 +10,13 @@
 #include <variant>
 
 #include "commands.h"
+#include "lidef/analysis/mesh_export.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
 #include "lidef/coefficients.h"
 #include "lidef/compare/compare.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
-#include "lidef/mesh_export.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/scenario.h"
@@ -83,7 +83,8 @@ void add_compare_options(CLI::App& app, Action& action) {
   sub->footer(
       "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and "
       "per\n"
-      "method METHOD.obj, METHOD.vtp (E_iso_minus_6 and detJ for the volumetric methods), METHOD.log and, for\n"
+      "method METHOD.obj, METHOD.vtp (E_iso_minus_6 and detJ for the volumetric methods), METHOD.log and, "
+      "for\n"
       "the harmonic methods (lidef, vhm), METHOD.coefficients.txt.\n"
       "A failing method is reported in the table and the others still run. Exit code: 0 every method ran,\n"
       "1 some method failed (the table says why), 2 bad input. Methods and criteria: docs/compare.md.");

@@ -19,15 +19,15 @@
 
 #include "cache_flags.h"
 #include "commands.h"
+#include "lidef/analysis/deform_outputs.h"
 #include "lidef/cage/auto_cage.h"
 #include "lidef/coefficients.h"
 #include "lidef/deform.h"
-#include "lidef/deform_outputs.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/scenario.h"
 #include "param_flags.h"
 
@@ -187,7 +187,7 @@ void add_deform_command(CLI::App& app, Action& action) {
       const double max_err = result.max_handle_error;
       const double tolerance = result.handle_tolerance;
 
-      // --- Outputs, all or nothing (lidef/deform_outputs.h).
+      // --- Outputs, all or nothing (lidef/analysis/deform_outputs.h).
       DeformOutputOptions out_options;
       out_options.grid = o.grid;
       out_options.total_seconds = ms_since(t_start) / 1000;

@@ -5,7 +5,7 @@
 
 #include "commands.h"
 #include "lidef/blas_kernel.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/subspace.h"
 #include "param_flags.h"
 

@@ -17,6 +17,8 @@
 
 #include "commands.h"
 #include "gnuplot.h"
+#include "lidef/analysis/explorer_export.h"
+#include "lidef/analysis/mesh_export.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/explorer/ball_certificate.h"
@@ -27,8 +29,6 @@
 #include "lidef/explorer/laplacian_experiment.h"
 #include "lidef/explorer/random_search.h"
 #include "lidef/explorer/sigma_minima.h"
-#include "lidef/explorer_export.h"
-#include "lidef/mesh_export.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/procedural_models.h"

@@ -28,8 +28,8 @@
 
 #include "bench_util.h"
 #include "lidef/blas_kernel.h"
-#include "lidef/edge_jet.h"
 #include "lidef/errors.h"
+#include "lidef/internal/edge_jet.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"

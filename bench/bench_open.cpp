@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/analysis/interactive_session.h"
 #include "lidef/blas_kernel.h"
-#include "lidef/interactive_session.h"
 #include "lidef/precompute_cache.h"
 
 using namespace lidef;

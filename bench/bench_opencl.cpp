@@ -37,7 +37,7 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
 

@@ -28,17 +28,12 @@ install(TARGETS ${LIDEF_LIBRARIES} lidef_warnings EXPORT lidefTargets
         INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 install(TARGETS lidef lidef-compare RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT runtime)
 
-# Public headers: the paper's concepts and the API. Implementation headers (the SIMD lanes, the edge jets'
-# lane evaluation, Newton-CG, target paths, mesh queries) are used by the libraries' sources and tests only;
-# no public header includes them.
-set(LIDEF_IMPLEMENTATION_HEADERS lane_math.h edge_jet.h newton_cg.h target_path.h mesh_queries.h)
-set(LIDEF_HEADER_EXCLUDES)
-foreach(h IN LISTS LIDEF_IMPLEMENTATION_HEADERS)
-  list(APPEND LIDEF_HEADER_EXCLUDES PATTERN ${h} EXCLUDE)
-endforeach()
+# Public headers: the paper's concepts and the API, one include prefix per library (lidef/, lidef/analysis/,
+# lidef/cage/, lidef/compare/, lidef/explorer/, lidef/opencl/). Implementation headers live in
+# deform/internal/lidef/internal/ and are not installed; no public header includes them.
 foreach(dir deform analysis explorer cage compare opencl)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
-          COMPONENT development FILES_MATCHING PATTERN "*.h" ${LIDEF_HEADER_EXCLUDES})
+          COMPONENT development FILES_MATCHING PATTERN "*.h")
 endforeach()
 
 set(LIDEF_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/lidef)

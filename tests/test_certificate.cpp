@@ -5,7 +5,7 @@
 #include <limits>
 #include <random>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/errors.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/octree_certifier.h"

@@ -9,7 +9,7 @@
 #include <memory>
 #include <random>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"

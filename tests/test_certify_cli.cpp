@@ -24,8 +24,8 @@
 #include <random>
 #include <sstream>
 
+#include "lidef/analysis/certificate_report.h"
 #include "lidef/cage.h"
-#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
@@ -372,14 +372,14 @@ TEST_F(VerifyCli, CertifiedMapPassesDenseSampling) {
   const auto cert_rows = read_csv(tmp / "cert/voxels.csv", kVoxelsHeader, 13);
   double max_tight = 0;
   for (size_t i = 0; i < rows.size(); ++i) {
-    EXPECT_EQ(rows[i][0], cert_rows[i][0]);  // same leaf order, exact centers
-    EXPECT_EQ(rows[i][5], cert_rows[i][6]);  // the certificate's L
-    EXPECT_EQ(rows[i][10], 0);               // no violation
-    EXPECT_EQ(rows[i][14], 0);               // no sample above the leaf's σ1 or σ1/σ3 bound
+    EXPECT_EQ(rows[i][0], cert_rows[i][0]);    // same leaf order, exact centers
+    EXPECT_EQ(rows[i][5], cert_rows[i][6]);    // the certificate's L
+    EXPECT_EQ(rows[i][10], 0);                 // no violation
+    EXPECT_EQ(rows[i][14], 0);                 // no sample above the leaf's σ1 or σ1/σ3 bound
     EXPECT_LE(rows[i][12], cert_rows[i][11]);  // sampled max σ1 ≤ sigma1_upper
     EXPECT_LE(rows[i][13], cert_rows[i][12]);  // sampled max σ1/σ3 ≤ distortion_upper
-    EXPECT_GT(rows[i][7], 0);                // min sampled σ3 > 0 in a certified leaf
-    EXPECT_LE(rows[i][9], 1.0);              // sampled Lipschitz estimate ≤ L
+    EXPECT_GT(rows[i][7], 0);                  // min sampled σ3 > 0 in a certified leaf
+    EXPECT_LE(rows[i][9], 1.0);                // sampled Lipschitz estimate ≤ L
     max_tight = std::max(max_tight, rows[i][9]);
   }
   EXPECT_GT(max_tight, 1e-3) << "the map is not affine: the sampled Lipschitz estimate cannot be ~0";

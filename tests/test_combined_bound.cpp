@@ -8,8 +8,8 @@
 #include <limits>
 #include <random>
 
-#include "lidef/certificate_verification.h"
-#include "lidef/edge_jet.h"
+#include "lidef/analysis/certificate_verification.h"
+#include "lidef/internal/edge_jet.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"

@@ -11,11 +11,11 @@
 
 #include "lidef/continuation.h"
 #include "lidef/errors.h"
+#include "lidef/internal/target_path.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
-#include "lidef/target_path.h"
 #include "test_beam.h"
 #include "test_support.h"
 

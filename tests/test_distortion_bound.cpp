@@ -14,11 +14,11 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "lidef/certificate_report.h"
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/certificate_verification.h"
+#include "lidef/analysis/interval_verification.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
-#include "lidef/interval_verification.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"

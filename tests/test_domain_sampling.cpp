@@ -11,7 +11,7 @@
 #include "lidef/domain_sampling.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
-#include "lidef/mesh_queries.h"
+#include "lidef/internal/mesh_queries.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"
 #include "lidef/signed_svd.h"

@@ -8,9 +8,9 @@
 #include <cmath>
 #include <random>
 
-#include "lidef/certificate_verification.h"
-#include "lidef/edge_jet.h"
-#include "lidef/lane_math.h"
+#include "lidef/analysis/certificate_verification.h"
+#include "lidef/internal/edge_jet.h"
+#include "lidef/internal/lane_math.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "test_cages.h"

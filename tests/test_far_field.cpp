@@ -10,10 +10,10 @@
 #include <cmath>
 #include <random>
 
-#include "lidef/certificate_verification.h"
-#include "lidef/edge_jet.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/edge_jet.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "lidef/signed_svd.h"

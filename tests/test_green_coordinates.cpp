@@ -7,7 +7,7 @@
 
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
-#include "lidef/lane_math.h"
+#include "lidef/internal/lane_math.h"
 #include "test_cages.h"
 #include "test_support.h"
 

@@ -10,9 +10,9 @@
 #include <thread>
 #include <vector>
 
+#include "lidef/analysis/interactive_session.h"
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
-#include "lidef/interactive_session.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/scenario.h"
 #include "lidef/symmetric_dirichlet.h"

@@ -1,10 +1,12 @@
-// The interval re-proof of a certificate (analysis/include/lidef/interval_verification.h, `lidef verify
+// The interval re-proof of a certificate (analysis/include/lidef/analysis/interval_verification.h, `lidef
+// verify
 // --interval`). Truths: the double-precision basis derivatives and central differences of the map (the
 // enclosures must contain them and be tight); matrices built as U diag(s) Vᵀ with known singular values
 // (the σ3 bound must stay below s3, and near it when well conditioned); the certifier's verdicts on small
 // procedural models (every certified leaf must be proven); tampered leaves (must not be proven); the CLI's
 // exit codes, a table cut short (its leaves proven, their coverage not) and a certificate that says "not
-// certified" (never PROVEN). IntervalSlow.*: the certificates of every shared scenario's output (label "slow").
+// certified" (never PROVEN). IntervalSlow.*: the certificates of every shared scenario's output (label
+// "slow").
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -14,11 +16,11 @@
 #include <random>
 #include <sstream>
 
+#include "lidef/analysis/interval_verification.h"
 #include "lidef/cage.h"
 #include "lidef/coefficients.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/hash.h"
-#include "lidef/interval_verification.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
@@ -434,8 +436,8 @@ TEST(IntervalVerification, CliExitCodes) {
 }
 
 // Every shared scenario: `lidef deform` (default parameters but 8000 samples, to keep the slow label within
-// CI's time; docs/benchmarks.md has the full-size runs, all leaves proven), then `lidef verify --interval` on the
-// certificate of the written map (deform certifies it with `lidef certify`'s code). All leaves proven.
+// CI's time; docs/benchmarks.md has the full-size runs, all leaves proven), then `lidef verify --interval` on
+// the certificate of the written map (deform certifies it with `lidef certify`'s code). All leaves proven.
 class IntervalSlow : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(IntervalSlow, SharedScenarioOutputCertificateIsProven) {
@@ -446,7 +448,8 @@ TEST_P(IntervalSlow, SharedScenarioOutputCertificateIsProven) {
   const std::string model = lidef::test::shared_data() + "/models/" + sc["model"].get<std::string>();
   std::string output;
   const auto t0 = std::chrono::steady_clock::now();
-  const int rc = run_lidef("deform " + quote(scenario) + " --samples 8000 --out " + quote(tmp / "out"), &output);
+  const int rc =
+      run_lidef("deform " + quote(scenario) + " --samples 8000 --out " + quote(tmp / "out"), &output);
   ASSERT_TRUE(rc == 0 || rc == 1) << output;  // 1: stopped short of the handles, still certified
   const double t_deform = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const nlohmann::json cj = read_json(tmp / "out/certificate.json");

@@ -8,9 +8,9 @@
 
 #include <algorithm>
 
-#include "lidef/certificate_report.h"
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/leaf_coverage.h"
 #include "lidef/domain_sampling.h"
-#include "lidef/leaf_coverage.h"
 #include "lidef/normalization.h"
 #include "lidef/procedural_models.h"
 #include "lidef/sampling.h"

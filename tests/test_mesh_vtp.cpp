@@ -13,8 +13,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "lidef/analysis/mesh_export.h"
 #include "lidef/errors.h"
-#include "lidef/mesh_export.h"
 #include "test_support.h"
 
 namespace {

@@ -7,7 +7,7 @@
 #include <Eigen/Eigenvalues>
 #include <random>
 
-#include "lidef/newton_cg.h"
+#include "lidef/internal/newton_cg.h"
 
 using namespace lidef;
 

@@ -18,7 +18,7 @@
 #include "lidef/lipschitz_bound.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/projected_newton.h"
 #include "lidef/sampling.h"
 #include "lidef/scenario.h"

@@ -12,8 +12,8 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "lidef/analysis/interactive_session.h"
 #include "lidef/hash.h"
-#include "lidef/interactive_session.h"
 #include "lidef/mesh_io.h"
 #include "lidef/precompute_cache.h"
 #include "lidef/projected_newton.h"

@@ -13,7 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <iostream>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/compare/vhm.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/octree_certifier.h"

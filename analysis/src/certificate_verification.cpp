@@ -1,4 +1,4 @@
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 
 #include <limits>
 #include <random>
@@ -7,8 +7,9 @@
 
 namespace lidef {
 
-VerificationResult verify_certificate(const HarmonicBasis& basis, const MatX3d& y, const std::vector<CertLeaf>& leaves,
-                                      int samples_per_voxel, unsigned seed) {
+VerificationResult verify_certificate(const HarmonicBasis& basis, const MatX3d& y,
+                                      const std::vector<CertLeaf>& leaves, int samples_per_voxel,
+                                      unsigned seed) {
   VerificationResult res;
   const long nl = static_cast<long>(leaves.size());
   res.voxels.resize(nl);

@@ -1,20 +1,20 @@
-#include "lidef/deform_outputs.h"
+#include "lidef/analysis/deform_outputs.h"
 
 #include <omp.h>
 
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/mesh_export.h"
+#include "lidef/analysis/vtk_export.h"
 #include "lidef/atomic_file.h"
-#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
-#include "lidef/mesh_export.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/staged_outputs.h"
-#include "lidef/vtk_export.h"
 
 namespace lidef {
 

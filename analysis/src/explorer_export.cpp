@@ -1,4 +1,4 @@
-#include "lidef/explorer_export.h"
+#include "lidef/analysis/explorer_export.h"
 
 #include <vtkFloatArray.h>
 #include <vtkImageData.h>

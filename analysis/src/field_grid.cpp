@@ -1,4 +1,4 @@
-#include "lidef/field_grid.h"
+#include "lidef/analysis/field_grid.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "lidef/interactive_session.h"
+#include "lidef/analysis/interactive_session.h"
 
 #include <omp.h>
 
@@ -906,10 +906,13 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
     blas_product(Mv, y, v);
     blas_product(Mg, y, g);
     MatX3d mesh_V = S.frame().points_from_normalized(v);
-    MeshFields m = mesh_fields(std::move(mesh_V), g);
+    MeshFieldOptions options;
+    options.sigma3 = extras.mesh_distortion;
+    MeshFields m = mesh_fields(std::move(mesh_V), g, options);
     f->mesh_V = std::move(m.V);
     f->mesh_e_iso = std::move(m.e_iso);
     f->mesh_det = std::move(m.det_j);
+    f->mesh_distortion = std::move(m.distortion);
     if (sources.rows() > 0) {
       // The solver recorded the energy of its last iteration; recomputing it (a pass over all samples, or a
       // device round trip) per frame would repeat that work.
@@ -945,6 +948,7 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_preparing_frame()
   f->mesh_V = m.mesh.V;
   f->mesh_e_iso = VecXd::Zero(m.mesh.V.rows());
   f->mesh_det = VecXd::Ones(m.mesh.V.rows());
+  if (extras.mesh_distortion) f->mesh_distortion = VecXd::Ones(m.mesh.V.rows());
   f->cage_V = m.cage.V;
   f->coefficients = m.cage.identity_coefficients();
   return f;

@@ -1,4 +1,4 @@
-#include "lidef/interval_verification.h"
+#include "lidef/analysis/interval_verification.h"
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>

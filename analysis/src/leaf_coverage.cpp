@@ -1,4 +1,4 @@
-#include "lidef/leaf_coverage.h"
+#include "lidef/analysis/leaf_coverage.h"
 
 #include <algorithm>
 #include <cmath>

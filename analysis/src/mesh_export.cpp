@@ -1,5 +1,5 @@
 // The .vtp writer of mesh_export.h. Includes VTK; keep VTK out of the public headers.
-#include "lidef/mesh_export.h"
+#include "lidef/analysis/mesh_export.h"
 
 #include <unistd.h>
 #include <vtkCellArray.h>

@@ -1,5 +1,5 @@
 // VTK writers for ParaView (VTK 9.1): the certification octree (.vtu) and map fields (.vti).
-#include "lidef/vtk_export.h"
+#include "lidef/analysis/vtk_export.h"
 
 #include <unistd.h>
 #include <vtkCellArray.h>

@@ -9,8 +9,8 @@
 #include <numeric>
 
 #include "../gnuplot.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/atomic_file.h"
-#include "lidef/certificate_verification.h"
 #include "lidef/errors.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"

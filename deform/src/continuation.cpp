@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include "lidef/internal/target_path.h"
 #include "lidef/local_global.h"
 #include "lidef/number_format.h"
-#include "lidef/target_path.h"
 
 namespace lidef {
 

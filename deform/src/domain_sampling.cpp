@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "lidef/errors.h"
-#include "lidef/mesh_queries.h"
+#include "lidef/internal/mesh_queries.h"
 #include "lidef/normalization.h"
 
 namespace lidef {

@@ -1,4 +1,4 @@
-#include "lidef/edge_jet.h"
+#include "lidef/internal/edge_jet.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <string>
 
 #include "lidef/errors.h"
-#include "lidef/lane_math.h"
+#include "lidef/internal/lane_math.h"
 #include "lidef/lipschitz_bound.h"
 
 namespace lidef {

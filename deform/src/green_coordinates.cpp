@@ -5,7 +5,7 @@
 #include <cstring>
 
 #include "lidef/geometry.h"
-#include "lidef/lane_math.h"
+#include "lidef/internal/lane_math.h"
 
 namespace lidef {
 namespace {

@@ -1,4 +1,4 @@
-#include "lidef/mesh_queries.h"
+#include "lidef/internal/mesh_queries.h"
 
 #include <algorithm>
 #include <cmath>

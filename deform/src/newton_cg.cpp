@@ -1,4 +1,4 @@
-#include "lidef/newton_cg.h"
+#include "lidef/internal/newton_cg.h"
 
 namespace lidef {
 

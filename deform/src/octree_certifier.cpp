@@ -9,10 +9,10 @@
 #include <mutex>
 
 #include "lidef/blas_kernel.h"
-#include "lidef/edge_jet.h"
 #include "lidef/errors.h"
+#include "lidef/internal/edge_jet.h"
+#include "lidef/internal/mesh_queries.h"
 #include "lidef/lipschitz_bound.h"
-#include "lidef/mesh_queries.h"
 #include "lidef/number_format.h"
 #include "lidef/signed_svd.h"
 

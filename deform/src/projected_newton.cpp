@@ -12,7 +12,7 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
-#include "lidef/newton_cg.h"
+#include "lidef/internal/newton_cg.h"
 #include "lidef/number_format.h"
 
 // LAPACK Cholesky from OpenBLAS (blocked and threaded; several times faster than Eigen::LLT at 900 x 900).

@@ -14,8 +14,8 @@
 
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
+#include "lidef/internal/mesh_queries.h"
 #include "lidef/mesh_io.h"
-#include "lidef/mesh_queries.h"
 #include "lidef/normalization.h"
 
 namespace lidef {

@@ -1,4 +1,4 @@
-#include "lidef/target_path.h"
+#include "lidef/internal/target_path.h"
 
 #include <Eigen/Geometry>
 #include <Eigen/SVD>

@@ -34,9 +34,15 @@ run("install" COMMAND ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${PREFIX}
 if(NOT EXISTS ${PREFIX}/lib/cmake/lidef/lidefConfig.cmake OR NOT EXISTS ${PREFIX}/include/lidef/lidef.h)
   message(FATAL_ERROR "install: lidefConfig.cmake or lidef/lidef.h missing under ${PREFIX}")
 endif()
+# Implementation headers stay in the build tree; each library's headers sit under its own prefix.
 foreach(h lane_math.h edge_jet.h newton_cg.h target_path.h mesh_queries.h)
-  if(EXISTS ${PREFIX}/include/lidef/${h})
-    message(FATAL_ERROR "install: implementation header lidef/${h} was installed")
+  if(EXISTS ${PREFIX}/include/lidef/${h} OR EXISTS ${PREFIX}/include/lidef/internal/${h})
+    message(FATAL_ERROR "install: implementation header ${h} was installed")
+  endif()
+endforeach()
+foreach(h analysis/certificate_report.h analysis/deform_outputs.h opencl/opencl_backend.h cage/auto_cage.h)
+  if(NOT EXISTS ${PREFIX}/include/lidef/${h})
+    message(FATAL_ERROR "install: public header lidef/${h} missing")
   endif()
 endforeach()
 

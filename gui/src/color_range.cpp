@@ -22,6 +22,10 @@ const char* to_string(Field f) {
       return "lipschitz";
     case Field::kMargin:
       return "margin";
+    case Field::kDistortion:
+      return "distortion";
+    case Field::kDistortionBound:
+      return "distortion_upper";
   }
   return "?";
 }

@@ -13,9 +13,12 @@ class vtkColorTransferFunction;
 namespace lidef::studio {
 
 // The scalar fields a view colours by (each has its own range settings).
-enum class Field { kEiso, kDetJ, kSigma3, kL, kMargin };
-constexpr int kNumFields = 5;
-const char* to_string(Field f);  // "e_iso", "det_j", "sigma3", "lipschitz", "margin"
+// kDistortion: σ1/σ3 sampled (mesh vertices, slices); kDistortionBound: the certified upper bound of σ1/σ3
+// per leaf.
+enum class Field { kEiso, kDetJ, kSigma3, kL, kMargin, kDistortion, kDistortionBound };
+constexpr int kNumFields = 7;
+// "e_iso", "det_j", "sigma3", "lipschitz", "margin", "distortion", "distortion_upper"
+const char* to_string(Field f);
 
 struct ColorRange {
   enum class Mode { kAuto, kPercentile, kManual };

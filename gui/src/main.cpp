@@ -38,6 +38,9 @@ int main(int argc, char** argv) {
       "--compare", compare,
       "A `lidef compare --out` folder: every method's mesh side by side (with --screenshot: that picture)");
   app.add_option("--view", view, "View: mesh, sigma3, lipschitz, octree")->capture_default_str();
+  bool distortion = false;
+  app.add_flag("--distortion", distortion,
+               "Colour the view by sigma1/sigma3 (the Lipschitz view: its certified upper bound per leaf)");
   app.add_option(
       "--screenshot", screenshot,
       "Solve until the solver rests, render --view, write this PNG and exit (0 written, 1 timed out, "
@@ -70,6 +73,7 @@ int main(int argc, char** argv) {
   ViewSettings settings;
   try {
     settings.view = view_from_string(view);
+    settings.distortion = distortion;
   } catch (const std::exception& e) {
     std::cerr << "lidef-studio: " << e.what() << "\n";
     return 2;
@@ -151,6 +155,7 @@ int main(int argc, char** argv) {
     const ExtrasRequest ex = extras_for(win.settings());
     if (ex.leaves && f->leaves_version != f->map_version) return;
     if (ex.field && f->field_version != f->map_version) return;
+    if (ex.mesh_distortion && f->mesh_distortion.size() != f->mesh_V.rows()) return;
     poll.stop();
     if (!win.save_screenshot(screenshot, 0, 0, transparent)) {
       exit_code = 2;

@@ -5,7 +5,7 @@
 #pragma once
 #include <string>
 
-#include "lidef/interactive_session.h"
+#include "lidef/analysis/interactive_session.h"
 
 namespace lidef::studio {
 

@@ -13,7 +13,7 @@
 #include <QWidget>
 #include <vector>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/projected_newton.h"
 
 class QPainter;

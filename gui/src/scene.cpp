@@ -28,6 +28,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <utility>
 
@@ -60,8 +61,12 @@ View view_from_string(const std::string& name) {
 Field shown_field(const ViewSettings& s) {
   switch (s.view) {
     case View::kMesh:
+      if (s.distortion) return Field::kDistortion;
       return s.mesh_volume_ratio ? Field::kDetJ : Field::kEiso;
+    case View::kSigma3:
+      return s.distortion ? Field::kDistortion : Field::kSigma3;
     case View::kLipschitz:
+      if (s.distortion) return Field::kDistortionBound;
       return s.lipschitz_margin ? Field::kMargin : Field::kL;
     default:
       return Field::kSigma3;
@@ -86,6 +91,7 @@ nlohmann::json settings_to_json(const ViewSettings& s) {
           {"rest_cage", s.rest_cage},
           {"deformed_cage", s.deformed_cage},
           {"mesh_edges", s.mesh_edges},
+          {"distortion", s.distortion},
           {"sigma_deformed_space", s.sigma_deformed_space},
           {"slice", {s.slice[0], s.slice[1], s.slice[2]}},
           {"slice_pos", {s.slice_pos[0], s.slice_pos[1], s.slice_pos[2]}},
@@ -111,6 +117,7 @@ void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::str
     get("rest_cage", s.rest_cage);
     get("deformed_cage", s.deformed_cage);
     get("mesh_edges", s.mesh_edges);
+    get("distortion", s.distortion);
     get("sigma_deformed_space", s.sigma_deformed_space);
     for (int a = 0; a < 3; ++a) {
       if (j.contains("slice")) s.slice[a] = j.at("slice").at(a).get<bool>();
@@ -144,6 +151,10 @@ ExtrasRequest extras_for(const ViewSettings& s) {
   ExtrasRequest r;
   r.leaves = s.view == View::kLipschitz || s.view == View::kOctree;
   r.field = s.view == View::kSigma3;
+  // The mesh view's distortion colours need σ1/σ3 per vertex; its caption names the certified bound, which
+  // comes with the leaves.
+  r.mesh_distortion = s.view == View::kMesh && s.distortion;
+  r.leaves = r.leaves || r.mesh_distortion;
   r.field_resolution = s.field_resolution;
   return r;
 }
@@ -437,8 +448,29 @@ namespace {
 
 // Quads of one grid plane (axis a at index k) whose 4 corners are inside the cage, with σ3 at the points;
 // `deformed` places the points at f(p).
+// The σ3 view's quantity at grid point n: σ3, or σ1/σ3 (NaN where σ3 <= 0: no finite distortion there).
+float grid_value(const FieldGrid& g, size_t n, bool distortion) {
+  if (!distortion) return g.sigma3[n];
+  return g.sigma3[n] > 0 ? g.sigma1[n] / g.sigma3[n] : std::numeric_limits<float>::quiet_NaN();
+}
+
+// The σ3 view's colours: viridis with low σ3 (near-degenerate) dark; red below 0. For σ1/σ3 reversed, so high
+// distortion is dark.
+void field_colors(vtkColorTransferFunction* ctf, double lo, double hi, bool distortion) {
+  if (!distortion) return sigma3_colors(ctf, lo, hi);
+  ctf->RemoveAllPoints();
+  hi = std::max(hi, lo + 1e-9);
+  for (int i = 0; i <= 8; ++i) {
+    double c[3];
+    viridis(1 - i / 8.0, c);
+    ctf->AddRGBPoint(lo + (hi - lo) * i / 8.0, c[0], c[1], c[2]);
+  }
+  ctf->SetNanColor(0.8, 0.0, 0.0);  // σ3 <= 0
+  ctf->ClampingOn();
+}
+
 Ptr<vtkPolyData> slice_polydata(const FieldGrid& g, const std::vector<float>* deformed, int a, int k,
-                                bool whole_cage) {
+                                bool whole_cage, bool distortion) {
   const int b = (a + 1) % 3, c = (a + 2) % 3;
   auto index = [&](int i, int j) {
     int ijk[3];
@@ -469,7 +501,7 @@ Ptr<vtkPolyData> slice_polydata(const FieldGrid& g, const std::vector<float>* de
         p[2] = g.origin.z() + g.spacing * iz;
       }
       id[static_cast<size_t>(i) * g.dims[c] + j] = pts->InsertNextPoint(p);
-      sig->InsertNextValue(g.sigma3[static_cast<size_t>(n)]);
+      sig->InsertNextValue(grid_value(g, static_cast<size_t>(n), distortion));
     }
   for (int i = 0; i + 1 < g.dims[b]; ++i)
     for (int j = 0; j + 1 < g.dims[c]; ++j) {
@@ -482,13 +514,14 @@ Ptr<vtkPolyData> slice_polydata(const FieldGrid& g, const std::vector<float>* de
   return polydata(pts, quads, sig);
 }
 
-// Lowest and highest σ3 of the grid points a view shows (inside the cage, inside the voxels unless the whole
-// cage is asked for); 0, 0 when there are none.
-std::pair<double, double> sigma3_range(const FieldGrid& g, const ViewSettings& s) {
+// Lowest and highest σ3 (or σ1/σ3) of the grid points a view shows (inside the cage, inside the voxels unless
+// the whole cage is asked for); 0, 0 when there are none.
+std::pair<double, double> field_range(const FieldGrid& g, const ViewSettings& s) {
   std::vector<double> v;
   for (size_t i = 0; i < g.sigma3.size(); ++i)
-    if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i])) v.push_back(g.sigma3[i]);
-  return color_range(v, s.range[static_cast<int>(Field::kSigma3)]);
+    if (g.inside_cage[i] && (s.sigma_whole_cage || g.inside_sampled[i]))
+      v.push_back(grid_value(g, i, s.distortion));
+  return color_range(v, s.range[static_cast<int>(shown_field(s))]);
 }
 
 // The chosen grid planes appended into one polydata with σ3 at the points.
@@ -496,14 +529,14 @@ Ptr<vtkPolyData> sigma3_slices(const SessionFrame& f, const ViewSettings& s) {
   const FieldGrid& g = *f.field;
   auto all_pts = Ptr<vtkPoints>::New();
   auto all_sig = Ptr<vtkFloatArray>::New();
-  all_sig->SetName("sigma3");
+  all_sig->SetName(s.distortion ? "sigma1/sigma3" : "sigma3");
   auto all_quads = Ptr<vtkCellArray>::New();
   for (int a = 0; a < 3; ++a) {
     if (!s.slice[a]) continue;
     const int k =
         std::clamp(static_cast<int>(std::lround(s.slice_pos[a] * (g.dims[a] - 1))), 0, g.dims[a] - 1);
     auto pd = slice_polydata(g, s.sigma_deformed_space ? f.field_deformed.get() : nullptr, a, k,
-                             s.sigma_whole_cage);
+                             s.sigma_whole_cage, s.distortion);
     const vtkIdType off = all_pts->GetNumberOfPoints();
     for (vtkIdType i = 0; i < pd->GetNumberOfPoints(); ++i) {
       all_pts->InsertNextPoint(pd->GetPoint(i));
@@ -561,11 +594,15 @@ LeafGlyphs leaf_glyphs(const Certificate& c, const Model& model, const ViewSetti
     if (!l.certified) ++L.failed;
     if (!leaf_shown(l, model, s)) continue;
     double x;
-    if (lip)
+    // A bound of +inf (L, σ1/σ3) is drawn above the range; a margin of -inf below it.
+    const bool upper = lip && (s.distortion || !s.lipschitz_margin);
+    if (lip && s.distortion)
+      x = l.distortion_upper;
+    else if (lip)
       x = s.lipschitz_margin ? l.margin : l.L;
     else
       x = s.octree_by_status ? (l.certified ? 1 : 0) : l.depth;
-    if (!std::isfinite(x)) x = lip && !s.lipschitz_margin ? 1e300 : -1e300;
+    if (!std::isfinite(x)) x = upper ? 1e300 : -1e300;
     L.pts->InsertNextPoint(l.center.x(), l.center.y(), l.center.z());
     L.side->InsertNextValue(l.side * kLeafDrawnSide);  // a small gap shows the cells
     if (lip && (l.depth > 0 || !l.certified)) {
@@ -588,13 +625,11 @@ struct LeafCounts {
 };
 // The settings the leaf glyphs depend on (view, leaf filters, colouring and its range).
 std::string glyph_key(const ViewSettings& s) {
-  return nlohmann::json{{"view", to_string(s.view)},
-                        {"margin", s.lipschitz_margin},
-                        {"refined", s.only_refined_or_failed},
-                        {"status", s.octree_by_status},
-                        {"clip", s.clip},
-                        {"min_depth", s.min_depth},
-                        {"range", range_to_json(s.range[static_cast<int>(shown_field(s))])}}
+  return nlohmann::json{
+      {"view", to_string(s.view)},    {"margin", s.lipschitz_margin},
+      {"distortion", s.distortion},   {"refined", s.only_refined_or_failed},
+      {"status", s.octree_by_status}, {"clip", s.clip},
+      {"min_depth", s.min_depth},     {"range", range_to_json(s.range[static_cast<int>(shown_field(s))])}}
       .dump();
 }
 }  // namespace
@@ -637,8 +672,16 @@ void Scene::Impl::update_mesh(const SessionFrame& f, const ViewSettings& s) {
     pts->SetPoint(i, f.mesh_V(i, 0), f.mesh_V(i, 1), f.mesh_V(i, 2));
   pts->Modified();
   auto arr = Ptr<vtkDoubleArray>::New();
-  const VecXd& v = s.mesh_volume_ratio ? f.mesh_det : f.mesh_e_iso;
-  arr->SetName(s.mesh_volume_ratio ? "volume ratio (det J)" : "E_iso - 6");
+  const Field fld = shown_field(s);
+  // Frames built before the view asked for σ1/σ3 lack it: their vertices show NaN until the next frame.
+  const VecXd nan = VecXd::Constant(f.mesh_V.rows(), std::numeric_limits<double>::quiet_NaN());
+  const VecXd& v = fld == Field::kDistortion
+                       ? (f.mesh_distortion.size() == f.mesh_V.rows() ? f.mesh_distortion : nan)
+                   : fld == Field::kDetJ ? f.mesh_det
+                                         : f.mesh_e_iso;
+  arr->SetName(fld == Field::kDistortion ? "sigma1/sigma3"
+               : fld == Field::kDetJ     ? "volume ratio (det J)"
+                                         : "E_iso - 6");
   arr->SetNumberOfValues(v.size());
   for (Eigen::Index i = 0; i < v.size(); ++i) arr->SetValue(i, v(i));
   mesh->GetPointData()->SetScalars(arr);
@@ -707,7 +750,19 @@ void Scene::Impl::show_bar(vtkScalarsToColors* colors, const char* title) {
   bar->VisibilityOn();
 }
 
-// Mesh view: the deformed mesh coloured by det J (log scale, symmetric around 1) or E_iso − 6.
+namespace {
+// The certificate's bound on σ1/σ3 over the certified domain (the largest per-leaf bound), for captions.
+std::string distortion_bound_text(const SessionFrame& f) {
+  if (!f.leaves) return "; certified bound: computing...";
+  const Certificate& c = *f.leaves;
+  if (!c.certified) return "; no certified bound (the map is not certified)";
+  std::string t = "; certified on the domain: sigma1/sigma3 <= " + format_g(c.max_distortion_upper_bound, 4);
+  if (f.leaves_version != f.map_version) t += " (of an earlier iterate)";
+  return t;
+}
+}  // namespace
+
+// Mesh view: the deformed mesh coloured by σ1/σ3, det J (log scale, symmetric around 1) or E_iso − 6.
 std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSettings& s) {
   mesh_actor->VisibilityOn();
   mesh_actor->GetProperty()->SetEdgeVisibility(s.mesh_edges ? 1 : 0);
@@ -715,7 +770,18 @@ std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSetting
   def_cage->SetVisibility(s.deformed_cage);
   const Field fld = shown_field(s);
   const ColorRange& cr = s.range[static_cast<int>(fld)];
-  if (s.mesh_volume_ratio) {
+  if (fld == Field::kDistortion) {
+    // 1 = conformal: the heat map starts there.
+    std::vector<double> v(f.mesh_distortion.data(), f.mesh_distortion.data() + f.mesh_distortion.size());
+    auto [lo, hi] = color_range(v, cr);
+    if (cr.mode != ColorRange::Mode::kManual) {
+      lo = 1;
+      hi = std::max(hi, 1.05);
+    }
+    mesh_lut->SetScaleToLinear();
+    heat_lut(mesh_lut, hi);
+    mesh_lut->SetTableRange(lo, std::max(hi, lo + 1e-9));
+  } else if (fld == Field::kDetJ) {
     // Symmetric around 1 on a log scale (a volume halved and doubled get opposite colours): the range is
     // taken on log det J.
     std::vector<double> v;
@@ -744,8 +810,12 @@ std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSetting
   mesh_lut->Build();
   mesh_mapper->SetScalarRange(mesh_lut->GetTableRange());
   range = {mesh_lut->GetTableRange()[0], mesh_lut->GetTableRange()[1]};
-  show_bar(mesh_lut, s.mesh_volume_ratio ? "det J" : "E_iso - 6");
-  return std::string("deformed mesh, ") + (s.mesh_volume_ratio ? "local volume ratio det J" : "E_iso - 6");
+  if (fld == Field::kDistortion) {
+    show_bar(mesh_lut, "sigma1/sigma3");
+    return "deformed mesh, distortion sigma1/sigma3 at the vertices" + distortion_bound_text(f);
+  }
+  show_bar(mesh_lut, fld == Field::kDetJ ? "det J" : "E_iso - 6");
+  return std::string("deformed mesh, ") + (fld == Field::kDetJ ? "local volume ratio det J" : "E_iso - 6");
 }
 
 // σ3 view: slices (and in rest space optionally a volume rendering) of the field grid, over a faint mesh.
@@ -795,11 +865,11 @@ std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSetti
   context_mesh->VisibilityOn();
   rest_cage->SetVisibility(!s.sigma_deformed_space && s.rest_cage);
   def_cage->SetVisibility(s.sigma_deformed_space && s.deformed_cage);
-  std::string what =
-      std::string("sigma3 field, ") + (s.sigma_deformed_space ? "deformed space" : "rest space");
+  std::string what = std::string(s.distortion ? "distortion sigma1/sigma3, " : "sigma3 field, ") +
+                     (s.sigma_deformed_space ? "deformed space" : "rest space");
   if (!f.field) return what + " (computing...)";
-  const auto [lo, hi] = sigma3_range(*f.field, s);
-  sigma3_colors(sigma_colors, lo, hi);
+  const auto [lo, hi] = field_range(*f.field, s);
+  field_colors(sigma_colors, lo, hi, s.distortion);
   range = {lo, hi};
   slices_mapper->SetInputData(sigma3_slices(f, s));
   slices_mapper->SetScalarRange(lo, hi);
@@ -809,7 +879,7 @@ std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSetti
     outline->VisibilityOn();
   }
   if (s.sigma_volume && !s.sigma_deformed_space) show_sigma3_volume(f, s, lo, hi);
-  show_bar(sigma_colors, "sigma3");
+  show_bar(sigma_colors, s.distortion ? "sigma1/sigma3" : "sigma3");
   what += std::string(s.sigma_whole_cage ? " (whole cage interior; certified only inside the voxels)"
                                          : " (inside the voxels)") +
           ", colours " + format_g(lo, 3) + " to " + format_g(hi, 3);
@@ -822,7 +892,7 @@ std::string Scene::Impl::show_sigma3_view(const SessionFrame& f, const ViewSetti
 // Volume rendering of σ3 in rest space; rebuilt when the field or the whole-cage choice changes.
 void Scene::Impl::show_sigma3_volume(const SessionFrame& f, const ViewSettings& s, double lo, double hi) {
   const FieldGrid& g = *f.field;
-  const long volume_key = 2 * f.field_version + (s.sigma_whole_cage ? 1 : 0);
+  const long volume_key = 4 * f.field_version + (s.sigma_whole_cage ? 1 : 0) + (s.distortion ? 2 : 0);
   if (volume_version != volume_key) {
     volume_version = volume_key;
     volume_image = Ptr<vtkImageData>::New();
@@ -830,23 +900,27 @@ void Scene::Impl::show_sigma3_volume(const SessionFrame& f, const ViewSettings& 
     volume_image->SetOrigin(g.origin.x(), g.origin.y(), g.origin.z());
     volume_image->SetSpacing(g.spacing, g.spacing, g.spacing);
     auto v = Ptr<vtkFloatArray>::New();
-    v->SetName("sigma3");
+    v->SetName(s.distortion ? "sigma1/sigma3" : "sigma3");
     v->SetNumberOfValues(g.points());
-    // Outside the cage: below the range, fully transparent.
-    const float outside = static_cast<float>(lo - 0.01 * (hi - lo + 1e-9));
-    for (long i = 0; i < g.points(); ++i)
-      v->SetValue(i, g.inside_cage[static_cast<size_t>(i)] &&
-                             (s.sigma_whole_cage || g.inside_sampled[static_cast<size_t>(i)]) &&
-                             std::isfinite(g.sigma3[static_cast<size_t>(i)])
-                         ? g.sigma3[static_cast<size_t>(i)]
+    // Outside the cage: beyond the range's transparent end. The interesting end is opaque: low σ3
+    // (near-degenerate), high σ1/σ3 (most distorted).
+    const double span = hi - lo + 1e-9;
+    const float outside = static_cast<float>(s.distortion ? hi + 0.01 * span : lo - 0.01 * span);
+    for (long i = 0; i < g.points(); ++i) {
+      const size_t n = static_cast<size_t>(i);
+      const float x = grid_value(g, n, s.distortion);
+      v->SetValue(i, g.inside_cage[n] && (s.sigma_whole_cage || g.inside_sampled[n]) && std::isfinite(x)
+                         ? x
                          : outside);
+    }
     volume_image->GetPointData()->SetScalars(v);
     volume_mapper->SetInputData(volume_image);
     auto opacity = Ptr<vtkPiecewiseFunction>::New();
+    const double bad = s.distortion ? hi : lo, good = s.distortion ? lo : hi;
     opacity->AddPoint(outside, 0.0);
-    opacity->AddPoint(lo, 0.5);  // low σ3 (near-degenerate) stands out
-    opacity->AddPoint(lo + 0.5 * (hi - lo), 0.08);
-    opacity->AddPoint(hi, 0.02);
+    opacity->AddPoint(bad, 0.5);
+    opacity->AddPoint(0.5 * (lo + hi), 0.08);
+    opacity->AddPoint(good, 0.02);
     auto prop = Ptr<vtkVolumeProperty>::New();
     prop->SetColor(sigma_colors);
     prop->SetScalarOpacity(opacity);
@@ -863,9 +937,10 @@ std::string Scene::Impl::show_leaves_view(const SessionFrame& f, const ViewSetti
   context_mesh->VisibilityOn();
   rest_cage->SetVisibility(s.rest_cage);
   const bool lip = s.view == View::kLipschitz;
-  std::string what =
-      lip ? (s.lipschitz_margin ? "leaf voxels, margin sigma3 - rL" : "leaf voxels, Lipschitz bound L")
-          : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
+  std::string what = lip ? (s.distortion         ? "leaf voxels, certified upper bound of sigma1/sigma3"
+                            : s.lipschitz_margin ? "leaf voxels, margin sigma3 - rL"
+                                                 : "leaf voxels, Lipschitz bound L")
+                         : (s.octree_by_status ? "octree leaves by status" : "octree leaves by depth");
   if (!f.leaves) return what + " (computing...)";
   const Certificate& c = *f.leaves;
   // The glyph inputs are rebuilt only when the leaves or what the view draws of them changed: a new input
@@ -909,6 +984,7 @@ std::string Scene::Impl::show_leaves_view(const SessionFrame& f, const ViewSetti
   what += ": " + std::to_string(L.shown) + " of " + std::to_string(c.leaves.size()) + " leaves shown, " +
           std::to_string(c.refined) + " voxels refined, " + std::to_string(L.failed) + " failed";
   if (s.clip < 1) what += ", clipped";
+  if (lip && s.distortion) what += distortion_bound_text(f);
   if (f.leaves_version != f.map_version) what += " (of an earlier iterate; updates when the solver rests)";
   return what;
 }
@@ -921,13 +997,15 @@ const char* Scene::Impl::color_leaves(const Certificate& c, const ViewSettings& 
   leaves_lut->IndexedLookupOff();
   leaves_lut->ResetAnnotations();
   leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);
-  if (lip && !s.lipschitz_margin) {
-    // L spans decades: log scale, viridis (a rainbow would invent boundaries that are not in the data).
+  if (lip && (s.distortion || !s.lipschitz_margin)) {
+    // L and the σ1/σ3 bound span decades: log scale, viridis (a rainbow would invent boundaries that are
+    // not in the data).
     lo = std::max(lo, 1e-12);
     viridis_lut(leaves_lut, lo, std::max(hi, lo * 10), true);
-    leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);  // infinite L: dark grey
-    leaves_lut->SetUseAboveRangeColor(s.range[static_cast<int>(Field::kL)].mode == ColorRange::Mode::kAuto);
-    return "L";
+    leaves_lut->SetAboveRangeColor(0.2, 0.2, 0.2, 1);  // an infinite bound: dark grey
+    leaves_lut->SetUseAboveRangeColor(s.range[static_cast<int>(shown_field(s))].mode ==
+                                      ColorRange::Mode::kAuto);
+    return s.distortion ? "K bound" : "L";
   }
   if (lip) {
     // Diverging around 0 (certified above, red at and below 0), symmetric unless set by hand.

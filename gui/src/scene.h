@@ -6,7 +6,7 @@
 #include <string>
 
 #include "color_range.h"
-#include "lidef/interactive_session.h"
+#include "lidef/analysis/interactive_session.h"
 
 class vtkActor;
 class vtkRenderer;
@@ -28,6 +28,9 @@ struct ViewSettings {
   bool mesh_volume_ratio = false;  // colour by det J instead of E_iso − 6
   bool rest_cage = false, deformed_cage = true;
   bool mesh_edges = false;  // the mesh's triangle edges over its colours
+  // Distortion σ1/σ3 instead of each view's own quantity: per vertex (mesh view), on the slices (σ3 view),
+  // the certified upper bound per leaf (Lipschitz view). The octree view is unchanged.
+  bool distortion = false;
   // σ3 view.
   bool sigma_deformed_space = false;      // slices drawn at the deformed grid positions
   bool slice[3] = {true, true, false};    // x, y, z slice planes
@@ -43,7 +46,9 @@ struct ViewSettings {
   int min_depth = 0;  // keep leaves at least this deep
   // Colour-bar range of each field (color_range.h). E_iso − 6 clamps at its 99th percentile by default: one
   // outlier at a pulled corner would otherwise wash out the rest of the mesh.
-  ColorRange range[kNumFields] = {{ColorRange::Mode::kPercentile, 99, 0, 1}, {}, {}, {}, {}};
+  // σ1/σ3 per vertex likewise: it peaks at the same corners.
+  ColorRange range[kNumFields] = {{ColorRange::Mode::kPercentile, 99, 0, 1}, {}, {}, {}, {},
+                                  {ColorRange::Mode::kPercentile, 99, 0, 1}, {}};
 };
 // The field the view colours by (kSigma3 for the octree view, which colours by depth or status: no range).
 Field shown_field(const ViewSettings& s);

@@ -72,17 +72,17 @@
 
 #include "compare_view.h"
 #include "explorer_panel.h"
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/mesh_export.h"
+#include "lidef/analysis/vtk_export.h"
 #include "lidef/atomic_file.h"
 #include "lidef/cage/auto_cage.h"
-#include "lidef/certificate_report.h"
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
-#include "lidef/mesh_export.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/number_format.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/subspace.h"
-#include "lidef/vtk_export.h"
 #include "params_panel.h"
 #include "plots_panel.h"
 #include "studio_common.h"
@@ -583,6 +583,19 @@ QWidget* StudioWindow::build_view_panel() {
     QMetaObject::invokeMethod(
         this, [this] { refresh_view_panel(); }, Qt::QueuedConnection);
   });
+  auto* dist = new QCheckBox("Distortion sigma1/sigma3");
+  dist->setObjectName("view_distortion");
+  dist->setChecked(settings_.distortion);
+  dist->setToolTip(
+      "Colour by sigma1/sigma3 instead: at the mesh vertices, on the slices, and in the Lipschitz view the "
+      "certified upper bound per leaf; the caption gives the certified bound over the whole domain");
+  connect(dist, &QCheckBox::toggled, this, [this](bool on) {
+    settings_.distortion = on;
+    settings_changed();
+    QMetaObject::invokeMethod(
+        this, [this] { refresh_view_panel(); }, Qt::QueuedConnection);
+  });
+  vl->addWidget(dist);
   lay->addWidget(views);
   lay->addWidget(build_range_controls());
   auto check = [&](QLayout* l, const char* text, bool* field, const char* tip) {

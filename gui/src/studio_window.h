@@ -13,7 +13,7 @@
 #include <mutex>
 #include <vector>
 
-#include "lidef/interactive_session.h"
+#include "lidef/analysis/interactive_session.h"
 #include "pick.h"
 #include "scene.h"
 
@@ -33,6 +33,7 @@ class vtkHandleWidget;
 class vtkSphereHandleRepresentation;
 class vtkCallbackCommand;
 class vtkObject;
+class vtkPolyData;
 
 namespace lidef::studio {
 
@@ -155,6 +156,8 @@ class StudioWindow : public QMainWindow {
   vtkRenderWindow* render_window() const;
   QVTKOpenGLNativeWidget* view_widget() const { return view_; }
   std::string caption() const { return scene_->caption(); }
+  // The deformed mesh as drawn: points f(v), the shown field as point scalars.
+  vtkPolyData* mesh_data() const { return scene_->mesh_data(); }
   // Handles of the shown frame whose image misses the target (red lines in the mesh view).
   int unreached_handles() const { return scene_->unreached_handles(); }
   // MSAA samples of the 3D view (0 by default: interaction speed; call before the window is first shown).

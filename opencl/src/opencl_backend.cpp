@@ -1,7 +1,7 @@
 #define CL_HPP_TARGET_OPENCL_VERSION 120
 #define CL_HPP_MINIMUM_OPENCL_VERSION 120
 #define CL_HPP_ENABLE_EXCEPTIONS
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 
 #include <clblast.h>
 #include <unistd.h>

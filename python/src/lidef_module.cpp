@@ -13,23 +13,23 @@
 #include <string>
 #include <vector>
 
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/deform_outputs.h"
+#include "lidef/analysis/vtk_export.h"
 #include "lidef/blas_kernel.h"
 #include "lidef/cage/auto_cage.h"
-#include "lidef/certificate_report.h"
 #include "lidef/deform.h"
-#include "lidef/deform_outputs.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
 #include "lidef/explorer/random_search.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/model_check.h"
 #include "lidef/normalization.h"
-#include "lidef/opencl_backend.h"
+#include "lidef/opencl/opencl_backend.h"
 #include "lidef/precompute_cache.h"
 #include "lidef/scenario.h"
 #include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
-#include "lidef/vtk_export.h"
 #include "python_arrays.h"
 #include "python_interrupt.h"
 

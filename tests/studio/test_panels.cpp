@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
 #include "lidef/deform_params.h"
 #include "lidef/projected_newton.h"
 #include "params_panel.h"

@@ -31,7 +31,7 @@
 #include <sstream>
 #include <thread>
 
-#include "lidef/certificate_report.h"
+#include "lidef/analysis/certificate_report.h"
 #include "lidef/scenario.h"
 #include "studio_fixture.h"
 #include "studio_window.h"

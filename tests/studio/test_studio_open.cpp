@@ -18,7 +18,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
-#include "lidef/interactive_session.h"
+#include "lidef/analysis/interactive_session.h"
 #include "params_panel.h"
 #include "plots_panel.h"
 #include "studio_fixture.h"

@@ -3,11 +3,15 @@
 // fixed size, the colour-range panel, and the View menu (panels, up axis, orientation axes, mesh edges),
 // recent files and the tool bar.
 #include <gtest/gtest.h>
+#include <vtkDataArray.h>
 #include <vtkImageData.h>
 #include <vtkNew.h>
 #include <vtkPNGReader.h>
+#include <vtkPointData.h>
+#include <vtkPolyData.h>
 
 #include <QAction>
+#include <QCheckBox>
 #include <QComboBox>
 #include <QDockWidget>
 #include <QLabel>
@@ -25,7 +29,7 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
-#include "lidef/interactive_session.h"
+#include "lidef/analysis/interactive_session.h"
 #include "lidef/number_format.h"
 #include "pick.h"
 #include "studio_common.h"
@@ -288,3 +292,66 @@ TEST(StudioView, ViewMenuUpAxisAxesEdgesRecentAndToolbar) {
 }
 
 }  // namespace
+
+// The distortion view: σ1/σ3 at the mesh vertices equal to the map's at those points (evaluated apart, by the
+// pick), never above the certified bound the caption states; the Lipschitz view colours leaves by that bound;
+// the σ3 view's slices by σ1/σ3. The setting is saved with the view settings.
+TEST(StudioView, DistortionViewShowsSigma1OverSigma3UnderItsCertifiedBound) {
+  Fixture fx;
+  StudioWindow& win = fx.win;
+  open_beam_with_two_handles(fx, 0.6);
+  auto* box = win.findChild<QCheckBox*>("view_distortion");
+  ASSERT_NE(box, nullptr);
+  box->setChecked(true);
+  ASSERT_TRUE(win.settings().distortion);
+  ASSERT_TRUE(pump_until(
+      [&] {
+        const auto f = win.shown_frame();
+        return settled(win, 0.1) && f->mesh_distortion.size() == f->mesh_V.rows() && f->leaves &&
+               f->leaves_version == f->map_version;
+      },
+      120));
+  const auto frame = win.shown_frame();
+  ASSERT_TRUE(frame->certified);
+  vtkDataArray* shown = win.mesh_data()->GetPointData()->GetScalars();
+  ASSERT_NE(shown, nullptr);
+  EXPECT_STREQ(shown->GetName(), "sigma1/sigma3");
+  const MatX3d& V = frame->model->mesh.V;
+  double max_vertex = 0;
+  for (Eigen::Index i = 0; i < V.rows(); ++i) max_vertex = std::max(max_vertex, shown->GetTuple1(i));
+  EXPECT_GT(max_vertex, 1.01) << "the pulled beam is not conformal";
+  for (Eigen::Index i = 0; i < V.rows(); i += std::max<Eigen::Index>(1, V.rows() / 25)) {
+    const studio::PickedValues p = studio::picked_values(*frame, V.row(i).transpose(), "");
+    EXPECT_NEAR(shown->GetTuple1(i), p.sigma1 / p.sigma3, 1e-9 * p.sigma1 / p.sigma3) << "vertex " << i;
+  }
+  const double bound = frame->leaves->max_distortion_upper_bound;
+  EXPECT_GE(bound, max_vertex) << "the certified bound is below a vertex's distortion";
+  EXPECT_NE(win.caption().find("sigma1/sigma3 <= " + format_g(bound, 4)), std::string::npos) << win.caption();
+
+  auto settings = win.settings();
+  settings.view = studio::View::kLipschitz;
+  win.set_settings(settings);
+  ASSERT_TRUE(settled(win));
+  pump_until([] { return false; }, 0.2);
+  EXPECT_NE(win.caption().find("certified upper bound of sigma1/sigma3"), std::string::npos) << win.caption();
+  const auto leaf_range = win.shown_color_range();
+  EXPECT_GE(leaf_range.first, 1.0);
+  EXPECT_LE(leaf_range.second, bound * (1 + 1e-12));
+
+  settings.view = studio::View::kSigma3;
+  win.set_settings(settings);
+  ASSERT_TRUE(pump_until(
+      [&] {
+        const auto f = win.shown_frame();
+        return settled(win, 0.1) && f->field && f->field_version == f->map_version;
+      },
+      120));
+  pump_until([] { return false; }, 0.2);
+  EXPECT_NE(win.caption().find("distortion sigma1/sigma3"), std::string::npos) << win.caption();
+  EXPECT_GE(win.shown_color_range().first, 1.0);
+
+  studio::ViewSettings back;
+  studio::settings_from_json(studio::settings_to_json(win.settings()), back, "test");
+  EXPECT_TRUE(back.distortion);
+  EXPECT_TRUE(fx.errors.empty()) << fx.errors.front();
+}

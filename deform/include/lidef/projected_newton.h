@@ -88,7 +88,7 @@ struct IterationRecord {
   int armijo_rejections = 0;       // halvings because the energy did not decrease enough (or became +∞)
   int certificate_rejections = 0;  // halvings because the certificate failed
   bool accepted = false;
-  bool certified = false;       // the current map (accepted point, or the previous one) is certified
+  bool certified = false;  // the current map (accepted point, or the previous one) is certified
   // The line search's certificate of the current map: min σ3 at the evaluated voxel centers, and min over
   // leaves of σ3 − r L − τ (voxels certified by perturbation carry their bound, docs/certificate.md Step 4e).
   double min_sigma3 = 0;
@@ -142,7 +142,7 @@ class DeformationSolver {
   // Precomputes everything that depends only on the cage and the parameters that shape it (reduced_dof,
   // samples/voxel_side, safety, hessian_fraction, threads). `log` receives one line per preprocessing stage.
   // `backend` runs the per-sample stages (compute_backend.h); nullptr = the CPU backend. The front end turns
-  // params.backend ("cpu", "opencl", "auto") into one (opencl/include/lidef/opencl_backend.h).
+  // params.backend ("cpu", "opencl", "auto") into one (opencl/include/lidef/opencl/opencl_backend.h).
   //
   // The voxels (energy samples and certificate) cover params.domain: "mesh" (domain_sampling.h: the mesh's
   // triangles and solid; needs `mesh`) or "voxels" (the paper's grid). Without a mesh the domain is the grid,
@@ -295,7 +295,7 @@ class DeformationSolver {
   // direction_scale): Σ_k |α_k| ‖p_k‖_F when they were combined from CG iterates.
   double direction_scale_ = 0;
   long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
-  struct Precompute;                             // the stages of the constructor (projected_newton.cpp)
+  struct Precompute;  // the stages of the constructor (projected_newton.cpp)
   // The plain direction p0 = −(factor)⁻¹ ∇E improved by params_.newton_cg_steps preconditioned CG iterates
   // on the exact Hessian; leaves the kernels' direction set to the result (and direction_scale_).
   VecXd conjugate_gradient_correction(const VecXd& gvec, const VecXd& p0, const MatXd& L,

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "lidef/analysis/field_grid.h"
 #include "lidef/cage.h"
-#include "lidef/field_grid.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"

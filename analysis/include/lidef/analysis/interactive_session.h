@@ -25,10 +25,10 @@
 #include <thread>
 #include <vector>
 
-#include "lidef/certificate_verification.h"
+#include "lidef/analysis/certificate_verification.h"
+#include "lidef/analysis/field_grid.h"
 #include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
-#include "lidef/field_grid.h"
 #include "lidef/model_check.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
@@ -64,10 +64,12 @@ struct SessionFrame {
                        // current weights
   double max_handle_error = 0;
   // Geometry (model units).
-  MatX3d mesh_V;                    // #Vm by 3: the deformed mesh vertices f(v)
-  VecXd mesh_e_iso;                 // #Vm: E_iso − 6 at the mesh vertices (NaN where det J ≤ 0)
-  VecXd mesh_det;                   // #Vm: det J, the local volume ratio
-  MatX3d cage_V;                    // #Vc by 3: the deformed cage (the vertex coefficients y_v)
+  MatX3d mesh_V;     // #Vm by 3: the deformed mesh vertices f(v)
+  VecXd mesh_e_iso;  // #Vm: E_iso − 6 at the mesh vertices (NaN where det J ≤ 0)
+  VecXd mesh_det;    // #Vm: det J, the local volume ratio
+  VecXd
+      mesh_distortion;  // #Vm: σ1/σ3 (NaN where σ3 ≤ 0); only when ExtrasRequest::mesh_distortion, else empty
+  MatX3d cage_V;        // #Vc by 3: the deformed cage (the vertex coefficients y_v)
   MatX3d sources, targets, images;  // #h by 3: handle sources, targets and their images f(source)
   MatX3d coefficients;              // #Vc+#Fc by 3: the map (coefficients.txt)
   // Extras, computed only when requested (set_extras) and then at most every `extras_interval` seconds while
@@ -91,6 +93,7 @@ struct SessionFrame {
 struct ExtrasRequest {
   bool leaves = false;
   bool field = false;
+  bool mesh_distortion = false;  // σ1/σ3 at the mesh vertices with every frame (a signed SVD per vertex)
   int field_resolution = 48;     // grid points along the longest axis of the cage's bounding box
   double extras_interval = 1.0;  // seconds between extras while iterating (0 = every frame)
 };

@@ -18,7 +18,7 @@
 #pragma once
 #include <string>
 
-#include "lidef/certificate_report.h"
+#include "lidef/analysis/certificate_report.h"
 #include "lidef/tri_mesh.h"
 #include "lidef/types.h"
 
