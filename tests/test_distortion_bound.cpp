@@ -208,6 +208,65 @@ TEST(DistortionBound, TargetIsProvenByRefinementOrReportedNotCertified) {
   EXPECT_NO_THROW(validate_params(dp, "test"));
 }
 
+// The line search's probes: a probe where σ1/σ3 is above the target refuses the map at once, with the verdict
+// of the full certificate (which fails too); probes below the target, or outside the voxels, change nothing.
+TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
+  const Sphere& s = sphere();
+  OctreeCertifier cert(s.cage, s.sampling);
+  const MatX3d y = lidef::test::smooth_map(s.cage, s.sub, 0.9, 12);
+  CertifyParams p;
+  p.max_depth = 3;
+  p.stop_on_failure = true;
+  const Certificate c0 = cert.certify(y, p);
+  ASSERT_TRUE(c0.certified) << c0.reason;
+  // The leaf center of largest σ1/σ3, and one of the smallest.
+  const CertLeaf* hi = nullptr;
+  const CertLeaf* lo = nullptr;
+  for (const CertLeaf& l : c0.leaves) {
+    if (!(l.sigma3 > 0) || !std::isfinite(l.sigma1)) continue;
+    if (!hi || l.sigma1 / l.sigma3 > hi->sigma1 / hi->sigma3) hi = &l;
+    if (!lo || l.sigma1 / l.sigma3 < lo->sigma1 / lo->sigma3) lo = &l;
+  }
+  ASSERT_TRUE(hi && lo);
+  const double k_hi = hi->sigma1 / hi->sigma3, k_lo = lo->sigma1 / lo->sigma3;
+  ASSERT_GT(k_hi, 1.01 * k_lo);
+
+  // Target below the value at `hi`: the probe there refuses at once; the full certificate refuses too.
+  CertifyParams q = p;
+  q.max_distortion = std::max(1.0, 0.99 * k_hi);
+  const Certificate full = cert.certify(y, q);
+  EXPECT_FALSE(full.certified);
+  EXPECT_TRUE(full.distortion_failed);
+  q.distortion_probes = {lo->center, hi->center};
+  const Certificate quick = cert.certify(y, q);
+  EXPECT_FALSE(quick.certified);
+  EXPECT_TRUE(quick.distortion_failed);
+  EXPECT_EQ(quick.reason, distortion_reason(q.max_distortion, hi->center));
+  ASSERT_EQ(quick.failing.size(), 1u);
+  EXPECT_EQ(quick.failing.front().center, hi->center);
+  EXPECT_EQ(quick.num_leaves, 0) << "the probe refused before evaluating the voxels";
+
+  // Target above every leaf's bound: certified with or without probes, identical bounds.
+  q.max_distortion = 2 * c0.max_distortion_upper_bound;
+  q.distortion_probes.clear();
+  const Certificate plain = cert.certify(y, q);
+  q.distortion_probes = {hi->center, lo->center, Vec3(100, 100, 100)};  // the last outside every voxel
+  const Certificate probed = cert.certify(y, q);
+  ASSERT_TRUE(plain.certified) << plain.reason;
+  ASSERT_TRUE(probed.certified) << probed.reason;
+  EXPECT_EQ(probed.max_distortion_upper_bound, plain.max_distortion_upper_bound);
+  EXPECT_EQ(probed.min_lower_bound, plain.min_lower_bound);
+  EXPECT_EQ(probed.num_leaves, plain.num_leaves);
+
+  // Without stop_on_failure (a report, not a line search) probes are not used: the full verdict with leaves.
+  q.max_distortion = std::max(1.0, 0.99 * k_hi);
+  q.stop_on_failure = false;
+  q.distortion_probes = {hi->center};
+  const Certificate report = cert.certify(y, q);
+  EXPECT_FALSE(report.certified);
+  EXPECT_GT(report.num_leaves, 0);
+}
+
 TEST(DistortionBound, IntervalReproofConfirmsEveryCertifiedLeafAndRefusesATamperedOne) {
   BallParams bp;
   bp.cage_subdivisions = 1;

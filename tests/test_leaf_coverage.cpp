@@ -75,7 +75,9 @@ TEST(LeafCoverage, TheCertifiersLeavesCoverTheMeshDomainAndThePapersGrid) {
     ASSERT_EQ(c.report.domain, domain);
     const LeafCoverage cov = prove_leaf_coverage(c.report, c.model.mesh);
     EXPECT_TRUE(cov.proven) << domain << ": " << cov.reason;
-    if (domain == "voxels") EXPECT_EQ(cov.base_cells, c.report.cert.voxels);
+    if (domain == "voxels") {
+      EXPECT_EQ(cov.base_cells, c.report.cert.voxels);
+    }
     EXPECT_GT(cov.cells_checked, 0);
     // The slack covers only rounding: far below a leaf's size.
     EXPECT_LT(cov.radius_slack, 1e-12) << domain;

@@ -400,6 +400,49 @@ struct OctreeCertifier::Run {
     return std::isfinite(k) ? k : kInf;
   }
 
+  // --- −1. Probing the distortion target (CertifyParams::distortion_probes). At a probe q inside the voxels,
+  // σ_i(J(q)) lies within τ_i (the rounding allowance of the double-precision evaluation, as for a center)
+  // of the computed σ̃_i; (σ̃1 − τ1)/(σ̃3 + τ3) > K then proves σ1/σ3 > K at q, and the leaf holding q can
+  // never be proven ≤ K (its bound covers a ball containing q). Returns true with `out` filled (not
+  // certified, the distortion reason at q) when a probe fails.
+  bool distortion_probe(Certificate& out) const {
+    if (!p.stop_on_failure || !(p.max_distortion > 0) || p.distortion_probes.empty()) return false;
+    MatX3d Q(static_cast<Eigen::Index>(p.distortion_probes.size()), 3);
+    for (size_t k = 0; k < p.distortion_probes.size(); ++k)
+      Q.row(static_cast<Eigen::Index>(k)) = p.distortion_probes[k].transpose();
+    const VecXi voxel = containing_voxel(oc.sampling_, Q);
+    const double K = p.max_distortion;
+    for (Eigen::Index k = 0; k < Q.rows(); ++k) {
+      if (voxel(k) < 0) continue;
+      const Vec3 q = Q.row(k).transpose();
+      Mat3 J;
+      double hn = 0, sJ = 0, sH = 0;
+      eval_point(q, J, hn, sJ, sH);
+      bool resolved = true;
+      const Vec3 sv = signed_singular_values(J, &resolved);
+      const double s1 = sv(0) - tolerance(sJ, 0, sv(0), 0, 0, 0);
+      const double s3 = sv(2) + tolerance(sJ, 0, sv(2), 0, 0, 0);
+      if (!resolved || !(s3 > 0) || !(s1 > K * s3 * (1 + 1e-12))) continue;
+      CertLeaf l;
+      l.center = q;
+      l.sigma3 = sv(2);
+      l.sigma1 = sv(0);
+      l.base = voxel(k);
+      l.certified = true;  // σ3 is not in question here; the distortion is
+      out.failing.push_back(l);
+      out.failed_voxels.push_back(voxel(k));
+      out.certified = false;
+      out.distortion_failed = true;
+      out.max_distortion = K;
+      out.voxel_side = side;
+      out.voxels = static_cast<int>(N);
+      out.min_sigma3_center = sv(2);
+      out.reason = distortion_reason(K, q);
+      return true;
+    }
+    return false;
+  }
+
   // --- 0. Certifying by perturbation (Step 4e): base voxels whose bound at the previous certified map ỹ₀
   // exceeds Γ_i ‖ỹ − ỹ₀‖_F are certified without evaluation. Reduced mode on the CPU only.
   void perturbation() {
@@ -1491,7 +1534,12 @@ struct OctreeCertifier::Run {
       for (size_t i = 0; i < c.leaves.size() && !hopeless; ++i) {
         const CertLeaf& l = c.leaves[i];
         if (l.distortion_upper <= K) continue;
-        if (!settled[i] && l.depth - level(l.base) < p.max_depth &&
+        // σ1/σ3 at the center itself above K beyond the float storage allowance (sigma3_error, which bounds
+        // both singular values' error by Weyl) and rounding: no child's bound can get below K, as each
+        // child's ball contains the center. Not split; a line search trial fails here.
+        const double e = std::isfinite(l.sigma3_error) ? l.sigma3_error : kInf;
+        const bool center_above = l.sigma3 + e > 0 && l.sigma1 - e > K * (l.sigma3 + e) * (1 + 1e-9);
+        if (!settled[i] && !center_above && l.depth - level(l.base) < p.max_depth &&
             budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
           split.push_back(i);
         else
@@ -1609,6 +1657,10 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
   const auto t_start = Clock::now();
   if (p.max_depth < 0) throw InputError("", "max depth must be >= 0");
   Run run(*this, y, yr_ptr, yr_rows, p);
+  if (Certificate quick; run.distortion_probe(quick)) {
+    quick.ms_total = ms_since(t_start);
+    return quick;
+  }
   run.perturbation();
   run.base_derivatives();
   run.base_sigma3();

@@ -638,6 +638,7 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       CertifyParams cp = certify_params(true, false);
       cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
       cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
+      cp.distortion_probes = distortion_probes_;
       if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
         cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
         cp.previous_lower = &perturb_lower_;
@@ -655,6 +656,10 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
         line_search_failed_ = c.failed_voxels;
         // The last rejection by the distortion bound, named in the model's frame (the stop message says it).
         distortion_rejection_ = c.distortion_failed ? frame_.from_normalized(Certificate(c)).reason : "";
+        if (c.distortion_failed) {  // the next trials look there first
+          distortion_probes_.clear();
+          for (const CertLeaf& l : c.failing) distortion_probes_.push_back(l.center);
+        }
       }
       rec.ms_certificate += ms_since(tc);
       if (trace)

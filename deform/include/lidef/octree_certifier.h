@@ -82,6 +82,12 @@ struct CertifyParams {
   // of σ1). A voxel taken over gets σ1 ≤ base_upper[i] + Γ_i ‖ỹ − ỹ₀‖_F; without it a taken-over voxel has no
   // finite σ1 bound, and with max_distortion > 0 no voxel is taken over.
   const std::vector<double>* previous_upper = nullptr;
+  // With max_distortion and stop_on_failure (the line search): points, in the frame of y, where a previous
+  // trial's distortion bound failed. σ1/σ3 is evaluated there first, and where it is certainly above
+  // max_distortion the map is refused at once with the verdict the full certificate would reach: the leaf
+  // whose cell holds the point bounds σ1/σ3 from above on a ball containing it. Points outside the voxels are
+  // skipped. Never changes a verdict; saves the full evaluation of trials that fail where the last one did.
+  std::vector<Vec3> distortion_probes;
 };
 
 // One leaf of the certification octree.

@@ -281,6 +281,7 @@ class DeformationSolver {
   // Base voxels whose proof failed in the last rejected line-search trial: the next trial refines them first
   // (CertifyParams::priority_voxels), so a trial failing at the same place is rejected early.
   std::vector<long> line_search_failed_;
+  std::vector<Vec3> distortion_probes_;  // where the last trial refused by the distortion bound failed
   // The last map the line search accepted and its certificate's per-voxel lower bounds (normalized frame):
   // the next trials certify by perturbation from it (CertifyParams::previous_y), used only while y_ is still
   // that map, bit for bit.
