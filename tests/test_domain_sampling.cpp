@@ -127,9 +127,11 @@ TEST(DomainSampling, ExactOnMeshesWithHolesAndSeveralComponents) {
   MatX3d P(4000, 3);
   P << points_on_triangles(mesh.V, mesh.F, 3000, 3), points_in_solid(a.V, a.F, 1000, 4);
   expect_exact_cover(cage, mesh, s, P);
-  EXPECT_EQ(mesh_domain_of(mesh.V, mesh.F).description(), "points, surface and the solid of 1 closed components");
+  EXPECT_EQ(mesh_domain_of(mesh.V, mesh.F).description(),
+            "points, surface and the solid of 1 closed components");
   for (int i = 0; i < s.size(); ++i)
-    EXPECT_FALSE(((Vec3(0.45, 0, 0).transpose() - s.centers.row(i)).cwiseAbs().array() <= 0.5 * s.side_of(i)).all())
+    EXPECT_FALSE(
+        ((Vec3(0.45, 0, 0).transpose() - s.centers.row(i)).cwiseAbs().array() <= 0.5 * s.side_of(i)).all())
         << i;
   // Nothing between the two components is kept: the gap x ∈ (−0.1, 0.1) meets D only through cells that
   // overlap a component.

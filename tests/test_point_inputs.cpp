@@ -5,14 +5,20 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <random>
+#include <sstream>
+#include <tuple>
 
+#include "lidef/cage.h"
 #include "lidef/cage/auto_cage.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/gaussian_splats.h"
 #include "lidef/mesh_io.h"
 #include "lidef/point_cloud_io.h"
+#include "lidef/sampling.h"
+#include "test_cli_outputs.h"
 #include "test_support.h"
 
 namespace lidef {
@@ -52,7 +58,8 @@ PlyCloud random_splats(int n, unsigned seed) {
       c.values(i, k) = static_cast<float>(u(rng));  // float-representable, so a write/read is exact
   c.set_columns3("x", "y", "z", sphere_points(n, 0.5, Vec3::Zero(), seed).cast<float>().cast<double>());
   for (int i = 0; i < n; ++i) {
-    for (int k = 0; k < 3; ++k) c.values(i, c.column("scale_" + std::to_string(k))) = static_cast<float>(-4 + u(rng));
+    for (int k = 0; k < 3; ++k)
+      c.values(i, c.column("scale_" + std::to_string(k))) = static_cast<float>(-4 + u(rng));
     c.values(i, c.column("tag")) = i;
   }
   return c;
@@ -83,10 +90,11 @@ TEST(PointCloudPly, RoundTripsInEveryFormat) {
 TEST(PointCloudPly, ReadsColoursAndOtherElements) {
   TempDir dir;
   const std::string path = (dir.path / "c.ply").string();
-  write_text(path,
-             "ply\nformat ascii 1.0\ncomment made by hand\nelement vertex 2\nproperty double x\nproperty double "
-             "y\nproperty double z\nproperty uchar red\nelement edge 1\nproperty int vertex1\nproperty int "
-             "vertex2\nend_header\n1 2 3 255\n4 5 6 0\n0 1\n");
+  write_text(
+      path,
+      "ply\nformat ascii 1.0\ncomment made by hand\nelement vertex 2\nproperty double x\nproperty double "
+      "y\nproperty double z\nproperty uchar red\nelement edge 1\nproperty int vertex1\nproperty int "
+      "vertex2\nend_header\n1 2 3 255\n4 5 6 0\n0 1\n");
   const PlyCloud c = read_ply_cloud(path);
   ASSERT_EQ(c.values.rows(), 2);
   EXPECT_EQ(c.points()(1, 2), 6);
@@ -103,17 +111,20 @@ TEST(PointCloudPly, BadInputsAreRefusedNamingTheFile) {
     return input_error_message([&] { read_gaussian_splats(path); });
   };
   const std::string head = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n";
-  EXPECT_NE(msg("empty.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
-                             "property float z\nend_header\n")
+  EXPECT_NE(msg("empty.ply",
+                "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                "property float z\nend_header\n")
                 .find("empty.ply: empty point cloud"),
             std::string::npos);
   EXPECT_NE(msg("nan.ply", head + "property float z\nproperty float scale_0\nend_header\n0 nan 0 1\n")
                 .find("nan.ply: vertex 1: coordinate is NaN"),
             std::string::npos);
-  EXPECT_NE(msg("noscale.ply", head + "property float z\nend_header\n0 0 0\n").find("noscale.ply: splat PLY without scales"),
+  EXPECT_NE(msg("noscale.ply", head + "property float z\nend_header\n0 0 0\n")
+                .find("noscale.ply: splat PLY without scales"),
             std::string::npos);
   EXPECT_NE(msg("noz.ply", head + "end_header\n0 0\n").find("no property 'z'"), std::string::npos);
-  EXPECT_NE(msg("short.ply", head + "property float z\nend_header\n0 0\n").find("file ends early"), std::string::npos);
+  EXPECT_NE(msg("short.ply", head + "property float z\nend_header\n0 0\n").find("file ends early"),
+            std::string::npos);
   // A binary body cut short.
   PlyCloud c = random_splats(10, 2);
   std::ostringstream full;
@@ -267,8 +278,8 @@ TEST(MeshDomainKinds, PointsOpenClosedAndMixed) {
   EXPECT_EQ(meets, (std::vector<char>{1, 1, 1, 0, 0}));
 }
 
-// A cage for a point cloud, sampled: every point lies in a leaf (point-in-box), and the statement says there is
-// no solid.
+// A cage for a point cloud, sampled: every point lies in a leaf (point-in-box), and the statement says there
+// is no solid.
 TEST(PointCloudCage, WrapsPointsAndTheDomainHoldsThem) {
   TempDir dir;
   const MatX3d P = sphere_points(2000, 1.0, Vec3(3, -2, 7), 7);
@@ -302,8 +313,201 @@ TEST(PointCloudCage, WrapsPointsAndTheDomainHoldsThem) {
   // No solid: the sphere's center is not in D.
   bool center_kept = false;
   for (int l = 0; l < s.size(); ++l)
-    center_kept |= ((Vec3(3, -2, 7).transpose() - s.centers.row(l)).cwiseAbs().array() <= 0.5 * s.side_of(l)).all();
+    center_kept |=
+        ((Vec3(3, -2, 7).transpose() - s.centers.row(l)).cwiseAbs().array() <= 0.5 * s.side_of(l)).all();
   EXPECT_FALSE(center_kept);
+}
+
+}  // namespace
+}  // namespace lidef
+
+namespace lidef {
+namespace {
+
+// Rows of a CSV file with a header line, as numbers.
+std::vector<std::vector<double>> read_csv_numbers(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::vector<double>> rows;
+  while (std::getline(in, line)) {
+    std::vector<double> r;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) r.push_back(std::strtod(cell.c_str(), nullptr));
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+// A point cloud (binary big-endian PLY with normals and colours) and a splat PLY on a sphere, each made into
+// a model by `lidef deform` (automatic cage), pulled and certified: every input point lies in a certified
+// leaf, deformed.ply's points are `lidef eval`'s f, splat covariances are J Σ Jᵀ with eval's J, normals
+// cof(J) n.
+TEST(DeformSlow, PointCloudAndSplatsPulledAndCertified) {
+  TempDir dir;
+  const int n = 1500;
+  PlyCloud points;
+  points.format = "binary_big_endian";
+  points.names = {"x", "y", "z", "nx", "ny", "nz", "red"};
+  points.types = {"double", "double", "double", "float", "float", "float", "uchar"};
+  points.values.resize(n, 7);
+  const MatX3d P = sphere_points(n, 0.5, Vec3(1, 2, 3), 11);
+  for (int i = 0; i < n; ++i) {
+    points.values.row(i).head(3) = P.row(i);
+    points.values.row(i).segment(3, 3) =
+        ((P.row(i) - Eigen::RowVector3d(1, 2, 3)) / 0.5).cast<float>().cast<double>();
+    points.values(i, 6) = i % 256;
+  }
+  PlyCloud splats = random_splats(n, 12);
+  splats.set_columns3("x", "y", "z",
+                      (splats.points().rowwise() + Eigen::RowVector3d(1, 2, 3)).cast<float>().cast<double>());
+  struct Case {
+    std::string name;
+    PlyCloud cloud;
+  };
+  for (const Case& c : {Case{"points", points}, Case{"splats", splats}}) {
+    SCOPED_TRACE(c.name);
+    const std::string ply = write_ply((dir.path / (c.name + ".ply")).string(), c.cloud);
+    const MatX3d X = c.cloud.points();
+    Eigen::Index lo = 0, hi = 0;
+    X.col(0).minCoeff(&lo);
+    X.col(0).maxCoeff(&hi);
+    std::ostringstream sc;
+    sc.precision(17);
+    sc << "{\"name\": \"pull_" << c.name << "\", \"model\": \"" << ply << "\", \"handles\": [{\"source\": ["
+       << X(lo, 0) << ", " << X(lo, 1) << ", " << X(lo, 2) << "], \"target\": [" << X(lo, 0) << ", "
+       << X(lo, 1) << ", " << X(lo, 2) << "]}, {\"source\": [" << X(hi, 0) << ", " << X(hi, 1) << ", "
+       << X(hi, 2) << "], \"target\": [" << X(hi, 0) + 0.05 << ", " << X(hi, 1) << ", " << X(hi, 2) << "]}]}";
+    const std::string scenario = (dir.path / (c.name + ".json")).string(),
+                      out = (dir.path / ("out_" + c.name)).string();
+    write_text(scenario, sc.str());
+    std::string log;
+    ASSERT_EQ(
+        test::run_lidef_cli("deform " + scenario + " --out " + out + " --cache-dir " +
+                                (dir.path / "cache").string() + " --samples 3000 --reduced-dof 60 --quiet",
+                            &log),
+        0)
+        << log;
+    const std::string summary = test::read_text(out + "/summary.json");
+    EXPECT_NE(summary.find("\"certified\": true"), std::string::npos);
+    EXPECT_NE(summary.find("\"domain_statement\": \"points and surface, no solid\""), std::string::npos);
+    EXPECT_NE(
+        test::read_text(out + "/certificate.json").find("\"statement\": \"points and surface, no solid\""),
+        std::string::npos);
+    ASSERT_TRUE(std::filesystem::exists(out + "/cage.obj"));
+    // Every input point in a certified leaf (voxels.csv: cx, cy, cz, side, ..., certified in column 9).
+    const auto leaves = read_csv_numbers(out + "/voxels.csv");
+    long outside = 0;
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+      bool in = false;
+      for (const auto& l : leaves)
+        in = in || (l[8] == 1 && std::abs(X(i, 0) - l[0]) <= 0.5 * l[3] * (1 + 1e-9) &&
+                    std::abs(X(i, 1) - l[1]) <= 0.5 * l[3] * (1 + 1e-9) &&
+                    std::abs(X(i, 2) - l[2]) <= 0.5 * l[3] * (1 + 1e-9));
+      outside += !in;
+    }
+    EXPECT_EQ(outside, 0);
+    // deformed.ply against `lidef eval` on a model folder made of the result's cage.obj and the input points:
+    // the result folder is usable on its own.
+    const std::string model = (dir.path / ("model_" + c.name)).string();
+    std::filesystem::create_directories(model);
+    std::filesystem::copy_file(out + "/cage.obj", model + "/cage.obj");
+    {
+      std::ofstream m(model + "/mesh.obj");
+      write_obj(m, X, MatX3i(0, 3));
+      std::ofstream xyz(model + "/points.xyz");
+      xyz.precision(17);
+      for (Eigen::Index i = 0; i < X.rows(); ++i) xyz << X(i, 0) << " " << X(i, 1) << " " << X(i, 2) << "\n";
+    }
+    ASSERT_EQ(test::run_lidef_cli("eval " + model + " --coeffs " + out + "/coefficients.txt --points " +
+                                      model + "/points.xyz --out " + model + "/eval.csv",
+                                  &log),
+              0)
+        << log;
+    const auto ev = read_csv_numbers(model + "/eval.csv");  // x,y,z,fx,fy,fz,J00..J22,...
+    ASSERT_EQ(static_cast<Eigen::Index>(ev.size()), X.rows());
+    const PlyCloud d = read_ply_cloud(out + "/deformed.ply");
+    ASSERT_EQ(d.names, c.cloud.names);
+    const MatX3d Y = d.points();
+    double worst_f = 0, worst_cov = 0, worst_n = 0;
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+      Mat3 J;
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) J(a, b) = ev[i][6 + 3 * a + b];
+      worst_f = std::max(worst_f, (Y.row(i) - Eigen::RowVector3d(ev[i][3], ev[i][4], ev[i][5])).norm());
+      if (c.name == "splats") {
+        auto cov = [](const PlyCloud& p, Eigen::Index k) {
+          return splat_covariance(
+              Vec3(p.values(k, p.column("scale_0")), p.values(k, p.column("scale_1")),
+                   p.values(k, p.column("scale_2"))),
+              Eigen::Vector4d(p.values(k, p.column("rot_0")), p.values(k, p.column("rot_1")),
+                              p.values(k, p.column("rot_2")), p.values(k, p.column("rot_3"))));
+        };
+        const Mat3 want = J * cov(c.cloud, i) * J.transpose();
+        worst_cov = std::max(worst_cov, (cov(d, i) - want).norm() / want.norm());
+        EXPECT_EQ(d.values(i, d.column("tag")), c.cloud.values(i, c.cloud.column("tag")));
+        EXPECT_EQ(d.values(i, d.column("opacity")), c.cloud.values(i, c.cloud.column("opacity")));
+      } else {
+        const Vec3 n0 = c.cloud.columns3("nx", "ny", "nz").row(i).transpose();
+        const Vec3 want = (J.inverse().transpose() * n0).normalized();  // cof J ∝ J⁻ᵀ for det J > 0
+        worst_n = std::max(worst_n, (d.columns3("nx", "ny", "nz").row(i).transpose() - want).norm());
+        EXPECT_EQ(d.values(i, 6), c.cloud.values(i, 6));
+      }
+    }
+    // Points are doubles (eval prints 17 digits); splat positions and all splat fields are float32 in the
+    // file.
+    EXPECT_LT(worst_f, c.name == "points" ? 1e-12 : 1e-6);
+    EXPECT_LT(worst_cov, 1e-5);
+    EXPECT_LT(worst_n, 1e-6);
+  }
+}
+
+// Two closed boxes through each other and a box with a hole, sampled: every point of the triangles and of the
+// closed solids is in a leaf; the statement names what is in D.
+TEST(MeshDomainKinds, CrossingComponentsKeepTheirSolids) {
+  auto box = [](const Vec3& lo, const Vec3& hi, int offset) {
+    MatX3d V(8, 3);
+    for (int k = 0; k < 8; ++k)
+      V.row(k) = Eigen::RowVector3d(k & 1 ? hi(0) : lo(0), k & 2 ? hi(1) : lo(1), k & 4 ? hi(2) : lo(2));
+    MatX3i F(12, 3);
+    F << 0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3,
+        7, 5;
+    F.array() += offset;
+    return std::make_pair(V, F);
+  };
+  const auto a = box(Vec3(-0.5, -0.3, -0.3), Vec3(0.2, 0.3, 0.3), 0),
+             b = box(Vec3(-0.2, -0.2, -0.5), Vec3(0.5, 0.2, 0.1), 8);
+  MatX3d V(16, 3);
+  V << a.first, b.first;
+  MatX3i F(24, 3);
+  F << a.second, b.second;
+  const MeshDomain dom = mesh_domain_of(V, F);
+  EXPECT_EQ(dom.description(), "mesh and its solid");
+  EXPECT_EQ(dom.closed_components, 2);
+  TriMesh cage_mesh;
+  std::tie(cage_mesh.V, cage_mesh.F) = box(Vec3(-1, -1, -1), Vec3(1, 1, 1), 0);
+  const Cage cage(cage_mesh);
+  SamplingParams sp;
+  sp.target_count = 2000;
+  const VoxelSampling s = sample_domain(cage, V, F, sp);
+  // Points of both solids, including the part where they overlap, and on every face.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0, 1);
+  MatX3d Q(2000, 3);
+  for (int i = 0; i < 1000; ++i) {
+    const auto& bx = i % 2 ? a : b;
+    const Vec3 lo = bx.first.colwise().minCoeff(), hi = bx.first.colwise().maxCoeff();
+    Q.row(i) = (lo + (hi - lo).cwiseProduct(Vec3(u(rng), u(rng), u(rng)))).transpose();
+    const int t = static_cast<int>(u(rng) * 24) % 24;
+    const double r = u(rng), q = u(rng) * (1 - r);
+    Q.row(1000 + i) = (1 - r - q) * V.row(F(t, 0)) + r * V.row(F(t, 1)) + q * V.row(F(t, 2));
+  }
+  const VecXi where = containing_voxel(s, Q);
+  EXPECT_EQ((where.array() < 0).count(), 0);
+  // With one face of the second box removed it is open: its solid leaves D, its triangles stay.
+  const MeshDomain open = mesh_domain_of(V, F.topRows(23));
+  EXPECT_EQ(open.description(), "points, surface and the solid of 1 closed components");
+  EXPECT_EQ(open.solid.rows(), 12);
 }
 
 }  // namespace

@@ -132,7 +132,8 @@ std::string source_ply(const Model& model, const Scenario& scenario) {
   if (model.dir.empty() || !fs::is_regular_file(json, ec)) return "";
   std::ifstream in(json);
   const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
-  if (j.is_discarded() || !j.contains("input") || !j["input"].contains("file") || !j["input"]["file"].is_string())
+  if (j.is_discarded() || !j.contains("input") || !j["input"].contains("file") ||
+      !j["input"]["file"].is_string())
     return "";
   const std::string file = j["input"]["file"];
   return is_ply(file) && fs::is_regular_file(file, ec) ? file : "";
@@ -188,7 +189,8 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
   write_file_atomic(out.path("coefficients.txt"), [&](std::ostream& s) { write_coefficients(s, y); });
   // The cage the coefficients belong to, so that the folder can be used on its own.
   write_file_atomic(out.path("cage.obj"), [&](std::ostream& s) {
-    write_obj(s, model.cage.V, model.cage.F, "lidef deform " + scenario.name + ": the cage of coefficients.txt");
+    write_obj(s, model.cage.V, model.cage.F,
+              "lidef deform " + scenario.name + ": the cage of coefficients.txt");
   });
   names.insert(names.begin() + 1, "cage.obj");
   const std::string ply = source_ply(model, scenario);

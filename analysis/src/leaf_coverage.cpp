@@ -220,11 +220,12 @@ LeafCoverage prove_leaf_coverage(const CertificateReport& rep, const TriMesh& me
   }
   out.proven = true;
   out.reason =
-      mesh_domain ? "every grid cell meeting the mesh's points, triangles or solid is covered by certified leaves (" +
-                        std::to_string(covered_leaves) + " leaves, " + std::to_string(out.cells_checked) +
-                        " cells checked)"
-                  : "the " + std::to_string(out.base_cells) + " base voxels are tiled by certified leaves (" +
-                        std::to_string(covered_leaves) + " leaves)";
+      mesh_domain
+          ? "every grid cell meeting the mesh's points, triangles or solid is covered by certified leaves (" +
+                std::to_string(covered_leaves) + " leaves, " + std::to_string(out.cells_checked) +
+                " cells checked)"
+          : "the " + std::to_string(out.base_cells) + " base voxels are tiled by certified leaves (" +
+                std::to_string(covered_leaves) + " leaves)";
   return out;
 }
 

@@ -16,7 +16,6 @@
 #include <vector>
 
 #include "auto_cage_cgal.h"
-#include "ply_check.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
@@ -24,6 +23,7 @@
 #include "lidef/number_format.h"
 #include "lidef/point_cloud_io.h"
 #include "lidef/subspace.h"
+#include "ply_check.h"
 
 namespace lidef {
 namespace {
@@ -119,7 +119,8 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
   if (fs::is_directory(path, ec)) throw InputError(path, "is a directory, expected a mesh file");
   const std::string ext = lower_extension(path);
   if (!supported_format(ext))
-    throw InputError(path, "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply, .stl or .xyz)");
+    throw InputError(path,
+                     "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply, .stl or .xyz)");
   if (fs::file_size(path, ec) == 0 && !ec) throw InputError(path, "file is empty");
   // Point clouds (a PLY without faces, Gaussian splats included; an XYZ file) are read by lidef's own
   // readers (point_cloud_io.h): every vertex is kept, in the file's order.
@@ -164,7 +165,8 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
                                  format_g(soup.points(i, 2)) + ")");
   if (soup.polygons.empty()) {
     // Vertices only (an OBJ point cloud): every point kept, no faces.
-    if (ext == "off") throw InputError(path, "no faces (only points; a point cloud is read from .ply, .xyz or .obj)");
+    if (ext == "off")
+      throw InputError(path, "no faces (only points; a point cloud is read from .ply, .xyz or .obj)");
     TriMesh cloud;
     cloud.source = path;
     cloud.V = std::move(soup.points);
@@ -319,8 +321,9 @@ void write_cage_model(const CageResult& result, const std::string& input_path, c
   });
   write_file_atomic(path_of("mesh.obj"), [&](std::ostream& o) {
     write_obj(o, result.mesh.V, result.mesh.F,
-              header + (result.mesh.F.rows() == 0 ? std::string("\nmesh: the input's points (a point cloud: no faces)")
-                                                : std::string("\nmesh: the input's vertices, polygons fan-triangulated")));
+              header + (result.mesh.F.rows() == 0
+                            ? std::string("\nmesh: the input's points (a point cloud: no faces)")
+                            : std::string("\nmesh: the input's vertices, polygons fan-triangulated")));
   });
   using nlohmann::ordered_json;
   const CageReport& r = result.report;

@@ -10,14 +10,14 @@
 #include <CGAL/IO/OFF.h>
 #include <CGAL/IO/PLY.h>
 #include <CGAL/IO/STL.h>
+#include <CGAL/Orthogonal_k_neighbor_search.h>
+#include <CGAL/Search_traits_3.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_cost.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_placement.h>
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
-#include <CGAL/Orthogonal_k_neighbor_search.h>
-#include <CGAL/Search_traits_3.h>
 #include <CGAL/alpha_wrap_3.h>
 
 #include <array>
@@ -42,8 +42,10 @@ using KdSearch = CGAL::Orthogonal_k_neighbor_search<CGAL::Search_traits_3<K>>;
 class InputDistance {
  public:
   InputDistance(const std::vector<Triangle>& triangles, const std::vector<Point>& lone_points)
-      : tree_(triangles.begin(), triangles.end()), kd_(lone_points.begin(), lone_points.end()),
-        has_triangles_(!triangles.empty()), has_points_(!lone_points.empty()) {
+      : tree_(triangles.begin(), triangles.end()),
+        kd_(lone_points.begin(), lone_points.end()),
+        has_triangles_(!triangles.empty()),
+        has_points_(!lone_points.empty()) {
     if (has_triangles_) tree_.accelerate_distance_queries();
   }
   double squared(const Point& p) const {

@@ -33,7 +33,8 @@ bool is_gaussian_splat_cloud(const PlyCloud& cloud) {
 PlyCloud read_gaussian_splats(const std::string& path) {
   PlyCloud cloud = read_ply_cloud(path);
   for (const char* s : kScales)
-    if (cloud.column(s) < 0) throw InputError(path, std::string("splat PLY without scales (no property '") + s + "')");
+    if (cloud.column(s) < 0)
+      throw InputError(path, std::string("splat PLY without scales (no property '") + s + "')");
   for (const char* s : kRotations)
     if (cloud.column(s) < 0)
       throw InputError(path, std::string("splat PLY without rotations (no property '") + s + "')");
@@ -41,7 +42,8 @@ PlyCloud read_gaussian_splats(const std::string& path) {
     double q2 = 0;
     for (const char* s : kRotations) q2 += std::pow(cloud.values(i, cloud.column(s)), 2);
     if (!(q2 > 0) || !std::isfinite(q2))
-      throw InputError(path, "splat " + std::to_string(i + 1) + ": rotation quaternion is zero or not finite");
+      throw InputError(path,
+                       "splat " + std::to_string(i + 1) + ": rotation quaternion is zero or not finite");
     for (const char* s : kScales)
       if (!std::isfinite(cloud.values(i, cloud.column(s))))
         throw InputError(path, "splat " + std::to_string(i + 1) + ": " + s + " is NaN or infinite");
@@ -72,9 +74,9 @@ Eigen::Matrix<double, 15, 1> sh_basis_degree1to3(const Vec3& d) {
   const double C2[] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
                        0.5462742152960396};
   const double C3[] = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-                       -0.4570457994644658, 1.445305721320277,  -0.5900435899266435};
+                       -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
   Eigen::Matrix<double, 15, 1> Y;
-  Y << -C1 * y, C1 * z, -C1 * x,  //
+  Y << -C1 * y, C1 * z, -C1 * x,                                                                   //
       C2[0] * x * y, C2[1] * y * z, C2[2] * (2 * zz - xx - yy), C2[3] * x * z, C2[4] * (xx - yy),  //
       C3[0] * y * (3 * xx - yy), C3[1] * x * y * z, C3[2] * y * (4 * zz - xx - yy),
       C3[3] * z * (2 * zz - 3 * xx - 3 * yy), C3[4] * x * (4 * zz - xx - yy), C3[5] * z * (xx - yy),
@@ -94,7 +96,8 @@ Eigen::Matrix<double, 15, 15> sh_rotation(const Mat3& R) {
   const int start[] = {0, 3, 8}, size[] = {3, 5, 7};
   for (int band = 0; band < 3; ++band) {
     // Y_b(Rᵀd)ᵀ = Y_b(d)ᵀ M_bᵀ for every sample: A_b M_bᵀ = B_b.
-    const Eigen::MatrixXd Ab = A.middleCols(start[band], size[band]), Bb = B.middleCols(start[band], size[band]);
+    const Eigen::MatrixXd Ab = A.middleCols(start[band], size[band]),
+                          Bb = B.middleCols(start[band], size[band]);
     const Eigen::MatrixXd MbT = Ab.colPivHouseholderQr().solve(Bb);
     M.block(start[band], start[band], size[band], size[band]) = MbT.transpose();
   }
@@ -119,7 +122,8 @@ void map_gaussian_splats(PlyCloud& cloud, const MatX3d& mapped, const MatXd& JT)
   for (int k = 0; k < 4; ++k) rc[k] = cloud.column(kRotations[k]);
   int rest[45];
   bool has_rest = true;
-  for (int k = 0; k < 45; ++k) has_rest = has_rest && (rest[k] = cloud.column("f_rest_" + std::to_string(k))) >= 0;
+  for (int k = 0; k < 45; ++k)
+    has_rest = has_rest && (rest[k] = cloud.column("f_rest_" + std::to_string(k))) >= 0;
   for (Eigen::Index i = 0; i < n; ++i) {
     const Mat3 J = JT.block<3, 3>(3 * i, 0).transpose();
     if (!(J.determinant() > 0))

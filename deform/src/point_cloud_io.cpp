@@ -35,11 +35,11 @@ bool ply_type(const std::string& t, PlyType* out) {
   static const struct {
     const char* name;
     PlyType type;
-  } kTypes[] = {{"char", {1, false, true}},   {"int8", {1, false, true}},     {"uchar", {1, false, false}},
-                {"uint8", {1, false, false}}, {"short", {2, false, true}},    {"int16", {2, false, true}},
+  } kTypes[] = {{"char", {1, false, true}},    {"int8", {1, false, true}},    {"uchar", {1, false, false}},
+                {"uint8", {1, false, false}},  {"short", {2, false, true}},   {"int16", {2, false, true}},
                 {"ushort", {2, false, false}}, {"uint16", {2, false, false}}, {"int", {4, false, true}},
-                {"int32", {4, false, true}},  {"uint", {4, false, false}},   {"uint32", {4, false, false}},
-                {"float", {4, true, true}},   {"float32", {4, true, true}},  {"double", {8, true, true}},
+                {"int32", {4, false, true}},   {"uint", {4, false, false}},   {"uint32", {4, false, false}},
+                {"float", {4, true, true}},    {"float32", {4, true, true}},  {"double", {8, true, true}},
                 {"float64", {8, true, true}}};
   for (const auto& k : kTypes)
     if (t == k.name) {
@@ -85,7 +85,8 @@ Header parse_header(const std::string& path, const std::string& bytes) {
     return true;
   };
   std::string line;
-  if (!next_line(&line) || line != "ply") throw InputError(path, "not a PLY file (first line is not 'ply')", 1);
+  if (!next_line(&line) || line != "ply")
+    throw InputError(path, "not a PLY file (first line is not 'ply')", 1);
   bool ended = false;
   while (next_line(&line)) {
     std::istringstream ss(line);
@@ -141,7 +142,10 @@ Header parse_header(const std::string& path, const std::string& bytes) {
 class BodyReader {
  public:
   BodyReader(const std::string& path, const std::string& bytes, const Header& h)
-      : path_(path), bytes_(bytes), pos_(h.body), ascii_(h.format == "ascii"),
+      : path_(path),
+        bytes_(bytes),
+        pos_(h.body),
+        ascii_(h.format == "ascii"),
         swap_(h.format == "binary_big_endian") {
     if (ascii_) text_.str(bytes.substr(h.body));
   }
@@ -272,16 +276,19 @@ MatX3d PlyCloud::columns3(const std::string& a, const std::string& b, const std:
   const int k[3] = {column(a), column(b), column(c)};
   MatX3d P(values.rows(), 3);
   for (int j = 0; j < 3; ++j) {
-    if (k[j] < 0) throw InputError("", "point cloud has no property '" + std::string(j == 0 ? a : j == 1 ? b : c) + "'");
+    if (k[j] < 0)
+      throw InputError("", "point cloud has no property '" + std::string(j == 0 ? a : j == 1 ? b : c) + "'");
     P.col(j) = values.col(k[j]);
   }
   return P;
 }
 
-void PlyCloud::set_columns3(const std::string& a, const std::string& b, const std::string& c, const MatX3d& P) {
+void PlyCloud::set_columns3(const std::string& a, const std::string& b, const std::string& c,
+                            const MatX3d& P) {
   const int k[3] = {column(a), column(b), column(c)};
   for (int j = 0; j < 3; ++j) {
-    if (k[j] < 0) throw InputError("", "point cloud has no property '" + std::string(j == 0 ? a : j == 1 ? b : c) + "'");
+    if (k[j] < 0)
+      throw InputError("", "point cloud has no property '" + std::string(j == 0 ? a : j == 1 ? b : c) + "'");
     values.col(k[j]) = P.col(j);
   }
 }
@@ -303,13 +310,15 @@ PlyCloud read_ply_cloud(const std::string& path) {
     cloud.types.push_back(p.type_name);
   }
   for (const char* axis : {"x", "y", "z"})
-    if (cloud.column(axis) < 0) throw InputError(path, std::string("vertex element has no property '") + axis + "'");
+    if (cloud.column(axis) < 0)
+      throw InputError(path, std::string("vertex element has no property '") + axis + "'");
   if (vertex->count == 0) throw InputError(path, "empty point cloud (0 vertices)");
   // A count far beyond the bytes present is refused before anything is allocated for it.
   if (h.format != "ascii") {
     std::size_t row = 0;
     for (const PlyProp& p : vertex->props) row += static_cast<std::size_t>(p.type.size);
-    if (static_cast<double>(vertex->count) * static_cast<double>(row) > static_cast<double>(bytes.size() - h.body))
+    if (static_cast<double>(vertex->count) * static_cast<double>(row) >
+        static_cast<double>(bytes.size() - h.body))
       throw InputError(path, "binary body is truncated: " + std::to_string(vertex->count) + " vertices of " +
                                  std::to_string(row) + " bytes need more than the file's " +
                                  std::to_string(bytes.size() - h.body) + " bytes after the header");
@@ -331,7 +340,8 @@ PlyCloud read_ply_cloud(const std::string& path) {
           continue;
         }
         const double n = rd.value(p.count_type, what + " count");
-        if (!(n >= 0 && n <= 1e6)) throw InputError(path, what + ": list length " + format_g(n) + " is invalid");
+        if (!(n >= 0 && n <= 1e6))
+          throw InputError(path, what + ": list length " + format_g(n) + " is invalid");
         std::vector<int> idx(static_cast<std::size_t>(n));
         for (int& v : idx) v = static_cast<int>(rd.value(p.type, what));
         if (!is_face || (p.name != "vertex_indices" && p.name != "vertex_index")) continue;
@@ -374,7 +384,8 @@ void write_ply_cloud(std::ostream& out, const PlyCloud& cloud) {
   out << "element vertex " << cloud.values.rows() << "\n";
   for (std::size_t k = 0; k < cloud.names.size(); ++k)
     out << "property " << cloud.types[k] << " " << cloud.names[k] << "\n";
-  if (cloud.F.rows() > 0) out << "element face " << cloud.F.rows() << "\nproperty list uchar int vertex_indices\n";
+  if (cloud.F.rows() > 0)
+    out << "element face " << cloud.F.rows() << "\nproperty list uchar int vertex_indices\n";
   out << "end_header\n";
   if (cloud.format == "ascii") {
     for (Eigen::Index i = 0; i < cloud.values.rows(); ++i) {
@@ -417,7 +428,8 @@ void map_point_cloud(PlyCloud& cloud, const MatX3d& mapped, const MatXd& JT) {
 
 MatX3d read_point_cloud(const std::string& path) {
   std::string ext = fs::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (ext == ".ply") return read_ply_cloud(path).points();
   if (ext == ".xyz") return read_points_xyz(path);
   if (ext == ".obj") return read_mesh_or_points(path).V;

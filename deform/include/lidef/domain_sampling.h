@@ -1,6 +1,7 @@
 // The mesh domain: the voxels that cover D = every input point, every point of the mesh's triangles, and the
 // solid bounded by its closed components (winding number ≥ ½), refined toward the cage until every leaf's
-// ball is clear of it. docs/sampling-and-subspace.md and docs/certificate.md explain the construction and why it suffices.
+// ball is clear of it. docs/sampling-and-subspace.md and docs/certificate.md explain the construction and why
+// it suffices.
 #pragma once
 #include <string>
 #include <vector>

@@ -6,9 +6,9 @@
 // image under f, to first order at μ, is the Gaussian with mean f(μ) and covariance J Σ Jᵀ (exactly: a linear
 // map of a Gaussian). New scales and quaternion come from the eigen-decomposition J Σ Jᵀ = U diag(λ) Uᵀ:
 // scale_k = ½ log λ_k with λ in ascending order, U's columns signed so that det U = +1, the quaternion of U
-// with w ≥ 0. The view-dependent colour (f_rest, real spherical harmonics of degrees 1..3, 15 coefficients per
-// colour channel stored channel after channel: f_rest[c·15 + k]) is rotated by the rotation Q of J's polar
-// decomposition J = Q P: the colour seen along d after the map is the colour seen along Qᵀd before it.
+// with w ≥ 0. The view-dependent colour (f_rest, real spherical harmonics of degrees 1..3, 15 coefficients
+// per colour channel stored channel after channel: f_rest[c·15 + k]) is rotated by the rotation Q of J's
+// polar decomposition J = Q P: the colour seen along d after the map is the colour seen along Qᵀd before it.
 // f_dc, opacity and every other property are kept as they are.
 #pragma once
 #include <string>

@@ -1,6 +1,6 @@
-// Point clouds: PLY files (ASCII, binary little and big endian) whose vertex element holds x y z and any other
-// scalar properties (normals, colours, a Gaussian splat's parameters), with an optional face element; XYZ
-// files (mesh_io.h, read_points_xyz); OBJ files with `v` lines only (mesh_io.h, read_mesh_or_points).
+// Point clouds: PLY files (ASCII, binary little and big endian) whose vertex element holds x y z and any
+// other scalar properties (normals, colours, a Gaussian splat's parameters), with an optional face element;
+// XYZ files (mesh_io.h, read_points_xyz); OBJ files with `v` lines only (mesh_io.h, read_mesh_or_points).
 //
 // Every vertex property is kept, in file order and with its PLY type, so a deformed cloud is written back
 // with every property it did not change bit for bit (a float or integer property goes through a double
