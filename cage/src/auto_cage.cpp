@@ -122,6 +122,8 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
     throw InputError(path,
                      "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply, .stl or .xyz)");
   if (fs::file_size(path, ec) == 0 && !ec) throw InputError(path, "file is empty");
+  // The PLY header checks (ply_check.h) hold for point clouds too: refused before either reader sees it.
+  if (ext == "ply") check_ply_before_cgal(path, fs::file_size(path, ec));
   // Point clouds (a PLY without faces, Gaussian splats included; an XYZ file) are read by lidef's own
   // readers (point_cloud_io.h): every vertex is kept, in the file's order.
   if (ext == "xyz" || (ext == "ply" && ply_face_count(path) == 0)) {
@@ -137,7 +139,6 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
     }
     return cloud;
   }
-  if (ext == "ply") check_ply_before_cgal(path, fs::file_size(path, ec));
   if (ext == "off" && is_binary_off(path)) refuse_binary_off(path);
   MeshReadInfo inf;
   inf.format = ext;
