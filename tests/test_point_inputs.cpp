@@ -145,6 +145,13 @@ TEST(PointCloudPly, XyzAndObjPointSets) {
   ASSERT_EQ(P.rows(), 3);
   EXPECT_EQ(P(2, 1), 5);
   EXPECT_EQ(read_mesh_or_points(obj).F.rows(), 0);
+  // The automatic cage's reader takes all three as point clouds (CGAL's OBJ reader would fail on `v` lines
+  // only).
+  for (const std::string& path : {xyz, obj}) {
+    const TriMesh m = read_any_mesh(path);
+    EXPECT_EQ(m.F.rows(), 0) << path;
+    EXPECT_EQ(m.V.rows(), path == obj ? 3 : 2) << path;
+  }
   // read_mesh still wants faces.
   EXPECT_NE(input_error_message([&] { read_mesh(obj); }).find("no faces"), std::string::npos);
 }

@@ -111,6 +111,19 @@ void refuse_binary_off(const std::string& path) {
       "OFF files; convert the mesh to ASCII OFF, OBJ, PLY or STL");
 }
 
+// Whether an OBJ file has an `f` statement. CGAL's OBJ reader fails on a file of `v` lines only, so a point
+// cloud in OBJ form goes to lidef's own reader (mesh_io.h, read_mesh_or_points).
+bool obj_has_faces(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  for (std::string line; std::getline(in, line);) {
+    const std::size_t k = line.find_first_not_of(" \t");
+    if (k != std::string::npos && line[k] == 'f' && k + 1 < line.size() &&
+        (line[k + 1] == ' ' || line[k + 1] == '\t'))
+      return true;
+  }
+  return false;
+}
+
 }  // namespace
 
 TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
@@ -126,10 +139,12 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
   if (ext == "ply") check_ply_before_cgal(path, fs::file_size(path, ec));
   // Point clouds (a PLY without faces, Gaussian splats included; an XYZ file) are read by lidef's own
   // readers (point_cloud_io.h): every vertex is kept, in the file's order.
-  if (ext == "xyz" || (ext == "ply" && ply_face_count(path) == 0)) {
+  if (ext == "xyz" || (ext == "ply" && ply_face_count(path) == 0) || (ext == "obj" && !obj_has_faces(path))) {
     TriMesh cloud;
     cloud.source = path;
-    cloud.V = ext == "xyz" ? read_points_xyz(path) : read_ply_cloud(path).points();
+    cloud.V = ext == "xyz"   ? read_points_xyz(path)
+              : ext == "ply" ? read_ply_cloud(path).points()
+                             : read_mesh_or_points(path).V;
     cloud.F.resize(0, 3);
     if (info) {
       *info = MeshReadInfo{};
