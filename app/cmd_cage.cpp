@@ -89,7 +89,8 @@ void add_cage_command(CLI::App& app, Action& action) {
   auto opt = std::make_shared<CageCommandOptions>();
   auto* sub = app.add_subcommand("cage", "Make a model folder from a mesh file: an automatic cage around it");
   sub->footer(
-      "Reads MESH (.obj, .off, .ply or .stl, ASCII or binary; polygons fan-triangulated), wraps it with\n"
+      "Reads MESH (.obj, .off, .ply or .stl, ASCII or binary; polygons fan-triangulated), or a point\n"
+      "cloud (.ply without faces, Gaussian splats included, .xyz, an .obj with vertices only), wraps it with\n"
       "CGAL's 3D alpha wrapping (alpha and offset are fractions of the bounding-box diagonal), simplifies\n"
       "the wrap by edge collapses to about --faces triangles, refusing every collapse that would bring the\n"
       "cage closer than --clearance to the mesh, and keeps the cage only when lidef's model checks pass\n"

@@ -24,6 +24,7 @@
 #include "lidef/coefficients.h"
 #include "lidef/deform.h"
 #include "lidef/deform_params.h"
+#include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
@@ -198,19 +199,20 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << ") after " << result.iterations << " iterations, " << format_g(res.seconds, 3) << " s\n"
                 << "  max handle error " << format_g(max_err, 3)
                 << (max_err <= tolerance ? " (reached)" : " (NOT reached)") << ", global volume ratio "
-                << format_g(vol_ratio, 5) << "\n"
+                << (std::isfinite(vol_ratio) ? format_g(vol_ratio, 5) : std::string("n/a (no faces)")) << "\n"
                 << (max_err <= tolerance
                         ? ""
                         : std::string("  ") + (un.proven ? "PROVEN: " : "") + un.reason + "\n")
                 << "  CERTIFIED locally injective on "
-                << (result.sampling.domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
+                << (result.sampling.domain == "mesh"
+                        ? "the domain (" + mesh_domain_of(model.mesh.V, model.mesh.F).description() + ": "
+                        : std::string("the union of "))
                 << cert.voxels << (result.sampling.domain == "mesh" ? " voxels)" : " voxels")
                 << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
                 << format_g(100 * out.mesh_coverage, 3) << "%\n"
-                << "  wrote " << (std::filesystem::path(o.out) / "").string()
-                << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
-                   "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"
-                << (o.grid > 0 ? ", field.vti" : "") << "}\n";
+                << "  wrote " << (std::filesystem::path(o.out) / "").string() << "{";
+      for (std::size_t k = 0; k < out.files.size(); ++k) std::cout << (k ? ", " : "") << out.files[k];
+      std::cout << "}\n";
       return res.targets_met() ? kOk : kStoppedEarly;
     };
   });

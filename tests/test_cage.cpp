@@ -320,7 +320,13 @@ TEST_F(Cage, BadInputsNameTheFile) {
       {"nan.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 nan 0\n3 0 1 2\n", ""},
       {"flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\nf 1 1 2\n", "degenerate"},
       {"points.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "no faces"},
-      {"mesh.xyz", "0 0 0\n", "unsupported mesh format"},
+      {"mesh.vtk", "0 0 0\n", "unsupported mesh format"},
+      // Point clouds are read, but not an empty one or one with a NaN.
+      {"empty.ply",
+       "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
+       "end_header\n",
+       "empty point cloud"},
+      {"nan.xyz", "0 0 0\n1 nan 0\n", "NaN"},
       // CGAL's binary OFF header multiplied a negative count (UB; fuzz/regressions/cgal_off/): refused first.
       {"negative.off", std::string("OFF BINARY\n\xff\xff\xff\xfe\0\0\0\1\0\0\0\0", 23), "not supported"},
       // A NUL in a PLY header line made CGAL read a face list of ~10^9 entries (out of memory; CI's libFuzzer

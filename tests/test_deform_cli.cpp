@@ -43,9 +43,10 @@ const char* const kIterationsHeader =
     "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
     "cg_steps,cg_scale";
 
-const std::vector<std::string> kOutputs = {"certificate.json", "coefficients.txt", "deformed.obj",
-                                           "deformed.vtp",     "iterations.csv",   "leaves.vtu",
-                                           "scenario.json",    "summary.json",     "voxels.csv"};
+const std::vector<std::string> kOutputs = {"cage.obj",     "certificate.json", "coefficients.txt",
+                                           "deformed.obj", "deformed.vtp",     "iterations.csv",
+                                           "leaves.vtu",   "scenario.json",    "summary.json",
+                                           "voxels.csv"};
 
 // Small and quick: the beam with 4000 samples and 60 reduced coefficients per coordinate (180 unknowns).
 const char* const kSmall = "--samples 4000 --reduced-dof 60";

@@ -110,7 +110,7 @@ TEST(DomainSampling, CoversTheBeamExactlyAndRefinesTowardTheCage) {
 }
 
 TEST(DomainSampling, ExactOnMeshesWithHolesAndSeveralComponents) {
-  // Two boxes in one cage; the second has two faces removed (open: the generalized winding number decides).
+  // Two boxes in one cage; the second has two faces removed (open: no solid).
   TriMesh a = box_surface(Vec3(-0.9, -0.4, -0.4), Vec3(-0.1, 0.4, 0.4), Eigen::Vector3i(4, 4, 4));
   TriMesh b = box_surface(Vec3(0.1, -0.3, -0.3), Vec3(0.8, 0.3, 0.3), Eigen::Vector3i(4, 3, 3));
   TriMesh holed = b;
@@ -122,12 +122,17 @@ TEST(DomainSampling, ExactOnMeshesWithHolesAndSeveralComponents) {
   sp.count_tolerance = 0.15;
   const VoxelSampling s = sample_domain(cage, mesh.V, mesh.F, sp);
   EXPECT_FALSE(WindingNumber(mesh.V, mesh.F).closed());
-  // Points on every triangle, and inside each solid away from the hole's level set (w ≥ 0.5 of the closed
-  // box; w ≥ 0.5 of the open box, measured on the open box alone).
-  MatX3d P(5000, 3);
-  P << points_on_triangles(mesh.V, mesh.F, 3000, 3), points_in_solid(a.V, a.F, 1000, 4),
-      points_in_solid(holed.V, holed.F, 1000, 5);
+  // Points on every triangle and inside the closed box. The open box bounds no solid (MeshDomain): only its
+  // triangles are in D, so its middle, far from every triangle, is in no leaf.
+  MatX3d P(4000, 3);
+  P << points_on_triangles(mesh.V, mesh.F, 3000, 3), points_in_solid(a.V, a.F, 1000, 4);
   expect_exact_cover(cage, mesh, s, P);
+  EXPECT_EQ(mesh_domain_of(mesh.V, mesh.F).description(),
+            "points, surface and the solid of 1 closed components");
+  for (int i = 0; i < s.size(); ++i)
+    EXPECT_FALSE(
+        ((Vec3(0.45, 0, 0).transpose() - s.centers.row(i)).cwiseAbs().array() <= 0.5 * s.side_of(i)).all())
+        << i;
   // Nothing between the two components is kept: the gap x ∈ (−0.1, 0.1) meets D only through cells that
   // overlap a component.
   for (int i = 0; i < s.size(); ++i) {

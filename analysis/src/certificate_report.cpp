@@ -167,8 +167,12 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
       S(i) = sampling.side_of(static_cast<int>(i));
     }
   }
-  const std::vector<char> meets =
-      mesh.F.rows() > 0 ? cubes_meeting_mesh_domain(mesh_V, mesh.F, C, S) : std::vector<char>();
+  const std::vector<char> meets = cubes_meeting_mesh_domain(mesh_V, mesh.F, C, S);
+  if (r.domain == "mesh") {
+    const MeshDomain dom = mesh_domain_of(mesh_V, mesh.F);
+    r.domain_statement = dom.description();
+    r.domain_definition = dom.definition();
+  }
   r.leaves_meeting_domain = std::count(meets.begin(), meets.end(), 1);
   return r;
 }
@@ -327,10 +331,9 @@ std::string certificate_json(const CertificateReport& r) {
   j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
   ojson d;
   d["kind"] = r.domain;
-  d["definition"] =
-      r.domain == "mesh"
-          ? "every point of the mesh triangles and of the solid they bound (winding number >= 1/2)"
-          : "the union of the paper's grid voxels clear of the cage";
+  if (r.domain == "mesh") d["statement"] = r.domain_statement;
+  d["definition"] = r.domain == "mesh" ? r.domain_definition
+                                       : "the union of the paper's grid voxels clear of the cage";
   d["leaves_meeting_mesh_domain"] = r.leaves_meeting_domain;
   d["uncleared_voxels"] = r.uncleared_voxels;
   j["domain"] = d;
@@ -422,6 +425,11 @@ CertificateReport read_certificate_json(const std::string& path) {
   if (root.contains("domain")) {  // absent in certificates written before the mesh domain
     const nlohmann::json& d = rd.at(root, "domain");
     r.domain = rd.string(d, "kind");
+    if (r.domain == "mesh") {
+      // "statement" is absent in certificates written before point clouds and open meshes were accepted.
+      r.domain_statement = d.contains("statement") ? rd.string(d, "statement") : "mesh and its solid";
+      r.domain_definition = rd.string(d, "definition");
+    }
     r.leaves_meeting_domain = rd.integer(d, "leaves_meeting_mesh_domain");
     r.uncleared_voxels = rd.integer(d, "uncleared_voxels");
   }

@@ -2,6 +2,9 @@
 
 #include <omp.h>
 
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -10,13 +13,17 @@
 #include "lidef/analysis/vtk_export.h"
 #include "lidef/atomic_file.h"
 #include "lidef/coefficients.h"
+#include "lidef/gaussian_splats.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
+#include "lidef/point_cloud_io.h"
 #include "lidef/staged_outputs.h"
 
 namespace lidef {
+
+namespace fs = std::filesystem;
 
 const char* const kIterationsHeader =
     "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
@@ -85,6 +92,7 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   sj["max_distortion"] = sc.params.max_distortion;
   sj["mesh_coverage"] = report.mesh_coverage;
   sj["domain"] = report.domain;
+  if (report.domain == "mesh") sj["domain_statement"] = report.domain_statement;
   sj["max_handle_error"] = r.max_handle_error;
   sj["handles_reached"] = r.handles_reached;
   sj["handle_tolerance"] = sc.params.handle_tolerance;
@@ -110,6 +118,56 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   return sj;
 }
 
+// The PLY file the model was made from: the scenario's model when it is a .ply file, else the input named by
+// the model folder's model.json (an automatic cage); "" when the model does not come from a PLY file.
+std::string source_ply(const Model& model, const Scenario& scenario) {
+  auto is_ply = [](const std::string& p) {
+    std::string ext = fs::path(p).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    return ext == ".ply";
+  };
+  std::error_code ec;
+  if (is_ply(scenario.model_dir) && fs::is_regular_file(scenario.model_dir, ec)) return scenario.model_dir;
+  const fs::path json = fs::path(model.dir) / "model.json";
+  if (model.dir.empty() || !fs::is_regular_file(json, ec)) return "";
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (j.is_discarded() || !j.contains("input") || !j["input"].contains("file") ||
+      !j["input"]["file"].is_string())
+    return "";
+  const std::string file = j["input"]["file"];
+  return is_ply(file) && fs::is_regular_file(file, ec) ? file : "";
+}
+
+// J(p_i)ᵀ at the points P (#P by 3) as 3#P by 3 (mesh_fields.h's layout), a block of points at a time so that
+// the basis gradients (3 rows per point, #V+#F columns) stay small for large clouds.
+MatXd jacobians_at(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P) {
+  MatXd JT(3 * P.rows(), 3);
+  const Eigen::Index block = 4096;
+  for (Eigen::Index b = 0; b < P.rows(); b += block) {
+    const Eigen::Index n = std::min(block, P.rows() - b);
+    JT.middleRows(3 * b, 3 * n) = basis.gradient_matrix(P.middleRows(b, n)) * y;
+  }
+  return JT;
+}
+
+// deformed.ply's content: the input PLY with its points mapped (mapped: f at the model's mesh vertices),
+// normals by the cofactor matrix, Gaussian splats' covariances and view-dependent colour by J
+// (gaussian_splats.h); every other property as read. False (nothing to write) when the PLY's vertices are not
+// the model's mesh vertices in the same order (a PLY mesh whose unused vertices the cage maker dropped).
+bool deformed_ply(const std::string& ply, const Model& model, const MatX3d& y, const MatX3d& mapped,
+                  PlyCloud* cloud) {
+  *cloud = read_ply_cloud(ply);
+  const MatX3d P = cloud->points();
+  if (P.rows() != model.mesh.V.rows() || P != model.mesh.V) return false;
+  const MatXd JT = jacobians_at(HarmonicBasis(model.cage), y, P);
+  if (is_gaussian_splat_cloud(*cloud))
+    map_gaussian_splats(*cloud, mapped, JT);
+  else
+    map_point_cloud(*cloud, mapped, JT);
+  return true;
+}
+
 }  // namespace
 
 DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
@@ -129,6 +187,18 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
            "leaves.vtu",       "iterations.csv", "summary.json", "scenario.json"};
   StagedOutputs out(dir);
   write_file_atomic(out.path("coefficients.txt"), [&](std::ostream& s) { write_coefficients(s, y); });
+  // The cage the coefficients belong to, so that the folder can be used on its own.
+  write_file_atomic(out.path("cage.obj"), [&](std::ostream& s) {
+    write_obj(s, model.cage.V, model.cage.F,
+              "lidef deform " + scenario.name + ": the cage of coefficients.txt");
+  });
+  names.insert(names.begin() + 1, "cage.obj");
+  const std::string ply = source_ply(model, scenario);
+  PlyCloud cloud;
+  if (!ply.empty() && deformed_ply(ply, model, y, r.deformed_vertices, &cloud)) {
+    write_file_atomic(out.path("deformed.ply"), [&](std::ostream& s) { write_ply_cloud(s, cloud); });
+    names.push_back("deformed.ply");
+  }
   write_file_atomic(out.path("deformed.obj"), [&](std::ostream& s) {
     write_obj(s, r.deformed_vertices, model.mesh.F, "lidef deform " + scenario.name + ": last certified map");
   });
@@ -155,7 +225,10 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
   const std::string summary =
       summary_json(scenario, r, report, volume_ratio, options.total_seconds).dump(2) + "\n";
   write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });
-  out.commit(options.grid > 0 ? std::vector<std::string>{} : std::vector<std::string>{"field.vti"});
+  std::vector<std::string> stale;  // files of an earlier run that this one does not write
+  if (options.grid <= 0) stale.push_back("field.vti");
+  if (std::find(names.begin(), names.end(), "deformed.ply") == names.end()) stale.push_back("deformed.ply");
+  out.commit(stale);
   return written;
 }
 

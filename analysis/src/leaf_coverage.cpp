@@ -163,7 +163,7 @@ LeafCoverage prove_leaf_coverage(const CertificateReport& rep, const TriMesh& me
 
   // --- 3. Coverage, level by level: a cell that must be covered is a certified leaf, or it contains leaves
   // and each of its children that must be covered is covered in turn.
-  if (mesh_domain && mesh.F.rows() == 0) return fail("the mesh domain needs the model's mesh triangles");
+  if (mesh_domain && mesh.V.rows() == 0) return fail("the mesh domain needs the model's mesh");
   std::vector<Cell> frontier;
   if (mesh_domain) {
     // Every base-grid cell that the mesh's bounding box touches (D lies in that box).
@@ -220,11 +220,12 @@ LeafCoverage prove_leaf_coverage(const CertificateReport& rep, const TriMesh& me
   }
   out.proven = true;
   out.reason =
-      mesh_domain ? "every grid cell meeting the mesh's triangles or solid is covered by certified leaves (" +
-                        std::to_string(covered_leaves) + " leaves, " + std::to_string(out.cells_checked) +
-                        " cells checked)"
-                  : "the " + std::to_string(out.base_cells) + " base voxels are tiled by certified leaves (" +
-                        std::to_string(covered_leaves) + " leaves)";
+      mesh_domain
+          ? "every grid cell meeting the mesh's points, triangles or solid is covered by certified leaves (" +
+                std::to_string(covered_leaves) + " leaves, " + std::to_string(out.cells_checked) +
+                " cells checked)"
+          : "the " + std::to_string(out.base_cells) + " base voxels are tiled by certified leaves (" +
+                std::to_string(covered_leaves) + " leaves)";
   return out;
 }
 

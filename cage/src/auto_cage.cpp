@@ -16,13 +16,14 @@
 #include <vector>
 
 #include "auto_cage_cgal.h"
-#include "ply_check.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
+#include "lidef/point_cloud_io.h"
 #include "lidef/subspace.h"
+#include "ply_check.h"
 
 namespace lidef {
 namespace {
@@ -35,7 +36,7 @@ double seconds_since(Clock::time_point t0) {
 }
 
 constexpr int kMaxFaces = 4000;
-constexpr const char* kFormats[] = {"obj", "off", "ply", "stl"};
+constexpr const char* kFormats[] = {"obj", "off", "ply", "stl", "xyz"};
 
 std::string lower_extension(const std::string& path) {
   std::string ext = fs::path(path).extension().string();
@@ -110,6 +111,19 @@ void refuse_binary_off(const std::string& path) {
       "OFF files; convert the mesh to ASCII OFF, OBJ, PLY or STL");
 }
 
+// Whether an OBJ file has an `f` statement. CGAL's OBJ reader fails on a file of `v` lines only, so a point
+// cloud in OBJ form goes to lidef's own reader (mesh_io.h, read_mesh_or_points).
+bool obj_has_faces(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  for (std::string line; std::getline(in, line);) {
+    const std::size_t k = line.find_first_not_of(" \t");
+    if (k != std::string::npos && line[k] == 'f' && k + 1 < line.size() &&
+        (line[k + 1] == ' ' || line[k + 1] == '\t'))
+      return true;
+  }
+  return false;
+}
+
 }  // namespace
 
 TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
@@ -118,9 +132,28 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
   if (fs::is_directory(path, ec)) throw InputError(path, "is a directory, expected a mesh file");
   const std::string ext = lower_extension(path);
   if (!supported_format(ext))
-    throw InputError(path, "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply or .stl)");
+    throw InputError(path,
+                     "unsupported mesh format '." + ext + "' (expected .obj, .off, .ply, .stl or .xyz)");
   if (fs::file_size(path, ec) == 0 && !ec) throw InputError(path, "file is empty");
+  // The PLY header checks (ply_check.h) hold for point clouds too: refused before either reader sees it.
   if (ext == "ply") check_ply_before_cgal(path, fs::file_size(path, ec));
+  // Point clouds (a PLY without faces, Gaussian splats included; an XYZ file) are read by lidef's own
+  // readers (point_cloud_io.h): every vertex is kept, in the file's order.
+  if (ext == "xyz" || (ext == "ply" && ply_face_count(path) == 0) || (ext == "obj" && !obj_has_faces(path))) {
+    TriMesh cloud;
+    cloud.source = path;
+    cloud.V = ext == "xyz"   ? read_points_xyz(path)
+              : ext == "ply" ? read_ply_cloud(path).points()
+                             : read_mesh_or_points(path).V;
+    cloud.F.resize(0, 3);
+    if (info) {
+      *info = MeshReadInfo{};
+      info->format = ext;
+      info->file_vertices = static_cast<int>(cloud.V.rows());
+      info->file_hash = file_hash(path);
+    }
+    return cloud;
+  }
   if (ext == "off" && is_binary_off(path)) refuse_binary_off(path);
   MeshReadInfo inf;
   inf.format = ext;
@@ -141,12 +174,22 @@ TriMesh read_any_mesh(const std::string& path, MeshReadInfo* info) {
   inf.file_vertices = static_cast<int>(soup.points.rows());
   inf.file_polygons = static_cast<int>(soup.polygons.size());
   if (soup.points.rows() == 0) throw InputError(path, "no vertices");
-  if (soup.polygons.empty()) throw InputError(path, "no faces (only points)");
   for (Eigen::Index i = 0; i < soup.points.rows(); ++i)
     if (!soup.points.row(i).allFinite())
       throw InputError(path, "vertex " + std::to_string(i + 1) + ": coordinate is NaN or infinite (" +
                                  format_g(soup.points(i, 0)) + ", " + format_g(soup.points(i, 1)) + ", " +
                                  format_g(soup.points(i, 2)) + ")");
+  if (soup.polygons.empty()) {
+    // Vertices only (an OBJ point cloud): every point kept, no faces.
+    if (ext == "off")
+      throw InputError(path, "no faces (only points; a point cloud is read from .ply, .xyz or .obj)");
+    TriMesh cloud;
+    cloud.source = path;
+    cloud.V = std::move(soup.points);
+    cloud.F.resize(0, 3);
+    if (info) *info = inf;
+    return cloud;
+  }
 
   // Fan triangulation; drop polygons with < 3 corners and triangles using a vertex twice.
   std::vector<std::array<int, 3>> tris;
@@ -294,7 +337,9 @@ void write_cage_model(const CageResult& result, const std::string& input_path, c
   });
   write_file_atomic(path_of("mesh.obj"), [&](std::ostream& o) {
     write_obj(o, result.mesh.V, result.mesh.F,
-              header + "\nmesh: the input's vertices, polygons fan-triangulated");
+              header + (result.mesh.F.rows() == 0
+                            ? std::string("\nmesh: the input's points (a point cloud: no faces)")
+                            : std::string("\nmesh: the input's vertices, polygons fan-triangulated")));
   });
   using nlohmann::ordered_json;
   const CageReport& r = result.report;

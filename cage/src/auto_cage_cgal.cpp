@@ -10,6 +10,8 @@
 #include <CGAL/IO/OFF.h>
 #include <CGAL/IO/PLY.h>
 #include <CGAL/IO/STL.h>
+#include <CGAL/Orthogonal_k_neighbor_search.h>
+#include <CGAL/Search_traits_3.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
@@ -22,6 +24,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <limits>
 
 namespace lidef::cage_cgal {
 namespace {
@@ -32,6 +35,34 @@ using Triangle = K::Triangle_3;
 using Mesh = CGAL::Surface_mesh<Point>;
 using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<Triangle>::const_iterator>;
 using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
+using KdSearch = CGAL::Orthogonal_k_neighbor_search<CGAL::Search_traits_3<K>>;
+
+// Squared distance from a point to the input: its triangles (AABB tree) and its points not on a triangle
+// (k-d tree; a point cloud has only those).
+class InputDistance {
+ public:
+  InputDistance(const std::vector<Triangle>& triangles, const std::vector<Point>& lone_points)
+      : tree_(triangles.begin(), triangles.end()),
+        kd_(lone_points.begin(), lone_points.end()),
+        has_triangles_(!triangles.empty()),
+        has_points_(!lone_points.empty()) {
+    if (has_triangles_) tree_.accelerate_distance_queries();
+  }
+  double squared(const Point& p) const {
+    double d = std::numeric_limits<double>::infinity();
+    if (has_triangles_) d = tree_.squared_distance(p);
+    if (has_points_) {
+      const KdSearch search(kd_, p, 1);
+      d = std::min(d, search.begin()->second);
+    }
+    return d;
+  }
+
+ private:
+  Tree tree_;
+  KdSearch::Tree kd_;
+  bool has_triangles_, has_points_;
+};
 namespace SMS = CGAL::Surface_mesh_simplification;
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -44,13 +75,13 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // R < clearance / 64 count as too close (conservative).
 class ClearanceTest {
  public:
-  ClearanceTest(const Tree& tree, double clearance) : tree_(tree), clearance_(clearance) {}
+  ClearanceTest(const InputDistance& tree, double clearance) : tree_(tree), clearance_(clearance) {}
 
   bool triangle_clear(const Point& a, const Point& b, const Point& c) const {
     const Point g = CGAL::centroid(a, b, c);
     const double r = std::sqrt(
         std::max({CGAL::squared_distance(g, a), CGAL::squared_distance(g, b), CGAL::squared_distance(g, c)}));
-    const double d = std::sqrt(tree_.squared_distance(g));
+    const double d = std::sqrt(tree_.squared(g));
     if (d < clearance_) return false;
     if (d >= clearance_ + r) return true;
     if (r < clearance_ / 64) return false;
@@ -60,7 +91,7 @@ class ClearanceTest {
   }
 
  private:
-  const Tree& tree_;
+  const InputDistance& tree_;
   double clearance_;
 };
 
@@ -126,23 +157,31 @@ WrapResult wrap_and_simplify(const TriMesh& mesh, double alpha, double offset, d
     points.emplace_back(mesh.V(i, 0), mesh.V(i, 1), mesh.V(i, 2));
   std::vector<std::array<std::size_t, 3>> faces;
   std::vector<Triangle> triangles;
+  std::vector<char> on_face(points.size(), 0);
   for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
     const std::array<std::size_t, 3> t = {static_cast<std::size_t>(mesh.F(f, 0)),
                                           static_cast<std::size_t>(mesh.F(f, 1)),
                                           static_cast<std::size_t>(mesh.F(f, 2))};
     faces.push_back(t);
+    for (std::size_t v : t) on_face[v] = 1;
     const Triangle tri(points[t[0]], points[t[1]], points[t[2]]);
     if (!tri.is_degenerate()) triangles.push_back(tri);
   }
 
+  std::vector<Point> lone_points;
+  for (std::size_t v = 0; v < points.size(); ++v)
+    if (!on_face[v]) lone_points.push_back(points[v]);
+
   Mesh wrap;
-  CGAL::alpha_wrap_3(points, faces, alpha, offset, wrap);
+  if (faces.empty())  // a point cloud: CGAL wraps the point set itself
+    CGAL::alpha_wrap_3(points, alpha, offset, wrap);
+  else
+    CGAL::alpha_wrap_3(points, faces, alpha, offset, wrap);
   result.wrap_faces = static_cast<int>(wrap.number_of_faces());
   result.seconds_wrap = seconds_since(t0);
 
   t0 = std::chrono::steady_clock::now();
-  Tree tree(triangles.begin(), triangles.end());
-  tree.accelerate_distance_queries();
+  const InputDistance tree(triangles, lone_points);
   const ClearanceTest test(tree, clearance);
   if (static_cast<int>(wrap.number_of_faces()) > target_faces) {
     // A closed triangle mesh has 3F/2 edges.

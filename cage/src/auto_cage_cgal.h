@@ -27,7 +27,7 @@ struct WrapResult {
   double seconds_wrap = 0, seconds_simplify = 0;
 };
 
-// CGAL::alpha_wrap_3 of `mesh`'s triangles (absolute alpha and offset), then edge collapses (Lindstrom-Turk
+// CGAL::alpha_wrap_3 of `mesh`'s triangles, or of its points when it has no faces (absolute alpha and offset), then edge collapses (Lindstrom-Turk
 // cost and placement) down to `target_faces` triangles, refusing every collapse after which a triangle around
 // the new vertex would come closer than `clearance` to the mesh or flip its normal. Deterministic.
 WrapResult wrap_and_simplify(const TriMesh& mesh, double alpha, double offset, double clearance,

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -11,6 +13,76 @@
 #include "lidef/normalization.h"
 
 namespace lidef {
+
+namespace {
+
+// Union-find over vertices (path halving).
+int find_root(std::vector<int>& parent, int v) {
+  while (parent[v] != v) v = parent[v] = parent[parent[v]];
+  return v;
+}
+
+}  // namespace
+
+MeshDomain mesh_domain_of(const MatX3d& V, const MatX3i& F) {
+  const int nv = static_cast<int>(V.rows()), nf = static_cast<int>(F.rows());
+  std::vector<int> parent(nv);
+  for (int v = 0; v < nv; ++v) parent[v] = v;
+  std::vector<char> used(nv, 0);
+  for (int t = 0; t < nf; ++t)
+    for (int k = 0; k < 3; ++k) {
+      used[F(t, k)] = 1;
+      const int a = find_root(parent, F(t, k)), b = find_root(parent, F(t, (k + 1) % 3));
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  // Per component (keyed by its root vertex): the signed count of every undirected edge's directions.
+  std::map<int, std::map<std::pair<int, int>, int>> balance;
+  for (int t = 0; t < nf; ++t) {
+    auto& b = balance[find_root(parent, F(t, 0))];
+    for (int k = 0; k < 3; ++k) {
+      const int u = F(t, k), w = F(t, (k + 1) % 3);
+      b[{std::min(u, w), std::max(u, w)}] += u < w ? 1 : -1;
+    }
+  }
+  std::map<int, bool> closed;
+  MeshDomain d;
+  for (const auto& [root, edges] : balance) {
+    bool c = true;
+    for (const auto& kv : edges) c = c && kv.second == 0;
+    closed[root] = c;
+    (c ? d.closed_components : d.open_components) += 1;
+  }
+  for (int v = 0; v < nv; ++v) d.isolated_points += !used[v];
+  d.elements.resize(nf + d.isolated_points, 3);
+  d.elements.topRows(nf) = F;
+  int e = nf;
+  for (int v = 0; v < nv; ++v)
+    if (!used[v]) d.elements.row(e++) = Eigen::RowVector3i(v, v, v);
+  int ns = 0;
+  for (int t = 0; t < nf; ++t) ns += closed[find_root(parent, F(t, 0))];
+  d.solid.resize(ns, 3);
+  ns = 0;
+  for (int t = 0; t < nf; ++t)
+    if (closed[find_root(parent, F(t, 0))]) d.solid.row(ns++) = F.row(t);
+  return d;
+}
+
+std::string MeshDomain::description() const {
+  if (open_components == 0 && isolated_points == 0) return "mesh and its solid";
+  if (closed_components == 0) return "points and surface, no solid";
+  return "points, surface and the solid of " + std::to_string(closed_components) + " closed components";
+}
+
+std::string MeshDomain::definition() const {
+  if (open_components == 0 && isolated_points == 0)
+    return "every point of the mesh triangles and of the solid they bound (winding number >= 1/2)";
+  std::string s = "every input point (" + std::to_string(isolated_points) +
+                  " not on a triangle) and every point of the mesh triangles";
+  if (closed_components == 0) return s + "; no solid (no closed component)";
+  return s + ", and the solid bounded by the " + std::to_string(closed_components) +
+         " closed components (their winding number >= 1/2); the " + std::to_string(open_components) +
+         " open components bound no solid";
+}
 
 namespace {
 
@@ -27,9 +99,10 @@ class DomainScan {
   DomainScan(const Cage& cage, const MatX3d& mesh_V, const MatX3i& mesh_F, const SamplingParams& p)
       : cage_(cage),
         V_(mesh_V),
-        F_(mesh_F),
+        dom_(mesh_domain_of(mesh_V, mesh_F)),
+        F_(dom_.elements),
         p_(p),
-        mesh_wn_(V_, F_),
+        mesh_wn_(V_, dom_.solid),
         cage_wn_(cage.V, cage.F),
         cage_grid_(cage.V, cage.F, (cage.bbox_max - cage.bbox_min).norm() / 128.0) {}
 
@@ -68,7 +141,7 @@ class DomainScan {
 
  private:
   bool inside(const Vec3& p) const { return mesh_wn_.at(p) >= 0.5; }
-  // The triangles of `from` that meet the closed cube c ± half.
+  // The elements of `from` that meet the closed cube c ± half.
   void crossing(const Vec3& c, double half, const std::vector<int>& from, std::vector<int>* out) const {
     out->clear();
     for (int t : from)
@@ -103,7 +176,8 @@ class DomainScan {
 
   const Cage& cage_;
   const MatX3d& V_;
-  const MatX3i& F_;
+  const MeshDomain dom_;
+  const MatX3i& F_;  // dom_.elements: triangles and isolated points
   const SamplingParams& p_;
   WindingNumber mesh_wn_, cage_wn_;
   TriangleGrid cage_grid_;
@@ -152,11 +226,10 @@ VoxelSampling collect(const DomainScan& ds, const std::vector<std::vector<Leaf>>
 VoxelSampling sample_domain(const Cage& cage, const MatX3d& mesh_V, const MatX3i& mesh_F,
                             const SamplingParams& p) {
   check_sampling_params(cage, p);
-  if (mesh_F.rows() == 0 || mesh_V.rows() == 0)
-    throw InputError(cage.source, "mesh domain: the mesh has no triangles");
+  if (mesh_V.rows() == 0) throw InputError(cage.source, "mesh domain: the mesh has no vertices");
   if (p.max_domain_level < 0 || p.max_domain_level > 30)
     throw InputError(cage.source, "mesh domain: max_domain_level must lie in [0, 30]");
-  if (mesh_F.minCoeff() < 0 || mesh_F.maxCoeff() >= mesh_V.rows())
+  if (mesh_F.rows() > 0 && (mesh_F.minCoeff() < 0 || mesh_F.maxCoeff() >= mesh_V.rows()))
     throw InputError(cage.source, "mesh domain: a mesh face index is out of range");
   // Laid out in the normalized frame (as sample_voxels), returned in model units.
   const Frame f = Frame::of(cage);
@@ -180,10 +253,17 @@ VoxelSampling sample_domain(const Cage& cage, const MatX3d& mesh_V, const MatX3i
     const Vec3 ext = nV.colwise().maxCoeff() - nV.colwise().minCoeff();
     const double box = std::max(ext.prod(), 1e-3 * std::pow(ext.maxCoeff(), 3));
     const double h0 = std::cbrt(box / p.target_count), h_max = 4 * h0;
+    // Below h_min the mesh's bounding box holds 64 x the target in cells. A solid or a surface has far more
+    // than the target leaves there, so the search never goes below it; a point cloud with fewer points than
+    // the target has at most 8 leaves per point whatever the side, so its count stops growing and the search
+    // would shrink the side without end — below h_min it is told "too many" and turns back, ending at the
+    // cloud's largest count.
+    const double h_min = std::cbrt(box / (64.0 * p.target_count));
     SamplingParams sp = p;
     sp.max_search_iterations = std::min(p.max_search_iterations, 12);
     const SideSearch ss = search_voxel_side(sp, h0, [&](double h) -> long {
       if (h > h_max) return 0;
+      if (h < h_min) return std::numeric_limits<long>::max() / 2;
       ds.set_side(h);
       return leaf_count(scan(ds));
     });
@@ -200,13 +280,15 @@ VoxelSampling sample_domain(const Cage& cage, const MatX3d& mesh_V, const MatX3i
   return out;
 }
 
-std::vector<char> cubes_meeting_mesh_domain(const MatX3d& V, const MatX3i& F, const MatX3d& centers,
+std::vector<char> cubes_meeting_mesh_domain(const MatX3d& V, const MatX3i& mesh_F, const MatX3d& centers,
                                             const VecXd& sides) {
   std::vector<char> out(centers.rows(), 0);
-  if (centers.rows() == 0 || F.rows() == 0) return out;
+  if (centers.rows() == 0 || V.rows() == 0) return out;
+  const MeshDomain dom = mesh_domain_of(V, mesh_F);
+  const MatX3i& F = dom.elements;
   const Vec3 ext = V.colwise().maxCoeff() - V.colwise().minCoeff();
   const TriangleGrid grid(V, F, std::max(ext.maxCoeff() / 64, 1e-300));
-  const WindingNumber wn(V, F);
+  const WindingNumber wn(V, dom.solid);
 #pragma omp parallel for schedule(dynamic, 64)
   for (Eigen::Index i = 0; i < centers.rows(); ++i) {
     const Vec3 c = centers.row(i);

@@ -160,7 +160,7 @@ TriMesh to_mesh(const std::vector<Vec3>& V, const std::vector<Eigen::Vector3i>& 
   return m;
 }
 
-TriMesh read_obj(const std::string& path, MeshLines* lines) {
+TriMesh read_obj(const std::string& path, MeshLines* lines, bool allow_points) {
   const std::string text = read_text_file(path, ".obj");
   LineReader rd(text);
   std::vector<Vec3> V;
@@ -211,7 +211,7 @@ TriMesh read_obj(const std::string& path, MeshLines* lines) {
   }
   if (!any) throw InputError(path, "file is empty (only blank lines or comments)");
   if (V.empty()) throw InputError(path, "no vertices ('v' lines)");
-  if (F.empty()) throw InputError(path, "no faces ('f' lines)");
+  if (F.empty() && !allow_points) throw InputError(path, "no faces ('f' lines)");
   for (size_t t = 0; t < F.size(); ++t)
     for (int k = 0; k < 3; ++k)
       if (F[t][k] >= static_cast<int>(V.size()))
@@ -334,9 +334,15 @@ PolygonSoupMesh read_off_polygons(const std::string& path) {
 
 TriMesh read_mesh(const std::string& path, MeshLines* lines) {
   const std::string ext = lower(fs::path(path).extension().string());
-  if (ext == ".obj") return read_obj(path, lines);
+  if (ext == ".obj") return read_obj(path, lines, false);
   if (ext == ".off") return read_off(path, lines);
   throw InputError(path, "unsupported mesh format '" + ext + "' (expected .obj or .off)");
+}
+
+TriMesh read_mesh_or_points(const std::string& path, MeshLines* lines) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext == ".obj") return read_obj(path, lines, true);
+  return read_mesh(path, lines);
 }
 
 void write_obj(std::ostream& out, const MatX3d& V, const MatX3i& F, const std::string& comment) {

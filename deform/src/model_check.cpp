@@ -453,8 +453,9 @@ void check_mesh(const TriMesh& mesh, const MeshLines* lines, const TriMesh* cage
   r.mesh_file = file;
   r.mesh_vertices = nv;
   r.mesh_faces = nf;
-  if (nv == 0 || nf == 0) {
-    r.errors.push_back({file, "", 0, "the mesh has no " + std::string(nv == 0 ? "vertices" : "faces")});
+  // A mesh without faces is a point set (a point cloud's model): its domain is the points.
+  if (nv == 0) {
+    r.errors.push_back({file, "", 0, "the mesh has no vertices"});
     return;
   }
   if (!check_indices_and_values(mesh, file, lines, r.errors)) return;
@@ -554,18 +555,18 @@ ValidationReport check_model_dir(const std::string& dir, TriMesh* cage_out, TriM
   };
   TriMesh cage, mesh;
   MeshLines cage_lines, mesh_lines;
-  auto read = [&](const std::string& path, TriMesh& m, MeshLines& lines) {
+  auto read = [&](const std::string& path, TriMesh& m, MeshLines& lines, bool allow_points) {
     if (path.empty()) return false;
     try {
-      m = read_mesh(path, &lines);
+      m = allow_points ? read_mesh_or_points(path, &lines) : read_mesh(path, &lines);
       return true;
     } catch (const InputError& e) {
       r.errors.push_back({e.file(), "", e.line(), e.message()});
       return false;
     }
   };
-  const bool have_cage = read(locate("cage"), cage, cage_lines);
-  const bool have_mesh = read(locate("mesh"), mesh, mesh_lines);
+  const bool have_cage = read(locate("cage"), cage, cage_lines, false);
+  const bool have_mesh = read(locate("mesh"), mesh, mesh_lines, true);
   const CheckTolerances tol;
   const bool cage_ok = have_cage && check_cage(cage, &cage_lines, tol, r);
   if (have_mesh) check_mesh(mesh, &mesh_lines, cage_ok && r.errors.empty() ? &cage : nullptr, tol, r);

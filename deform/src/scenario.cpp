@@ -246,7 +246,8 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
     std::string ext = p.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
     const bool mesh_file =
-        fs::is_regular_file(p, ec) && (ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl");
+        fs::is_regular_file(p, ec) && (ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" ||
+                                     ext == ".xyz");
     if (fs::is_directory(p, ec) || mesh_file) {
       s.model_dir = p.string();
       break;

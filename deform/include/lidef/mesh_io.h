@@ -33,6 +33,10 @@ struct MeshLines {
 // line of every vertex and face.
 TriMesh read_mesh(const std::string& path, MeshLines* lines = nullptr);
 
+// read_mesh, except that an OBJ file without `f` lines is read as a point set (F is 0 by 3): a model's mesh
+// may be a point cloud (its certified domain is then the points, domain_sampling.h).
+TriMesh read_mesh_or_points(const std::string& path, MeshLines* lines = nullptr);
+
 // An ASCII .off file with faces of any size (the automatic cage's reader, cage/auto_cage.h): V (#V by 3) and
 // each face's 0-based vertex indices. The same syntax checks as read_mesh (line-based: one vertex or face per
 // line; extra numbers on a line — normals, colours — must be numbers and are ignored), but no arity check.

@@ -38,6 +38,9 @@ struct CertificateReport {
   // or "voxels" (the paper's grid); the leaves that meet D (exact test, cubes_meeting_mesh_domain) and the
   // voxels the certifier refused as not clear of the cage.
   std::string domain = "voxels";
+  // Domain "mesh": what D holds for this mesh (MeshDomain::description / definition: "mesh and its solid",
+  // "points and surface, no solid", ...); empty for "voxels".
+  std::string domain_statement, domain_definition;
   long leaves_meeting_domain = 0;
   long uncleared_voxels = 0;
   SamplingParams sampling_params;       // as requested (voxel_side 0 = searched from target_count)

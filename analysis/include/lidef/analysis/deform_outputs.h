@@ -16,10 +16,12 @@ struct DeformOutputOptions {
   double total_seconds = -1;  // summary.json's time_s.total (< 0: preprocess + solve + finish)
 };
 
-// Writes into `dir` (created if missing): coefficients.txt, deformed.obj, deformed.vtp (E_iso_minus_6, detJ,
-// sigma3), certificate.json + voxels.csv + leaves.vtu, iterations.csv, summary.json, scenario.json
-// (`scenario` with the parameters used), and field.vti when options.grid > 0 (a field.vti of an earlier run
-// is removed otherwise). `scenario.model_dir` names the model in the certificate. Throws InputError naming
+// Writes into `dir` (created if missing): coefficients.txt, cage.obj (the cage the coefficients belong to),
+// deformed.obj, deformed.vtp (E_iso_minus_6, detJ, sigma3), certificate.json + voxels.csv + leaves.vtu,
+// iterations.csv, summary.json, scenario.json (`scenario` with the parameters used), field.vti when
+// options.grid > 0, and deformed.ply when the model comes from a PLY file whose vertices are the model's mesh
+// vertices (a point cloud, Gaussian splats, a PLY mesh without unused vertices; point_cloud_io.h,
+// gaussian_splats.h). A field.vti or deformed.ply of an earlier run that this one does not write is removed. `scenario.model_dir` names the model in the certificate. Throws InputError naming
 // `dir` when it cannot be a folder.
 struct DeformOutputs {
   std::string dir;

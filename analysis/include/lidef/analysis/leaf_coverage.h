@@ -10,8 +10,8 @@
 //   2. no two leaves are the same cell, and none is inside another; domain "voxels": the level-0 cells they
 //   lie
 //      in are as many as the certificate's base voxels;
-//   3. domain "mesh": every grid cell that meets D (the mesh's triangles and the solid they bound, the exact
-//      test of cubes_meeting_mesh_domain) is a certified leaf, or its children that meet D are covered in
+//   3. domain "mesh": every grid cell that meets D (the input's points, its triangles and the solid bounded by
+//      its closed components, MeshDomain; the exact test of cubes_meeting_mesh_domain) is a certified leaf, or its children that meet D are covered in
 //      turn — so D lies in the union of the certified leaves; domain "voxels": every base voxel is tiled by
 //      certified leaves.
 // A leaf that is not certified, a cell that meets D with no leaf, or a leaf off the grid fails the proof.
