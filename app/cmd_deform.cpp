@@ -202,11 +202,18 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << (max_err <= tolerance
                         ? ""
                         : std::string("  ") + (un.proven ? "PROVEN: " : "") + un.reason + "\n")
-                << "  CERTIFIED locally injective on "
+                << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
+                        ? "  CERTIFIED injective on "
+                        : "  CERTIFIED locally injective on ")
                 << (result.sampling.domain == "mesh" ? "the whole mesh and its solid (" : "the union of ")
                 << cert.voxels << (result.sampling.domain == "mesh" ? " voxels)" : " voxels")
                 << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
                 << format_g(100 * out.mesh_coverage, 3) << "%\n"
+                << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
+                        ? "  the shape does not pass through itself\n"
+                    : out.global.verdict == GlobalInjectivity::Verdict::kOverlap
+                        ? "  locally injective only: " + out.global.reason + "\n"
+                        : "  global injectivity not decided: " + out.global.reason + "\n")
                 << "  wrote " << (std::filesystem::path(o.out) / "").string()
                 << "{coefficients.txt, deformed.obj, deformed.vtp, certificate.json, "
                    "voxels.csv, leaves.vtu, iterations.csv, summary.json, scenario.json"

@@ -71,8 +71,13 @@ GlobalInjectivity global_injectivity_not_decided(const std::string& reason) {
 }
 
 struct GlobalInjectivityChecker::Impl {
-  const Cage& cage;
-  const TriMesh& mesh;
+  // Everything is computed in the cage's normalized frame (bounding-box center at the origin, diagonal 1), so
+  // that the rounding allowances, relative to the coefficients' magnitudes, do not grow when the model is
+  // moved away from the origin; points are reported in model units (center + scale · p).
+  Vec3 center;
+  double scale;
+  Cage cage;
+  TriMesh mesh;
   HarmonicBasis basis;
   EdgeArrays edges;
   TriangleGrid cage_grid;
@@ -81,17 +86,25 @@ struct GlobalInjectivityChecker::Impl {
   std::string structure_problem;               // why the surface argument does not apply ("" = it does)
   double cage_diameter = 0;
 
+  static TriMesh normalized(const MatX3d& V, const MatX3i& F, const Vec3& center, double scale) {
+    TriMesh t;
+    t.V = (V.rowwise() - center.transpose()) / scale;
+    t.F = F;
+    return t;
+  }
   Impl(const Cage& c, const TriMesh& m)
-      : cage(c),
-        mesh(m),
-        basis(c),
-        edges(edge_endpoints(c, true), edge_endpoints(c, false)),
-        cage_grid(c.V, c.F, (c.bbox_max - c.bbox_min).norm() / 64.0),
-        cage_winding(c.V, c.F) {
-    cage_diameter = (c.bbox_max - c.bbox_min).norm();
-    vertex_faces.resize(m.V.rows());
-    for (int f = 0; f < m.F.rows(); ++f)
-      for (int k = 0; k < 3; ++k) vertex_faces[m.F(f, k)].push_back(f);
+      : center(0.5 * (c.bbox_min + c.bbox_max)),
+        scale(std::max((c.bbox_max - c.bbox_min).norm(), 1e-300)),
+        cage(normalized(c.V, c.F, center, scale)),
+        mesh(normalized(m.V, m.F, center, scale)),
+        basis(cage),
+        edges(edge_endpoints(cage, true), edge_endpoints(cage, false)),
+        cage_grid(cage.V, cage.F, (cage.bbox_max - cage.bbox_min).norm() / 64.0),
+        cage_winding(cage.V, cage.F) {
+    cage_diameter = (cage.bbox_max - cage.bbox_min).norm();
+    vertex_faces.resize(mesh.V.rows());
+    for (int f = 0; f < mesh.F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
     structure_problem = check_structure();
   }
 
@@ -249,7 +262,7 @@ bool robust_pierce(const Vec3& s0, const Vec3& s1, const std::array<Vec3, 3>& t,
 
 }  // namespace
 
-GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y,
+GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                                                   const GlobalInjectivityParams& params) const {
   const auto t_start = std::chrono::steady_clock::now();
   const Impl& im = *impl_;
@@ -257,9 +270,16 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y,
     g.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
     return g;
   };
-  if (y.rows() != im.basis.size())
-    throw InputError("", "coefficients have " + std::to_string(y.rows()) +
+  if (y_model.rows() != im.basis.size())
+    throw InputError("", "coefficients have " + std::to_string(y_model.rows()) +
                              " rows, expected #V+#F = " + std::to_string(im.basis.size()));
+  if (!y_model.allFinite()) throw InputError("", "coefficients contain NaN or Inf");
+  // The map in the normalized frame: f'(p') = (f(center + scale p') − center) / scale, so y_v' = (y_v −
+  // center) / scale and y_t' = y_t (the face rows are linear parts, unchanged).
+  MatX3d y = y_model;
+  const int ncv0 = im.cage.num_vertices();
+  y.topRows(ncv0) = (y_model.topRows(ncv0).rowwise() - im.center.transpose()) / im.scale;
+  auto to_model = [&](const Vec3& p) -> Vec3 { return im.center + im.scale * p; };
   if (!im.structure_problem.empty()) return finish(global_injectivity_not_decided(im.structure_problem));
   const TriMesh& mesh = im.mesh;
   const long nv = mesh.V.rows(), nf = mesh.F.rows();
@@ -331,7 +351,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y,
   GlobalInjectivity out;
   double max_rho = 0;
   for (const Piece& P : pieces) max_rho = std::max(max_rho, P.rho);
-  out.max_tube_radius = max_rho;
+  out.max_tube_radius = max_rho * im.scale;
 
   // --- 3. Candidate pairs: boxes of the tubes; pieces without a finite tube get the mesh's image box
   // (they are split below). A sorted list of (cell, piece) entries groups the pieces by cell.
@@ -516,7 +536,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y,
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].outcome == kCrossing) {
       out.verdict = GlobalInjectivity::Verdict::kOverlap;
-      out.overlap_point = results[k].where;
+      out.overlap_point = to_model(results[k].where);
       out.overlap_face_a = pairs[k].first;
       out.overlap_face_b = pairs[k].second;
       out.reason = "the shape overlaps itself near " + where(out.overlap_point) + " (mesh triangles " +
@@ -526,16 +546,17 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y,
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].outcome == kOpen) {
       out.verdict = GlobalInjectivity::Verdict::kNotDecided;
-      out.overlap_point = results[k].where;
+      out.overlap_point = to_model(results[k].where);
       out.overlap_face_a = pairs[k].first;
       out.overlap_face_b = pairs[k].second;
       out.reason = pairs[k].first == pairs[k].second
                        ? "could not prove the map injective on mesh triangle " +
-                             std::to_string(pairs[k].first) + " near " + where(results[k].where) +
+                             std::to_string(pairs[k].first) + " near " + where(to_model(results[k].where)) +
                              " (depth " + std::to_string(params.max_depth) + ")"
                        : "could not separate the images of mesh triangles " + std::to_string(pairs[k].first) +
-                             " and " + std::to_string(pairs[k].second) + " near " + where(results[k].where) +
-                             " (depth " + std::to_string(params.max_depth) + ")";
+                             " and " + std::to_string(pairs[k].second) + " near " +
+                             where(to_model(results[k].where)) + " (depth " +
+                             std::to_string(params.max_depth) + ")";
       return finish(out);
     }
   out.verdict = GlobalInjectivity::Verdict::kInjective;
