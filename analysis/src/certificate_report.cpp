@@ -124,6 +124,15 @@ std::uint64_t coefficients_hash(const MatX3d& y) {
   return fnv1a64(bytes);
 }
 
+GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
+                                            const Cage& cage, const TriMesh& mesh, const MatX3d& y) {
+  if (!cert.certified) return global_injectivity_not_decided("the local certificate failed");
+  if (domain != "mesh" || mesh.F.rows() == 0)
+    return global_injectivity_not_decided(
+        "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)");
+  return check_global_injectivity(cage, mesh, y);
+}
+
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
                                           const MatX3d& y, const std::string& model,
                                           const std::string& coefficients,
@@ -170,13 +179,7 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
   const std::vector<char> meets =
       mesh.F.rows() > 0 ? cubes_meeting_mesh_domain(mesh_V, mesh.F, C, S) : std::vector<char>();
   r.leaves_meeting_domain = std::count(meets.begin(), meets.end(), 1);
-  if (!cert.certified)
-    r.global = global_injectivity_not_decided("the local certificate failed");
-  else if (r.domain != "mesh" || mesh.F.rows() == 0)
-    r.global = global_injectivity_not_decided(
-        "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)");
-  else
-    r.global = check_global_injectivity(cage, mesh, y);
+  r.global = decide_global_injectivity(cert, r.domain, cage, mesh, y);
   return r;
 }
 

@@ -350,30 +350,70 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
   }
   GlobalInjectivity out;
   double max_rho = 0;
-  for (const Piece& P : pieces) max_rho = std::max(max_rho, P.rho);
+  for (const Piece& P : pieces)
+    if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
   out.max_tube_radius = max_rho * im.scale;
-
-  // --- 3. Candidate pairs: boxes of the tubes; pieces without a finite tube get the mesh's image box
-  // (they are split below). A sorted list of (cell, piece) entries groups the pieces by cell.
-  Vec3 lo = fV.colwise().minCoeff().transpose(), hi = fV.colwise().maxCoeff().transpose();
-  std::vector<Vec3> blo(nf), bhi(nf);
-  double mean_extent = 0;
-  for (long f = 0; f < nf; ++f) {
-    const Piece& P = pieces[f];
-    Vec3 a = P.q[0].cwiseMin(P.q[1]).cwiseMin(P.q[2]), b = P.q[0].cwiseMax(P.q[1]).cwiseMax(P.q[2]);
-    if (std::isfinite(P.rho)) {
-      a.array() -= P.rho + slack, b.array() += P.rho + slack;
-    } else {
-      a = lo, b = hi;
+  // The top pieces: the triangles, a triangle whose ball is not clear of the cage (no finite tube) replaced
+  // by its 1-to-4 splits until each has one (in face order, depth first: deterministic).
+  // A tube wider than a quarter of its piece (a triangle near the cage, where L₁ is large) would pair the
+  // piece with most of the surface: such pieces are split first too.
+  auto thin = [](const Piece& P) { return std::isfinite(P.rho) && P.rho <= 0.25 * P.diam; };
+  std::vector<Piece> top;
+  top.reserve(nf);
+  {
+    std::vector<float> row;
+    std::vector<double> buf;
+    std::vector<Piece> todo;
+    for (long f = 0; f < nf; ++f) {
+      if (thin(pieces[f])) {
+        top.push_back(pieces[f]);
+        continue;
+      }
+      todo.assign(1, pieces[f]);
+      while (!todo.empty()) {
+        const Piece P = todo.back();
+        todo.pop_back();
+        if (thin(P) || (P.depth >= params.max_depth && std::isfinite(P.rho))) {
+          top.push_back(P);
+          continue;
+        }
+        if (P.depth >= params.max_depth)
+          return finish(global_injectivity_not_decided(
+              "mesh triangle " + std::to_string(f) + " lies too close to the cage for a bound near (" +
+              format_g(to_model(P.c).x()) + ", " + format_g(to_model(P.c).y()) + ", " +
+              format_g(to_model(P.c).z()) + ")"));
+        std::array<Vec3, 3> mp, mq;
+        for (int k = 0; k < 3; ++k) {
+          mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
+          mq[k] = im.eval_f(y, mp[k], buf);
+        }
+        const int d = P.depth + 1, fc = P.face;
+        todo.push_back(make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, fc, d, row));
+        todo.push_back(make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, fc, d, row));
+        todo.push_back(make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, fc, d, row));
+        todo.push_back(make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, fc, d, row));
+      }
     }
-    blo[f] = a, bhi[f] = b;
-    mean_extent += std::isfinite(P.rho) ? (b - a).maxCoeff() : 0;
   }
-  mean_extent /= static_cast<double>(nf);
+  const long nt = static_cast<long>(top.size());
+
+  // --- 3. Candidate pairs: boxes of the top pieces' tubes. A sorted list of (cell, piece) entries groups the
+  // pieces by cell.
+  Vec3 lo = fV.colwise().minCoeff().transpose(), hi = fV.colwise().maxCoeff().transpose();
+  std::vector<Vec3> blo(nt), bhi(nt);
+  double mean_extent = 0;
+  for (long f = 0; f < nt; ++f) {
+    const Piece& P = top[f];
+    Vec3 a = P.q[0].cwiseMin(P.q[1]).cwiseMin(P.q[2]), b = P.q[0].cwiseMax(P.q[1]).cwiseMax(P.q[2]);
+    a.array() -= P.rho + slack, b.array() += P.rho + slack;
+    blo[f] = a, bhi[f] = b;
+    mean_extent += (b - a).maxCoeff();
+  }
+  mean_extent /= static_cast<double>(nt);
   const double span = std::max((hi - lo).maxCoeff(), 1e-300);
   const double cell = std::max(mean_extent, span / 256.0);
   std::vector<std::pair<long, int>> entries;
-  for (long f = 0; f < nf; ++f) {
+  for (long f = 0; f < nt; ++f) {
     std::array<long, 3> a, b;
     for (int k = 0; k < 3; ++k) {
       a[k] = static_cast<long>(std::floor((std::max(blo[f](k), lo(k) - cell) - lo(k)) / cell));
@@ -401,8 +441,8 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
   pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
   out.candidate_pairs = static_cast<long>(pairs.size());
   // A triangle not covered by one injectivity ball is a work item of its own (split until its pieces are).
-  for (long f = 0; f < nf; ++f)
-    if (!face_ok[f]) pairs.emplace_back(static_cast<int>(f), static_cast<int>(f));
+  for (long i = 0; i < nt; ++i)
+    if (!face_ok[top[i].face]) pairs.emplace_back(static_cast<int>(i), static_cast<int>(i));
 
   // --- 4. Per pair.
   enum Outcome : char { kCleared, kCrossing, kOpen };
@@ -451,14 +491,19 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       const int fa = pairs[k].first, fb = pairs[k].second;
       PairResult& res = results[k];
       std::array<int, 3> sv;
-      const int nshared = fa == fb ? 3 : shared_vertices(fa, fb, &sv);
+      const int ffa = top[fa].face, ffb = top[fb].face;
+      int nshared = 3;
+      if (ffa == ffb)
+        for (int i = 0; i < 3; ++i) sv[i] = mesh.F(ffa, i);
+      else
+        nshared = shared_vertices(ffa, ffb, &sv);
       if (fa != fb) {
         bool star = false;
         for (int i = 0; i < nshared; ++i) star = star || star_ok[sv[i]];
         if (star) continue;  // both triangles lie in the star ball of a shared vertex, where f is injective
       }
       stack.clear();
-      stack.push_back({pieces[fa], pieces[fb], fa == fb, nshared > 0});
+      stack.push_back({top[fa], top[fb], fa == fb, nshared > 0});
       while (!stack.empty()) {
         if ((res.tests & 63) == 63 && k > first_crossing.load(std::memory_order_relaxed)) break;
         const Task task = stack.back();
@@ -533,6 +578,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
   auto where = [](const Vec3& p) {
     return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
   };
+  for (auto& pr : pairs) pr = {top[pr.first].face, top[pr.second].face};
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].outcome == kCrossing) {
       out.verdict = GlobalInjectivity::Verdict::kOverlap;

@@ -59,6 +59,12 @@ struct CertificateReport {
 // FNV-1a 64 of the coefficient doubles (#V+#F by 3, row by row, native byte order) and the row count.
 std::uint64_t coefficients_hash(const MatX3d& y);
 
+// The global injectivity verdict of a map whose local certificate is `cert` on the domain named `domain`:
+// decided (global_injectivity.h) only when the certificate holds on the mesh's solid, else not decided with
+// the reason.
+GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
+                                            const Cage& cage, const TriMesh& mesh, const MatX3d& y);
+
 // Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
                                           const MatX3d& y, const std::string& model,
