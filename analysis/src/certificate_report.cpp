@@ -31,6 +31,7 @@ ojson num(double x) {
   return format_double(x);
 }
 
+
 ojson leaf_json(const CertLeaf& l) {
   ojson j;
   j["center"] = ojson::array({num(l.center.x()), num(l.center.y()), num(l.center.z())});
@@ -52,8 +53,7 @@ struct Reader {
   const nlohmann::json& root;
 
   const nlohmann::json& at(const nlohmann::json& obj, const char* key) const {
-    if (!obj.is_object() || !obj.contains(key))
-      throw InputError(path, std::string("missing key '") + key + "'");
+    if (!obj.is_object() || !obj.contains(key)) throw InputError(path, std::string("missing key '") + key + "'");
     return obj.at(key);
   }
   double number(const nlohmann::json& obj, const char* key) const { return value(at(obj, key), key); }
@@ -86,14 +86,12 @@ struct Reader {
     const std::string s = string(obj, key);
     char* end = nullptr;
     const unsigned long long h = std::strtoull(s.c_str(), &end, 16);
-    if (s.size() != 16 || *end != '\0')
-      throw InputError(path, std::string("key '") + key + "' is not a 16-digit hex hash");
+    if (s.size() != 16 || *end != '\0') throw InputError(path, std::string("key '") + key + "' is not a 16-digit hex hash");
     return h;
   }
   Vec3 vec3(const nlohmann::json& obj, const char* key) const {
     const nlohmann::json& v = at(obj, key);
-    if (!v.is_array() || v.size() != 3)
-      throw InputError(path, std::string("key '") + key + "' is not [x, y, z]");
+    if (!v.is_array() || v.size() != 3) throw InputError(path, std::string("key '") + key + "' is not [x, y, z]");
     Vec3 p;
     for (int k = 0; k < 3; ++k) p(k) = value(v[k], key);
     return p;
@@ -102,8 +100,7 @@ struct Reader {
 
 std::string read_all(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in)
-    throw InputError(path, std::filesystem::exists(path) ? "cannot open for reading" : "file not found");
+  if (!in) throw InputError(path, std::filesystem::exists(path) ? "cannot open for reading" : "file not found");
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
@@ -193,7 +190,7 @@ const char* voxels_csv_header() {
 namespace {
 const char* kVoxelsCsvHeader9 = "cx,cy,cz,side,depth,sigma3,L,margin,certified";
 const char* kVoxelsCsvHeader10 = "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error";
-}  // namespace
+}
 
 std::string voxels_csv(const std::vector<CertLeaf>& leaves) {
   std::string s = voxels_csv_header();
@@ -227,14 +224,11 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
     size_t start = 0;
     while (true) {
       const size_t comma = line.find(',', start);
-      const std::string field =
-          line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      const std::string field = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
       if (k >= nfields) throw InputError(path, "more than " + std::to_string(nfields) + " fields", lineno);
       char* end = nullptr;
       f[k] = std::strtod(field.c_str(), &end);
-      if (field.empty() || *end != '\0')
-        throw InputError(path, "field " + std::to_string(k + 1) + " is not a number: '" + field + "'",
-                         lineno);
+      if (field.empty() || *end != '\0') throw InputError(path, "field " + std::to_string(k + 1) + " is not a number: '" + field + "'", lineno);
       ++k;
       if (comma == std::string::npos) break;
       start = comma + 1;
@@ -244,8 +238,7 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
                        lineno);
     if (!(f[9] >= 0)) throw InputError(path, "sigma3_error must be a number >= 0", lineno);
     if (!(f[3] > 0) || !std::isfinite(f[3])) throw InputError(path, "side must be a positive number", lineno);
-    if (f[4] != std::floor(f[4]) || f[4] < 0 || f[4] > 64)
-      throw InputError(path, "depth must be an integer in 0..64", lineno);
+    if (f[4] != std::floor(f[4]) || f[4] < 0 || f[4] > 64) throw InputError(path, "depth must be an integer in 0..64", lineno);
     if (f[8] != 0 && f[8] != 1) throw InputError(path, "certified must be 0 or 1", lineno);
     for (int c = 0; c < 3; ++c)
       if (!std::isfinite(f[c])) throw InputError(path, "center is not finite", lineno);
@@ -273,9 +266,7 @@ std::vector<CertLeaf> parse_voxels_csv(const std::string& text, const std::strin
 }
 }  // namespace
 
-std::vector<CertLeaf> read_voxels_csv(const std::string& path) {
-  return parse_voxels_csv(read_all(path), path);
-}
+std::vector<CertLeaf> read_voxels_csv(const std::string& path) { return parse_voxels_csv(read_all(path), path); }
 
 std::string certificate_json(const CertificateReport& r) {
   const Certificate& c = r.cert;
@@ -302,9 +293,7 @@ std::string certificate_json(const CertificateReport& r) {
                        {"max_tube_radius", num(g.max_tube_radius)}};
   j["model"] = r.model;
   j["coefficients"] = r.coefficients;
-  j["cage"] = {{"vertices", r.cage_vertices},
-               {"faces", r.cage_faces},
-               {"edges", r.cage_edges},
+  j["cage"] = {{"vertices", r.cage_vertices}, {"faces", r.cage_faces}, {"edges", r.cage_edges},
                {"fnv1a64", hex64(r.cage_hash)}};
   j["coefficients_fnv1a64"] = hex64(r.coefficients_hash);
   j["bound"] = to_string(c.bound);
@@ -320,8 +309,7 @@ std::string certificate_json(const CertificateReport& r) {
   s["hessian_fraction"] = num(r.sampling_params.hessian_fraction);
   s["voxel_side"] = num(c.voxel_side);
   s["radius"] = num(r.sampling_radius);
-  s["origin"] =
-      ojson::array({num(r.sampling_origin.x()), num(r.sampling_origin.y()), num(r.sampling_origin.z())});
+  s["origin"] = ojson::array({num(r.sampling_origin.x()), num(r.sampling_origin.y()), num(r.sampling_origin.z())});
   s["voxels"] = c.voxels;
   s["hessian_subset"] = r.hessian_subset;
   s["target_met"] = r.sampling_target_met;
@@ -332,8 +320,7 @@ std::string certificate_json(const CertificateReport& r) {
   j["leaves"] = c.num_leaves;
   long certified_leaves = 0;
   for (const CertLeaf& l : c.leaves) certified_leaves += l.certified;
-  j["leaves_certified"] =
-      c.leaves.size() == static_cast<size_t>(c.num_leaves) ? ojson(certified_leaves) : ojson();
+  j["leaves_certified"] = c.leaves.size() == static_cast<size_t>(c.num_leaves) ? ojson(certified_leaves) : ojson();
   j["refined"] = c.refined;
   j["max_depth_used"] = c.max_depth_used;
   j["min_sigma3_center"] = num(c.min_sigma3_center);
@@ -382,8 +369,7 @@ CertificateReport read_certificate_json(const std::string& path) {
   nlohmann::json root;
   try {
     root = nlohmann::json::parse(text);
-  } catch (
-      const nlohmann::json::exception& e) {  // parse_error, and out_of_range 406 for a number such as 1e999
+  } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range 406 for a number such as 1e999
     throw InputError(path, std::string("not valid JSON: ") + e.what());
   }
   const Reader rd{path, root};
@@ -468,8 +454,7 @@ CertificateReport read_certificate_json(const std::string& path) {
   r.voxels_csv = rd.string(root, "voxels_csv");
   r.voxels_csv_hash = rd.hash(root, "voxels_csv_fnv1a64");
 
-  // The leaves, from the CSV beside the JSON; refused when it is not the file the certificate was written
-  // with.
+  // The leaves, from the CSV beside the JSON; refused when it is not the file the certificate was written with.
   const std::filesystem::path csv_rel(r.voxels_csv);
   if (r.voxels_csv.empty() || csv_rel.is_absolute() || csv_rel.has_parent_path())
     throw InputError(path, "key 'voxels_csv' must be a plain file name");
