@@ -21,6 +21,7 @@
 #include "lidef/lipschitz_bound.h"
 #include "lidef/mesh_queries.h"
 #include "lidef/number_format.h"
+#include "lidef/self_intersections.h"
 #include "lidef/signed_svd.h"
 
 namespace lidef {
@@ -106,6 +107,18 @@ struct GlobalInjectivityChecker::Impl {
     for (int f = 0; f < mesh.F.rows(); ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
     structure_problem = check_structure();
+    // Exact predicates on the model's own coordinates (normalizing them would round).
+    if (structure_problem.empty()) structure_problem = check_embedded(m);
+  }
+
+  // The degree argument compares the deformed surface with an embedded rest surface: where the rest mesh's
+  // triangles already intersect, the identity itself would look like an overlap, so nothing is decided.
+  static std::string check_embedded(const TriMesh& m) {
+    const std::vector<std::pair<int, int>> hits = find_self_intersections(m.V, m.F);
+    if (hits.empty()) return "";
+    return "the rest-state mesh intersects itself (" + std::to_string(hits.size()) +
+           " pairs of triangles, the first " + std::to_string(hits[0].first) + " and " +
+           std::to_string(hits[0].second) + ")";
   }
 
   static std::vector<Vec3> edge_endpoints(const Cage& c, bool first) {
