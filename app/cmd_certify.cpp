@@ -176,6 +176,7 @@ void add_certify_command(CLI::App& app, Action& action) {
                                     {"bound", cert.ms_bound},
                                     {"refine", cert.ms_refine},
                                     {"total", cert.ms_total}};
+      tj["global_injectivity_ms"] = report.global.ms;
       tj["certificate_files_ms"] = ms_files;
       tj["field_ms"] = ms_field;
       tj["total_ms"] = ms_since(t_start);
@@ -185,10 +186,19 @@ void add_certify_command(CLI::App& app, Action& action) {
 
       // --- Summary.
       const char* bound = to_string(cert.bound);
-      if (cert.certified && sampling.domain == "mesh")
+      const GlobalInjectivity& g = report.global;
+      if (cert.certified && sampling.domain == "mesh" && g.verdict == GlobalInjectivity::Verdict::kInjective)
+        std::cout << "lidef certify: CERTIFIED injective on the whole mesh and its solid (" << cert.num_leaves
+                  << " leaves, " << report.leaves_meeting_domain << " meeting it; " << bound
+                  << "-order bound; the shape does not pass through itself)\n";
+      else if (cert.certified && sampling.domain == "mesh" &&
+               g.verdict == GlobalInjectivity::Verdict::kOverlap)
+        std::cout << "lidef certify: CERTIFIED locally injective on the whole mesh and its solid — but "
+                  << g.reason << "\n";
+      else if (cert.certified && sampling.domain == "mesh")
         std::cout << "lidef certify: CERTIFIED locally injective on the whole mesh and its solid ("
                   << cert.num_leaves << " leaves, " << report.leaves_meeting_domain << " meeting it; "
-                  << bound << "-order bound)\n";
+                  << bound << "-order bound); global injectivity not decided: " << g.reason << "\n";
       else if (cert.certified)
         std::cout << "lidef certify: CERTIFIED locally injective on the union of " << cert.voxels
                   << " voxels (" << bound << "-order bound)\n";

@@ -203,13 +203,20 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << (max_err <= tolerance
                         ? ""
                         : std::string("  ") + (un.proven ? "PROVEN: " : "") + un.reason + "\n")
-                << "  CERTIFIED locally injective on "
+                << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
+                        ? "  CERTIFIED injective on "
+                        : "  CERTIFIED locally injective on ")
                 << (result.sampling.domain == "mesh"
                         ? "the domain (" + mesh_domain_of(model.mesh.V, model.mesh.F).description() + ": "
                         : std::string("the union of "))
                 << cert.voxels << (result.sampling.domain == "mesh" ? " voxels)" : " voxels")
                 << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
                 << format_g(100 * out.mesh_coverage, 3) << "%\n"
+                << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
+                        ? "  the shape does not pass through itself\n"
+                    : out.global.verdict == GlobalInjectivity::Verdict::kOverlap
+                        ? "  locally injective only: " + out.global.reason + "\n"
+                        : "  global injectivity not decided: " + out.global.reason + "\n")
                 << "  wrote " << (std::filesystem::path(o.out) / "").string() << "{";
       for (std::size_t k = 0; k < out.files.size(); ++k) std::cout << (k ? ", " : "") << out.files[k];
       std::cout << "}\n";

@@ -124,6 +124,15 @@ std::uint64_t coefficients_hash(const MatX3d& y) {
   return fnv1a64(bytes);
 }
 
+GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
+                                            const Cage& cage, const TriMesh& mesh, const MatX3d& y) {
+  if (!cert.certified) return global_injectivity_not_decided("the local certificate failed");
+  if (domain != "mesh" || mesh.F.rows() == 0)
+    return global_injectivity_not_decided(
+        "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)");
+  return check_global_injectivity(cage, mesh, y);
+}
+
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
                                           const MatX3d& y, const std::string& model,
                                           const std::string& coefficients,
@@ -174,6 +183,7 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
     r.domain_definition = dom.definition();
   }
   r.leaves_meeting_domain = std::count(meets.begin(), meets.end(), 1);
+  r.global = decide_global_injectivity(cert, r.domain, cage, mesh, y);
   return r;
 }
 
@@ -278,6 +288,22 @@ std::string certificate_json(const CertificateReport& r) {
   j["version"] = kVersion;
   j["certified"] = c.certified;
   j["reason"] = c.reason;
+  // Global injectivity on D: true (proven), false (the shape overlaps itself at overlap.point, where the
+  // images of the mesh triangles overlap.faces meet), null (not decided: global_reason says why).
+  const GlobalInjectivity& g = r.global;
+  j["globally_injective"] = g.verdict == GlobalInjectivity::Verdict::kInjective ? ojson(true)
+                            : g.verdict == GlobalInjectivity::Verdict::kOverlap ? ojson(false)
+                                                                                : ojson();
+  j["global_reason"] = g.reason;
+  j["overlap"] =
+      g.verdict == GlobalInjectivity::Verdict::kOverlap
+          ? ojson{{"point", {num(g.overlap_point.x()), num(g.overlap_point.y()), num(g.overlap_point.z())}},
+                  {"faces", {g.overlap_face_a, g.overlap_face_b}}}
+          : ojson();
+  j["global_check"] = {{"candidate_pairs", g.candidate_pairs},
+                       {"pair_tests", g.pair_tests},
+                       {"max_depth_used", g.max_depth_used},
+                       {"max_tube_radius", num(g.max_tube_radius)}};
   j["model"] = r.model;
   j["coefficients"] = r.coefficients;
   j["cage"] = {{"vertices", r.cage_vertices},

@@ -79,6 +79,17 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   sj["message"] = r.solve.message;
   sj["iterations"] = r.iterations;
   sj["certified"] = cert.certified;
+  // Global injectivity on D (certificate.json has the same three fields).
+  const GlobalInjectivity& g = report.global;
+  sj["globally_injective"] =
+      g.verdict == GlobalInjectivity::Verdict::kInjective ? nlohmann::ordered_json(true)
+      : g.verdict == GlobalInjectivity::Verdict::kOverlap ? nlohmann::ordered_json(false)
+                                                          : nlohmann::ordered_json();
+  sj["global_reason"] = g.reason;
+  sj["overlap_point"] =
+      g.verdict == GlobalInjectivity::Verdict::kOverlap
+          ? nlohmann::ordered_json{g.overlap_point.x(), g.overlap_point.y(), g.overlap_point.z()}
+          : nlohmann::ordered_json();
   sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
   sj["min_sigma3_sampled"] = cert.min_sigma3_center;
   // Bounded distortion: the certified upper bounds over the leaves, the sampled maximum over the mesh
@@ -180,6 +191,7 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
       signed_volume(r.deformed_vertices, model.mesh.F) / signed_volume(model.mesh.V, model.mesh.F);
   DeformOutputs written;
   written.mesh_coverage = report.mesh_coverage;
+  written.global = report.global;
   written.volume_ratio = volume_ratio;
   written.dir = dir;
   std::vector<std::string>& names = written.files;

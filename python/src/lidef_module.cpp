@@ -113,6 +113,17 @@ struct PyCertificate {
   SamplingParams sampling_params;
   CertifyParams certify_params;
   std::string coefficients_name;  // how certificate.json names the map
+  // The global injectivity verdict, computed on first use (certificate_report.h).
+  mutable std::shared_ptr<const GlobalInjectivity> global_verdict;
+
+  const GlobalInjectivity& global() const {
+    if (!global_verdict) {
+      py::gil_scoped_release release;
+      global_verdict = std::make_shared<const GlobalInjectivity>(
+          decide_global_injectivity(cert, sampling->domain, model->cage, model->mesh, y));
+    }
+    return *global_verdict;
+  }
 
   py::dict leaves() const {
     const auto& L = cert.leaves;
@@ -433,6 +444,22 @@ void bind(py::module_& m) {
       .def_property_readonly("certified", [](const PyCertificate& c) { return c.cert.certified; })
       .def_property_readonly("min_lower_bound", [](const PyCertificate& c) { return c.cert.min_lower_bound; })
       .def_property_readonly("reason", [](const PyCertificate& c) { return c.cert.reason; })
+      .def_property_readonly("globally_injective",
+                             [](const PyCertificate& c) -> py::object {
+                               const GlobalInjectivity& g = c.global();
+                               if (g.verdict == GlobalInjectivity::Verdict::kInjective)
+                                 return py::bool_(true);
+                               if (g.verdict == GlobalInjectivity::Verdict::kOverlap) return py::bool_(false);
+                               return py::none();
+                             })
+      .def_property_readonly("global_reason", [](const PyCertificate& c) { return c.global().reason; })
+      .def_property_readonly("overlap_point",
+                             [](const PyCertificate& c) -> py::object {
+                               const GlobalInjectivity& g = c.global();
+                               if (g.verdict != GlobalInjectivity::Verdict::kOverlap) return py::none();
+                               return py::make_tuple(g.overlap_point.x(), g.overlap_point.y(),
+                                                     g.overlap_point.z());
+                             })
       .def_property_readonly("voxels", [](const PyCertificate& c) { return c.cert.voxels; })
       .def_property_readonly("leaves", &PyCertificate::leaves)
       .def("write", &PyCertificate::write, py::arg("dir"),

@@ -28,6 +28,13 @@ def test_identity_is_certified_with_consistent_leaves(beam):
     np.testing.assert_allclose(leaves["sigma3"], 1.0, atol=1e-6)
 
 
+def test_global_injectivity_is_decided_with_the_local_certificate(beam):
+    cert = lidef.certify(beam, beam.identity(), **PARAMS)
+    assert cert.globally_injective is True
+    assert cert.global_reason == ""
+    assert cert.overlap_point is None
+
+
 def test_a_mirrored_map_is_not_certified(beam):
     # x -> -x folds orientation everywhere: sigma3 = -1 at every voxel.
     Y = beam.identity().copy()
@@ -36,6 +43,9 @@ def test_a_mirrored_map_is_not_certified(beam):
     assert not cert.certified
     assert cert.reason
     assert cert.min_lower_bound < 0
+    # Without a local certificate the global verdict is not decided.
+    assert cert.globally_injective is None
+    assert "local certificate" in cert.global_reason
 
 
 def test_certificate_files_match_the_cli(beam, cli, tmp_path):

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "lidef/cage.h"
+#include "lidef/global_injectivity.h"
 #include "lidef/hash.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
@@ -26,6 +27,9 @@ namespace lidef {
 // Everything certificate.json records: the certifier's result plus its provenance.
 struct CertificateReport {
   Certificate cert;               // verdict, counts, minima, failing leaves; leaves go to voxels.csv
+  // Global injectivity on D (global_injectivity.h): decided only when the local certificate covers the
+  // mesh's solid; otherwise not decided, with the reason.
+  GlobalInjectivity global;
   std::string model;              // model folder as given on the command line
   std::string coefficients;       // coefficient file as given, or "identity"
   std::uint64_t cage_hash = 0;    // FNV-1a 64 of the cage (subspace_cage_hash)
@@ -57,6 +61,12 @@ struct CertificateReport {
 
 // FNV-1a 64 of the coefficient doubles (#V+#F by 3, row by row, native byte order) and the row count.
 std::uint64_t coefficients_hash(const MatX3d& y);
+
+// The global injectivity verdict of a map whose local certificate is `cert` on the domain named `domain`:
+// decided (global_injectivity.h) only when the certificate holds on the mesh's solid, else not decided with
+// the reason.
+GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
+                                            const Cage& cage, const TriMesh& mesh, const MatX3d& y);
 
 // Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,

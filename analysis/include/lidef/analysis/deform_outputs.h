@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "lidef/deform.h"
+#include "lidef/global_injectivity.h"
 #include "lidef/model_check.h"
 #include "lidef/scenario.h"
 
@@ -28,6 +29,7 @@ struct DeformOutputs {
   std::vector<std::string> files;  // the names written, in the order above
   double mesh_coverage = 0;        // fraction of mesh vertices inside the certified voxels
   double volume_ratio = 0;         // signed volume of the deformed mesh over the rest mesh's
+  GlobalInjectivity global;        // the global injectivity verdict written to the reports
 };
 DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
                                    const DeformResult& result, const DeformOutputOptions& options = {});

@@ -1,0 +1,630 @@
+// Global injectivity on the mesh's solid (docs/certificate.md, "Global injectivity"): stages
+//   1. map-dependent constants: ‖δ_e‖ per cage edge, the mapped mesh vertices, the rounding allowance ε;
+//   2. one piece per surface triangle (ball, L₁, tube radius ρ) and per mesh vertex its star ball;
+//   3. candidate pairs: triangles whose tube boxes overlap (a sorted cell list, deterministic);
+//   4. per pair: separate, cover by an injectivity ball, prove a crossing, or split (bounded);
+//   5. the verdict (the first overlap in pair order, else the first undecided pair, else injective).
+#include "lidef/global_injectivity.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "lidef/errors.h"
+#include "lidef/green_coordinates.h"
+#include "lidef/lipschitz_bound.h"
+#include "lidef/mesh_queries.h"
+#include "lidef/number_format.h"
+#include "lidef/self_intersections.h"
+#include "lidef/signed_svd.h"
+
+namespace lidef {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Relative allowance for the double-precision evaluation of f at a point (the closed-form basis and the sum
+// over the coefficients), relative to the magnitudes of the coefficients' contributions
+// (docs/certificate.md).
+constexpr double kValueRel = 1e-8;
+// Relative allowance for J and the bounds (as the local certificate's kRoundingRel).
+constexpr double kRoundingRel = 1e-9;
+// Relative slack of the geometric predicates on the affine image triangles (dot products, distances of
+// points of magnitude M carry errors of a few 1e-16 M; 1e-12 M is far above them).
+constexpr double kGeomRel = 1e-12;
+
+// A triangle piece of the rest surface: corners p, their computed images q, the ball (c, R) ⊇ piece, the
+// Lipschitz constant L1 of J on that ball, and the tube radius rho.
+struct Piece {
+  std::array<Vec3, 3> p, q;
+  Vec3 c = Vec3::Zero();
+  double R = 0, diam = 0, L1 = kInf, rho = kInf;
+  int face = -1, depth = 0;
+};
+
+double tri_diameter(const std::array<Vec3, 3>& p) {
+  return std::max({(p[0] - p[1]).norm(), (p[1] - p[2]).norm(), (p[2] - p[0]).norm()});
+}
+
+}  // namespace
+
+const char* to_json_literal(GlobalInjectivity::Verdict v) {
+  switch (v) {
+    case GlobalInjectivity::Verdict::kInjective:
+      return "true";
+    case GlobalInjectivity::Verdict::kOverlap:
+      return "false";
+    default:
+      return "null";
+  }
+}
+
+GlobalInjectivity global_injectivity_not_decided(const std::string& reason) {
+  GlobalInjectivity g;
+  g.reason = reason;
+  return g;
+}
+
+struct GlobalInjectivityChecker::Impl {
+  // Everything is computed in the cage's normalized frame (bounding-box center at the origin, diagonal 1), so
+  // that the rounding allowances, relative to the coefficients' magnitudes, do not grow when the model is
+  // moved away from the origin; points are reported in model units (center + scale · p).
+  Vec3 center;
+  double scale;
+  Cage cage;
+  TriMesh mesh;
+  HarmonicBasis basis;
+  EdgeArrays edges;
+  TriangleGrid cage_grid;
+  WindingNumber cage_winding;
+  std::vector<std::vector<int>> vertex_faces;  // per mesh vertex the faces around it
+  std::string structure_problem;               // why the surface argument does not apply ("" = it does)
+  double cage_diameter = 0;
+
+  static TriMesh normalized(const MatX3d& V, const MatX3i& F, const Vec3& center, double scale) {
+    TriMesh t;
+    t.V = (V.rowwise() - center.transpose()) / scale;
+    t.F = F;
+    return t;
+  }
+  Impl(const Cage& c, const TriMesh& m)
+      : center(0.5 * (c.bbox_min + c.bbox_max)),
+        scale(std::max((c.bbox_max - c.bbox_min).norm(), 1e-300)),
+        cage(normalized(c.V, c.F, center, scale)),
+        mesh(normalized(m.V, m.F, center, scale)),
+        basis(cage),
+        edges(edge_endpoints(cage, true), edge_endpoints(cage, false)),
+        cage_grid(cage.V, cage.F, (cage.bbox_max - cage.bbox_min).norm() / 64.0),
+        cage_winding(cage.V, cage.F) {
+    cage_diameter = (cage.bbox_max - cage.bbox_min).norm();
+    vertex_faces.resize(mesh.V.rows());
+    for (int f = 0; f < mesh.F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
+    structure_problem = check_structure();
+    // Exact predicates on the model's own coordinates (normalizing them would round).
+    if (structure_problem.empty()) structure_problem = check_embedded(m);
+  }
+
+  // The degree argument compares the deformed surface with an embedded rest surface: where the rest mesh's
+  // triangles already intersect, the identity itself would look like an overlap, so nothing is decided.
+  static std::string check_embedded(const TriMesh& m) {
+    const std::vector<std::pair<int, int>> hits = find_self_intersections(m.V, m.F);
+    if (hits.empty()) return "";
+    return "the rest-state mesh intersects itself (" + std::to_string(hits.size()) +
+           " pairs of triangles, the first " + std::to_string(hits[0].first) + " and " +
+           std::to_string(hits[0].second) + ")";
+  }
+
+  static std::vector<Vec3> edge_endpoints(const Cage& c, bool first) {
+    std::vector<Vec3> out;
+    for (const CageEdge& e : c.edges) out.push_back(c.V.row(first ? e.v0 : e.v1));
+    return out;
+  }
+
+  // The degree argument needs ∂D to be one closed surface: every undirected edge used once in each
+  // direction, and the faces connected.
+  std::string check_structure() const {
+    const long nf = mesh.F.rows();
+    if (nf == 0) return "the mesh has no triangles";
+    std::vector<std::array<int, 3>> half;  // (min, max, +1/-1)
+    half.reserve(3 * nf);
+    for (long f = 0; f < nf; ++f)
+      for (int k = 0; k < 3; ++k) {
+        const int a = mesh.F(f, k), b = mesh.F(f, (k + 1) % 3);
+        half.push_back({std::min(a, b), std::max(a, b), a < b ? 1 : -1});
+      }
+    std::sort(half.begin(), half.end());
+    for (size_t i = 0; i < half.size();) {
+      size_t j = i;
+      while (j < half.size() && half[j][0] == half[i][0] && half[j][1] == half[i][1]) ++j;
+      if (j - i != 2 || half[i][2] == half[i + 1][2])
+        return "the mesh surface is not a closed manifold (edge " + std::to_string(half[i][0]) + "-" +
+               std::to_string(half[i][1]) + " is used by " + std::to_string(j - i) +
+               " triangles or twice in one direction)";
+      i = j;
+    }
+    // Connected components of faces through shared vertices (union-find).
+    std::vector<long> parent(nf);
+    std::iota(parent.begin(), parent.end(), 0L);
+    auto find = [&](long x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    for (const auto& faces : vertex_faces)
+      for (size_t k = 1; k < faces.size(); ++k) parent[find(faces[k])] = find(faces[0]);
+    long components = 0;
+    for (long f = 0; f < nf; ++f) components += find(f) == f;
+    if (components != 1)
+      return "the mesh surface has " + std::to_string(components) +
+             " connected components; their nesting is not compared with the rest state";
+    return "";
+  }
+
+  // f(p) for coefficients y (the basis values times y).
+  Vec3 eval_f(const MatX3d& y, const Vec3& p, std::vector<double>& buf) const {
+    buf.resize(basis.size());
+    basis.evaluate(p, 0, buf.data(), nullptr, nullptr);
+    Vec3 out = Vec3::Zero();
+    for (int k = 0; k < basis.size(); ++k) out += buf[k] * y.row(k).transpose();
+    return out;
+  }
+
+  // L1 ≥ max over B(c, R) of the full Hessian tensor norm (docs/certificate.md Steps 1–3, first order):
+  // Σ_e ‖δ_e‖ Γ_e(B); +∞ when the ball is not clear of the cage.
+  double lipschitz(const VecXd& delta, const Vec3& c, double R, std::vector<float>& row) const {
+    if (!c.allFinite() || !(R >= 0)) return kInf;
+    if (cage_grid.any_within(c, R * (1 + 1e-9)) || std::abs(cage_winding.at(c) - 1.0) > 1e-6) return kInf;
+    row.resize(edges.size());
+    if (!factor_row(edges, false, c, R, row.data())) return kInf;
+    double L = 0;
+    for (long e = 0; e < edges.size(); ++e) L += delta(e) * static_cast<double>(row[e]);
+    return L * (1 + kRoundingRel);
+  }
+
+  // Is f injective on B(c, R)? ‖J(z) − J(c)‖₂ ≤ R L1 < σ3(J(c)) − rounding (docs/certificate.md).
+  bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const VecXd& delta, const Vec3& c, double R,
+                      std::vector<float>& row) const {
+    const double L = lipschitz(delta, c, R, row);
+    if (!std::isfinite(L)) return false;
+    double sJ = 0;
+    const MapJet jet = basis.differential_jet(fm, c, 1, &sJ);
+    bool resolved = false;
+    const double s3 = signed_singular_values(jet.J, &resolved)(2);
+    if (!resolved || !(s3 > 0)) return false;
+    const double tau = kRoundingRel * (sJ + s3 + R * L);
+    return s3 - tau > R * L;
+  }
+};
+
+GlobalInjectivityChecker::GlobalInjectivityChecker(const Cage& cage, const TriMesh& mesh)
+    : impl_(std::make_unique<Impl>(cage, mesh)) {}
+GlobalInjectivityChecker::~GlobalInjectivityChecker() = default;
+
+namespace {
+
+// Lower bound of the distance between two affine triangles a and b (separating axes: both normals, the
+// in-plane edge normals, the 9 edge cross products and the centroid difference; each axis' gap is a lower
+// bound of the distance, minus the rounding slack).
+double separation_lower_bound(const std::array<Vec3, 3>& a, const std::array<Vec3, 3>& b, double slack) {
+  std::array<Vec3, 3> ea{a[1] - a[0], a[2] - a[1], a[0] - a[2]}, eb{b[1] - b[0], b[2] - b[1], b[0] - b[2]};
+  const Vec3 na = ea[0].cross(ea[1]), nb = eb[0].cross(eb[1]);
+  std::array<Vec3, 18> axes;
+  int n = 0;
+  axes[n++] = na;
+  axes[n++] = nb;
+  axes[n++] = (b[0] + b[1] + b[2] - a[0] - a[1] - a[2]);
+  for (int i = 0; i < 3; ++i) {
+    axes[n++] = na.cross(ea[i]);
+    axes[n++] = nb.cross(eb[i]);
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) axes[n++] = ea[i].cross(eb[j]);
+  double best = -kInf;
+  for (int k = 0; k < n; ++k) {
+    const double len = axes[k].norm();
+    if (!(len > 0)) continue;
+    const Vec3 u = axes[k] / len;
+    double amin = kInf, amax = -kInf, bmin = kInf, bmax = -kInf;
+    for (int i = 0; i < 3; ++i) {
+      const double da = u.dot(a[i]), db = u.dot(b[i]);
+      amin = std::min(amin, da), amax = std::max(amax, da);
+      bmin = std::min(bmin, db), bmax = std::max(bmax, db);
+    }
+    best = std::max(best, std::max(bmin - amax, amin - bmax));
+  }
+  return best - slack;
+}
+
+// A proven crossing: segment s0 s1 pierces triangle t with margins above m (docs/certificate.md, "A proven
+// overlap"). On success, x = the crossing point.
+bool robust_pierce(const Vec3& s0, const Vec3& s1, const std::array<Vec3, 3>& t, double m, double slack,
+                   Vec3* x) {
+  const Vec3 n = (t[1] - t[0]).cross(t[2] - t[0]);
+  const double nn = n.norm();
+  if (!(nn > 0)) return false;
+  const Vec3 u = n / nn;
+  const double h0 = u.dot(s0 - t[0]), h1 = u.dot(s1 - t[0]);
+  if (!(h0 * h1 < 0) || std::abs(h0) <= m + slack || std::abs(h1) <= m + slack) return false;
+  const double tt = h0 / (h0 - h1);
+  const Vec3 X = s0 + tt * (s1 - s0);
+  // In-plane distance from X to each edge line, positive inside.
+  double dX = kInf;
+  for (int k = 0; k < 3; ++k) {
+    const Vec3 e = t[(k + 1) % 3] - t[k];
+    const Vec3 inward = u.cross(e);
+    const double len = inward.norm();
+    if (!(len > 0)) return false;
+    dX = std::min(dX, inward.dot(X - t[k]) / len);
+  }
+  if (!(dX > slack)) return false;
+  dX -= slack;
+  // Distance from the segment to ∂t ≥ dX·H/(H+P): H = |h0 − h1| (height change), P = in-plane length.
+  const Vec3 d = s1 - s0;
+  const double H = std::abs(h0 - h1);
+  const double P = (d - u.dot(d) * u).norm();
+  if (!(dX * H / (H + P) > (m + slack) * (1 + 1e-9))) return false;
+  *x = X;
+  return true;
+}
+
+}  // namespace
+
+GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
+                                                  const GlobalInjectivityParams& params) const {
+  const auto t_start = std::chrono::steady_clock::now();
+  const Impl& im = *impl_;
+  auto finish = [&](GlobalInjectivity g) {
+    g.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+    return g;
+  };
+  if (y_model.rows() != im.basis.size())
+    throw InputError("", "coefficients have " + std::to_string(y_model.rows()) +
+                             " rows, expected #V+#F = " + std::to_string(im.basis.size()));
+  if (!y_model.allFinite()) throw InputError("", "coefficients contain NaN or Inf");
+  // The map in the normalized frame: f'(p') = (f(center + scale p') − center) / scale, so y_v' = (y_v −
+  // center) / scale and y_t' = y_t (the face rows are linear parts, unchanged).
+  MatX3d y = y_model;
+  const int ncv0 = im.cage.num_vertices();
+  y.topRows(ncv0) = (y_model.topRows(ncv0).rowwise() - im.center.transpose()) / im.scale;
+  auto to_model = [&](const Vec3& p) -> Vec3 { return im.center + im.scale * p; };
+  if (!im.structure_problem.empty()) return finish(global_injectivity_not_decided(im.structure_problem));
+  const TriMesh& mesh = im.mesh;
+  const long nv = mesh.V.rows(), nf = mesh.F.rows();
+
+  // --- 1. Map constants.
+  const HarmonicBasis::FaceMatrices fm = im.basis.face_matrices(y);
+  VecXd delta(im.cage.num_edges());
+  for (int e = 0; e < im.cage.num_edges(); ++e) {
+    const CageEdge& ce = im.cage.edges[e];
+    delta(e) = (fm.A[ce.f0] - fm.A[ce.f1]).norm() * (1 + kRoundingRel) +
+               kRoundingRel * (fm.A_abs[ce.f0] + fm.A_abs[ce.f1]);
+  }
+  const MatX3d fV = im.basis.map_values(y, mesh.V);
+  const int ncv = im.cage.num_vertices();
+  const double yv = y.topRows(ncv).cwiseAbs().maxCoeff();
+  const double yt = y.bottomRows(y.rows() - ncv).cwiseAbs().maxCoeff();
+  // ε: the evaluation error of a mapped point, relative to the coefficients' contributions (y_v φ_v with
+  // Σ|φ_v| of order one, y_t ψ_t with ψ_t at most of the order of the cage's size).
+  const double eps = kValueRel * (yv + yt * im.cage_diameter) * 8;
+  const double geom_scale = fV.cwiseAbs().maxCoeff() + eps;
+  const double slack = kGeomRel * geom_scale;
+
+  auto make_piece = [&](const std::array<Vec3, 3>& p, const std::array<Vec3, 3>& q, int face, int depth,
+                        std::vector<float>& row) {
+    Piece P;
+    P.p = p, P.q = q, P.face = face, P.depth = depth;
+    P.c = (p[0] + p[1] + p[2]) / 3.0;
+    P.R = 0;
+    for (const Vec3& v : p) P.R = std::max(P.R, (v - P.c).norm());
+    P.R = P.R * (1 + 1e-12) + 1e-15 * P.c.cwiseAbs().maxCoeff();
+    P.diam = tri_diameter(p);
+    P.L1 = im.lipschitz(delta, P.c, P.R, row);
+    P.rho = std::isfinite(P.L1) ? 0.5 * P.L1 * P.diam * P.diam * (1 + 1e-9) + eps : kInf;
+    return P;
+  };
+
+  // --- 2. Pieces and star balls.
+  std::vector<Piece> pieces(nf);
+  std::vector<char> star_ok(nv, 0);
+#pragma omp parallel
+  {
+    std::vector<float> row;
+#pragma omp for schedule(dynamic, 256)
+    for (long f = 0; f < nf; ++f) {
+      std::array<Vec3, 3> p, q;
+      for (int k = 0; k < 3; ++k) p[k] = mesh.V.row(mesh.F(f, k)), q[k] = fV.row(mesh.F(f, k));
+      pieces[f] = make_piece(p, q, static_cast<int>(f), 0, row);
+    }
+#pragma omp for schedule(dynamic, 256)
+    for (long v = 0; v < nv; ++v) {
+      const Vec3 c = mesh.V.row(v);
+      double R = 0;
+      for (int f : im.vertex_faces[v])
+        for (int k = 0; k < 3; ++k) R = std::max(R, (Vec3(mesh.V.row(mesh.F(f, k))) - c).norm());
+      R = R * (1 + 1e-12);
+      star_ok[v] = im.injective_ball(fm, delta, c, R, row);
+    }
+  }
+  // A triangle's own points: its ball, or the star ball of one of its corners, must be an injectivity ball.
+  std::vector<char> face_ok(nf, 0);
+#pragma omp parallel
+  {
+    std::vector<float> row;
+#pragma omp for schedule(dynamic, 256)
+    for (long f = 0; f < nf; ++f)
+      face_ok[f] = star_ok[mesh.F(f, 0)] || star_ok[mesh.F(f, 1)] || star_ok[mesh.F(f, 2)] ||
+                   im.injective_ball(fm, delta, pieces[f].c, pieces[f].R, row);
+  }
+  GlobalInjectivity out;
+  double max_rho = 0;
+  for (const Piece& P : pieces)
+    if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
+  out.max_tube_radius = max_rho * im.scale;
+  // The top pieces: the triangles, a triangle whose ball is not clear of the cage (no finite tube) replaced
+  // by its 1-to-4 splits until each has one (in face order, depth first: deterministic).
+  // A tube wider than a quarter of its piece (a triangle near the cage, where L₁ is large) would pair the
+  // piece with most of the surface: such pieces are split first too.
+  auto thin = [](const Piece& P) { return std::isfinite(P.rho) && P.rho <= 0.25 * P.diam; };
+  std::vector<Piece> top;
+  top.reserve(nf);
+  {
+    std::vector<float> row;
+    std::vector<double> buf;
+    std::vector<Piece> todo;
+    for (long f = 0; f < nf; ++f) {
+      if (thin(pieces[f])) {
+        top.push_back(pieces[f]);
+        continue;
+      }
+      todo.assign(1, pieces[f]);
+      while (!todo.empty()) {
+        const Piece P = todo.back();
+        todo.pop_back();
+        if (thin(P) || (P.depth >= params.max_depth && std::isfinite(P.rho))) {
+          top.push_back(P);
+          continue;
+        }
+        if (P.depth >= params.max_depth)
+          return finish(global_injectivity_not_decided(
+              "mesh triangle " + std::to_string(f) + " lies too close to the cage for a bound near (" +
+              format_g(to_model(P.c).x()) + ", " + format_g(to_model(P.c).y()) + ", " +
+              format_g(to_model(P.c).z()) + ")"));
+        std::array<Vec3, 3> mp, mq;
+        for (int k = 0; k < 3; ++k) {
+          mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
+          mq[k] = im.eval_f(y, mp[k], buf);
+        }
+        const int d = P.depth + 1, fc = P.face;
+        todo.push_back(make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, fc, d, row));
+        todo.push_back(make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, fc, d, row));
+        todo.push_back(make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, fc, d, row));
+        todo.push_back(make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, fc, d, row));
+      }
+    }
+  }
+  const long nt = static_cast<long>(top.size());
+
+  // --- 3. Candidate pairs: boxes of the top pieces' tubes. A sorted list of (cell, piece) entries groups the
+  // pieces by cell.
+  Vec3 lo = fV.colwise().minCoeff().transpose(), hi = fV.colwise().maxCoeff().transpose();
+  std::vector<Vec3> blo(nt), bhi(nt);
+  double mean_extent = 0;
+  for (long f = 0; f < nt; ++f) {
+    const Piece& P = top[f];
+    Vec3 a = P.q[0].cwiseMin(P.q[1]).cwiseMin(P.q[2]), b = P.q[0].cwiseMax(P.q[1]).cwiseMax(P.q[2]);
+    a.array() -= P.rho + slack, b.array() += P.rho + slack;
+    blo[f] = a, bhi[f] = b;
+    mean_extent += (b - a).maxCoeff();
+  }
+  mean_extent /= static_cast<double>(nt);
+  const double span = std::max((hi - lo).maxCoeff(), 1e-300);
+  const double cell = std::max(mean_extent, span / 256.0);
+  std::vector<std::pair<long, int>> entries;
+  for (long f = 0; f < nt; ++f) {
+    std::array<long, 3> a, b;
+    for (int k = 0; k < 3; ++k) {
+      a[k] = static_cast<long>(std::floor((std::max(blo[f](k), lo(k) - cell) - lo(k)) / cell));
+      b[k] = static_cast<long>(std::floor((std::min(bhi[f](k), hi(k) + cell) - lo(k)) / cell));
+    }
+    for (long i = a[0]; i <= b[0]; ++i)
+      for (long j = a[1]; j <= b[1]; ++j)
+        for (long k = a[2]; k <= b[2]; ++k)
+          entries.emplace_back(((i + 2) * 1048576L + (j + 2)) * 1048576L + (k + 2), static_cast<int>(f));
+  }
+  std::sort(entries.begin(), entries.end());
+  std::vector<std::pair<int, int>> pairs;
+  for (size_t i = 0; i < entries.size();) {
+    size_t j = i;
+    while (j < entries.size() && entries[j].first == entries[i].first) ++j;
+    for (size_t a = i; a < j; ++a)
+      for (size_t b = a + 1; b < j; ++b) {
+        const int fa = entries[a].second, fb = entries[b].second;
+        if (((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all())
+          pairs.emplace_back(std::min(fa, fb), std::max(fa, fb));
+      }
+    i = j;
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  out.candidate_pairs = static_cast<long>(pairs.size());
+  // A triangle not covered by one injectivity ball is a work item of its own (split until its pieces are).
+  for (long i = 0; i < nt; ++i)
+    if (!face_ok[top[i].face]) pairs.emplace_back(static_cast<int>(i), static_cast<int>(i));
+
+  // --- 4. Per pair.
+  enum Outcome : char { kCleared, kCrossing, kOpen };
+  struct PairResult {
+    Outcome outcome = kCleared;
+    Vec3 where = Vec3::Zero();
+    long tests = 0;
+    int depth = 0;
+  };
+  std::vector<PairResult> results(pairs.size());
+  // The smallest index of a pair with a proven crossing so far: pairs after it cannot change the verdict
+  // (the first crossing in pair order), so they are skipped — the verdict stays independent of the threads.
+  std::atomic<long> first_crossing{std::numeric_limits<long>::max()};
+  auto shared_vertices = [&](int fa, int fb, std::array<int, 3>* sv) {
+    int n = 0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (mesh.F(fa, i) == mesh.F(fb, j)) (*sv)[n++] = mesh.F(fa, i);
+    return n;
+  };
+#pragma omp parallel
+  {
+    std::vector<float> row;
+    std::vector<double> buf;
+    // A piece pair to clear, or (self) one piece whose own points must be shown to have distinct images;
+    // touching: the pieces may share points in the rest state (no crossing is reported for them).
+    struct Task {
+      Piece P, Q;
+      bool self, touching;
+    };
+    std::vector<Task> stack;
+    auto split = [&](const Piece& P, std::array<Piece, 4>* ch) {
+      std::array<Vec3, 3> mp, mq;
+      for (int k = 0; k < 3; ++k) {
+        mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
+        mq[k] = im.eval_f(y, mp[k], buf);
+      }
+      (*ch)[0] = make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, P.face, P.depth + 1, row);
+      (*ch)[1] = make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, P.face, P.depth + 1, row);
+      (*ch)[2] = make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, P.face, P.depth + 1, row);
+      (*ch)[3] = make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, P.face, P.depth + 1, row);
+    };
+#pragma omp for schedule(dynamic, 64)
+    for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
+      if (k > first_crossing.load(std::memory_order_relaxed)) continue;
+      const int fa = pairs[k].first, fb = pairs[k].second;
+      PairResult& res = results[k];
+      std::array<int, 3> sv;
+      const int ffa = top[fa].face, ffb = top[fb].face;
+      int nshared = 3;
+      if (ffa == ffb)
+        for (int i = 0; i < 3; ++i) sv[i] = mesh.F(ffa, i);
+      else
+        nshared = shared_vertices(ffa, ffb, &sv);
+      if (fa != fb) {
+        bool star = false;
+        for (int i = 0; i < nshared; ++i) star = star || star_ok[sv[i]];
+        if (star) continue;  // both triangles lie in the star ball of a shared vertex, where f is injective
+      }
+      stack.clear();
+      stack.push_back({top[fa], top[fb], fa == fb, nshared > 0});
+      while (!stack.empty()) {
+        if ((res.tests & 63) == 63 && k > first_crossing.load(std::memory_order_relaxed)) break;
+        const Task task = stack.back();
+        stack.pop_back();
+        const Piece &P = task.P, &Q = task.Q;
+        ++res.tests;
+        res.depth = std::max({res.depth, P.depth, Q.depth});
+        std::array<Piece, 4> ch;
+        if (task.self) {  // the piece's own points: one injectivity ball, or split
+          if (im.injective_ball(fm, delta, P.c, P.R, row)) continue;
+          if (P.depth >= params.max_depth || res.tests >= params.max_tests_per_pair) {
+            res.outcome = kOpen;
+            res.where = (P.q[0] + P.q[1] + P.q[2]) / 3.0;
+            break;
+          }
+          split(P, &ch);
+          for (int i = 0; i < 4; ++i)
+            for (int j = i + 1; j < 4; ++j) stack.push_back({ch[i], ch[j], false, true});
+          for (int i = 0; i < 4; ++i) stack.push_back({ch[i], ch[i], true, true});
+          continue;
+        }
+        const bool tubes = std::isfinite(P.rho) && std::isfinite(Q.rho);
+        if (tubes && separation_lower_bound(P.q, Q.q, slack) > P.rho + Q.rho) continue;
+        // One ball around both pieces.
+        const Vec3 c = 0.5 * (P.c + Q.c);
+        double R = 0;
+        for (int i = 0; i < 3; ++i) R = std::max({R, (P.p[i] - c).norm(), (Q.p[i] - c).norm()});
+        if (im.injective_ball(fm, delta, c, R * (1 + 1e-12), row)) continue;
+        if (tubes && !task.touching) {
+          const double m = P.rho + Q.rho;
+          Vec3 x;
+          bool found = false;
+          for (int e = 0; e < 3 && !found; ++e) {
+            found = robust_pierce(P.q[e], P.q[(e + 1) % 3], Q.q, m, slack, &x) ||
+                    robust_pierce(Q.q[e], Q.q[(e + 1) % 3], P.q, m, slack, &x);
+          }
+          if (found) {
+            res.outcome = kCrossing;
+            res.where = x;
+            long cur = first_crossing.load();
+            while (k < cur && !first_crossing.compare_exchange_weak(cur, k)) {
+            }
+            break;
+          }
+        }
+        const bool can_split = P.depth < params.max_depth || Q.depth < params.max_depth;
+        if (!can_split || res.tests >= params.max_tests_per_pair) {
+          res.outcome = kOpen;
+          res.where = 0.5 * (P.q[0] + Q.q[0]);
+          break;
+        }
+        // Split the larger piece (one that may still be split).
+        const bool split_p = Q.depth >= params.max_depth || (P.depth < params.max_depth && P.diam >= Q.diam);
+        if (split_p) {
+          split(P, &ch);
+          for (int i = 3; i >= 0; --i) stack.push_back({ch[i], Q, false, task.touching});
+        } else {
+          split(Q, &ch);
+          for (int i = 3; i >= 0; --i) stack.push_back({P, ch[i], false, task.touching});
+        }
+      }
+    }
+  }
+
+  // --- 5. Verdict.
+  // Over the pairs up to the first crossing (all of them when there is none): processed in full whatever the
+  // thread schedule, so these counts are deterministic.
+  for (size_t k = 0; k < results.size() && static_cast<long>(k) <= first_crossing.load(); ++k) {
+    out.pair_tests += results[k].tests;
+    out.max_depth_used = std::max(out.max_depth_used, results[k].depth);
+  }
+  auto where = [](const Vec3& p) {
+    return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
+  };
+  for (auto& pr : pairs) pr = {top[pr.first].face, top[pr.second].face};
+  for (size_t k = 0; k < results.size(); ++k)
+    if (results[k].outcome == kCrossing) {
+      out.verdict = GlobalInjectivity::Verdict::kOverlap;
+      out.overlap_point = to_model(results[k].where);
+      out.overlap_face_a = pairs[k].first;
+      out.overlap_face_b = pairs[k].second;
+      out.reason = "the shape overlaps itself near " + where(out.overlap_point) + " (mesh triangles " +
+                   std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) + ")";
+      return finish(out);
+    }
+  for (size_t k = 0; k < results.size(); ++k)
+    if (results[k].outcome == kOpen) {
+      out.verdict = GlobalInjectivity::Verdict::kNotDecided;
+      out.overlap_point = to_model(results[k].where);
+      out.overlap_face_a = pairs[k].first;
+      out.overlap_face_b = pairs[k].second;
+      out.reason = pairs[k].first == pairs[k].second
+                       ? "could not prove the map injective on mesh triangle " +
+                             std::to_string(pairs[k].first) + " near " + where(to_model(results[k].where)) +
+                             " (depth " + std::to_string(params.max_depth) + ")"
+                       : "could not separate the images of mesh triangles " + std::to_string(pairs[k].first) +
+                             " and " + std::to_string(pairs[k].second) + " near " +
+                             where(to_model(results[k].where)) + " (depth " +
+                             std::to_string(params.max_depth) + ")";
+      return finish(out);
+    }
+  out.verdict = GlobalInjectivity::Verdict::kInjective;
+  return finish(out);
+}
+
+GlobalInjectivity check_global_injectivity(const Cage& cage, const TriMesh& mesh, const MatX3d& y,
+                                           const GlobalInjectivityParams& params) {
+  return GlobalInjectivityChecker(cage, mesh).check(y, params);
+}
+
+}  // namespace lidef

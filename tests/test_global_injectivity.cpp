@@ -1,0 +1,183 @@
+// Global injectivity (global_injectivity.h): the verdict against sampled truth — the winding number of the
+// deformed surface at the images of interior points counts their preimages — and its invariance.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "lidef/cage.h"
+#include "lidef/coefficients.h"
+#include "lidef/geometry.h"
+#include "lidef/global_injectivity.h"
+#include "lidef/green_coordinates.h"
+#include "lidef/mesh_queries.h"
+#include "lidef/model_check.h"
+#include "lidef/self_intersections.h"
+#include "test_support.h"
+
+namespace lidef {
+namespace {
+
+using Verdict = GlobalInjectivity::Verdict;
+
+// Coefficients of the cage map p ↦ g(p) for a smooth g with Jacobian Jg: y_v = g(v), y_t = Jg(centroid) n_t
+// (exact for affine g, MATH-NOTES; a smooth g is reproduced approximately, which is all a test map needs).
+template <class G, class JG>
+MatX3d coefficients_of(const Cage& cage, G g, JG jg) {
+  MatX3d y(cage.num_coeffs(), 3);
+  for (int v = 0; v < cage.num_vertices(); ++v) y.row(v) = g(Vec3(cage.V.row(v))).transpose();
+  for (int t = 0; t < cage.num_faces(); ++t) {
+    const Vec3 c =
+        (Vec3(cage.V.row(cage.F(t, 0))) + Vec3(cage.V.row(cage.F(t, 1))) + Vec3(cage.V.row(cage.F(t, 2)))) /
+        3.0;
+    y.row(cage.num_vertices() + t) = (jg(c) * Vec3(cage.N.row(t))).transpose();
+  }
+  return y;
+}
+
+// A gentle bend (of a model whose long axis is z, |x| < 1/κ) about the y axis: angle κ z, radius 1/κ.
+MatX3d bend_coefficients(const Cage& cage, double kappa) {
+  auto g = [kappa](const Vec3& p) {
+    const double a = kappa * p.z(), r = 1.0 / kappa - p.x();
+    return Vec3(1.0 / kappa - r * std::cos(a), p.y(), r * std::sin(a));
+  };
+  auto jg = [kappa](const Vec3& p) {
+    const double a = kappa * p.z(), r = 1.0 / kappa - p.x();
+    Mat3 J;
+    J << std::cos(a), 0, r * kappa * std::sin(a), 0, 1, 0, -std::sin(a), 0, r * kappa * std::cos(a);
+    return J;
+  };
+  return coefficients_of(cage, g, jg);
+}
+
+// The largest winding number of the deformed (piecewise-linear) surface at the images of grid points inside
+// the rest solid, at least `clearance` from its surface: the number of preimages of those image points.
+double max_image_winding(const Cage& cage, const TriMesh& mesh, const MatX3d& y, double spacing,
+                         double clearance) {
+  const WindingNumber rest(mesh.V, mesh.F);
+  const TriangleGrid near(mesh.V, mesh.F, clearance);
+  const Vec3 lo = mesh.V.colwise().minCoeff().transpose(), hi = mesh.V.colwise().maxCoeff().transpose();
+  std::vector<Vec3> inside;
+  for (double x = lo.x() + spacing / 2; x < hi.x(); x += spacing)
+    for (double yy = lo.y() + spacing / 2; yy < hi.y(); yy += spacing)
+      for (double z = lo.z() + spacing / 2; z < hi.z(); z += spacing) {
+        const Vec3 p(x, yy, z);
+        if (rest.at(p) >= 0.5 && !near.any_within(p, clearance)) inside.push_back(p);
+      }
+  MatX3d P(inside.size(), 3);
+  for (size_t i = 0; i < inside.size(); ++i) P.row(i) = inside[i].transpose();
+  const HarmonicBasis basis(cage);
+  const MatX3d fP = basis.map_values(y, P);
+  const MatX3d fV = basis.map_values(y, mesh.V);
+  const WindingNumber deformed(fV, mesh.F);
+  double w = 0;
+  for (Eigen::Index i = 0; i < fP.rows(); ++i) w = std::max(w, deformed.at(fP.row(i)));
+  return w;
+}
+
+TEST(GlobalInjectivity, IdentityAndGentleBendOfSpotAreInjectiveAndNoImagePointIsCoveredTwice) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("spot"));
+  const GlobalInjectivityChecker checker(m.cage, m.mesh);
+  const GlobalInjectivity id = checker.check(m.cage.identity_coefficients());
+  EXPECT_EQ(id.verdict, Verdict::kInjective) << id.reason;
+  const MatX3d y = bend_coefficients(m.cage, 0.8);
+  const GlobalInjectivity g = checker.check(y);
+  EXPECT_EQ(g.verdict, Verdict::kInjective) << g.reason;
+  EXPECT_GT(g.candidate_pairs, 0);
+  EXPECT_LT(max_image_winding(m.cage, m.mesh, y, 0.05, 0.02), 1.5);
+}
+
+TEST(GlobalInjectivity, OpenSurfaceIsNotDecided) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("bar"));
+  TriMesh open = m.mesh;
+  open.F.conservativeResize(open.F.rows() - 1, 3);
+  const GlobalInjectivity g = check_global_injectivity(m.cage, open, m.cage.identity_coefficients());
+  EXPECT_EQ(g.verdict, Verdict::kNotDecided);
+  EXPECT_NE(g.reason.find("not a closed manifold"), std::string::npos) << g.reason;
+}
+
+TEST(GlobalInjectivity, RestMeshThatIntersectsItselfIsNotDecidedEvenForTheIdentity) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("spot"));
+  // The shared spot mesh is embedded: its identity is decided.
+  ASSERT_TRUE(find_self_intersections(m.mesh.V, m.mesh.F).empty());
+  const GlobalInjectivity id = check_global_injectivity(m.cage, m.mesh, m.cage.identity_coefficients());
+  EXPECT_EQ(id.verdict, Verdict::kInjective) << id.reason;
+  // The vertex of largest x pushed through the body to beyond the smallest x: its triangles cross the
+  // surface, while the mesh stays one closed manifold. The identity must not be reported as an overlap.
+  TriMesh crossed = m.mesh;
+  Eigen::Index v = 0;
+  const double x_max = crossed.V.col(0).maxCoeff(&v), x_min = crossed.V.col(0).minCoeff();
+  crossed.V(v, 0) = x_min - 0.05 * (x_max - x_min);
+  ASSERT_FALSE(find_self_intersections(crossed.V, crossed.F).empty());
+  const GlobalInjectivity g = check_global_injectivity(m.cage, crossed, m.cage.identity_coefficients());
+  EXPECT_EQ(g.verdict, Verdict::kNotDecided) << g.reason;
+  EXPECT_NE(g.reason.find("rest-state mesh intersects itself"), std::string::npos) << g.reason;
+}
+
+// The shared bar mesh intersects itself (exact predicates: its triangle 14036 crosses four triangles of the
+// side y = -0.17, two of them sharing no vertex with it), so no verdict on it is decided.
+TEST(GlobalInjectivity, SharedBarMeshIntersectsItselfSoItsVerdictsAreNotDecided) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("bar"));
+  EXPECT_FALSE(find_self_intersections(m.mesh.V, m.mesh.F).empty());
+  const GlobalInjectivity g = check_global_injectivity(m.cage, m.mesh, m.cage.identity_coefficients());
+  EXPECT_EQ(g.verdict, Verdict::kNotDecided) << g.reason;
+  EXPECT_NE(g.reason.find("rest-state mesh intersects itself"), std::string::npos) << g.reason;
+}
+
+TEST(GlobalInjectivity, VerdictIsInvariantUnderTranslationAndScale) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("spot"));
+  const MatX3d y = bend_coefficients(m.cage, 0.8);
+  for (const double s : {1e-3, 250.0}) {
+    const Vec3 t(1e3, -37.5, 4.25);
+    TriMesh cm;
+    cm.V = (m.cage.V * s).rowwise() + t.transpose();
+    cm.F = m.cage.F;
+    const Cage cage(cm);
+    TriMesh mesh = m.mesh;
+    mesh.V = (m.mesh.V * s).rowwise() + t.transpose();
+    MatX3d ys = y;
+    const int nv = m.cage.num_vertices();
+    ys.topRows(nv) = (y.topRows(nv) * s).rowwise() + t.transpose();  // y_v = g(v): moved like the points
+    const GlobalInjectivity g = check_global_injectivity(cage, mesh, ys);
+    EXPECT_EQ(g.verdict, Verdict::kInjective) << "scale " << s << ": " << g.reason;
+  }
+}
+
+// The bar bent into a tight U whose free end is laid onto its fixed half (data/scenarios/
+// bar_fold_onto_itself.json; the coefficients are the map `lidef deform` wrote for it, certified locally
+// injective): the shape passes through itself.
+MatX3d fold_coefficients(const Cage& cage) {
+  return read_coefficients(test::project_data() + "/scenarios/bar_fold_onto_itself.coefficients.txt", cage);
+}
+
+// The fold does pass through itself (the winding numbers below), yet the verdict is left open: the bar's rest
+// mesh already intersects itself, so the surface argument does not apply to it, wherever the model is moved
+// or scaled.
+TEST(GlobalInjectivity, BarFoldedOntoItselfOverlapsButTheBarMeshIntersectsItselfSoNothingIsDecided) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("bar"));
+  const MatX3d y = fold_coefficients(m.cage);
+  EXPECT_GT(max_image_winding(m.cage, m.mesh, y, 0.03, 0.02), 1.5);
+  for (const double s : {1e-2, 1.0, 40.0}) {
+    const Vec3 t = s == 1.0 ? Vec3::Zero() : Vec3(-250.0, 3.5, 1e2);
+    TriMesh cm;
+    cm.V = (m.cage.V * s).rowwise() + t.transpose();
+    cm.F = m.cage.F;
+    const Cage cage(cm);
+    TriMesh mesh = m.mesh;
+    mesh.V = (m.mesh.V * s).rowwise() + t.transpose();
+    MatX3d ys = y;
+    const int nv = m.cage.num_vertices();
+    ys.topRows(nv) = (y.topRows(nv) * s).rowwise() + t.transpose();
+    const GlobalInjectivity g = check_global_injectivity(cage, mesh, ys);
+    EXPECT_EQ(g.verdict, Verdict::kNotDecided) << "scale " << s << ": " << g.reason;
+    EXPECT_NE(g.reason.find("rest-state mesh intersects itself"), std::string::npos) << g.reason;
+  }
+}
+
+}  // namespace
+}  // namespace lidef
