@@ -1,6 +1,6 @@
 // Benchmark of the local-injectivity certificate in the reduced space (OctreeCertifier::certify_reduced), the
-// per-map cost of the certificate once the per-cage precomputation is done (issue "Sound local-injectivity
-// certificate", section 5: target ≤ 50 ms per certification on the bar).
+// per-map cost of the certificate once the per-cage precomputation is done (target: ≤ 50 ms per certification
+// on the bar).
 //
 // Per model: load_model, sample_voxels (target 30,000 voxels), load_or_compute_subspace(cage, s = 300,
 // default_cache_dir()), then OctreeCertifier(cage, sampling, &Ξ) (the reduced path; its construction and the
@@ -140,7 +140,7 @@ std::string fmt_sci(double v, int prec = 3) {
   return bench::sci(v, prec);
 }
 
-// Whether the header declares a float-storage allowance (the lead's float storage of the reduced matrices).
+// Whether the header declares a float-storage allowance (the float storage of the reduced matrices).
 template <class T, class = void>
 struct declares_float_storage : std::false_type {};
 template <class T>

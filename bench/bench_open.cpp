@@ -1,4 +1,4 @@
-// Opening a model in the studio's engine (issue 18 §2, "Opening without waiting"): the time from open_model()
+// Opening a model in the studio's engine: the time from open_model()
 // to a resting session (solver precomputation + mesh matrices, the identity certified), per stage, three ways
 // in one process: without the cache, the first time with an empty cache (computed and written), and reopened
 // (read from the cache). Stage times come from the preparing frames (InteractiveSession publishes one per

@@ -1,4 +1,4 @@
-// lidef-studio while dragging (issue: studio, "Speed"): a scripted drag of the pushed end of the shared `bar`
+// lidef-studio while dragging: a scripted drag of the pushed end of the shared `bar`
 // (bar_bend) in the real window, one Newton step + certificate per view update. Reports view updates per
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.

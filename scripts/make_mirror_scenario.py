@@ -29,7 +29,7 @@ def main():
         "pinning the subspace, lidef deform proves before solving that every map of the subspace within the "
         "handle tolerance folds (det J < 0 at a voxel center); a correct run tries only a direct solve and "
         "ends blocked_by_certificate with the last certified map written, summary.json's unreachable.proven "
-        "true (scripts/make_mirror_scenario.py writes this file; issue 16)")
+        "true (scripts/make_mirror_scenario.py writes this file)")
     lines = ['{', '  "name": "beam_mirror",', '  "model": "beam",',
              '  "description": ' + json.dumps(description) + ',', '  "handles": [']
     rows = ['    {"source": %s, "target": %s}' % (json.dumps(s), json.dumps(t)) for s, t in handles]

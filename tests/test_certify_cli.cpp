@@ -649,7 +649,7 @@ TEST_P(SharedModelCertify, IdentityIsCertified) {
   EXPECT_EQ(j["certified"], true);
   EXPECT_EQ(j["refined"], 0);
   EXPECT_EQ(j["leaves"], j["voxels"]);
-  EXPECT_EQ(j["mesh_coverage"].get<double>(), 1.0);  // issue 15: the whole mesh
+  EXPECT_EQ(j["mesh_coverage"].get<double>(), 1.0);  // the whole mesh
   std::cout << GetParam() << ": " << j["voxels"] << " voxels, mesh coverage " << j["mesh_coverage"] << "\n"
             << output;
 }

@@ -607,7 +607,7 @@ TEST_F(DeformShared, HorseLegLiftConverges) {
   expect_converged("horse_leg_lift");
 }
 
-// Issue 16: the 180-degree twist is reached (max handle error <= 1e-3), certified, through a planned
+// The 180-degree twist is reached (max handle error <= 1e-3), certified, through a planned
 // rotation-aware continuation (docs/solver.md, "Continuation"); before it the run stopped 0.32 short.
 TEST_F(DeformShared, BarTwist180ReachesItsTargetsThroughContinuation) {
   LIDEF_REQUIRE_SHARED();

@@ -1,4 +1,4 @@
-// The mesh domain (domain_sampling.h, issue 15): exact coverage of D = mesh triangles ∪ solid, leaves clear
+// The mesh domain (domain_sampling.h): exact coverage of D = mesh triangles ∪ solid, leaves clear
 // of the cage, the certifier's clearance guard, dense sampling of certified maps inside D, determinism.
 #include <gtest/gtest.h>
 #include <omp.h>
@@ -173,7 +173,7 @@ TEST(DomainSampling, MeshCrossingTheCageIsNotCertifiable) {
   EXPECT_NE(c.reason.find("not clear of the cage"), std::string::npos) << c.reason;
 }
 
-// Issue 15's reproduction: a voxel crossing a face of a cube cage far from any edge used to be certified
+// A reproduction: a voxel crossing a face of a cube cage far from any edge used to be certified
 // (L ≈ 3e-16 for the identity). The guard refuses it, and a voxel outside; one inside stays certified.
 TEST(CertifierGuard, RefusesVoxelsWhoseBallIsNotClearOfTheCage) {
   const Cage cage(box_surface(Vec3(-1, -1, -1), Vec3(1, 1, 1), Eigen::Vector3i(1, 1, 1)));

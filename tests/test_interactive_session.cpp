@@ -183,7 +183,7 @@ TEST(InteractiveSession, DragPathKeepsEveryFrameCertifiedAndReachesTheLastTarget
   EXPECT_TRUE(rec.errors.empty());
 }
 
-// Issue 16: dragging the beam's end around a full turn keeps following the cursor. The studio's window only
+// Dragging the beam's end around a full turn keeps following the cursor. The studio's window only
 // forwards the dragged targets to this engine (tests/studio drag the same way with mouse events); here the
 // end face's targets turn about the beam axis in 10-degree updates 40 ms apart, as a drag does, and at every
 // quarter turn the engine must come to rest with the handles on their targets and a certified map. Slow label

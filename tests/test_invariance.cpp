@@ -1,4 +1,4 @@
-// Independence of position and units (issue 19): translated and scaled copies of the shared models give the
+// Independence of position and units: translated and scaled copies of the shared models give the
 // same check result, the same voxels, the same certificate and the same Newton iterations, with coefficients
 // equal up to the transform. The truth is the untransformed model: the harmonic map is affine-covariant, so
 // a copy moved by t and scaled by s must give f_copy(s p + t) = s f(p) + t exactly in exact arithmetic.

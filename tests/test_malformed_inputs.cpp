@@ -1,4 +1,4 @@
-// Malformed inputs, end to end through the CLI (issue 19, "Reliability"): every case exits with 2, names the
+// Malformed inputs, end to end through the CLI: every case exits with 2, names the
 // offending file (and where useful the line or element), and writes nothing: the output folder does not exist
 // afterwards, and a certificate's folder keeps exactly what it had.
 //

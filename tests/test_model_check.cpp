@@ -683,7 +683,7 @@ TEST(CheckCli, HelpAndBadArguments) {
 
 }  // namespace
 
-// Moving a model far from the origin changes none of the checks (issue 19: the signed volume was summed in
+// Moving a model far from the origin changes none of the checks (the signed volume was summed in
 // absolute coordinates and the beam moved by 1e6 came out "inverted").
 TEST(ModelCheck, FarFromTheOriginTheCheckAndVolumeAreUnchanged) {
   const std::string src = test::project_data() + "/models/beam";

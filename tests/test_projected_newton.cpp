@@ -339,7 +339,7 @@ TEST(ProjectedNewton, SetHandlesRejectsBadInput) {
   s->set_handles(src, tgt);
   m = message([&] { s->set_targets(nan); });
   EXPECT_NE(m.find("not a finite number"), std::string::npos) << m;
-  // A target at 1e300: finite, but its squared distance is not a double (issue 19: it used to run).
+  // A target at 1e300: finite, but its squared distance is not a double (it used to run).
   MatX3d far = tgt;
   far(1, 0) = 1e300;
   m = message([&] { s->set_handles(src, far, "far.json"); });
@@ -347,7 +347,7 @@ TEST(ProjectedNewton, SetHandlesRejectsBadInput) {
   EXPECT_NE(m.find("cage diagonals"), std::string::npos) << m;
   m = message([&] { s->set_targets(far); });
   EXPECT_NE(m.find("cage diagonals"), std::string::npos) << m;
-  // One source with two different targets (issue 19: it used to run and average them).
+  // One source with two different targets (it used to run and average them).
   MatX3d dup_src = src, dup_tgt = tgt;
   dup_src.row(1) = dup_src.row(0);
   dup_tgt.row(1) = dup_tgt.row(0) + Eigen::RowVector3d(0.1, 0, 0);

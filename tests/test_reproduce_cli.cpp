@@ -1,4 +1,4 @@
-// `lidef reproduce` (issue 20, docs/reproduction.md): every name with --quick, the structure of its outputs
+// `lidef reproduce` (docs/reproduction.md): every name with --quick, the structure of its outputs
 // (summary.json's claims, README.md's claims list, the CSV header, the PNG when gnuplot exists) and the
 // claims that must hold whatever the machine: the Lipschitz bounds lie above the sampled ground truth (fig5,
 // checked again here from the CSV) and the σ3 counterexample is verified (fig2). Reproduce.* run in the unit

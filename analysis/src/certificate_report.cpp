@@ -127,9 +127,11 @@ std::uint64_t coefficients_hash(const MatX3d& y) {
 GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
                                             const Cage& cage, const TriMesh& mesh, const MatX3d& y) {
   if (!cert.certified) return global_injectivity_not_decided("the local certificate failed");
-  if (domain != "mesh" || mesh.F.rows() == 0)
+  if (domain != "mesh")
     return global_injectivity_not_decided(
         "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)");
+  if (mesh.F.rows() == 0)
+    return global_injectivity_not_decided("a point cloud has no surface whose image could be checked");
   return check_global_injectivity(cage, mesh, y);
 }
 
@@ -358,8 +360,8 @@ std::string certificate_json(const CertificateReport& r) {
   ojson d;
   d["kind"] = r.domain;
   if (r.domain == "mesh") d["statement"] = r.domain_statement;
-  d["definition"] = r.domain == "mesh" ? r.domain_definition
-                                       : "the union of the paper's grid voxels clear of the cage";
+  d["definition"] =
+      r.domain == "mesh" ? r.domain_definition : "the union of the paper's grid voxels clear of the cage";
   d["leaves_meeting_mesh_domain"] = r.leaves_meeting_domain;
   d["uncleared_voxels"] = r.uncleared_voxels;
   j["domain"] = d;

@@ -18,8 +18,8 @@
 
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/mesh_queries.h"
 #include "lidef/lipschitz_bound.h"
-#include "lidef/mesh_queries.h"
 #include "lidef/number_format.h"
 #include "lidef/self_intersections.h"
 #include "lidef/signed_svd.h"
@@ -108,17 +108,23 @@ struct GlobalInjectivityChecker::Impl {
       for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
     structure_problem = check_structure();
     // Exact predicates on the model's own coordinates (normalizing them would round).
-    if (structure_problem.empty()) structure_problem = check_embedded(m);
+    if (structure_problem.empty()) {
+      rest_intersections = find_self_intersections(m.V, m.F);
+      if (!rest_intersections.empty())
+        rest_problem = "the rest-state mesh intersects itself (" + std::to_string(rest_intersections.size()) +
+                       " pairs of triangles, the first " + std::to_string(rest_intersections[0].first) +
+                       " and " + std::to_string(rest_intersections[0].second) + ")";
+    }
   }
 
-  // The degree argument compares the deformed surface with an embedded rest surface: where the rest mesh's
-  // triangles already intersect, the identity itself would look like an overlap, so nothing is decided.
-  static std::string check_embedded(const TriMesh& m) {
-    const std::vector<std::pair<int, int>> hits = find_self_intersections(m.V, m.F);
-    if (hits.empty()) return "";
-    return "the rest-state mesh intersects itself (" + std::to_string(hits.size()) +
-           " pairs of triangles, the first " + std::to_string(hits[0].first) + " and " +
-           std::to_string(hits[0].second) + ")";
+  // The degree argument (true) needs an embedded rest surface; where the rest mesh's triangles already
+  // intersect, nothing is proven true. A crossing (false) still is, between triangles that are disjoint at
+  // rest: they share no vertex and are not among these pairs (sorted, i < j), so x ≠ y with f(x) = f(y).
+  std::vector<std::pair<int, int>> rest_intersections;
+  std::string rest_problem;
+  bool intersect_at_rest(int a, int b) const {
+    const std::pair<int, int> key{std::min(a, b), std::max(a, b)};
+    return std::binary_search(rest_intersections.begin(), rest_intersections.end(), key);
   }
 
   static std::vector<Vec3> edge_endpoints(const Cage& c, bool first) {
@@ -516,7 +522,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
         if (star) continue;  // both triangles lie in the star ball of a shared vertex, where f is injective
       }
       stack.clear();
-      stack.push_back({top[fa], top[fb], fa == fb, nshared > 0});
+      stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
       while (!stack.empty()) {
         if ((res.tests & 63) == 63 && k > first_crossing.load(std::memory_order_relaxed)) break;
         const Task task = stack.back();
@@ -602,6 +608,11 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                    std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) + ")";
       return finish(out);
     }
+  if (!im.rest_problem.empty()) {  // no crossing proven, and "true" needs an embedded rest surface
+    out.verdict = GlobalInjectivity::Verdict::kNotDecided;
+    out.reason = im.rest_problem;
+    return finish(out);
+  }
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].outcome == kOpen) {
       out.verdict = GlobalInjectivity::Verdict::kNotDecided;

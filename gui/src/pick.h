@@ -1,4 +1,4 @@
-// Values at a picked point (issue 18 §4): σ1, σ3, det J and E_iso − 6 of the frame's map at a rest-space
+// Values at a picked point: σ1, σ3, det J and E_iso − 6 of the frame's map at a rest-space
 // point — computed as `lidef eval` computes them (HarmonicBasis::map_jet, signed_singular_values) and E_iso
 // as the mesh view's field (mesh_fields) — and, when the frame has the certificate's leaves, the leaf that
 // holds the point (depth, L, margin, status). No Qt or VTK here.

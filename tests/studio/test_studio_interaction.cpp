@@ -169,7 +169,7 @@ TEST(StudioInteraction, SavedSessionReopensWithHandlesCameraAndView) {
 }
 
 // A mesh file opens like a model folder: its automatic cage is made once (with a progress dialog) and reused
-// from the cache the next time; a scenario whose "model" is a mesh file opens the same way (issue 17).
+// from the cache the next time; a scenario whose "model" is a mesh file opens the same way.
 TEST(StudioInteraction, MeshFileOpensWithAnAutomaticCage) {
   TempDir cache, dir;
   ::setenv("LIDEF_CACHE_DIR", cache.str().c_str(), 1);
@@ -201,7 +201,7 @@ TEST(StudioInteraction, MeshFileOpensWithAnAutomaticCage) {
   ::unsetenv("LIDEF_CACHE_DIR");
 }
 
-// ---------------------------------------------------------------- issue 18: inspect, camera, colour, layout
+// ---------------------------------------------------------------- inspect, camera, colour, layout
 
 // The beam with two handles, the second pulled up: a bent map with some E_iso − 6 spread.
 void open_bent_beam(Fixture& fx) {

@@ -193,7 +193,7 @@ TEST(StudioRenderErrors, BadInputExitsTwoAndWritesNothing) {
             1);  // broken.json only
 }
 
-// The side-by-side picture of a `lidef compare` run (issue 7's picture): every method's mesh, labelled.
+// The side-by-side picture of a `lidef compare` run: every method's mesh, labelled.
 TEST(StudioRenderCompare, SideBySidePictureOfACompareRun) {
   TempDir dir;
   std::string log;

@@ -100,7 +100,7 @@ struct IterationRecord {
   int cg_steps = 0;             // conjugate-gradient iterates taken (newton_cg_steps; 0: the plain direction)
   double cg_scale = 0;          // the first iterate's scale of the plain direction (1: the subset Hessian's)
   // ms_solve: the Cholesky solve and the direction (its Jacobians G δ and the CG iterates, newton_cg_steps);
-  // before the eighth session the Jacobian pass was counted in ms_line_search.
+  // before 2026-11-24 the Jacobian pass was counted in ms_line_search.
   double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, ms_certificate = 0, ms_total = 0;
 };
 
