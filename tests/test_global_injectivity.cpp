@@ -118,7 +118,8 @@ TEST(GlobalInjectivity, RestMeshThatIntersectsItselfIsNotDecidedEvenForTheIdenti
 }
 
 // The shared bar mesh intersects itself (exact predicates: its triangle 14036 crosses four triangles of the
-// side y = -0.17, two of them sharing no vertex with it), so no verdict on it is decided.
+// side y = -0.17, two of them sharing no vertex with it), so it is never proven injective — not even by the
+// identity (only a crossing between triangles disjoint at rest could decide it, as false).
 TEST(GlobalInjectivity, SharedBarMeshIntersectsItselfSoItsVerdictsAreNotDecided) {
   LIDEF_REQUIRE_SHARED();
   const Model m = load_model(test::shared_model("bar"));

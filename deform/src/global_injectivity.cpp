@@ -598,12 +598,16 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
   };
   for (auto& pr : pairs) pr = {top[pr.first].face, top[pr.second].face};
+  // The verdict `v` named by pair k: its place and its two mesh triangles.
+  auto at_pair = [&](GlobalInjectivity::Verdict v, size_t k) {
+    out.verdict = v;
+    out.overlap_point = to_model(results[k].where);
+    out.overlap_face_a = pairs[k].first;
+    out.overlap_face_b = pairs[k].second;
+  };
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].outcome == kCrossing) {
-      out.verdict = GlobalInjectivity::Verdict::kOverlap;
-      out.overlap_point = to_model(results[k].where);
-      out.overlap_face_a = pairs[k].first;
-      out.overlap_face_b = pairs[k].second;
+      at_pair(GlobalInjectivity::Verdict::kOverlap, k);
       out.reason = "the shape overlaps itself near " + where(out.overlap_point) + " (mesh triangles " +
                    std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) + ")";
       return finish(out);
@@ -615,10 +619,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
   }
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].outcome == kOpen) {
-      out.verdict = GlobalInjectivity::Verdict::kNotDecided;
-      out.overlap_point = to_model(results[k].where);
-      out.overlap_face_a = pairs[k].first;
-      out.overlap_face_b = pairs[k].second;
+      at_pair(GlobalInjectivity::Verdict::kNotDecided, k);
       out.reason = pairs[k].first == pairs[k].second
                        ? "could not prove the map injective on mesh triangle " +
                              std::to_string(pairs[k].first) + " near " + where(to_model(results[k].where)) +
