@@ -18,6 +18,7 @@
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "lidef/normalization.h"
@@ -31,11 +32,6 @@
 
 namespace lidef::cli {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 // Upper limits that keep a typo from exhausting memory (documented in --help); the parameter table bounds the
 // others (samples <= 5e6, max_depth <= 20).

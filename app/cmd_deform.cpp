@@ -26,6 +26,7 @@
 #include "lidef/deform_params.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/model_check.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl/opencl_backend.h"
@@ -34,11 +35,6 @@
 
 namespace lidef::cli {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 std::atomic<bool> g_stop{false};
 extern "C" void on_sigint(int) {

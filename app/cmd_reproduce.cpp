@@ -12,6 +12,7 @@
 #include "commands.h"
 #include "gnuplot.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
@@ -129,13 +130,13 @@ void add_reproduce_command(CLI::App& app, Action& action) {
           rc = kError;
           continue;
         }
-        const auto t0 = std::chrono::steady_clock::now();
+        const auto t0 = Clock::now();
         try {
           StagedOutputs out((fs::path(o.out) / f->name).string());
           FigureOutput res;
           ctx.progress("start: " + std::string(f->title));
           f->run(ctx, out, res);
-          run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          run.seconds = seconds_since(t0);
           const bool measured = write_report(out, *f, res, run);
           out.commit();
           long holding = 0;

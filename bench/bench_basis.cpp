@@ -36,6 +36,7 @@
 #include "lidef/cage.h"
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_io.h"
 #include "nlohmann/json.hpp"
 
@@ -87,9 +88,9 @@ Timing time_it(int reps, const std::function<double()>& fn) {
   std::vector<double> ms, cpu;
   for (int r = 0; r < reps; ++r) {
     const double c0 = cpu_ms();
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = Clock::now();
     const double c = fn();
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    ms.push_back(ms_since(t0));
     cpu.push_back(cpu_ms() - c0);
     if (std::abs(c - t.checksum) > 1e-9 * std::max(1.0, std::abs(t.checksum))) {
       std::cerr << "bench_basis: checksum changed between repetitions (" << c << " vs " << t.checksum

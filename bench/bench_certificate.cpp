@@ -61,6 +61,7 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/cage.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
@@ -71,7 +72,6 @@ using namespace lidef;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
 using MatX3dCol = Eigen::Matrix<double, Eigen::Dynamic, 3>;  // reduced coefficients ỹ (s by 3)
 
 struct Options {
@@ -86,10 +86,6 @@ struct Options {
   bool validate = true;
   std::vector<std::string> models = {"bar", "animal"};
 };
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 double cpu_ms() {
   rusage u{};

@@ -21,10 +21,10 @@
 #include "bench_util.h"
 #include "lidef/analysis/interactive_session.h"
 #include "lidef/blas_kernel.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/precompute_cache.h"
 
 using namespace lidef;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
@@ -73,7 +73,7 @@ Timing open_once(const std::string& model_dir, const std::string& cache_dir, con
   // The cache entry the session writes in the background while it rests: the time from resting until it is
   // written, and the CPU time of the whole opening with it.
   s.wait_for_cache_store();
-  t.stored_s = std::chrono::duration<double>(Clock::now() - t2).count();
+  t.stored_s = seconds_since(t2);
   t.cpu_stored_s = cpu_seconds() - c0;
   return t;
 }

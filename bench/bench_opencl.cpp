@@ -36,6 +36,7 @@
 #include "bench_util.h"
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/model_check.h"
 #include "lidef/opencl/opencl_backend.h"
 #include "lidef/projected_newton.h"
@@ -43,13 +44,8 @@
 
 using namespace lidef;
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 
 namespace {
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 std::string f(double x, int prec = 3) {
   char b[64];

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "lidef/coefficients.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_io.h"
 #include "lidef/model_check.h"
 #include "test_support.h"
@@ -43,10 +44,9 @@ const char* const kIterationsHeader =
     "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
     "cg_steps,cg_scale";
 
-const std::vector<std::string> kOutputs = {"cage.obj",     "certificate.json", "coefficients.txt",
-                                           "deformed.obj", "deformed.vtp",     "iterations.csv",
-                                           "leaves.vtu",   "scenario.json",    "summary.json",
-                                           "voxels.csv"};
+const std::vector<std::string> kOutputs = {
+    "cage.obj",       "certificate.json", "coefficients.txt", "deformed.obj", "deformed.vtp",
+    "iterations.csv", "leaves.vtu",       "scenario.json",    "summary.json", "voxels.csv"};
 
 // Small and quick: the beam with 4000 samples and 60 reduced coefficients per coordinate (180 unknowns).
 const char* const kSmall = "--samples 4000 --reduced-dof 60";
@@ -560,9 +560,9 @@ std::string shared_scenario(const std::string& name) {
 nlohmann::json run_shared(const TempDir& tmp, const std::string& name, const std::string& extra,
                           const std::vector<int>& exit_codes) {
   std::string output;
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = lidef::Clock::now();
   const int rc = deform(shared_scenario(name), tmp / "out", tmp / "cache", extra, &output);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double wall = lidef::seconds_since(t0);
   if (std::find(exit_codes.begin(), exit_codes.end(), rc) == exit_codes.end()) {
     ADD_FAILURE() << name << ": exit code " << rc << "\n" << output;
     return nullptr;

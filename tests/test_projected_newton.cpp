@@ -15,6 +15,7 @@
 
 #include "lidef/analysis/certificate_verification.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/projected_newton.h"
@@ -69,10 +70,6 @@ bool bitwise_equal(const MatS3& a, const MatS3& b) {
   return a.rows() == b.rows() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
 }
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 // One beam_bend run with dynamic weighting off, shared by the tests that only read it. Every accepted iterate
 // is certified in the callback by a fresh full-space certifier (no reduction).
 struct BendRun {
@@ -86,7 +83,7 @@ struct BendRun {
 const BendRun& bend_run() {
   static const std::unique_ptr<BendRun> R = [] {
     auto r = std::make_unique<BendRun>();
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = Clock::now();
     DeformParams p = fast_params();
     p.dynamic_weighting = false;
     p.max_iterations =

@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/signed_svd.h"
 
 namespace lidef {
@@ -646,7 +647,7 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double ra
 IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d& y,
                                                   const std::vector<CertLeaf>& leaves, LipschitzBound bound,
                                                   double radius_slack) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   IntervalVerification out;
   const IntervalVerifier verifier(cage, y, bound);
   for (size_t i = 0; i < leaves.size(); ++i)
@@ -664,7 +665,7 @@ IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d
     out.worst_slack = std::min(out.worst_slack, r.margin_lo);
   }
   summarize_distortion_i(out, leaves);
-  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  out.seconds = seconds_since(t0);
   return out;
 }
 

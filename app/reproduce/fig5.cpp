@@ -12,6 +12,7 @@
 #include "lidef/analysis/certificate_verification.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
 #include "reproduce.h"
@@ -60,7 +61,7 @@ void run_fig5(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
     p.dynamic_weighting = false;
     std::unique_ptr<DeformationSolver> solver;
     c.run = solve_scenario(ctx, model, sc, p, c.label, &solver);
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = Clock::now();
     CertifyParams cp = solver->certify_params(false, true);
     cp.max_depth = 0;  // the base voxels only: the same voxels for both bounds
     cp.bound = LipschitzBound::kFirstOrder;
@@ -101,7 +102,7 @@ void run_fig5(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
     c.median_first = median(c.l1);
     c.median_third = median(c.l3);
     c.median_truth = median(c.truth);
-    c.ms_truth = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    c.ms_truth = ms_since(t0);
   }
 
   write_file_atomic(out.path("fig5.csv"), [&](std::ostream& f) {

@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "lidef/cage/auto_cage.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "reproduce.h"
 
@@ -28,14 +29,13 @@ SolveRun solve_scenario(const Context& ctx, const Model& model, const Scenario& 
   // it would report a solve that did not happen.
   if (params.continuation)
     throw std::logic_error("solve_scenario runs one direct solve: " + label + " asks for the continuation");
-  using Clock = std::chrono::steady_clock;
   SolveRun r;
   r.label = label;
   r.params = params;
   const auto t0 = Clock::now();
   auto solver = std::make_unique<DeformationSolver>(
       model.cage, params, ctx.cache_dir, [&](const std::string& m) { ctx.progress(label + ": " + m); });
-  r.preprocess_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  r.preprocess_s = seconds_since(t0);
   solver->set_handles(sc.sources, sc.targets, sc.path);
   const auto t1 = Clock::now();
   r.result = solver->solve([&](const IterationRecord& it) {
@@ -44,7 +44,7 @@ SolveRun solve_scenario(const Context& ctx, const Model& model, const Scenario& 
                  (it.certified ? "" : ", NOT certified"));
     return true;
   });
-  r.solve_s = std::chrono::duration<double>(Clock::now() - t1).count();
+  r.solve_s = seconds_since(t1);
   r.history = solver->history();
   r.y = solver->coefficients();
   r.energy = energy_at_user_weights(*solver, params);

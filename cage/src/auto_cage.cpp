@@ -19,6 +19,7 @@
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/point_cloud_io.h"
@@ -29,11 +30,6 @@ namespace lidef {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 constexpr int kMaxFaces = 4000;
 constexpr const char* kFormats[] = {"obj", "off", "ply", "stl", "xyz"};

@@ -26,6 +26,8 @@
 #include <fstream>
 #include <limits>
 
+#include "lidef/internal/stopwatch.h"
+
 namespace lidef::cage_cgal {
 namespace {
 
@@ -64,10 +66,6 @@ class InputDistance {
   bool has_triangles_, has_points_;
 };
 namespace SMS = CGAL::Surface_mesh_simplification;
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // Sound test "every point of triangle (a, b, c) is at least `clearance` from the mesh": the ball of radius R
 // around the centroid g covers the triangle, so dist(g) >= clearance + R proves it; dist(g) < clearance
@@ -150,7 +148,7 @@ bool read_polygon_soup(const std::string& path, const std::string& format, Polyg
 WrapResult wrap_and_simplify(const TriMesh& mesh, double alpha, double offset, double clearance,
                              int target_faces) {
   WrapResult result;
-  auto t0 = std::chrono::steady_clock::now();
+  auto t0 = Clock::now();
   std::vector<Point> points;
   points.reserve(static_cast<std::size_t>(mesh.V.rows()));
   for (Eigen::Index i = 0; i < mesh.V.rows(); ++i)
@@ -180,7 +178,7 @@ WrapResult wrap_and_simplify(const TriMesh& mesh, double alpha, double offset, d
   result.wrap_faces = static_cast<int>(wrap.number_of_faces());
   result.seconds_wrap = seconds_since(t0);
 
-  t0 = std::chrono::steady_clock::now();
+  t0 = Clock::now();
   const InputDistance tree(triangles, lone_points);
   const ClearanceTest test(tree, clearance);
   if (static_cast<int>(wrap.number_of_faces()) > target_faces) {

@@ -13,6 +13,7 @@
 #include "lidef/continuation.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
 #include "lidef/normalization.h"
@@ -27,10 +28,6 @@ namespace lidef {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 void summarize_fields(MethodResult& r) {

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/symmetric_dirichlet.h"
 
 namespace lidef {
@@ -192,7 +193,6 @@ void PwlTetSolver::analyze() {
 }
 
 PwlTetIteration PwlTetSolver::step() {
-  using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   if (W_.rows() == 0) throw InputError("handles", "PWL(Tet): no handles set");
   const int nt = mesh_.num_tets(), n = 3 * mesh_.num_vertices();
@@ -261,13 +261,13 @@ PwlTetIteration PwlTetSolver::step() {
   }
   rec.energy = energy(X_, &rec.e_dis, &rec.e_p2p);
   rec.max_handle_error = handle_errors().maxCoeff();
-  rec.ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  rec.ms = ms_since(t0);
   history_.push_back(rec);
   return rec;
 }
 
 PwlTetResult PwlTetSolver::solve(const std::function<bool(const PwlTetIteration&)>& on_iteration) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   PwlTetResult res;
   res.message = "iteration limit";
   for (int it = 0; it < params_.max_iterations; ++it) {
@@ -297,7 +297,7 @@ PwlTetResult PwlTetSolver::solve(const std::function<bool(const PwlTetIteration&
       break;
     }
   }
-  res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.seconds = seconds_since(t0);
   return res;
 }
 

@@ -9,6 +9,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/local_global.h"
 
 namespace lidef {
@@ -160,7 +161,7 @@ void SrArapSolver::global_step() {
 }
 
 PwlTriIteration SrArapSolver::step() {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   if (W_.rows() == 0) throw InputError("handles", "PWL(Tri): no handles set");
   PwlTriIteration rec;
   rec.iteration = static_cast<int>(history_.size()) + 1;
@@ -169,13 +170,13 @@ PwlTriIteration SrArapSolver::step() {
   global_step();
   rec.energy = energy(X_, R_);
   rec.max_handle_error = handle_errors().maxCoeff();
-  rec.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  rec.ms = ms_since(t0);
   history_.push_back(rec);
   return rec;
 }
 
 PwlTriResult SrArapSolver::solve(const std::function<bool(const PwlTriIteration&)>& on_iteration) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   PwlTriResult res;
   res.message = "iteration limit";
   double prev = std::numeric_limits<double>::infinity();
@@ -193,7 +194,7 @@ PwlTriResult SrArapSolver::solve(const std::function<bool(const PwlTriIteration&
     }
     prev = r.energy;
   }
-  res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.seconds = seconds_since(t0);
   return res;
 }
 

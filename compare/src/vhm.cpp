@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/local_global.h"
 
 namespace lidef {
@@ -87,7 +88,7 @@ VecXd VhmSolver::handle_errors() const {
 }
 
 VhmIteration VhmSolver::step() {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   if (D_.rows() == 0) throw InputError("handles", "VHM: no handles set");
   R_ = best_rotations(y_);  // local step
   // Global step: (A + ρI) y = (1/n_a) Gᵀ T + λ1 Dᵀ Q + ρ y_prev, T = stacked R_iᵀ (rows 3i+b: R_i(:, b)ᵀ).
@@ -101,13 +102,13 @@ VhmIteration VhmSolver::step() {
   rec.iteration = static_cast<int>(history_.size()) + 1;
   rec.energy = energy(y_, R_, &rec);
   rec.max_handle_error = handle_errors().maxCoeff();
-  rec.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  rec.ms = ms_since(t0);
   history_.push_back(rec);
   return rec;
 }
 
 VhmResult VhmSolver::solve(const std::function<bool(const VhmIteration&)>& on_iteration) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   VhmResult res;
   res.message = "iteration limit";
   double prev = energy(y_, best_rotations(y_));
@@ -125,7 +126,7 @@ VhmResult VhmSolver::solve(const std::function<bool(const VhmIteration&)>& on_it
     }
     prev = r.energy;
   }
-  res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.seconds = seconds_since(t0);
   return res;
 }
 

@@ -3,6 +3,7 @@
 #include <chrono>
 
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/normalization.h"
 
@@ -10,7 +11,7 @@ namespace lidef {
 
 DeformResult deform_result(const DeformationSolver& solver, const TriMesh& mesh, const SolveResult& solve,
                            const PathSolveReport& path) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   DeformResult r;
   r.solve = solve;
   r.path = path;
@@ -48,7 +49,7 @@ DeformResult deform_result(const DeformationSolver& solver, const TriMesh& mesh,
   r.dof = 3 * solver.subspace().size();
   r.hessian_samples = static_cast<int>(solver.sampling().hessian_subset.size());
   r.preprocess_seconds = solver.preprocess_seconds();
-  r.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.finish_seconds = seconds_since(t0);
   return r;
 }
 

@@ -14,6 +14,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "lidef/self_intersections.h"
 
@@ -521,16 +522,16 @@ void check_mesh(const TriMesh& mesh, const MeshLines* lines, const TriMesh* cage
 
 ValidationReport validate_model(const TriMesh& cage, const TriMesh& mesh, const MeshLines* cage_lines,
                                 const MeshLines* mesh_lines, const CheckTolerances& tol) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   ValidationReport r;
   const bool cage_ok = check_cage(cage, cage_lines, tol, r);
   check_mesh(mesh, mesh_lines, cage_ok ? &cage : nullptr, tol, r);
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.seconds = seconds_since(t0);
   return r;
 }
 
 ValidationReport check_model_dir(const std::string& dir, TriMesh* cage_out, TriMesh* mesh_out) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   ValidationReport r;
   std::error_code ec;
   if (!fs::exists(dir, ec)) {
@@ -572,7 +573,7 @@ ValidationReport check_model_dir(const std::string& dir, TriMesh* cage_out, TriM
   if (have_mesh) check_mesh(mesh, &mesh_lines, cage_ok && r.errors.empty() ? &cage : nullptr, tol, r);
   if (cage_out) *cage_out = std::move(cage);
   if (mesh_out) *mesh_out = std::move(mesh);
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.seconds = seconds_since(t0);
   return r;
 }
 

@@ -20,16 +20,12 @@
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
+#include "lidef/internal/stopwatch.h"
 
 namespace lidef {
 namespace fs = std::filesystem;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 constexpr char kMagic[8] = {'L', 'I', 'D', 'E', 'F', 'P', 'C', '\0'};
 constexpr std::uint32_t kByteOrder = 0x01020304u;

@@ -21,6 +21,7 @@
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
 #include "lidef/hash.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/smoothness.h"
 
 extern "C" {
@@ -250,7 +251,7 @@ void write_cache(const std::string& path, const SpectralSubspace& sub) {
 }  // namespace
 
 SpectralSubspace compute_subspace(const Cage& cage, int s, SubspaceSolver solver) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   s = clamp_s(cage, s);
   const int n = cage.num_coeffs(), m = s - 4;
   const SpMat K = smoothness_matrix(cage);
@@ -288,7 +289,7 @@ SpectralSubspace compute_subspace(const Cage& cage, int s, SubspaceSolver solver
   out.eigenvalues.tail(m) = vals;
   out.cage_hash = subspace_cage_hash(cage);
   out.solver = solver == SubspaceSolver::Dense ? (lapack ? "dense, LAPACK dsyevd" : "dense") : "sparse";
-  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  out.seconds = seconds_since(t0);
   return out;
 }
 
@@ -318,13 +319,13 @@ std::string subspace_cache_path(const Cage& cage, int s, const std::string& cach
 SpectralSubspace load_or_compute_subspace(const Cage& cage, int s, const std::string& cache_dir) {
   s = clamp_s(cage, s);
   if (cache_dir.empty()) return compute_subspace(cage, s);
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   const std::string path = subspace_cache_path(cage, s, cache_dir);
   SpectralSubspace sub;
   sub.cage_hash = subspace_cage_hash(cage);
   if (read_cache(path, cage.num_coeffs(), s, sub.cage_hash, sub)) {
     sub.solver = "cache";
-    sub.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    sub.seconds = seconds_since(t0);
     return sub;
   }
   sub = compute_subspace(cage, s);

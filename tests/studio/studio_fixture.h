@@ -15,13 +15,14 @@
 #include <thread>
 #include <vector>
 
+#include "lidef/internal/stopwatch.h"
 #include "studio_window.h"
 
 namespace lidef::test {
 
 inline bool pump_until(const std::function<bool()>& cond, double seconds) {
-  const auto t0 = std::chrono::steady_clock::now();
-  while (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < seconds) {
+  const auto t0 = Clock::now();
+  while (seconds_since(t0) < seconds) {
     QApplication::processEvents(QEventLoop::AllEvents, 20);
     if (cond()) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(5));

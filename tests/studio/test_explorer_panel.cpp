@@ -27,6 +27,7 @@
 
 #include "explorer_panel.h"
 #include "lidef/explorer/explorer_example.h"
+#include "lidef/internal/stopwatch.h"
 #include "test_support.h"
 
 namespace {
@@ -35,8 +36,8 @@ using namespace lidef::test;
 using lidef::studio::ExplorerPanel;
 
 void pump(double seconds) {
-  const auto t0 = std::chrono::steady_clock::now();
-  while (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < seconds) {
+  const auto t0 = Clock::now();
+  while (seconds_since(t0) < seconds) {
     QApplication::processEvents(QEventLoop::AllEvents, 20);
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
@@ -117,10 +118,10 @@ TEST(ExplorerPanel, ShippedCounterexampleHasAnInteriorMinimumBelowTheBoundary) {
   ExplorerPanel& panel = fx.panel;
   EXPECT_EQ(panel.resolution(), 48);
   EXPECT_TRUE(std::isnan(panel.interior_min()));
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   ASSERT_TRUE(panel.open_shipped_example());
   ASSERT_TRUE(panel.wait_until_idle(60));
-  const double open_ms = 1000 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double open_ms = 1000 * seconds_since(t0);
   ASSERT_TRUE(settle(panel));
   ASSERT_TRUE(fx.errors.empty()) << fx.errors.front();
   std::printf(
