@@ -4,7 +4,7 @@
 # CI (.ci/run) adds:
 #   make check-sanitize-ci  clang ASan + UBSan: the sanitized subset of the unit tests, then every reader's
 #                           libFuzzer target for 20 s from the corpus and the kept findings
-# By hand (README, "Sanitizers and fuzzing"):
+# By hand (docs/dev.md, "Sanitizers and fuzzing"):
 #   make check-sanitize  the unit tests built with ASan + UBSan in build-asan/ (gcc), failing on any report
 #   make fuzz            every reader's libFuzzer target (clang) for FUZZ_SECONDS each, failing on any finding
 BUILD ?= build
@@ -32,7 +32,7 @@ demo: build
 test: build
 	@cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 1500
 
-# ASan + UBSan build of the unit tests (README, "Sanitizers and fuzzing"). Its own build folder and flags, so the
+# ASan + UBSan build of the unit tests (docs/dev.md, "Sanitizers and fuzzing"). Its own build folder and flags, so the
 # normal build keeps its objects; ccache keeps both (base_dir makes worktrees share entries). -O1: ASan's usual
 # level; -g1: line tables, enough for symbolized reports and cheaper to compile than -g. Eigen's bounds
 # assertions stay on (no NDEBUG). The studio and the benchmarks are not built: the
@@ -53,7 +53,7 @@ check-sanitize: deps
 #      the analysis library's tests that do not start the CLI), label "sanitize", failing on any report;
 #   2. every reader's libFuzzer target for CI_FUZZ_SECONDS each from the committed corpus and every kept finding
 #      (a kept finding that comes back fails at once), seed 1; a new finding fails CI with its input in the log.
-# -O1 and line tables: ASan's usual level, cheap to compile. README, "Sanitizers and fuzzing".
+# -O1 and line tables: ASan's usual level, cheap to compile. docs/dev.md, "Sanitizers and fuzzing".
 ASAN_CI_BUILD ?= build-sanitize-ci
 CI_FUZZ_SECONDS ?= 20
 check-sanitize-ci: deps

@@ -81,7 +81,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       "--domain mesh (default): the voxels cover the mesh's triangles and solid, refined toward the cage;\n"
       "--domain voxels: the paper's grid only (certificate.json reports how many mesh vertices lie "
       "outside).\n"
-      "Details: docs/certificate-outputs.md.");
+      "Details: docs/outputs.md.");
   sub->callback([opts, &action] {
     action = [opts] {
       const Opts& o = *opts;

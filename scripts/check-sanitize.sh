@@ -13,7 +13,7 @@ rm -rf "$LOGS"
 mkdir -p "$LOGS"
 export ASAN_OPTIONS="log_path=$LOGS/asan:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:check_initialization_order=1"
 export UBSAN_OPTIONS="log_path=$LOGS/ubsan:print_stacktrace=1:halt_on_error=1"
-# Tests left out under ASan (README, "Sanitizers and fuzzing"): the slow label, as in CI, and
+# Tests left out under ASan (docs/dev.md, "Sanitizers and fuzzing"): the slow label, as in CI, and
 # $SANITIZE_EXCLUDE (a ctest -E regex) when set.
 # $SANITIZE_SELECT (a ctest -R regex) runs only those tests.
 # $SANITIZE_LABEL (a ctest -L regex) runs that label instead of everything but slow (`make check-sanitize-ci`:

@@ -460,6 +460,13 @@ void bind(py::module_& m) {
                                return py::make_tuple(g.overlap_point.x(), g.overlap_point.y(),
                                                      g.overlap_point.z());
                              })
+      .def_property_readonly(
+          "max_sigma1_upper_bound", [](const PyCertificate& c) { return c.cert.max_sigma1_upper_bound; },
+          "An upper bound of the largest singular value of J on the certified domain (inf: none proven).")
+      .def_property_readonly(
+          "max_distortion_upper_bound",
+          [](const PyCertificate& c) { return c.cert.max_distortion_upper_bound; },
+          "An upper bound of sigma1/sigma3 on the certified domain (inf: none proven).")
       .def_property_readonly("voxels", [](const PyCertificate& c) { return c.cert.voxels; })
       .def_property_readonly("leaves", &PyCertificate::leaves)
       .def("write", &PyCertificate::write, py::arg("dir"),

@@ -90,3 +90,23 @@ def test_bad_coefficients_and_parameters_raise_input_error(beam):
         lidef.certify(beam, beam.identity(), no_such_parameter=1)
     with pytest.raises(lidef.InputError, match="bound"):
         lidef.certify(beam, beam.identity(), bound="fifth")
+
+
+def test_distortion_bounds_hold_at_the_leaves_and_at_random_points(beam):
+    # A map that stretches the beam: scale the coefficients' x column. The certificate's sigma1 and
+    # sigma1/sigma3 bounds must not be below sigma1 and sigma1/sigma3 evaluated anywhere in the domain;
+    # leaf centers and mesh vertices (on the domain's boundary) are such places.
+    Y = beam.identity().copy()
+    Y[:, 0] *= 1.5
+    cert = lidef.certify(beam, Y, **PARAMS)
+    assert cert.certified
+    P = np.vstack([cert.leaves["center"], beam.mesh_vertices])
+    _, J = beam.evaluate(Y, P)
+    s = np.linalg.svd(J, compute_uv=False)
+    sigma1, sigma3 = s[:, 0], s[:, 2]
+    assert np.isfinite(cert.max_sigma1_upper_bound)
+    assert np.isfinite(cert.max_distortion_upper_bound)
+    assert cert.max_sigma1_upper_bound >= sigma1.max()
+    assert cert.max_distortion_upper_bound >= (sigma1 / sigma3).max()
+    # Not vacuous: within a factor of the sampled values (a stretch of 1.5 gives K near 1.5).
+    assert cert.max_distortion_upper_bound < 2 * (sigma1 / sigma3).max()

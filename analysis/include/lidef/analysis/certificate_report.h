@@ -1,6 +1,6 @@
 // The certificate as files: certificate.json (verdict, counts, parameters, the first failing leaves) and
 // voxels.csv (one row per octree leaf), plus the reader `lidef verify` uses. No VTK here (see vtk_export.h).
-// Every field and column is documented in docs/certificate-outputs.md.
+// Every field and column is documented in docs/outputs.md.
 //
 // Determinism: both files are a pure function of the model, the coefficients and the parameters — byte-identical
 // for the same input whatever the thread count. Wall-clock timings are therefore NOT part of them; `lidef

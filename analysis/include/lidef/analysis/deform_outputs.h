@@ -1,6 +1,6 @@
 // The files of a deformation (`lidef deform --out DIR`, the Python module's DeformResult.write): the map, the
 // deformed mesh, its certificate with leaves, the iteration log, the scenario as run and summary.json. All of
-// them appear together or none (staged_outputs.h). docs/certificate-outputs.md describes them.
+// them appear together or none (staged_outputs.h). docs/outputs.md describes them.
 #pragma once
 #include <string>
 #include <vector>

@@ -1,7 +1,7 @@
 // Files for ParaView: the certification octree as an unstructured grid (.vtu) and map fields on a regular
 // grid
 // (.vti). This header is VTK-free; VTK (9.1) is linked privately by lidef_analysis. Arrays and suggested
-// filters: docs/certificate-outputs.md.
+// filters: docs/outputs.md.
 //
 // Writes are atomic: each writer writes `path.tmp.<pid>.<ext>` and renames it over `path`; on failure the
 // temporary is removed, `path` is untouched and InputError(path, ...) is thrown. Files are VTK XML, appended
