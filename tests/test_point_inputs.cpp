@@ -14,10 +14,13 @@
 
 #include "lidef/cage.h"
 #include "lidef/cage/auto_cage.h"
+#include "lidef/coefficients.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/gaussian_splats.h"
+#include "lidef/green_coordinates.h"
 #include "lidef/mesh_io.h"
 #include "lidef/point_cloud_io.h"
+#include "lidef/procedural_models.h"
 #include "lidef/sampling.h"
 #include "test_cli_outputs.h"
 #include "test_support.h"
@@ -154,6 +157,78 @@ TEST(PointCloudPly, XyzAndObjPointSets) {
   }
   // read_mesh still wants faces.
   EXPECT_NE(input_error_message([&] { read_mesh(obj); }).find("no faces"), std::string::npos);
+}
+
+// XYZ files with a normal per point: read with their normals, written back exactly; a file that mixes 3 and 6
+// columns is refused naming the line.
+TEST(PointCloudPly, XyzWithNormals) {
+  TempDir dir;
+  const std::string path = (dir.path / "n.xyz").string();
+  write_text(path, "# x y z nx ny nz\n0 0 0 0 0 1\n1 2 3 0.6 0.8 0\n");
+  MatX3d N;
+  const MatX3d P = read_points_xyz(path, &N);
+  ASSERT_EQ(P.rows(), 2);
+  ASSERT_EQ(N.rows(), 2);
+  EXPECT_EQ(P.row(1), Eigen::RowVector3d(1, 2, 3));
+  EXPECT_EQ(N.row(1), Eigen::RowVector3d(0.6, 0.8, 0));
+  EXPECT_EQ(read_point_cloud(path).rows(), 2);
+  std::ostringstream written;
+  write_points_xyz(written, P * (1.0 / 3), N);
+  write_text(path, written.str());
+  MatX3d N2;
+  EXPECT_EQ(read_points_xyz(path, &N2), P * (1.0 / 3));  // shortest round-trip digits: exact
+  EXPECT_EQ(N2, N);
+  MatX3d none;
+  write_text(path, "0 0 0\n1 1 1\n");
+  read_points_xyz(path, &none);
+  EXPECT_EQ(none.rows(), 0);
+  write_text(path, "0 0 0 0 0 1\n1 1 1\n");
+  const std::string msg = input_error_message([&] { read_points_xyz(path); });
+  EXPECT_NE(msg.find("n.xyz:2: point 2: expected 6 numbers"), std::string::npos) << msg;
+}
+
+// A PLY mesh with a vertex that no face uses: the model drops it (the cage maker keeps the mesh's used
+// vertices), yet deformed.ply holds every input vertex in input order, the unused one evaluated by the map
+// and counted in summary.json as not in the model.
+TEST(PointCloudPly, DeformedPlyKeepsUnusedVertices) {
+  TempDir dir;
+  const Model ball = make_ball();
+  PlyCloud mesh;
+  mesh.format = "ascii";
+  mesh.names = {"x", "y", "z"};
+  mesh.types = {"double", "double", "double"};
+  const Eigen::Index n = ball.mesh.V.rows();
+  mesh.values.resize(n + 1, 3);
+  mesh.values.topRows(n) = ball.mesh.V;
+  mesh.values.row(n) << 0.1, 0.2, 0.3;  // inside the ball, used by no face
+  mesh.F = ball.mesh.F;
+  const std::string ply = write_ply((dir.path / "ball.ply").string(), mesh);
+  const std::string scenario = (dir.path / "pull.json").string(), out = (dir.path / "out").string();
+  write_text(scenario, "{\"name\": \"pull\", \"model\": \"" + ply +
+                           "\", \"handles\": [{\"source\": [-1, 0, 0], \"target\": [-1, 0, 0]}, "
+                           "{\"source\": [1, 0, 0], \"target\": [1.05, 0, 0]}]}");
+  std::string log;
+  ASSERT_LE(test::run_lidef_cli("deform " + scenario + " --out " + out + " --cache-dir " +
+                                    (dir.path / "cache").string() +
+                                    " --samples 2000 --reduced-dof 30 --max-iterations 2 --quiet",
+                                &log),
+            1)
+      << log;
+  const PlyCloud d = read_ply_cloud(out + "/deformed.ply");
+  ASSERT_EQ(d.values.rows(), n + 1);
+  EXPECT_EQ(d.F, mesh.F);
+  const std::string summary = test::read_text(out + "/summary.json");
+  EXPECT_NE(summary.find("\"points_not_in_model\": 1"), std::string::npos) << summary;
+  // The unused vertex is f at it: the map of the written coefficients evaluated there.
+  const TriMesh cage = read_mesh(out + "/cage.obj");
+  const Cage cg(cage);
+  const MatX3d y = read_coefficients(out + "/coefficients.txt", cg);
+  const MatX3d want = HarmonicBasis(cg).map_values(y, mesh.values.bottomRows(1));
+  EXPECT_LT((d.points().bottomRows(1) - want).norm(), 1e-12);
+  // The used vertices are deformed.obj's, in input order.
+  const TriMesh obj = read_mesh(out + "/deformed.obj");
+  ASSERT_EQ(obj.V.rows(), n);
+  EXPECT_EQ(d.points().topRows(n), obj.V);
 }
 
 TEST(GaussianSplats, ScaleRotationRoundTrip) {
@@ -372,10 +447,19 @@ TEST(DeformSlow, PointCloudAndSplatsPulledAndCertified) {
   struct Case {
     std::string name;
     PlyCloud cloud;
+    bool xyz = false;  // written as x y z nx ny nz lines (the cloud's first six columns)
   };
-  for (const Case& c : {Case{"points", points}, Case{"splats", splats}}) {
+  for (const Case& c : {Case{"points", points}, Case{"splats", splats}, Case{"xyz", points, true}}) {
     SCOPED_TRACE(c.name);
-    const std::string ply = write_ply((dir.path / (c.name + ".ply")).string(), c.cloud);
+    std::string ply;
+    if (c.xyz) {
+      ply = (dir.path / "points.xyz").string();
+      std::ostringstream text;
+      write_points_xyz(text, c.cloud.points(), c.cloud.columns3("nx", "ny", "nz"));
+      write_text(ply, text.str());
+    } else {
+      ply = write_ply((dir.path / (c.name + ".ply")).string(), c.cloud);
+    }
     const MatX3d X = c.cloud.points();
     Eigen::Index lo = 0, hi = 0;
     X.col(0).minCoeff(&lo);
@@ -399,6 +483,7 @@ TEST(DeformSlow, PointCloudAndSplatsPulledAndCertified) {
         << log;
     const std::string summary = test::read_text(out + "/summary.json");
     EXPECT_NE(summary.find("\"certified\": true"), std::string::npos);
+    EXPECT_NE(summary.find("\"points_not_in_model\": 0"), std::string::npos);
     EXPECT_NE(summary.find("\"domain_statement\": \"points and surface, no solid\""), std::string::npos);
     EXPECT_NE(
         test::read_text(out + "/certificate.json").find("\"statement\": \"points and surface, no solid\""),
@@ -435,7 +520,17 @@ TEST(DeformSlow, PointCloudAndSplatsPulledAndCertified) {
         << log;
     const auto ev = read_csv_numbers(model + "/eval.csv");  // x,y,z,fx,fy,fz,J00..J22,...
     ASSERT_EQ(static_cast<Eigen::Index>(ev.size()), X.rows());
-    const PlyCloud d = read_ply_cloud(out + "/deformed.ply");
+    PlyCloud d;
+    if (c.xyz) {
+      MatX3d N;
+      const MatX3d Yx = read_points_xyz(out + "/deformed.xyz", &N);
+      d = c.cloud;  // the same columns; only x y z and the normals are in the file
+      d.set_columns3("x", "y", "z", Yx);
+      d.set_columns3("nx", "ny", "nz", N);
+      EXPECT_FALSE(std::filesystem::exists(out + "/deformed.ply"));
+    } else {
+      d = read_ply_cloud(out + "/deformed.ply");
+    }
     ASSERT_EQ(d.names, c.cloud.names);
     const MatX3d Y = d.points();
     double worst_f = 0, worst_cov = 0, worst_n = 0;
@@ -465,7 +560,7 @@ TEST(DeformSlow, PointCloudAndSplatsPulledAndCertified) {
     }
     // Points are doubles (eval prints 17 digits); splat positions and all splat fields are float32 in the
     // file.
-    EXPECT_LT(worst_f, c.name == "points" ? 1e-12 : 1e-6);
+    EXPECT_LT(worst_f, c.name == "splats" ? 1e-6 : 1e-12);
     EXPECT_LT(worst_cov, 1e-5);
     EXPECT_LT(worst_n, 1e-6);
   }

@@ -3,8 +3,10 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -25,26 +27,64 @@ namespace lidef {
 
 namespace fs = std::filesystem;
 
-const char* const kIterationsHeader =
-    "iteration,energy_before,energy,e_dis,e_p2p,e_smooth,lambda_p2p,lambda_smooth,gradient_norm,step,step_"
-    "norm,"
-    "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
-    "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
-    "cg_steps,cg_scale";
+namespace {
+
+// The columns of iterations.csv, each with the field of IterationRecord it shows: the header and every row
+// come from this one list. Numbers are written so that they read back to the same double; times to 6 digits.
+struct IterationColumn {
+  const char* name;
+  std::string (*cell)(const IterationRecord&);
+};
+std::string num(double x) {
+  return format_double(x);
+}
+std::string ms(double x) {
+  return format_g(x, 6);
+}
+const IterationColumn kIterationColumns[] = {
+    {"iteration", [](const IterationRecord& r) { return std::to_string(r.iteration); }},
+    {"energy_before", [](const IterationRecord& r) { return num(r.energy_before); }},
+    {"energy", [](const IterationRecord& r) { return num(r.terms.total); }},
+    {"e_dis", [](const IterationRecord& r) { return num(r.terms.dis); }},
+    {"e_p2p", [](const IterationRecord& r) { return num(r.terms.p2p); }},
+    {"e_smooth", [](const IterationRecord& r) { return num(r.terms.smooth); }},
+    {"lambda_p2p", [](const IterationRecord& r) { return num(r.lambda_p2p); }},
+    {"lambda_smooth", [](const IterationRecord& r) { return num(r.lambda_smooth); }},
+    {"gradient_norm", [](const IterationRecord& r) { return num(r.gradient_norm); }},
+    {"step", [](const IterationRecord& r) { return num(r.step); }},
+    {"step_norm", [](const IterationRecord& r) { return num(r.step_norm); }},
+    {"armijo_rejections", [](const IterationRecord& r) { return std::to_string(r.armijo_rejections); }},
+    {"certificate_rejections",
+     [](const IterationRecord& r) { return std::to_string(r.certificate_rejections); }},
+    {"accepted", [](const IterationRecord& r) { return std::string(r.accepted ? "1" : "0"); }},
+    {"certified", [](const IterationRecord& r) { return std::string(r.certified ? "1" : "0"); }},
+    {"min_sigma3_sampled", [](const IterationRecord& r) { return num(r.min_sigma3); }},
+    {"min_lower_bound", [](const IterationRecord& r) { return num(r.min_lower_bound); }},
+    {"refined", [](const IterationRecord& r) { return std::to_string(r.refined); }},
+    {"max_handle_error", [](const IterationRecord& r) { return num(r.max_handle_error); }},
+    {"weight_action", [](const IterationRecord& r) { return '"' + r.weight_action + '"'; }},
+    {"ms_gradient", [](const IterationRecord& r) { return ms(r.ms_gradient); }},
+    {"ms_hessian", [](const IterationRecord& r) { return ms(r.ms_hessian); }},
+    {"ms_solve", [](const IterationRecord& r) { return ms(r.ms_solve); }},
+    {"ms_line_search", [](const IterationRecord& r) { return ms(r.ms_line_search); }},
+    {"ms_certificate", [](const IterationRecord& r) { return ms(r.ms_certificate); }},
+    {"ms_total", [](const IterationRecord& r) { return ms(r.ms_total); }},
+    {"cg_steps", [](const IterationRecord& r) { return std::to_string(r.cg_steps); }},
+    {"cg_scale", [](const IterationRecord& r) { return num(r.cg_scale); }},
+};
+
+}  // namespace
+
+std::string iterations_header() {
+  std::string h;
+  for (const IterationColumn& c : kIterationColumns) h += (h.empty() ? "" : ",") + std::string(c.name);
+  return h;
+}
 
 std::string iteration_row(const IterationRecord& r) {
-  std::ostringstream s;
-  auto d = [](double x) { return format_double(x); };
-  s << r.iteration << ',' << d(r.energy_before) << ',' << d(r.terms.total) << ',' << d(r.terms.dis) << ','
-    << d(r.terms.p2p) << ',' << d(r.terms.smooth) << ',' << d(r.lambda_p2p) << ',' << d(r.lambda_smooth)
-    << ',' << d(r.gradient_norm) << ',' << d(r.step) << ',' << d(r.step_norm) << ',' << r.armijo_rejections
-    << ',' << r.certificate_rejections << ',' << (r.accepted ? 1 : 0) << ',' << (r.certified ? 1 : 0) << ','
-    << d(r.min_sigma3) << ',' << d(r.min_lower_bound) << ',' << r.refined << ',' << d(r.max_handle_error)
-    << ',' << '"' << r.weight_action << '"' << ',' << format_g(r.ms_gradient, 6) << ','
-    << format_g(r.ms_hessian, 6) << ',' << format_g(r.ms_solve, 6) << ',' << format_g(r.ms_line_search, 6)
-    << ',' << format_g(r.ms_certificate, 6) << ',' << format_g(r.ms_total, 6) << ',' << r.cg_steps << ','
-    << d(r.cg_scale);
-  return s.str();
+  std::string row;
+  for (const IterationColumn& c : kIterationColumns) row += (row.empty() ? "" : ",") + c.cell(r);
+  return row;
 }
 
 namespace {
@@ -129,16 +169,15 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   return sj;
 }
 
-// The PLY file the model was made from: the scenario's model when it is a .ply file, else the input named by
-// the model folder's model.json (an automatic cage); "" when the model does not come from a PLY file.
-std::string source_ply(const Model& model, const Scenario& scenario) {
-  auto is_ply = [](const std::string& p) {
-    std::string ext = fs::path(p).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-    return ext == ".ply";
+// The point file the model was made from (.ply or .xyz): the scenario's model when it is such a file, else
+// the input named by the model folder's model.json (an automatic cage); "" when the model comes from neither.
+std::string source_points_file(const Model& model, const Scenario& scenario) {
+  auto is_points = [](const std::string& p) {
+    const std::string ext = lowercase_extension(p);
+    return ext == ".ply" || ext == ".xyz";
   };
   std::error_code ec;
-  if (is_ply(scenario.model_dir) && fs::is_regular_file(scenario.model_dir, ec)) return scenario.model_dir;
+  if (is_points(scenario.model_dir) && fs::is_regular_file(scenario.model_dir, ec)) return scenario.model_dir;
   const fs::path json = fs::path(model.dir) / "model.json";
   if (model.dir.empty() || !fs::is_regular_file(json, ec)) return "";
   std::ifstream in(json);
@@ -147,7 +186,7 @@ std::string source_ply(const Model& model, const Scenario& scenario) {
       !j["input"]["file"].is_string())
     return "";
   const std::string file = j["input"]["file"];
-  return is_ply(file) && fs::is_regular_file(file, ec) ? file : "";
+  return is_points(file) && fs::is_regular_file(file, ec) ? file : "";
 }
 
 // J(p_i)ᵀ at the points P (#P by 3) as 3#P by 3 (mesh_fields.h's layout), a block of points at a time so that
@@ -162,21 +201,68 @@ MatXd jacobians_at(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P)
   return JT;
 }
 
-// deformed.ply's content: the input PLY with its points mapped (mapped: f at the model's mesh vertices),
-// normals by the cofactor matrix, Gaussian splats' covariances and view-dependent colour by J
-// (gaussian_splats.h); every other property as read. False (nothing to write) when the PLY's vertices are not
-// the model's mesh vertices in the same order (a PLY mesh whose unused vertices the cage maker dropped).
-bool deformed_ply(const std::string& ply, const Model& model, const MatX3d& y, const MatX3d& mapped,
-                  PlyCloud* cloud) {
-  *cloud = read_ply_cloud(ply);
-  const MatX3d P = cloud->points();
-  if (P.rows() != model.mesh.V.rows() || P != model.mesh.V) return false;
-  const MatXd JT = jacobians_at(HarmonicBasis(model.cage), y, P);
-  if (is_gaussian_splat_cloud(*cloud))
-    map_gaussian_splats(*cloud, mapped, JT);
+// The input's points under the map, in input order: a point that is a vertex of the model's mesh takes that
+// vertex's mapped position (the numbers of deformed.obj); any other point (a PLY mesh's unused vertex, which
+// the cage maker drops) is evaluated here and lies outside the certified domain unless it happens to be
+// inside it. `evaluated` gets the count of those.
+MatX3d map_input_points(const MatX3d& P, const Model& model, const HarmonicBasis& basis, const MatX3d& y,
+                        const MatX3d& mapped, long* evaluated) {
+  std::map<std::array<double, 3>, Eigen::Index> vertex_of;
+  for (Eigen::Index i = 0; i < model.mesh.V.rows(); ++i)
+    vertex_of.emplace(std::array<double, 3>{model.mesh.V(i, 0), model.mesh.V(i, 1), model.mesh.V(i, 2)}, i);
+  MatX3d out(P.rows(), 3);
+  std::vector<Eigen::Index> others;
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    const auto it = vertex_of.find({P(i, 0), P(i, 1), P(i, 2)});
+    if (it != vertex_of.end())
+      out.row(i) = mapped.row(it->second);
+    else
+      others.push_back(i);
+  }
+  if (!others.empty()) {
+    MatX3d Q(static_cast<Eigen::Index>(others.size()), 3);
+    for (size_t k = 0; k < others.size(); ++k) Q.row(k) = P.row(others[k]);
+    const MatX3d fQ = basis.map_values(y, Q);
+    for (size_t k = 0; k < others.size(); ++k) out.row(others[k]) = fQ.row(k);
+  }
+  *evaluated = static_cast<long>(others.size());
+  return out;
+}
+
+// The deformed input in its own format (deformed.ply / deformed.xyz): the points mapped, normals by the
+// cofactor matrix, Gaussian splats' covariances and colours (map_gaussian_splats); every other property kept.
+struct DeformedInput {
+  std::string name;  // "deformed.ply" or "deformed.xyz"
+  PlyCloud cloud;
+  long points_not_in_model = 0;
+};
+DeformedInput deformed_input(const std::string& file, const Model& model, const MatX3d& y,
+                             const MatX3d& mapped) {
+  DeformedInput d;
+  if (lowercase_extension(file) == ".xyz") {
+    MatX3d N;
+    const MatX3d P = read_points_xyz(file, &N);
+    d.name = "deformed.xyz";
+    d.cloud.format = "ascii";
+    d.cloud.names = {"x", "y", "z"};
+    if (N.rows() > 0) d.cloud.names.insert(d.cloud.names.end(), {"nx", "ny", "nz"});
+    d.cloud.types.assign(d.cloud.names.size(), "double");
+    d.cloud.values.resize(P.rows(), static_cast<Eigen::Index>(d.cloud.names.size()));
+    d.cloud.values.leftCols(3) = P;
+    if (N.rows() > 0) d.cloud.values.rightCols(3) = N;
+  } else {
+    d.name = "deformed.ply";
+    d.cloud = read_ply_cloud(file);
+  }
+  const MatX3d P = d.cloud.points();
+  const HarmonicBasis basis(model.cage);
+  const MatX3d Q = map_input_points(P, model, basis, y, mapped, &d.points_not_in_model);
+  const MatXd JT = jacobians_at(basis, y, P);
+  if (is_gaussian_splat_cloud(d.cloud))
+    map_gaussian_splats(d.cloud, Q, JT);
   else
-    map_point_cloud(*cloud, mapped, JT);
-  return true;
+    map_point_cloud(d.cloud, Q, JT);
+  return d;
 }
 
 }  // namespace
@@ -205,11 +291,18 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
               "lidef deform " + scenario.name + ": the cage of coefficients.txt");
   });
   names.insert(names.begin() + 1, "cage.obj");
-  const std::string ply = source_ply(model, scenario);
-  PlyCloud cloud;
-  if (!ply.empty() && deformed_ply(ply, model, y, r.deformed_vertices, &cloud)) {
-    write_file_atomic(out.path("deformed.ply"), [&](std::ostream& s) { write_ply_cloud(s, cloud); });
-    names.push_back("deformed.ply");
+  const std::string input = source_points_file(model, scenario);
+  DeformedInput deformed;
+  if (!input.empty()) {
+    deformed = deformed_input(input, model, y, r.deformed_vertices);
+    write_file_atomic(out.path(deformed.name), [&](std::ostream& s) {
+      if (deformed.name == "deformed.xyz")
+        write_points_xyz(s, deformed.cloud.points(),
+                         deformed.cloud.has_normals() ? deformed.cloud.columns3("nx", "ny", "nz") : MatX3d());
+      else
+        write_ply_cloud(s, deformed.cloud);
+    });
+    names.push_back(deformed.name);
   }
   write_file_atomic(out.path("deformed.obj"), [&](std::ostream& s) {
     write_obj(s, r.deformed_vertices, model.mesh.F, "lidef deform " + scenario.name + ": last certified map");
@@ -230,16 +323,21 @@ DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, c
     names.push_back("field.vti");
   }
   write_file_atomic(out.path("iterations.csv"), [&](std::ostream& s) {
-    s << kIterationsHeader << "\n";
+    s << iterations_header() << "\n";
     for (const IterationRecord& rec : r.history) s << iteration_row(rec) << "\n";
   });
   write_scenario(out.path("scenario.json"), scenario);
-  const std::string summary =
-      summary_json(scenario, r, report, volume_ratio, options.total_seconds).dump(2) + "\n";
+  nlohmann::ordered_json sj = summary_json(scenario, r, report, volume_ratio, options.total_seconds);
+  if (!deformed.name.empty())
+    sj["deformed_input"] = {{"file", deformed.name},
+                            {"points", deformed.cloud.values.rows()},
+                            {"points_not_in_model", deformed.points_not_in_model}};
+  const std::string summary = sj.dump(2) + "\n";
   write_file_atomic(out.path("summary.json"), [&](std::ostream& s) { s << summary; });
   std::vector<std::string> stale;  // files of an earlier run that this one does not write
   if (options.grid <= 0) stale.push_back("field.vti");
-  if (std::find(names.begin(), names.end(), "deformed.ply") == names.end()) stale.push_back("deformed.ply");
+  for (const char* name : {"deformed.ply", "deformed.xyz"})
+    if (std::find(names.begin(), names.end(), name) == names.end()) stale.push_back(name);
   out.commit(stale);
   return written;
 }

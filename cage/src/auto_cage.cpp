@@ -34,12 +34,10 @@ namespace fs = std::filesystem;
 constexpr int kMaxFaces = 4000;
 constexpr const char* kFormats[] = {"obj", "off", "ply", "stl", "xyz"};
 
+// "ply" for "a/B.PLY" (without the dot, as the formats are named in messages).
 std::string lower_extension(const std::string& path) {
-  std::string ext = fs::path(path).extension().string();
-  if (!ext.empty() && ext[0] == '.') ext.erase(0, 1);
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
+  const std::string ext = lowercase_extension(path);
+  return ext.empty() ? ext : ext.substr(1);
 }
 
 bool supported_format(const std::string& ext) {

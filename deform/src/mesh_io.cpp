@@ -18,12 +18,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
-
 // Whole file as text. Rejects missing, unreadable, empty and binary files with a message naming the file.
 std::string read_text_file(const std::string& path, const char* what) {
   std::error_code ec;
@@ -288,8 +282,8 @@ OffData parse_off(const std::string& path, int arity) {
     if (n < 0) throw InputError(path, "face " + std::to_string(t + 1) + ": negative size", rd.line());
     if (static_cast<long>(tok.size()) - 1 < n)
       throw InputError(path,
-                       "face " + std::to_string(t + 1) + " lists " + std::to_string(tok.size() - 1) + " of its " +
-                           std::to_string(n) + " vertex indices",
+                       "face " + std::to_string(t + 1) + " lists " + std::to_string(tok.size() - 1) +
+                           " of its " + std::to_string(n) + " vertex indices",
                        rd.line());
     std::vector<std::size_t> f(static_cast<size_t>(n));
     for (long k = 0; k < n; ++k) {
@@ -333,14 +327,14 @@ PolygonSoupMesh read_off_polygons(const std::string& path) {
 }
 
 TriMesh read_mesh(const std::string& path, MeshLines* lines) {
-  const std::string ext = lower(fs::path(path).extension().string());
+  const std::string ext = lowercase_extension(path);
   if (ext == ".obj") return read_obj(path, lines, false);
   if (ext == ".off") return read_off(path, lines);
   throw InputError(path, "unsupported mesh format '" + ext + "' (expected .obj or .off)");
 }
 
 TriMesh read_mesh_or_points(const std::string& path, MeshLines* lines) {
-  const std::string ext = lower(fs::path(path).extension().string());
+  const std::string ext = lowercase_extension(path);
   if (ext == ".obj") return read_obj(path, lines, true);
   return read_mesh(path, lines);
 }
@@ -359,28 +353,57 @@ void write_obj(std::ostream& out, const MatX3d& V, const MatX3i& F, const std::s
     out << "f " << F(t, 0) + 1 << " " << F(t, 1) + 1 << " " << F(t, 2) + 1 << "\n";
 }
 
-MatX3d read_points_xyz(const std::string& path) {
+std::string lowercase_extension(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+void write_points_xyz(std::ostream& out, const MatX3d& P, const MatX3d& normals) {
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    out << format_double(P(i, 0)) << ' ' << format_double(P(i, 1)) << ' ' << format_double(P(i, 2));
+    if (normals.rows() == P.rows())
+      out << ' ' << format_double(normals(i, 0)) << ' ' << format_double(normals(i, 1)) << ' '
+          << format_double(normals(i, 2));
+    out << '\n';
+  }
+}
+
+MatX3d read_points_xyz(const std::string& path, MatX3d* normals) {
   const std::string text = read_text_file(path, ".xyz");
   LineReader rd(text);
-  std::vector<Vec3> P;
+  std::vector<Vec3> P, N;
+  size_t columns = 0;  // 3 or 6, set by the first point
   while (rd.next()) {
     const auto& tok = rd.tokens();
     const long point1 = static_cast<long>(P.size()) + 1;
-    if (tok.size() != 3)
+    if (columns == 0 && (tok.size() == 3 || tok.size() == 6)) columns = tok.size();
+    if (tok.size() != columns)
       throw InputError(path,
-                       "point " + std::to_string(point1) + ": expected 3 numbers 'x y z', found " +
-                           std::to_string(tok.size()),
+                       "point " + std::to_string(point1) + ": expected " +
+                           (columns == 6 ? std::string("6 numbers 'x y z nx ny nz' like the first point")
+                                         : std::string("3 numbers 'x y z' (or 6 with a normal)")) +
+                           ", found " + std::to_string(tok.size()),
                        rd.line());
-    Vec3 p;
+    Vec3 p, n = Vec3::Zero();
     for (int k = 0; k < 3; ++k) p[k] = parse_double(tok[k], path, rd.line());
-    if (!p.allFinite())
+    if (columns == 6)
+      for (int k = 0; k < 3; ++k) n[k] = parse_double(tok[3 + k], path, rd.line());
+    if (!p.allFinite() || !n.allFinite())
       throw InputError(path, "point " + std::to_string(point1) + " has a NaN or infinite coordinate",
                        rd.line());
     P.push_back(p);
+    N.push_back(n);
   }
   if (P.empty()) throw InputError(path, "no points (file has only blank lines or comments)");
   MatX3d out(static_cast<Eigen::Index>(P.size()), 3);
   for (size_t i = 0; i < P.size(); ++i) out.row(i) = P[i].transpose();
+  if (normals) {
+    normals->resize(columns == 6 ? out.rows() : 0, 3);
+    if (columns == 6)
+      for (size_t i = 0; i < N.size(); ++i) normals->row(i) = N[i].transpose();
+  }
   return out;
 }
 

@@ -427,9 +427,7 @@ void map_point_cloud(PlyCloud& cloud, const MatX3d& mapped, const MatXd& JT) {
 }
 
 MatX3d read_point_cloud(const std::string& path) {
-  std::string ext = fs::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  const std::string ext = lowercase_extension(path);
   if (ext == ".ply") return read_ply_cloud(path).points();
   if (ext == ".xyz") return read_points_xyz(path);
   if (ext == ".obj") return read_mesh_or_points(path).V;

@@ -243,11 +243,9 @@ Scenario read_scenario(const std::string& path, const std::string& models_dir) {
   for (const fs::path& p : tried) {
     std::error_code ec;
     // A mesh file stands for the model folder lidef_cage makes from it (resolve_model_path, docs/cages.md).
-    std::string ext = p.extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-    const bool mesh_file =
-        fs::is_regular_file(p, ec) && (ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" ||
-                                     ext == ".xyz");
+    const std::string ext = lowercase_extension(p.string());
+    const bool mesh_file = fs::is_regular_file(p, ec) && (ext == ".obj" || ext == ".off" || ext == ".ply" ||
+                                                          ext == ".stl" || ext == ".xyz");
     if (fs::is_directory(p, ec) || mesh_file) {
       s.model_dir = p.string();
       break;

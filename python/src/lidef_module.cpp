@@ -1,7 +1,7 @@
 // The Python module `lidef` (its compiled part, lidef._lidef; python/lidef/__init__.py re-exports it):
 // numpy arrays in and out (float64 points, int faces), the same library calls as the `lidef` CLI
 // (app/cmd_deform.cpp, app/cmd_certify.cpp), the GIL released while they compute and Ctrl-C honoured
-// between units of work (python_interrupt.h). README ("Python") and docs/tutorial.md describe the API.
+// between units of work (python_interrupt.h). docs/tutorial.md describes the API.
 #include <omp.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>

@@ -51,8 +51,16 @@ PolygonSoupMesh read_off_polygons(const std::string& path);
 // and the output is deterministic. `comment`, when non-empty, is written first as `# ...` lines.
 void write_obj(std::ostream& out, const MatX3d& V, const MatX3i& F, const std::string& comment = "");
 
-// Reads a point list: one `x y z` per line; blank lines and `#` comments are skipped. Returns #P by 3.
-// Throws InputError for a missing/empty/binary file, a line without exactly 3 numbers, or a non-finite value.
-MatX3d read_points_xyz(const std::string& path);
+// Reads a point list: one `x y z` per line, or `x y z nx ny nz` (a point and its normal) on every line;
+// blank lines and `#` comments are skipped. Returns #P by 3; normals (optional) gets #P by 3 normals, or 0
+// rows when the file has 3 columns. Throws InputError for a missing/empty/binary file, a line whose count of
+// numbers is not that of the first point (3 or 6), or a non-finite value.
+MatX3d read_points_xyz(const std::string& path, MatX3d* normals = nullptr);
+// Writes points (and normals, when it has #P rows) in that format, numbers in the shortest form that reads
+// back to the same double.
+void write_points_xyz(std::ostream& out, const MatX3d& P, const MatX3d& normals = MatX3d());
+
+// The extension of a path with its dot, in lower case (".ply" for "a/B.PLY"; "" when there is none).
+std::string lowercase_extension(const std::string& path);
 
 }  // namespace lidef

@@ -20,6 +20,7 @@
 
 #include "lidef/cage.h"
 #include "lidef/compute_backend.h"
+#include "lidef/deform_params.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/sampling.h"
@@ -27,15 +28,18 @@
 
 namespace lidef {
 
+// The defaults of the parameters that also are rows of the parameter table come from DeformParams (declared
+// once, there).
 struct CertifyParams {
-  LipschitzBound bound = LipschitzBound::kThirdOrder;
-  int max_depth = 6;                 // subdivision levels below the base voxels
-  long max_refined_voxels = 200000;  // budget of child voxels evaluated in all; exhausted = not certified
+  LipschitzBound bound = DeformParams().bound;
+  int max_depth = DeformParams().max_depth;  // subdivision levels below the base voxels
+  // Budget of child voxels evaluated in all; exhausted = not certified.
+  long max_refined_voxels = DeformParams().max_refined;
   long max_children_per_voxel =
       4096;                      // budget per base voxel (a full depth-4 subtree); exhausted = not certified
   bool stop_on_failure = false;  // return as soon as the verdict is "not certified" (line search)
   bool keep_leaves = true;       // fill Certificate::leaves (reports); the verdict never depends on it
-  RefinementEval refinement = RefinementEval::kFarField;  // CPU evaluation of octree children
+  RefinementEval refinement = DeformParams().refinement;  // CPU evaluation of octree children
   // Far field: a face is "near" a subdivided node of radius r when its bounding sphere comes within
   // far_field_reach · r of the node's center (docs/certificate.md, Step 4d). Larger: more faces evaluated
   // exactly, a smaller remainder.
@@ -45,7 +49,7 @@ struct CertifyParams {
   // loosest until min_lower_bound ≥ (1 − bound_tolerance) · min_sigma3_center, so the lower bound says how
   // small σ3 really is, not merely that it is positive. Never changes the verdict; uses what is left of
   // max_refined_voxels and max_depth (docs/certificate.md, "Tight lower bound").
-  double bound_tolerance = 0;
+  double bound_tolerance = DeformParams().bound_tolerance;
   // With stop_on_failure: base voxels (indices into the sampling, any order) whose refinement runs first, to
   // completion, before the other failing voxels are refined — the line search passes the voxels that failed
   // its previous trial, so that a trial failing at the same place is rejected without refining the rest.
@@ -77,7 +81,7 @@ struct CertifyParams {
   // max_refined_voxels permitting) and a bound still above it makes the map not certified ("distortion bound
   // K not proven at
   // ..."). 0: off (the bounds are still computed and reported).
-  double max_distortion = 0;
+  double max_distortion = DeformParams().max_distortion;
   // With previous_y/previous_lower: that certificate's Certificate::base_upper (per base voxel an upper bound
   // of σ1). A voxel taken over gets σ1 ≤ base_upper[i] + Γ_i ‖ỹ − ỹ₀‖_F; without it a taken-over voxel has no
   // finite σ1 bound, and with max_distortion > 0 no voxel is taken over.

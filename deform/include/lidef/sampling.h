@@ -14,22 +14,25 @@
 #include <vector>
 
 #include "lidef/cage.h"
+#include "lidef/deform_params.h"
 #include "lidef/types.h"
 
 namespace lidef {
 
+// The defaults of the parameters that also are rows of the parameter table come from DeformParams (declared
+// once, there).
 struct SamplingParams {
   // Desired |I|; the voxel side is searched until |I| is within count_tolerance of it (relative).
-  int target_count = 30000;
+  int target_count = DeformParams().samples;
   double count_tolerance = 0.03;
   // > 0: use exactly this voxel side and skip the search (target_count is then ignored).
-  double voxel_side = 0;
+  double voxel_side = DeformParams().voxel_side;
   // Center-to-cage distance ≥ safety · r. Must be > 1 (at 1 the ball touches the cage and the third-order
   // bound is infinite); 1.5 leaves every ball r/2 clear of the cage while losing only a thin layer.
-  double safety = 1.5;
+  double safety = DeformParams().safety;
   // |H| = round(hessian_fraction · |I|) (paper: 5%), spread evenly over the volume (see
   // select_hessian_subset).
-  double hessian_fraction = 0.05;
+  double hessian_fraction = DeformParams().hessian_fraction;
   int max_search_iterations = 40;
   // Mesh domain (domain_sampling.h): octree levels below the base grid when refining toward the cage, and the
   // most leaves one base cell may be split into (a mesh crossing the cage would otherwise refine forever).
@@ -38,9 +41,9 @@ struct SamplingParams {
 };
 
 struct VoxelSampling {
-  MatX3d centers;                   // #I by 3 voxel centers, grid order (z slowest, x fastest)
-  double side = 0;                  // base cube side h (a voxel of level k has side h / 2^k)
-  double radius() const;            // (√3/2) h, center-to-corner of a base voxel
+  MatX3d centers;         // #I by 3 voxel centers, grid order (z slowest, x fastest)
+  double side = 0;        // base cube side h (a voxel of level k has side h / 2^k)
+  double radius() const;  // (√3/2) h, center-to-corner of a base voxel
   // Per-voxel octree level below the base grid (#I, or empty: every voxel is a base voxel). The mesh domain
   // (domain_sampling.h) refines toward the cage; everything that uses a voxel's size asks side_of/radius_of.
   std::vector<int> level;
