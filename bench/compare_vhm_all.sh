@@ -1,7 +1,7 @@
 #!/bin/bash
 # lidef vs VHM on every shared and project scenario: reached, certified, mean E_iso-6.
 # Run from the repository root after `make build`: bash bench/compare_vhm_all.sh; each scenario's
-# $OUT/<name>/table.md has both rows (docs/benchmarks.md, "lidef and VHM on every scenario").
+# $OUT/<name>/table.md has both rows (docs/benchmarks.md, "Comparison with the alternatives").
 # ARGS (optional) are passed to every `lidef compare`, e.g. ARGS="--lambda-smooth 0.01".
 set -u
 L=${LIDEF:-build/app/lidef}

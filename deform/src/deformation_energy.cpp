@@ -26,8 +26,9 @@ Mat3 jacobian_at(const MatJT& JT, int i) {
 // The two passes over the stored float rows of G, the per-iteration stages that read the most memory. Each
 // float is widened to double and every product and sum is double (G's rounding is the only one; the class
 // comment). GCC's vector extensions give 4 doubles per operation; the summation order is fixed by the code,
-// not by the thread count or a BLAS (deterministic). The Eigen product with a 3-column right side they replace
-// took 13-17 ms per pass on the bar at 2 threads, these 5-11 (bench_opencl, docs/benchmarks.md).
+// not by the thread count or a BLAS (deterministic). The Eigen product with a 3-column right side they
+// replace took 13-17 ms per pass on the bar at 2 threads, these 5-11 (bench_opencl; docs/benchmarks.md,
+// "Per-iteration stage split").
 using V4d = double __attribute__((vector_size(32)));
 using V4f = float __attribute__((vector_size(16)));
 

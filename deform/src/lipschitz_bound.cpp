@@ -155,7 +155,7 @@ double taylor_sigma3_lower_bound(const Mat3& J, const std::array<Mat3, 3>& H, do
   const double epsM = 1e-12 * nJ2, epsF = 1e-12 * std::sqrt(nJ2) * hF;
   // x and Z only need to be a unit vector and an orthonormal basis of x⊥ (their accuracy only makes the bound
   // tighter): the closed-form eigenvectors (computeDirect) do, and cost less than the iterative solver (the
-  // spectral term's overhead per certification went from ~13-16 to ~10 ms, docs/benchmarks.md).
+  // spectral term's overhead per certification went from ~13-16 to ~10 ms, CHANGELOG.md, 2026-11-24).
   Eigen::SelfAdjointEigenSolver<Mat3> es;
   es.computeDirect(M);
   Vec3 x = es.eigenvectors().col(0).normalized();

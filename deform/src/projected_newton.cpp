@@ -98,7 +98,7 @@ struct DeformationSolver::Precompute {
     if (setup.log) setup.log(s);
   }
   // Stage `name` runs from fraction b to e of the whole. The spans are the stage times measured on the
-  // animal (docs/benchmarks.md), so that the bar moves evenly.
+  // animal (docs/benchmarks.md, "Opening a model"), so that the bar moves evenly.
   void enter(const std::string& name, double b, double e) {
     stage = name;
     begin = b;

@@ -91,7 +91,7 @@ namespace lidef::studio {
 
 // A renderer that draws translucent geometry with plain alpha blending instead of vtkOpenGLRenderer's
 // order-independent transparency (extra full-viewport passes; ~9% of a Lipschitz-view frame under Mesa's
-// software renderer, docs/benchmarks.md "Studio"). The only translucent prop is the faint context mesh: one
+// software renderer, CHANGELOG.md, 2026-11-23). The only translucent prop is the faint context mesh: one
 // colour at one opacity, for which the blending order changes little.
 // clang-format off
 class PlainBlendRenderer : public vtkOpenGLRenderer {
@@ -206,7 +206,7 @@ void StudioWindow::build_ui() {
   view_->setRenderWindow(win);
   window_ = win;
   // No MSAA while interacting: under Mesa's software renderer (Xvfb, this 2-core machine) 4x MSAA doubles the
-  // render time and the renderer shares the cores with the solver (docs/benchmarks.md, "Studio").
+  // render time and the renderer shares the cores with the solver (CHANGELOG.md, 2026-11-22).
   window_->SetMultiSamples(0);
   auto ren = vtkSmartPointer<PlainBlendRenderer>::New();
   ren->SetBackground(1, 1, 1);

@@ -56,7 +56,7 @@ void reexec_with_environment(char** argv, const std::vector<std::pair<std::strin
 // function below); the products split their output over OpenMP's threads instead. Why: Debian's OpenBLAS is
 // the pthread build, whose workers spin ~0.1 s after each call; on two cores they then take a core from the
 // OpenMP stages that follow and from the studio's renderer (bench_studio at the defaults: a 900x900 Cholesky
-// 8 ms alone, 63-76 ms beside the window; 3.1-3.6 -> 4.2 view updates/s, side by side; docs/benchmarks.md).
+// 8 ms alone, 63-76 ms beside the window; 3.1-3.6 -> 4.2 view updates/s, side by side; CHANGELOG.md).
 // One pool, one wait policy (OMP_WAIT_POLICY, gui/src/omp_wait.h).
 void use_blas_in_calling_thread();
 // Column-major C (m by n) = op(A) op(B), op = transpose when the flag is set, as cblas_?gemm with alpha 1 and
@@ -70,10 +70,10 @@ void gemm_parallel(bool trans_a, bool trans_b, int m, int n, int k, const double
 // C = A B for a row-major A (m by k) and a column-major B (k by n), into a row-major C (m by n; resized, its
 // memory reused when the shape is the same), with OpenBLAS's dgemm: the precomputation's products of basis
 // derivatives with the subspace Ξ, about twice Eigen's product with OpenBLAS's AVX-512 kernels
-// (docs/benchmarks.md). Its rounding depends on OpenBLAS's kernels and thread count: blas_numerics().
+// (CHANGELOG.md, 2026-11-24). Its rounding depends on OpenBLAS's kernels and thread count: blas_numerics().
 void blas_product(const MatXdR& A, const MatXd& B, MatXdR& C);
 // C = A B, all column-major (C resized): the studio's per-frame products of the mesh matrices (#V and 3#V by
-// s) with ỹ (s by 3), 3.8 ms against Eigen's 15.3 for the bar's 94 MB (docs/benchmarks.md, bench_studio).
+// s) with ỹ (s by 3), 3.8 ms against Eigen's 15.3 for the bar's 94 MB (bench_studio, CHANGELOG.md).
 void blas_product(const MatXd& A, const MatXd& B, MatXd& C);
 // "<core>/<threads>" of OpenBLAS in this process (threads: OpenMP's, over which the products split), for the
 // keys of cached results of blas_product.
