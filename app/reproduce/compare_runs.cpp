@@ -122,8 +122,8 @@ std::string tet_mesh_label(const std::string& method, const std::map<std::string
   std::replace(mesh.begin(), mesh.end(), ',', ';');
   if (method == kModelMeshRow) return "model tet mesh (coarser than the paper's; extra row)";
   if (!p) return mesh + " (the paper has no row for this model)";
-  return mesh + (csv_number(row, "dof") >= p->dof[paper_column(method)] ? " (at least the paper's DOF)"
-                                                                        : " (FEWER DOF than the paper's)");
+  return mesh + (csv_number(row, "dof") >= p->dof[paper_column(method)] ? "; at least the paper's DOF"
+                                                                        : "; FEWER DOF than the paper's");
 }
 
 // When the model's own tet mesh is coarser than Table 1's PWL(Tet) DOF (the bar's has the cage's 106
