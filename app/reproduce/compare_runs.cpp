@@ -206,9 +206,8 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
   res.files.insert(res.files.begin(), "table1.csv");
   // Plot: iterations per method and scenario (log scale).
   write_file_atomic(out.path("table1.dat"), [&](std::ostream& f) {
-    f << "# scenario, then iterations of lidef pwl-tet pwl-tet-model-mesh pwl-tet-fine vhm pwl-tri (NaN: "
-         "failed "
-         "or not run)\n";
+    f << "# scenario, then iterations of lidef pwl-tet pwl-tet-model-mesh pwl-tet-fine vhm pwl-tri\n"
+         "# (NaN: failed or not run)\n";
     for (const Result& r : results) {
       f << '"' << r.s.name << '"';
       for (const std::string& m : kTable1Rows) {
