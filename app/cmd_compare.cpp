@@ -54,6 +54,11 @@ void add_compare_options(CLI::App& app, Action& action) {
   sub->add_option("--tet-max-volume", c.coarse_tet.max_volume,
                   "pwl-tet (TetGen): max tet volume, -a (0: none)")
       ->capture_default_str();
+  sub->add_option(
+         "--tet-min-dof", c.coarse_min_dof,
+         "pwl-tet: at least this many DOF (3 x tet vertices): the model's tet mesh when it has them, "
+         "else TetGen with the max volume searched for them (0: off)")
+      ->capture_default_str();
   sub->add_option("--fine-tet-quality", c.fine_tet.min_ratio, "pwl-tet-fine: max radius-edge ratio, -q")
       ->capture_default_str();
   sub->add_option("--fine-tet-max-volume", c.fine_tet.max_volume,
@@ -104,6 +109,11 @@ void add_compare_options(CLI::App& app, Action& action) {
                            "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
       if (o.c.methods.empty()) throw InputError("--methods", "no method given");
       o.c.use_model_tets = !o.no_model_tets;
+      if (o.c.coarse_min_dof < 0) throw InputError("--tet-min-dof", "must be >= 0");
+      if (o.c.coarse_min_dof > 300000000) throw InputError("--tet-min-dof", "too large (at most 300000000)");
+      if (o.c.coarse_min_dof > 0 && o.c.coarse_tet.max_volume > 0)
+        throw InputError("--tet-min-dof",
+                         "cannot be combined with --tet-max-volume (the max volume is searched for the DOF)");
       o.c.cache_dir = o.cache_dir == "<default>" ? default_cache_dir() : o.cache_dir;
       if (sc.params.threads > 0) omp_set_num_threads(sc.params.threads);
       // A mesh file as the model: its automatic cage, made once and cached (lidef/cage/auto_cage.h).

@@ -210,6 +210,18 @@ TEST(CompareCli, UnknownMethodIsAnErrorAndWritesNothing) {
   EXPECT_FALSE(fs::exists(dir / "cmp"));
 }
 
+TEST(CompareCli, TetMinDofWithMaxVolumeIsAnErrorAndWritesNothing) {
+  // --tet-min-dof searches the max volume: a given one would be silently ignored.
+  TempDir dir;
+  std::string log;
+  EXPECT_EQ(run_lidef("compare '" + lidef::test::project_data() + "/scenarios/beam_bend.json' --out '" +
+                          dir / "cmp" + "' --methods pwl-tet --tet-min-dof 3000 --tet-max-volume 0.001",
+                      &log),
+            2);
+  EXPECT_NE(log.find("--tet-min-dof"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(dir / "cmp"));
+}
+
 TEST(Compare, TetgenFailureFailsOnlyPwlTet) {
   // Two crossing boxes (closed, manifold, self-intersecting) as the cage; the mesh is the first box shrunk.
   using namespace lidef;
@@ -238,6 +250,32 @@ TEST(Compare, TetgenFailureFailsOnlyPwlTet) {
   EXPECT_NE(rows[0].error.find("crossing/cage.obj"), std::string::npos) << rows[0].error;
   EXPECT_TRUE(rows[1].ok) << rows[1].error;
   EXPECT_NE(comparison_table_md(rows, sc).find("FAILED"), std::string::npos);
+}
+
+TEST(Compare, TetMinDofGivesPwlTetAtLeastThoseDof) {
+  // A box cage without a tet mesh of its own: --tet-min-dof makes TetGen's mesh fine enough, and the row says
+  // how it was made.
+  using namespace lidef;
+  const TriMesh box = box_surface(Vec3(0, 0, 0), Vec3(1, 1, 1), Eigen::Vector3i(2, 2, 2));
+  Model model{
+      Cage(box), box_surface(Vec3(0.1, 0.1, 0.1), Vec3(0.9, 0.9, 0.9), Eigen::Vector3i(3, 3, 3)), "", {}};
+  Scenario sc;
+  sc.name = "box";
+  sc.sources = model.mesh.V.topRows(2);
+  sc.targets = sc.sources;
+  sc.targets(1, 0) += 0.05;
+  CompareOptions opt;
+  opt.methods = {"pwl-tet"};
+  opt.coarse_min_dof = 900;
+  const auto rows = run_comparison(sc, model, opt);
+  ASSERT_EQ(rows.size(), 1u);
+  ASSERT_TRUE(rows[0].ok) << rows[0].error;
+  EXPECT_GE(rows[0].dof, 900);
+  EXPECT_NE(rows[0].detail.find("searched"), std::string::npos) << rows[0].detail;
+  opt.coarse_min_dof = 0;  // TetGen's default mesh of the box is far coarser
+  const auto plain = run_comparison(sc, model, opt);
+  ASSERT_TRUE(plain[0].ok) << plain[0].error;
+  EXPECT_LT(plain[0].dof, 900);
 }
 
 TEST(CompareSlow, SharedBarBendAllMethods) {

@@ -191,6 +191,29 @@ TEST(PwlTet, TetgenMeshTilesTheCage) {
   EXPECT_NEAR(fine_vol, beam.cage.volume, 1e-9 * beam.cage.volume);
 }
 
+TEST(PwlTet, TetgenMeshForAVertexCount) {
+  // Table 1's PWL(Tet) resolution is a DOF count: the searched max volume gives at least the vertices asked
+  // for, not many more (the bracket ends within 10% of each other), and the same mesh every time.
+  const Model beam = make_beam();
+  const TriMesh cage{beam.cage.V, beam.cage.F, "beam cage"};
+  const int target = 600;
+  const TetgenForVertices found = tetrahedralize_min_vertices(cage, TetgenOptions{}, target);
+  EXPECT_GE(found.mesh.num_vertices(), target);
+  EXPECT_LE(found.mesh.num_vertices(), 1.5 * target);
+  EXPECT_GT(found.options.max_volume, 0);
+  EXPECT_GE(found.meshings, 2);  // a bracket needs a mesh short of the target too
+  const TetMesh again = tetrahedralize(cage, found.options);
+  EXPECT_EQ(again.num_vertices(), found.mesh.num_vertices());
+  EXPECT_TRUE(again.V == found.mesh.V);
+  const TetgenForVertices second = tetrahedralize_min_vertices(cage, TetgenOptions{}, target);
+  EXPECT_EQ(second.options.max_volume, found.options.max_volume);
+  EXPECT_EQ(second.meshings, found.meshings);
+  // A target the cage's own vertices reach is met too (the search only grows the volume until it falls
+  // short).
+  EXPECT_GE(tetrahedralize_min_vertices(cage, TetgenOptions{}, 8).mesh.num_vertices(), 8);
+  EXPECT_THROW(tetrahedralize_min_vertices(cage, TetgenOptions{}, 3), InputError);
+}
+
 TEST(PwlTet, EmbeddingReproducesPoints) {
   const Model beam = make_beam();
   const TetMesh t = beam_tets();

@@ -211,15 +211,46 @@ TEST(ReproduceSlow, Table1QuickOnSharedBar) {
   const nlohmann::json s =
       check_structure(tmp / "out/table1", "table1", "table1.csv",
                       "scenario,method,status,dof,iterations,converged,certified,inverted_mesh_vertices,max_"
-                      "handle_error,paper_dof,paper_iterations,time_s,time_ratio_to_lidef,paper_time_s");
+                      "handle_error,paper_dof,paper_iterations,time_s,time_ratio_to_lidef,paper_time_s,"
+                      "tet_mesh");
   const nlohmann::json* c = claim_containing(s, "lidef's result is certified");
   ASSERT_NE(c, nullptr);
   EXPECT_EQ((*c)["measured"], true);  // lidef never returns an uncertified map
   const nlohmann::json* it = claim_containing(s, "no more iterations");
   ASSERT_NE(it, nullptr);
   EXPECT_EQ((*it)["paper"]["lidef"], 14);  // Table 1, bar
-  for (const char* m : {"lidef", "pwl-tet", "pwl-tet-fine", "vhm", "pwl-tri"})
+  for (const char* m : {"lidef", "pwl-tet", "pwl-tet-model-mesh", "pwl-tet-fine", "vhm", "pwl-tri"})
     EXPECT_TRUE(s["data"]["bar_bend"].contains(m)) << m;
+  // PWL(Tet) at the paper's resolution (Table 1, bar: 3,312 DOF): the bar's own tet mesh has only the cage's
+  // 106 vertices, so `pwl-tet` runs on a TetGen mesh with at least the paper's DOF and the model's mesh stays
+  // as the extra row `pwl-tet-model-mesh`.
+  const auto& fair = s["data"]["bar_bend"]["pwl-tet"];
+  const auto& coarse = s["data"]["bar_bend"]["pwl-tet-model-mesh"];
+  EXPECT_EQ(fair["paper_dof"], 3312);
+  EXPECT_GE(fair["dof"].get<double>(), 3312) << fair.dump();
+  EXPECT_NE(fair["tet_mesh"].get<std::string>().find("TetGen"), std::string::npos) << fair.dump();
+  EXPECT_EQ(coarse["dof"].get<double>(), 318) << coarse.dump();
+  EXPECT_NE(fair["status"], "failed");
+  EXPECT_EQ((*it)["paper"]["pwl-tet"], 23);
+  EXPECT_EQ((*it)["measured"]["pwl-tet"], fair["iterations"]);  // the claims use the paper-resolution row
+  EXPECT_FALSE((*it)["measured"].contains("pwl-tet-model-mesh"));
+  const nlohmann::json* fastest = claim_containing(s, "shortest solve time");
+  ASSERT_NE(fastest, nullptr);
+  EXPECT_TRUE((*fastest)["measured"].contains("pwl-tet"));
+  EXPECT_FALSE((*fastest)["measured"].contains("pwl-tet-model-mesh"));
+  // table1.csv: both rows, with the DOF next to the paper's.
+  std::ifstream csv(tmp / "out/table1/table1.csv");
+  std::string line;
+  int fair_rows = 0, coarse_rows = 0;
+  while (std::getline(csv, line)) {
+    fair_rows += line.rfind("bar_bend,pwl-tet,", 0) == 0 && line.find(",3312,") != std::string::npos;
+    coarse_rows += line.rfind("bar_bend,pwl-tet-model-mesh,", 0) == 0 &&
+                   line.find(",318,") != std::string::npos &&
+                   line.find("model tet mesh (coarser than the paper's") != std::string::npos;
+  }
+  EXPECT_EQ(fair_rows, 1);
+  EXPECT_EQ(coarse_rows, 1);
+  EXPECT_TRUE(fs::exists(tmp / "out/table1/compare_bar_bend_pwl_tet_paper_dof.log"));
 }
 
 TEST(ReproduceSlow, Fig12QuickOnSharedBar) {

@@ -173,14 +173,30 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   TetMesh tets;
   const std::filesystem::path node = std::filesystem::path(s.model.dir) / "tet.node",
                               ele = std::filesystem::path(s.model.dir) / "tet.ele";
+  bool have_tets = false;
   if (s.opt.use_model_tets && !s.model.dir.empty() && std::filesystem::exists(node) &&
       std::filesystem::exists(ele)) {
     tets = read_tet_mesh(node.string(), ele.string());
     r.detail = "model tet mesh";
-  } else {
+    have_tets = 3L * tets.num_vertices() >= s.opt.coarse_min_dof;
+    if (!have_tets)
+      s.say(r.method, "the model's tet mesh has " + std::to_string(3L * tets.num_vertices()) +
+                          " DOF, fewer than the " + std::to_string(s.opt.coarse_min_dof) +
+                          " asked for: TetGen instead");
+  }
+  if (!have_tets) {
     const TriMesh cage{s.model.cage.V, s.model.cage.F, s.model.cage.source};
-    tets = tetrahedralize(cage, s.opt.coarse_tet);
-    r.detail = "TetGen " + tetgen_switches(s.opt.coarse_tet);
+    if (s.opt.coarse_min_dof > 0) {
+      const int min_vertices = static_cast<int>((s.opt.coarse_min_dof + 2) / 3);
+      TetgenForVertices found = tetrahedralize_min_vertices(cage, s.opt.coarse_tet, min_vertices);
+      tets = std::move(found.mesh);
+      r.detail = "TetGen " + tetgen_switches(found.options) + " (max volume searched in " +
+                 std::to_string(found.meshings) + " meshings for >= " + std::to_string(s.opt.coarse_min_dof) +
+                 " DOF)";
+    } else {
+      tets = tetrahedralize(cage, s.opt.coarse_tet);
+      r.detail = "TetGen " + tetgen_switches(s.opt.coarse_tet);
+    }
   }
   if (fine) {
     TetgenOptions o = s.opt.fine_tet;

@@ -7,6 +7,8 @@
 #include <sstream>
 
 #include "lidef/errors.h"
+#include "lidef/geometry.h"
+#include "lidef/number_format.h"
 
 namespace lidef {
 
@@ -177,6 +179,57 @@ TetEmbedding embed_points(const TetMesh& mesh, const MatX3d& P, const std::strin
     throw InputError(where, s.str());
   }
   return e;
+}
+
+namespace {
+// x rounded to 3 significant digits (x > 0).
+double round3(double x) {
+  const double scale = std::pow(10.0, std::floor(std::log10(x)) - 2);
+  return std::round(x / scale) * scale;
+}
+}  // namespace
+
+TetgenForVertices tetrahedralize_min_vertices(const TriMesh& cage, TetgenOptions options, int min_vertices) {
+  const std::string where = cage.source.empty() ? "cage" : cage.source;
+  if (min_vertices < 4) throw InputError(where, "tetrahedralize: the target vertex count must be >= 4");
+  const double volume = std::abs(signed_volume(cage.V, cage.F));
+  if (!(volume > 0)) throw InputError(where, "tetrahedralize: the cage encloses no volume");
+  TetgenForVertices best;
+  int meshings = 0;
+  // `enough`: the largest volume tried whose mesh reached the target; `short_of`: the smallest tried whose
+  // mesh did not (infinite until one is tried).
+  double enough = 0, short_of = std::numeric_limits<double>::infinity();
+  // A quality tet mesh has about 6 tets per vertex: the first guess aims at the target directly.
+  double v = round3(volume / (6.0 * min_vertices));
+  constexpr int kMaxMeshings = 40;
+  while (meshings < kMaxMeshings) {
+    options.max_volume = v;
+    TetMesh m = tetrahedralize(cage, options);
+    ++meshings;
+    if (m.num_vertices() >= min_vertices) {
+      enough = v;
+      best.mesh = std::move(m);
+      best.options = options;
+    } else {
+      short_of = v;
+    }
+    const bool bracketed = enough > 0 && std::isfinite(short_of);
+    if (bracketed && short_of <= 1.1 * enough) break;
+    // No tet is larger than the cage: beyond its volume the switch changes nothing, and the target is met.
+    if (!bracketed && enough > 0 && v >= volume) break;
+    const double next = bracketed    ? round3(std::sqrt(enough * short_of))
+                        : enough > 0 ? round3(2 * v)
+                                     : round3(v / 2);
+    // Rounding can land on an end of the bracket: the bracket is then as narrow as 3 digits allow.
+    if (next == enough || next == short_of) break;
+    v = next;
+  }
+  if (enough <= 0)
+    throw NumericalError(where + ": TetGen reached no mesh with " + std::to_string(min_vertices) +
+                         " vertices in " + std::to_string(meshings) +
+                         " meshings (smallest max volume tried " + format_g(v) + ")");
+  best.meshings = meshings;
+  return best;
 }
 
 }  // namespace lidef

@@ -4,6 +4,7 @@
 // Methods (names as on the command line):
 //   lidef         this project's certified projected Newton in the harmonic subspace (projected_newton.h)
 //   pwl-tet       PWL(Tet) on a coarse tet mesh: the model's tet.node/tet.ele (Table 1's DOF), else TetGen
+//                 (coarse_min_dof: at least that many DOF, TetGen's volume searched where the model's is coarser)
 //   pwl-tet-fine  PWL(Tet) on a fine TetGen mesh (max tet volume = factor × lidef's voxel volume; Fig. 3)
 //   vhm           Variational Harmonic Maps (vhm.h) on the model's vhm_anchors.xyz; its result is certified
 //                 with lidef's certificate on lidef's voxels (Fig. 11)
@@ -34,6 +35,10 @@ struct CompareOptions {
   // PWL(Tet)
   bool use_model_tets = true;  // coarse mesh: the model's tet.node/tet.ele when present
   TetgenOptions coarse_tet;    // otherwise TetGen with these switches
+  // > 0: the coarse mesh has at least this many DOF (3 × vertices): the model's tet mesh when it has them,
+  // else TetGen with its max volume searched for them (tetrahedralize_min_vertices; coarse_tet.max_volume is
+  // not used). Table 1 at the paper's resolution.
+  long coarse_min_dof = 0;
   TetgenOptions fine_tet;      // fine mesh; fine_tet.max_volume <= 0: fine_volume_factor × voxel side³
   double fine_volume_factor = 1.0;
   int tet_max_iterations = 200;

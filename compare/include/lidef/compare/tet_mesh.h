@@ -50,6 +50,21 @@ std::string tetgen_switches(const TetgenOptions& options, bool refine = false);
 // fails otherwise or returns no tet.
 TetMesh tetrahedralize(const TriMesh& cage, const TetgenOptions& options = {});
 
+// The TetGen mesh of the cage's interior for PWL(Tet) at a given resolution (paper Table 1 states PWL(Tet)'s
+// DOF = 3 × tet vertices): the max tet volume (-a, `options.max_volume` is replaced) is searched so that the
+// mesh has at least `min_vertices` vertices, and kept as large as the search can: the vertex count grows as
+// the volume shrinks but not strictly (TetGen's quality refinement adds points unevenly), so the search
+// brackets the target between a volume with too few vertices and one with enough, and halves the bracket in
+// log scale until its ends are within 10% (volumes rounded to 3 significant digits, so the switches read
+// plainly). Deterministic: the same cage and options try the same volumes and give the same mesh. Throws as
+// tetrahedralize, and NumericalError when no volume reaches the target within the search's 40 meshings.
+struct TetgenForVertices {
+  TetMesh mesh;
+  TetgenOptions options;  // the switches that made `mesh` (max_volume: the volume found)
+  int meshings = 0;       // TetGen runs of the search
+};
+TetgenForVertices tetrahedralize_min_vertices(const TriMesh& cage, TetgenOptions options, int min_vertices);
+
 // Refines an existing tet mesh with TetGen (-r) to the quality and volume bounds of `options`, keeping its
 // vertices and boundary. Works where the cage itself cannot be tetrahedralized (e.g. the animal's slightly
 // self-intersecting cage, whose published tet mesh is valid). Errors as for tetrahedralize.
