@@ -14,7 +14,6 @@
 // per core and stays meaningful when other processes share the machine); exit code 2 when the data is
 // missing.
 #include <omp.h>
-#include <sys/resource.h>
 
 #include <Eigen/Core>
 #include <algorithm>
@@ -49,58 +48,17 @@ struct Options {
   int reps = 3;
   int max_points = 30000;
   int max_threads = 2;
-  std::vector<std::string> models = {"animal", "bar"};
+  std::vector<std::string> models;
 };
 
-struct Timing {
-  double median_ms = 0, min_ms = 0;  // wall clock
-  double median_cpu_ms = 0;          // process CPU time (user + system, all threads)
-  double checksum = 0;
-};
-
-double cpu_ms() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return 1e3 * (u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-3 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
-
-std::string loadavg() {
-  std::FILE* f = std::fopen("/proc/loadavg", "r");
-  char buf[128] = {0};
-  if (f) {
-    if (!std::fgets(buf, sizeof buf, f)) buf[0] = 0;
-    std::fclose(f);
+// Times `work` (bench::time_reps) and stops the program (exit code 3) when its checksum changed between
+// repetitions.
+bench::Timing time_checked(int reps, const std::function<double()>& work) {
+  const bench::Timing t = bench::time_reps(reps, work);
+  if (!t.checksum_same) {
+    std::cerr << "bench_basis: checksum changed between repetitions\n";
+    std::exit(3);
   }
-  std::string s = buf;
-  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-  return s.empty() ? "unknown" : s;
-}
-
-// Runs `fn` once untimed (warm-up: page faults, caches), then `reps` times; returns median and min.
-Timing time_it(int reps, const std::function<double()>& fn) {
-  Timing t;
-  t.checksum = fn();
-  std::vector<double> ms, cpu;
-  for (int r = 0; r < reps; ++r) {
-    const double c0 = cpu_ms();
-    const auto t0 = Clock::now();
-    const double c = fn();
-    ms.push_back(ms_since(t0));
-    cpu.push_back(cpu_ms() - c0);
-    if (std::abs(c - t.checksum) > 1e-9 * std::max(1.0, std::abs(t.checksum))) {
-      std::cerr << "bench_basis: checksum changed between repetitions (" << c << " vs " << t.checksum
-                << ")\n";
-      std::exit(3);
-    }
-  }
-  t.min_ms = *std::min_element(ms.begin(), ms.end());
-  t.median_ms = median(ms);
-  t.median_cpu_ms = median(cpu);
   return t;
 }
 
@@ -122,43 +80,6 @@ double evaluate_all(const HarmonicBasis& B, const MatX3d& P, int order) {
     }
   }
   return checksum;
-}
-
-std::string fmt(double v, int prec) {
-  return bench::fixed(v, prec);
-}
-
-std::string fmt_sci(double v) {
-  return bench::sci(v, 3);
-}
-
-// The optimization/target flags green_coordinates.cpp was compiled with, read from the build's
-// compile_commands.json (CMAKE_EXPORT_COMPILE_COMMANDS), so the report shows what the measured code really
-// used.
-std::string basis_compile_flags() {
-  const std::string path = std::string(LIDEF_BUILD_DIR) + "/compile_commands.json";
-  std::ifstream in(path);
-  if (!in) return "unknown (" + path + " not found)";
-  nlohmann::json db;
-  try {
-    in >> db;
-  } catch (const std::exception&) {
-    return "unknown (" + path + " unreadable)";
-  }
-  const std::string suffix = "/deform/src/green_coordinates.cpp";
-  for (const auto& entry : db) {
-    const std::string file = entry.value("file", "");
-    if (file.size() < suffix.size() || file.compare(file.size() - suffix.size(), suffix.size(), suffix) != 0)
-      continue;
-    std::istringstream cmd(entry.value("command", ""));
-    std::string tok, flags;
-    while (cmd >> tok)
-      if (tok.rfind("-O", 0) == 0 || tok.rfind("-m", 0) == 0 || tok.rfind("-f", 0) == 0 ||
-          tok.rfind("-std", 0) == 0 || tok == "-DNDEBUG" || tok.rfind("-g", 0) == 0)
-        flags += (flags.empty() ? "" : " ") + tok;
-    return flags;
-  }
-  return "unknown (green_coordinates.cpp not in " + path + ")";
 }
 
 // Vector instruction sets enabled for this translation unit (Eigen's string does not name AVX2/FMA
@@ -184,53 +105,29 @@ std::string target_macros() {
   return s.empty() ? "none beyond SSE2" : s;
 }
 
-void usage() {
-  std::cerr << "usage: bench_basis [DATA_DIR] [--reps R] [--points N] [--threads T] [--models a,b]\n";
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   Options opt;
-  if (const char* env = std::getenv("LIDEF_SHARED_DATA")) opt.data = env;
-  if (opt.data.empty()) opt.data = LIDEF_SHARED_DATA_DIR;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        usage();
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    try {
-      if (a == "--reps")
-        opt.reps = std::stoi(next());
-      else if (a == "--points")
-        opt.max_points = std::stoi(next());
-      else if (a == "--threads")
-        opt.max_threads = std::stoi(next());
-      else if (a == "--models") {
-        opt.models.clear();
-        std::stringstream ss(next());
-        std::string m;
-        while (std::getline(ss, m, ','))
-          if (!m.empty()) opt.models.push_back(m);
-      } else if (a == "-h" || a == "--help") {
-        usage();
-        return 0;
-      } else if (!a.empty() && a[0] == '-') {
-        usage();
-        return 2;
-      } else
-        opt.data = a;
-    } catch (const std::exception&) {
-      usage();
-      return 2;
-    }
-  }
-  if (opt.reps < 1 || opt.max_points < 1 || opt.max_threads < 1 || opt.models.empty()) {
-    usage();
+  opt.data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR);
+  std::string models = "animal,bar";
+  CLI::App app{
+      "bench_basis: harmonic basis evaluation (values, gradients, Hessians) at each model's samples.xyz, "
+      "and the GEMM with the stored gradient matrix; a markdown report on stdout"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("DATA_DIR", opt.data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  app.add_option("--reps", opt.reps,
+                 "timed repetitions per configuration; the median and the minimum are reported")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--points", opt.max_points, "use at most N points of each model's samples.xyz")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--threads", opt.max_threads, "largest thread count; runs 1 and T")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--models", models, "comma-separated model names");
+  if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
+  opt.models = bench::split_list(models);
+  if (opt.models.empty()) {
+    std::cerr << "bench_basis: --models: no model named\n";
     return 2;
   }
   std::vector<int> thread_counts = {1};
@@ -241,19 +138,19 @@ int main(int argc, char** argv) {
   std::cout << "- Eigen " << EIGEN_WORLD_VERSION << "." << EIGEN_MAJOR_VERSION << "." << EIGEN_MINOR_VERSION
             << ", Eigen::SimdInstructionSetsInUse(): " << Eigen::SimdInstructionSetsInUse()
             << "; compiler target macros: " << target_macros() << "\n";
-  std::cout << "- compiler: GCC-compatible " << __VERSION__
-            << "; green_coordinates.cpp compiled with: " << basis_compile_flags() << "\n";
+  std::cout << "- compiler: GCC-compatible " << __VERSION__ << "; green_coordinates.cpp compiled with: "
+            << bench::compile_flags(LIDEF_BUILD_DIR, "/deform/src/green_coordinates.cpp") << "\n";
   std::cout << "- OpenMP: omp_get_num_procs() = " << omp_get_num_procs() << ", thread counts run: ";
   for (size_t k = 0; k < thread_counts.size(); ++k) std::cout << (k ? ", " : "") << thread_counts[k];
   std::cout << "\n- repetitions: " << opt.reps
             << " timed (after 1 untimed warm-up); median and min reported\n";
-  std::cout << "- load average at start (/proc/loadavg): " << loadavg() << "\n";
+  std::cout << "- load average at start (/proc/loadavg): " << bench::load_average() << "\n";
 
   struct Row {
     std::string model, what;
     int faces, n, threads;
     Eigen::Index points;
-    Timing t;
+    bench::Timing t;
     bool per_face;  // report points/s and ns per point×face
     std::string extra;
   };
@@ -281,27 +178,28 @@ int main(int argc, char** argv) {
     for (int order = 0; order < 3; ++order)
       for (const int th : thread_counts) {
         omp_set_num_threads(th);
-        const Timing t = time_it(opt.reps, [&] { return evaluate_all(B, P, order); });
+        const bench::Timing t = time_checked(opt.reps, [&] { return evaluate_all(B, P, order); });
         rows.push_back({name, names[order], nf, n, th, N, t, true, ""});
-        std::cerr << "  " << names[order] << ", " << th << " thread(s): " << fmt(t.median_ms, 1) << " ms\n";
+        std::cerr << "  " << names[order] << ", " << th << " thread(s): " << bench::fixed(t.med(), 1)
+                  << " ms\n";
       }
 
     // The precomputed gradient matrix G (3N by n, what HarmonicBasis::gradient_matrix returns) and the
     // per-map contraction J-stack = G y, a dense (3N by n) x (n by 3) product.
     omp_set_num_threads(thread_counts.back());
     MatXd G;
-    const Timing tg = time_it(1, [&] {
+    const bench::Timing tg = time_checked(1, [&] {
       G = B.gradient_matrix(P);
       return G(0, 0);
     });
     rows.push_back({name, "gradient_matrix build (3N x n, stored)", nf, n, thread_counts.back(), N, tg, true,
-                    fmt(8.0 * G.size() / (1 << 30), 2) + " GiB"});
+                    bench::fixed(8.0 * G.size() / (1 << 30), 2) + " GiB"});
     // Memory bandwidth reference: one pass reading G (a sum), 1 thread. GEMM cannot beat this.
     {
       omp_set_num_threads(1);
-      const Timing t = time_it(opt.reps, [&] { return G.sum(); });
+      const bench::Timing t = time_checked(opt.reps, [&] { return G.sum(); });
       rows.push_back({name, "read G once (G.sum(), bandwidth reference)", nf, n, 1, N, t, false,
-                      fmt(8.0 * G.size() / (t.median_ms * 1e6), 2) + " GB/s"});
+                      bench::fixed(8.0 * G.size() / (t.med() * 1e6), 2) + " GB/s"});
     }
     // Identity coefficients: G y must stack J(p_i)ᵀ = I, a sanity check that G is what is being multiplied.
     const MatXd y = cage->identity_coefficients();
@@ -309,7 +207,7 @@ int main(int argc, char** argv) {
     for (const int th : thread_counts) {
       omp_set_num_threads(th);
       Eigen::setNbThreads(th);
-      const Timing t = time_it(opt.reps, [&] {
+      const bench::Timing t = time_checked(opt.reps, [&] {
         JJ.noalias() = G * y;
         return JJ.sum();
       });
@@ -321,13 +219,14 @@ int main(int argc, char** argv) {
                       "GEMM G y: (" + std::to_string(G.rows()) + " x " + std::to_string(G.cols()) + ") x (" +
                           std::to_string(G.cols()) + " x 3)",
                       nf, n, th, N, t, false,
-                      fmt(flops / (t.median_ms * 1e6), 2) + " GFLOP/s, " +
-                          fmt(bytes / (t.median_ms * 1e6), 2) + " GB/s; max abs(J-I) = " + fmt_sci(err)});
-      std::cerr << "  GEMM, " << th << " thread(s): " << fmt(t.median_ms, 1) << " ms, max|J-I| " << err
+                      bench::fixed(flops / (t.med() * 1e6), 2) + " GFLOP/s, " +
+                          bench::fixed(bytes / (t.med() * 1e6), 2) +
+                          " GB/s; max abs(J-I) = " + bench::sci(err)});
+      std::cerr << "  GEMM, " << th << " thread(s): " << bench::fixed(t.med(), 1) << " ms, max|J-I| " << err
                 << "\n";
 
       // The same product as three matrix-vector products (three passes over G), for comparison.
-      const Timing tv = time_it(opt.reps, [&] {
+      const bench::Timing tv = time_checked(opt.reps, [&] {
         for (int c = 0; c < 3; ++c) JJ.col(c).noalias() = G * y.col(c);
         return JJ.sum();
       });
@@ -335,25 +234,26 @@ int main(int argc, char** argv) {
       for (Eigen::Index i = 0; i < N; ++i)
         errv = std::max(errv, (JJ.middleRows(3 * i, 3) - MatXd::Identity(3, 3)).cwiseAbs().maxCoeff());
       rows.push_back({name, "same product as 3 GEMVs G y_c", nf, n, th, N, tv, false,
-                      fmt(flops / (tv.median_ms * 1e6), 2) + " GFLOP/s, " +
-                          fmt(3 * bytes / (tv.median_ms * 1e6), 2) +
-                          " GB/s; max abs(J-I) = " + fmt_sci(errv)});
+                      bench::fixed(flops / (tv.med() * 1e6), 2) + " GFLOP/s, " +
+                          bench::fixed(3 * bytes / (tv.med() * 1e6), 2) +
+                          " GB/s; max abs(J-I) = " + bench::sci(errv)});
     }
   }
 
-  std::cout << "- load average at end (/proc/loadavg): " << loadavg() << "\n\n";
+  std::cout << "- load average at end (/proc/loadavg): " << bench::load_average() << "\n\n";
   std::cout << "| model | faces | basis fns | points | quantity | threads | median ms | min ms | CPU ms | "
                "points/s | "
                "ns / (point x face) | CPU ns / (point x face) | notes |\n";
   std::cout << "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---|\n";
   for (const Row& r : rows) {
-    const double s = r.t.median_ms * 1e-3;
+    const double s = r.t.med() * 1e-3;
     std::cout << "| " << r.model << " | " << r.faces << " | " << r.n << " | " << r.points << " | " << r.what
-              << " | " << r.threads << " | " << fmt(r.t.median_ms, 1) << " | " << fmt(r.t.min_ms, 1) << " | "
-              << fmt(r.t.median_cpu_ms, 1) << " | " << (r.per_face ? fmt_sci(r.points / s) : "") << " | "
-              << (r.per_face ? fmt(1e9 * s / (double(r.points) * r.faces), 1) : "") << " | "
-              << (r.per_face ? fmt(1e6 * r.t.median_cpu_ms / (double(r.points) * r.faces), 1) : "") << " | "
-              << r.extra << " |\n";
+              << " | " << r.threads << " | " << bench::fixed(r.t.med(), 1) << " | "
+              << bench::fixed(r.t.min(), 1) << " | " << bench::fixed(r.t.med_cpu(), 1) << " | "
+              << (r.per_face ? bench::sci(r.points / s) : "") << " | "
+              << (r.per_face ? bench::fixed(1e9 * s / (double(r.points) * r.faces), 1) : "") << " | "
+              << (r.per_face ? bench::fixed(1e6 * r.t.med_cpu() / (double(r.points) * r.faces), 1) : "")
+              << " | " << r.extra << " |\n";
   }
   std::cout
       << "\nmedian/min ms: wall clock. CPU ms: process CPU time of the timed run (user + system, all "
@@ -367,7 +267,7 @@ int main(int argc, char** argv) {
       for (const Row& m : rows)
         if (m.model == g.model && m.threads == g.threads && m.what.rfind("GEMM", 0) == 0)
           std::cout << "- " << g.model << ", " << g.threads << " thread(s): gradients "
-                    << fmt(g.t.median_ms, 1) << " ms vs GEMM " << fmt(m.t.median_ms, 1) << " ms (x"
-                    << fmt(g.t.median_ms / m.t.median_ms, 0) << ")\n";
+                    << bench::fixed(g.t.med(), 1) << " ms vs GEMM " << bench::fixed(m.t.med(), 1) << " ms (x"
+                    << bench::fixed(g.t.med() / m.t.med(), 0) << ")\n";
   return 0;
 }

@@ -36,7 +36,6 @@
 // Usage: bench_certificate [DATA_DIR] [--reps R] [--threads T] [--models a,b] [--voxels N] [--s S]
 //                          [--sigma-target X] [--no-validate]
 #include <omp.h>
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include <Eigen/Core>
@@ -84,14 +83,8 @@ struct Options {
   double sigma_target = 0.45;
   double far_reach = CertifyParams{}.far_field_reach;
   bool validate = true;
-  std::vector<std::string> models = {"bar", "animal"};
+  std::vector<std::string> models;
 };
-
-double cpu_ms() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return 1e3 * (u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-3 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
 
 // Resident set size in bytes (/proc/self/statm, second field); 0 when unavailable.
 double rss_bytes() {
@@ -101,73 +94,11 @@ double rss_bytes() {
   return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE));
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
-double minimum(const std::vector<double>& v) {
-  return v.empty() ? 0 : *std::min_element(v.begin(), v.end());
-}
-
-std::string loadavg() {
-  std::ifstream in("/proc/loadavg");
-  std::string s;
-  std::getline(in, s);
-  return s.empty() ? "unknown" : s;
-}
-
-// First line of /proc/pressure/cpu ("some avg10=.. avg60=.. ..."): the share of time a runnable task waited
-// for a CPU, i.e. how much other load competed with the benchmark.
-std::string cpu_pressure() {
-  std::ifstream in("/proc/pressure/cpu");
-  std::string s;
-  std::getline(in, s);
-  const auto t = s.find(" total=");
-  if (t != std::string::npos) s.resize(t);
-  return s.empty() ? "unavailable" : s;
-}
-
-std::string fmt(double v, int prec) {
-  return bench::fixed(v, prec);
-}
-
-std::string fmt_sci(double v, int prec = 3) {
-  return bench::sci(v, prec);
-}
-
 // Whether the header declares a float-storage allowance (the float storage of the reduced matrices).
 template <class T, class = void>
 struct declares_float_storage : std::false_type {};
 template <class T>
 struct declares_float_storage<T, std::void_t<decltype(T::kFloatStorageRel)>> : std::true_type {};
-
-// Optimization flags octree_certifier.cpp was compiled with (from this build's compile_commands.json).
-std::string certifier_compile_flags() {
-  const std::string path = std::string(LIDEF_BUILD_DIR) + "/compile_commands.json";
-  std::ifstream in(path);
-  if (!in) return "unknown (" + path + " not found)";
-  nlohmann::json db;
-  try {
-    in >> db;
-  } catch (const std::exception&) {
-    return "unknown (" + path + " unreadable)";
-  }
-  const std::string suffix = "/deform/src/octree_certifier.cpp";
-  for (const auto& entry : db) {
-    const std::string file = entry.value("file", "");
-    if (file.size() < suffix.size() || file.compare(file.size() - suffix.size(), suffix.size(), suffix) != 0)
-      continue;
-    std::istringstream cmd(entry.value("command", ""));
-    std::string tok, flags;
-    while (cmd >> tok)
-      if (tok.rfind("-O", 0) == 0 || tok.rfind("-m", 0) == 0 || tok.rfind("-f", 0) == 0 ||
-          tok.rfind("-std", 0) == 0 || tok == "-DNDEBUG" || tok.rfind("-g", 0) == 0)
-        flags += (flags.empty() ? "" : " ") + tok;
-    return flags;
-  }
-  return "unknown (octree_certifier.cpp not in " + path + ")";
-}
 
 // Modification times of the certifier source and of the library this program was linked with, so a report
 // shows which version of octree_certifier.cpp it measured (and warns when the source is newer than the
@@ -178,10 +109,7 @@ std::string file_time(const std::string& path) {
   if (ec) return "unknown";
   const auto sys = std::chrono::time_point_cast<std::chrono::system_clock::duration>(
       ft - std::filesystem::file_time_type::clock::now() + std::chrono::system_clock::now());
-  const std::time_t t = std::chrono::system_clock::to_time_t(sys);
-  char buf[64];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", std::gmtime(&t));
-  return buf;
+  return bench::utc_text(std::chrono::system_clock::to_time_t(sys));
 }
 
 struct RunResult {
@@ -211,6 +139,11 @@ struct Row {
   Stages st;
   double bytes = 0, flops = 0, stream_gbs = 0, stream_ms = 0;
 };
+
+[[noreturn]] void fail(const std::string& msg) {
+  std::cerr << "bench_certificate: CHECK FAILED: " << msg << "\n";
+  std::exit(3);
+}
 
 // One pass reading every element of `v` (a reduction): the bandwidth reference. Returns the checksum.
 template <class T>
@@ -246,18 +179,9 @@ StreamTiming time_read(size_t n1, size_t n2, int reps, int threads) {
   const std::vector<T1> a = filled<T1>(n1);
   const std::vector<T2> b = filled<T2>(n2);
   omp_set_num_threads(threads);
-  const double ref = read_pass(a) + read_pass(b);  // warm-up
-  std::vector<double> ms;
-  for (int r = 0; r < reps; ++r) {
-    const auto t0 = Clock::now();
-    const double c = read_pass(a) + read_pass(b);
-    ms.push_back(ms_since(t0));
-    if (std::abs(c - ref) > 1e-9 * std::abs(ref)) {
-      std::cerr << "bench_certificate: read-pass checksum changed\n";
-      std::exit(3);
-    }
-  }
-  return {median(ms), minimum(ms), double(n1) * sizeof(T1) + double(n2) * sizeof(T2)};
+  const bench::Timing t = bench::time_reps(reps, [&] { return read_pass(a) + read_pass(b); });
+  if (!t.checksum_same) fail("read-pass checksum changed");
+  return {t.med(), t.min(), double(n1) * sizeof(T1) + double(n2) * sizeof(T2)};
 }
 
 StreamTiming time_read_dispatch(int e1, size_t n1, int e2, size_t n2, int reps, int threads) {
@@ -267,70 +191,42 @@ StreamTiming time_read_dispatch(int e1, size_t n1, int e2, size_t n2, int reps, 
   return time_read<double, double>(n1, n2, reps, threads);
 }
 
-void usage() {
-  std::cerr
-      << "usage: bench_certificate [DATA_DIR] [--reps R] [--threads T] [--models a,b] [--voxels N] [--s S]\n"
-         "                         [--sigma-target X] [--far-reach K] [--no-validate]\n";
-}
-
-[[noreturn]] void fail(const std::string& msg) {
-  std::cerr << "bench_certificate: CHECK FAILED: " << msg << "\n";
-  std::exit(3);
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   Options opt;
-  if (const char* env = std::getenv("LIDEF_SHARED_DATA")) opt.data = env;
-  if (opt.data.empty()) opt.data = LIDEF_SHARED_DATA_DIR;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        usage();
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    try {
-      if (a == "--reps")
-        opt.reps = std::stoi(next());
-      else if (a == "--threads")
-        opt.max_threads = std::stoi(next());
-      else if (a == "--voxels")
-        opt.voxels = std::stoi(next());
-      else if (a == "--s")
-        opt.s = std::stoi(next());
-      else if (a == "--sigma-target")
-        opt.sigma_target = std::stod(next());
-      else if (a == "--far-reach")
-        opt.far_reach = std::stod(next());
-      else if (a == "--no-validate")
-        opt.validate = false;
-      else if (a == "--models") {
-        opt.models.clear();
-        std::stringstream ss(next());
-        std::string m;
-        while (std::getline(ss, m, ','))
-          if (!m.empty()) opt.models.push_back(m);
-      } else if (a == "-h" || a == "--help") {
-        usage();
-        return 0;
-      } else if (!a.empty() && a[0] == '-') {
-        usage();
-        return 2;
-      } else
-        opt.data = a;
-    } catch (const std::exception&) {
-      usage();
-      return 2;
-    }
-  }
-  if (opt.reps < 1 || opt.max_threads < 1 || opt.voxels < 1 || opt.s < 5 || opt.models.empty() ||
-      !(opt.sigma_target > 0 && opt.sigma_target < 1)) {
-    usage();
+  opt.data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR);
+  std::string models = "bar,animal";
+  bool no_validate = false;
+  CLI::App app{
+      "bench_certificate: the local-injectivity certificate in the reduced space (certify_reduced) "
+      "on an identity and a deformed map per model: per-stage times, bytes streamed and a read-pass "
+      "bandwidth reference; a markdown report on stdout"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("DATA_DIR", opt.data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  app.add_option("--reps", opt.reps, "timed repetitions per configuration (after 2 untimed warm-ups)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--threads", opt.max_threads, "largest thread count; runs 1 and T")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--models", models, "comma-separated model names");
+  app.add_option("--voxels", opt.voxels, "target voxel count of sample_voxels")->check(CLI::PositiveNumber);
+  app.add_option("--s", opt.s, "subspace size s")->check(CLI::Range(5, 1 << 20));
+  app.add_option("--sigma-target", opt.sigma_target,
+                 "min sigma3 over the base centers of the deformed map, in (0, 1)")
+      ->check(CLI::Validator(
+          [](std::string& v) {
+            const double x = std::atof(v.c_str());
+            return x > 0 && x < 1 ? std::string() : "must lie strictly between 0 and 1";
+          },
+          "in (0, 1)"));
+  app.add_option("--far-reach", opt.far_reach, "CertifyParams::far_field_reach of the far-field rows");
+  app.add_flag("--no-validate", no_validate, "skip the validation against the full-space certifier");
+  if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
+  opt.validate = !no_validate;
+  opt.models = bench::split_list(models);
+  if (opt.models.empty()) {
+    std::cerr << "bench_certificate: --models: no model named\n";
     return 2;
   }
   std::vector<int> thread_counts = {1};
@@ -342,8 +238,8 @@ int main(int argc, char** argv) {
   std::cout << "- data: " << opt.data << "\n";
   std::cout << "- octree_certifier.cpp: source modified " << file_time(src) << "; linked library "
             << LIDEF_CORE_FILE << " built " << file_time(LIDEF_CORE_FILE) << "\n";
-  std::cout << "- compiler: GCC-compatible " << __VERSION__
-            << "; octree_certifier.cpp compiled with: " << certifier_compile_flags() << "\n";
+  std::cout << "- compiler: GCC-compatible " << __VERSION__ << "; octree_certifier.cpp compiled with: "
+            << bench::compile_flags(LIDEF_BUILD_DIR, "/deform/src/octree_certifier.cpp") << "\n";
   std::cout << "- OpenMP: omp_get_num_procs() = " << omp_get_num_procs() << ", thread counts run: ";
   for (size_t k = 0; k < thread_counts.size(); ++k) std::cout << (k ? ", " : "") << thread_counts[k];
   std::cout
@@ -351,8 +247,8 @@ int main(int argc, char** argv) {
       << " timed; median and min reported; keep_leaves = false, other CertifyParams at their defaults\n";
   std::cout << "- header declares float storage allowance (kFloatStorageRel): "
             << (header_float ? "yes" : "no") << "\n";
-  std::cout << "- load average at start (/proc/loadavg): " << loadavg()
-            << "; CPU pressure (/proc/pressure/cpu): " << cpu_pressure() << "\n";
+  std::cout << "- load average at start (/proc/loadavg): " << bench::load_average()
+            << "; CPU pressure (/proc/pressure/cpu): " << bench::cpu_pressure() << "\n";
 
   std::vector<Row> rows;
   std::vector<std::string> notes;
@@ -395,7 +291,7 @@ int main(int argc, char** argv) {
     const MatX3dCol yr_id = Xi.transpose() * y_id;
     const double id_resid = (Xi * yr_id - MatXd(y_id)).cwiseAbs().maxCoeff() / y_id.cwiseAbs().maxCoeff();
     if (!(id_resid < 1e-10))
-      fail(name + ": identity not in span Xi (rel. residual " + fmt_sci(id_resid) + ")");
+      fail(name + ": identity not in span Xi (rel. residual " + bench::sci(id_resid) + ")");
 
     // First call per bound: builds that bound's |I| by #E factor matrix (per-cage precomputation).
     CertifyParams timed;
@@ -421,7 +317,7 @@ int main(int argc, char** argv) {
                         std::to_string(elem_f[to_string(b)]) + " bytes)");
       if (!c.certified || c.refined != 0 || !(std::abs(c.min_sigma3_center - 1) < 1e-5))
         fail(name + ": identity map: certified " + std::to_string(c.certified) + ", refined " +
-             std::to_string(c.refined) + ", min sigma3 " + fmt_sci(c.min_sigma3_center, 17));
+             std::to_string(c.refined) + ", min sigma3 " + bench::sci(c.min_sigma3_center, 17));
     }
 
     // The deformed map: ỹ = ỹ_id + c D, D a fixed mix of the smooth non-affine columns 4..11.
@@ -474,14 +370,14 @@ int main(int argc, char** argv) {
       const double tol = elem_gh == 8 ? 1e-9 : 1e-5;
       validation = "reduced (stored, " + std::to_string(elem_gh) +
                    "-byte) vs full-space on-the-fly double, " + "third bound: min sigma3 " +
-                   fmt_sci(red.min_sigma3_center, 15) + " vs " + fmt_sci(ful.min_sigma3_center, 15) +
-                   " (|diff| " + fmt_sci(d_min) + "); sigma3 at " + std::to_string(compared) +
-                   " unrefined base voxels: max |diff| " + fmt_sci(d_base) + "; verdict " +
+                   bench::sci(red.min_sigma3_center, 15) + " vs " + bench::sci(ful.min_sigma3_center, 15) +
+                   " (|diff| " + bench::sci(d_min) + "); sigma3 at " + std::to_string(compared) +
+                   " unrefined base voxels: max |diff| " + bench::sci(d_base) + "; verdict " +
                    (red.certified ? "certified" : "NOT certified") + " vs " +
                    (ful.certified ? "certified" : "NOT certified") + "; refined " +
                    std::to_string(red.refined) + " vs " + std::to_string(ful.refined) + "; leaves " +
                    std::to_string(red.num_leaves) + " vs " + std::to_string(ful.num_leaves) + "; tolerance " +
-                   fmt_sci(tol) + " (" + fmt(ms_since(tv) / 1000, 1) + " s)";
+                   bench::sci(tol) + " (" + bench::fixed(ms_since(tv) / 1000, 1) + " s)";
       std::cerr << "  validation: " << validation << "\n";
       if (!(d_min <= tol) || !(d_base <= tol) || compared == 0 || red.certified != ful.certified)
         fail(name + ": " + validation);
@@ -528,11 +424,11 @@ int main(int argc, char** argv) {
         row.threads = th;
         for (int k = 0; k < opt.warmup; ++k) row.r = summarize(cert.certify_reduced(*yr, p));
         for (int k = 0; k < opt.reps; ++k) {
-          const double c0 = cpu_ms();
+          const double c0 = bench::cpu_ms();
           const auto t1 = Clock::now();
           const Certificate c = cert.certify_reduced(*yr, p);
           row.st.wall.push_back(ms_since(t1));
-          row.st.cpu.push_back(cpu_ms() - c0);
+          row.st.cpu.push_back(bench::cpu_ms() - c0);
           if (!(summarize(c) == row.r)) fail(name + ": certificate changed between repetitions");
           row.st.jac.push_back(c.ms_jacobian);
           row.st.sig.push_back(c.ms_sigma);
@@ -560,7 +456,7 @@ int main(int argc, char** argv) {
                  std::to_string(o.r.leaves) + ")");
         rows.push_back(row);
         std::cerr << "  " << mapname << ", " << row.bound << ", " << row.refine << ", " << th
-                  << " thread(s): " << fmt(median(row.st.tot), 1) << " ms\n";
+                  << " thread(s): " << bench::fixed(bench::median(row.st.tot), 1) << " ms\n";
       }
 
     // Bandwidth reference: read the same bytes (same element types) once, per thread count.
@@ -571,7 +467,7 @@ int main(int argc, char** argv) {
         const size_t factors = size_t(N) * E * (bs == "combined" || bs == "spectral" ? 2 : 1);
         stream[{b, th}] = time_read_dispatch(elem_gh, size_t(9) * N * s, elem_f[b], factors, opt.reps, th);
         std::cerr << "  read pass (" << b << " factors), " << th
-                  << " thread(s): " << fmt(stream[{b, th}].median_ms, 1) << " ms\n";
+                  << " thread(s): " << bench::fixed(stream[{b, th}].median_ms, 1) << " ms\n";
       }
     for (Row& r : rows)
       if (r.model == name) {
@@ -582,35 +478,38 @@ int main(int argc, char** argv) {
 
     std::cout << "\n## " << name << "\n\n";
     std::cout << "- cage: " << cage.num_vertices() << " vertices, " << cage.num_faces() << " faces, " << E
-              << " edges, #V+#F = " << n << "; load_model " << fmt(ms_load, 0) << " ms\n";
+              << " edges, #V+#F = " << n << "; load_model " << bench::fixed(ms_load, 0) << " ms\n";
     std::cout << "- voxels: |I| = " << N << " (target " << opt.voxels << "), side "
-              << fmt_sci(sampling.side, 6) << "; sample_voxels " << fmt(ms_sample, 0) << " ms\n";
-    std::cout << "- subspace: s = " << s << " (" << sub.solver << ", " << fmt(ms_sub, 0) << " ms)\n";
+              << bench::sci(sampling.side, 6) << "; sample_voxels " << bench::fixed(ms_sample, 0) << " ms\n";
+    std::cout << "- subspace: s = " << s << " (" << sub.solver << ", " << bench::fixed(ms_sub, 0) << " ms)\n";
     std::cout << "- precomputation (per cage, " << thread_counts.back() << " threads): OctreeCertifier(cage, "
-              << "sampling, &Xi) " << fmt(ms_build, 0)
-              << " ms (precompute_seconds() = " << fmt(cert.precompute_seconds(), 3)
+              << "sampling, &Xi) " << bench::fixed(ms_build, 0)
+              << " ms (precompute_seconds() = " << bench::fixed(cert.precompute_seconds(), 3)
               << " s); first certify_reduced per bound, which also builds "
-              << "that bound's |I| x #E factor matrix: first " << fmt(ms_first["first"], 0) << " ms, third "
-              << fmt(ms_first["third"], 0) << " ms\n";
-    std::cout << "- stored element size (resident-set growth): reduced matrices " << fmt(elem_gh_meas, 2)
-              << " bytes per entry of 9|I|s -> " << elem_gh << "-byte; factors first "
-              << fmt(elem_f_meas["first"], 2) << ", third " << fmt(elem_f_meas["third"], 2)
-              << " bytes per entry of |I|#E -> " << elem_f["first"] << "/" << elem_f["third"] << "-byte";
+              << "that bound's |I| x #E factor matrix: first " << bench::fixed(ms_first["first"], 0)
+              << " ms, third " << bench::fixed(ms_first["third"], 0) << " ms\n";
+    std::cout << "- stored element size (resident-set growth): reduced matrices "
+              << bench::fixed(elem_gh_meas, 2) << " bytes per entry of 9|I|s -> " << elem_gh
+              << "-byte; factors first " << bench::fixed(elem_f_meas["first"], 2) << ", third "
+              << bench::fixed(elem_f_meas["third"], 2) << " bytes per entry of |I|#E -> " << elem_f["first"]
+              << "/" << elem_f["third"] << "-byte";
     if (header_float != (elem_gh == 4)) std::cout << " (WARNING: header suggests the other storage type)";
     std::cout << "\n";
     std::cout << "- bytes streamed per certification: reduced matrices 9 x " << N << " x " << s << " x "
-              << elem_gh << " = " << fmt(9.0 * N * s * elem_gh / 1e6, 1) << " MB; factors " << N << " x " << E
-              << " x " << elem_f["third"] << " = " << fmt(double(N) * E * elem_f["third"] / 1e6, 1)
-              << " MB (as doubles: " << fmt((9.0 * N * s + double(N) * E) * 8 / 1e6, 1) << " MB in all)\n";
+              << elem_gh << " = " << bench::fixed(9.0 * N * s * elem_gh / 1e6, 1) << " MB; factors " << N
+              << " x " << E << " x " << elem_f["third"] << " = "
+              << bench::fixed(double(N) * E * elem_f["third"] / 1e6, 1)
+              << " MB (as doubles: " << bench::fixed((9.0 * N * s + double(N) * E) * 8 / 1e6, 1)
+              << " MB in all)\n";
     std::cout << "- deformed map: yr = Xi^T y_id + c D, D(k, k mod 3) = w_k |y_id|_max for k = 4..11, "
-              << "w = (1, -0.8, 0.6, -0.5, 0.4, -0.3, 0.25, -0.2); c = " << fmt_sci(scale, 6)
+              << "w = (1, -0.8, 0.6, -0.5, 0.4, -0.3, 0.25, -0.2); c = " << bench::sci(scale, 6)
               << " (bisection for base min sigma3 = " << opt.sigma_target << "): base min sigma3 "
-              << fmt(smin_base, 4) << "\n";
+              << bench::fixed(smin_base, 4) << "\n";
     std::cout << "- validation: " << validation << "\n";
   }
 
-  std::cout << "\n- load average at end (/proc/loadavg): " << loadavg()
-            << "; CPU pressure (/proc/pressure/cpu): " << cpu_pressure() << "\n\n";
+  std::cout << "\n- load average at end (/proc/loadavg): " << bench::load_average()
+            << "; CPU pressure (/proc/pressure/cpu): " << bench::cpu_pressure() << "\n\n";
   std::cout << "| model | map | bound | refinement | threads | verdict | min σ3 | refined | leaves | total "
                "ms (median / "
                "min) | jacobian ms | sigma ms | bound ms | refine ms | µs per child | wall ms | CPU ms | MB "
@@ -620,20 +519,24 @@ int main(int argc, char** argv) {
       << "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|-"
          "--:|---:|\n";
   for (const Row& r : rows) {
-    const double jb = median(r.st.jac) + median(r.st.bnd);
+    const double jb = bench::median(r.st.jac) + bench::median(r.st.bnd);
     // Each subdivided node has 8 children, all evaluated unless a budget runs out (then fewer: an upper
     // bound).
-    const double us_child = r.r.refined > 0 ? 1000.0 * median(r.st.ref) / (8.0 * r.r.refined) : 0.0;
+    const double us_child = r.r.refined > 0 ? 1000.0 * bench::median(r.st.ref) / (8.0 * r.r.refined) : 0.0;
     std::cout << "| " << r.model << " | " << r.map << " | " << r.bound << " | " << r.refine << " | "
               << r.threads << " | " << (r.r.certified ? "certified" : "NOT certified") << " | "
-              << fmt(r.r.min_sigma3, 4) << " | " << r.r.refined << " | " << r.r.leaves << " | "
-              << fmt(median(r.st.tot), 1) << " / " << fmt(minimum(r.st.tot), 1) << " | "
-              << fmt(median(r.st.jac), 1) << " | " << fmt(median(r.st.sig), 1) << " | "
-              << fmt(median(r.st.bnd), 1) << " | " << fmt(median(r.st.ref), 1) << " | "
-              << (r.r.refined > 0 ? fmt(us_child, 1) : "-") << " | " << fmt(median(r.st.wall), 1) << " | "
-              << fmt(median(r.st.cpu), 1) << " | " << fmt(r.bytes / 1e6, 0) << " | "
-              << fmt(r.bytes / (jb * 1e6), 2) << " | " << fmt(r.flops / (median(r.st.jac) * 1e6), 2) << " | "
-              << fmt(r.stream_ms, 1) << " | " << fmt(r.stream_gbs, 2) << " |\n";
+              << bench::fixed(r.r.min_sigma3, 4) << " | " << r.r.refined << " | " << r.r.leaves << " | "
+              << bench::fixed(bench::median(r.st.tot), 1) << " / "
+              << bench::fixed(bench::minimum(r.st.tot), 1) << " | "
+              << bench::fixed(bench::median(r.st.jac), 1) << " | " << bench::fixed(bench::median(r.st.sig), 1)
+              << " | " << bench::fixed(bench::median(r.st.bnd), 1) << " | "
+              << bench::fixed(bench::median(r.st.ref), 1) << " | "
+              << (r.r.refined > 0 ? bench::fixed(us_child, 1) : "-") << " | "
+              << bench::fixed(bench::median(r.st.wall), 1) << " | "
+              << bench::fixed(bench::median(r.st.cpu), 1) << " | " << bench::fixed(r.bytes / 1e6, 0) << " | "
+              << bench::fixed(r.bytes / (jb * 1e6), 2) << " | "
+              << bench::fixed(r.flops / (bench::median(r.st.jac) * 1e6), 2) << " | "
+              << bench::fixed(r.stream_ms, 1) << " | " << bench::fixed(r.stream_gbs, 2) << " |\n";
   }
   std::cout
       << "\nStage columns: medians of Certificate::ms_jacobian / ms_sigma / ms_bound / ms_refine; total = "

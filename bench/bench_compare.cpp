@@ -24,10 +24,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
-#include <sstream>
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "lidef/blas_kernel.h"
 #include "lidef/compare/compare.h"
 #include "lidef/errors.h"
@@ -38,53 +38,33 @@
 namespace fs = std::filesystem;
 
 namespace {
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string x; std::getline(ss, x, ',');)
-    if (!x.empty()) out.push_back(x);
-  return out;
-}
 std::string g(double x, int p = 3) {
   return std::isnan(x) ? "—" : lidef::format_g(x, p);
 }
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data, cache = "/tmp/lidef-bench-cache";
-  std::vector<std::string> only;
+  std::string data = lidef::bench::default_data_dir(LIDEF_SHARED_DATA_DIR), cache = "/tmp/lidef-bench-cache";
+  std::string only_list, methods;
   lidef::CompareOptions opt;
+  for (const std::string& m : opt.methods) methods += (methods.empty() ? "" : ",") + m;
   int threads = 0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << "bench_compare: " << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--only")
-      only = split(next());
-    else if (a == "--methods")
-      opt.methods = split(next());
-    else if (a == "--threads")
-      threads = std::atoi(next().c_str());
-    else if (a == "--tet-max-iterations")
-      opt.tet_max_iterations = std::atoi(next().c_str());
-    else if (a == "--fine-volume-factor")
-      opt.fine_volume_factor = std::atof(next().c_str());
-    else if (a == "--cache-dir")
-      cache = next();
-    else if (!a.empty() && a[0] != '-')
-      data = a;
-    else {
-      std::cerr << "bench_compare: unknown option " << a << "\n";
-      return 2;
-    }
-  }
-  if (data.empty())
-    data = std::getenv("LIDEF_SHARED_DATA") ? std::getenv("LIDEF_SHARED_DATA") : LIDEF_SHARED_DATA_DIR;
+  CLI::App app{
+      "bench_compare: every method of `lidef compare` (the paper's Table 1) on every shared scenario, "
+      "in one process; per scenario the Table-1-style table, then solve times and ratios to lidef"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("DATA_DIR", data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  app.add_option("--only", only_list, "comma-separated scenario or model names");
+  app.add_option("--methods", methods, "comma-separated methods");
+  app.add_option("--threads", threads, "OpenMP and OpenBLAS threads for every method (0: the default)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--fine-volume-factor", opt.fine_volume_factor,
+                 "pwl-tet-fine: TetGen's max tet volume over lidef's voxel volume");
+  app.add_option("--tet-max-iterations", opt.tet_max_iterations, "iteration limit of the tet methods");
+  app.add_option("--cache-dir", cache, "lidef's subspace cache folder");
+  if (const int rc = lidef::bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
+  const std::vector<std::string> only = lidef::bench::split_list(only_list);
+  opt.methods = lidef::bench::split_list(methods);
   if (!fs::is_directory(fs::path(data) / "scenarios")) {
     std::cerr << "bench_compare: no scenarios folder in " << data << " (skipped)\n";
     return 0;

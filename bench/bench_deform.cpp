@@ -90,8 +90,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
 struct Options {
   std::string data;       // shared data folder
   std::string scenarios;  // folder of scenario JSONs (default data/scenarios)
@@ -102,7 +100,7 @@ struct Options {
   int reps = 7;        // Hessian / SYRK repetitions
   int cg_steps = -1;   // >= 0: newton_cg_steps for every scenario (-1: the scenario's)
   std::string cache_dir = "/tmp/lidef-bench-cache";
-  std::vector<std::string> hessian_models = {"bar", "animal"};
+  std::vector<std::string> hessian_models;
   bool compare = true;
   bool markdown_only = false;
 };
@@ -116,102 +114,6 @@ const std::vector<std::string> kOrder = {"bar_bend",         "bar_twist90",    "
                                          "beam_bend"};
 // Per-iteration targets at 900 DOF (ms, mean over iterations 2..N).
 const std::map<std::string, double> kTargets = {{"bar", 150.0}, {"animal", 400.0}};
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
-double minimum(const std::vector<double>& v) {
-  return v.empty() ? std::nan("") : *std::min_element(v.begin(), v.end());
-}
-
-using bench::sci;
-std::string fmt(double v, int prec) {
-  return bench::fixed(v, prec);
-}
-
-std::string first_line(const std::string& path) {
-  std::ifstream in(path);
-  std::string s;
-  std::getline(in, s);
-  return s;
-}
-std::string loadavg() {
-  const std::string s = first_line("/proc/loadavg");
-  return s.empty() ? "unknown" : s;
-}
-std::string cpu_pressure() {
-  std::string s = first_line("/proc/pressure/cpu");
-  const auto t = s.find(" total=");
-  if (t != std::string::npos) s.resize(t);
-  return s.empty() ? "unavailable" : s;
-}
-std::string mem_total() {
-  std::ifstream in("/proc/meminfo");
-  std::string key;
-  double kb = 0;
-  std::string unit;
-  while (in >> key >> kb >> unit)
-    if (key == "MemTotal:") return fmt(kb / (1024.0 * 1024.0), 1) + " GiB";
-  return "unknown";
-}
-std::string utc_now() {
-  const std::time_t t = std::time(nullptr);
-  char buf[64];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", std::gmtime(&t));
-  return buf;
-}
-
-// Output of a shell command (first lines), for the git state of the measured source.
-std::string command_output(const std::string& cmd) {
-  std::string out;
-  if (FILE* p = popen(cmd.c_str(), "r")) {
-    char buf[512];
-    while (fgets(buf, sizeof buf, p)) out += buf;
-    pclose(p);
-  }
-  while (!out.empty() && (out.back() == '\n' || out.back() == ' ')) out.pop_back();
-  return out;
-}
-
-// Optimization flags a core source was compiled with (this build's compile_commands.json).
-std::string compile_flags(const std::string& file_suffix) {
-  std::ifstream in(std::string(LIDEF_BUILD_DIR) + "/compile_commands.json");
-  if (!in) return "unknown";
-  nlohmann::json db;
-  try {
-    in >> db;
-  } catch (const std::exception&) {
-    return "unknown";
-  }
-  for (const auto& entry : db) {
-    const std::string file = entry.value("file", "");
-    if (file.size() < file_suffix.size() ||
-        file.compare(file.size() - file_suffix.size(), file_suffix.size(), file_suffix) != 0)
-      continue;
-    std::istringstream cmd(entry.value("command", ""));
-    std::string tok, flags;
-    while (cmd >> tok)
-      if (tok.rfind("-O", 0) == 0 || tok.rfind("-m", 0) == 0 || tok.rfind("-f", 0) == 0 || tok == "-DNDEBUG")
-        flags += (flags.empty() ? "" : " ") + tok;
-    return flags;
-  }
-  return "unknown";
-}
-
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> v;
-  std::stringstream ss(s);
-  std::string m;
-  while (std::getline(ss, m, ','))
-    if (!m.empty()) v.push_back(m);
-  return v;
-}
 
 bool contains(const std::vector<std::string>& v, const std::string& x) {
   return std::find(v.begin(), v.end(), x) != v.end();
@@ -258,27 +160,10 @@ std::string stop_text(const RunResult& r) {
   return s;
 }
 
-struct Timing {
-  std::vector<double> ms;
-  double med() const { return median(ms); }
-  double min() const { return minimum(ms); }
-};
-template <class F>
-Timing time_reps(int reps, F&& f) {
-  f();  // warm-up
-  Timing t;
-  for (int r = 0; r < reps; ++r) {
-    const auto t0 = Clock::now();
-    f();
-    t.ms.push_back(ms_since(t0));
-  }
-  return t;
-}
-
 struct HessRow {
   std::string scenario, model;
   int s = 0, h = 0;
-  Timing hess, psd, syrk, block, fused;
+  bench::Timing hess, psd, syrk, block, fused;
   double hess_flops = 0, syrk_flops = 0, block_flops = 0, fused_flops = 0;
   double checksum = 0;
 };
@@ -297,12 +182,12 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
   row.h = m;
   const MatJT JT = E.jacobians(solver.reduced_coefficients());
   MatXd Hd;
-  row.hess = time_reps(reps, [&] { Hd = E.distortion_hessian(JT, true, false); });
+  row.hess = bench::time_reps(reps, [&] { Hd = E.distortion_hessian(JT, true, false); });
   row.checksum = Hd.trace();
   // The per-sample part alone: the |H| PSD-projected 9x9 blocks (the same OpenMP loop as the library's).
   std::vector<Mat9> blocks(m);
   const std::vector<int>& sub = E.hessian_subset();
-  row.psd = time_reps(reps, [&] {
+  row.psd = bench::time_reps(reps, [&] {
 #pragma omp parallel for schedule(static)
     for (int q = 0; q < m; ++q) blocks[q] = sd_hessian_psd(JT.middleRows<3>(3 * sub[q]).transpose());
   });
@@ -316,7 +201,7 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
   // SYRK has no split over OpenMP's threads: OpenBLAS's own threads run it, then the library's setting (one
   // BLAS thread, blas_kernel.h) is restored.
   openblas_set_num_threads(omp_get_max_threads());
-  row.syrk = time_reps(reps, [&] {
+  row.syrk = bench::time_reps(reps, [&] {
     cblas_ssyrk(CblasColMajor, CblasUpper, CblasTrans, n, k, 1.0f, M.data(), k, 0.0f, C.data(), n);
   });
   openblas_set_num_threads(1);
@@ -327,11 +212,11 @@ HessRow hessian_vs_syrk(const DeformationSolver& solver, const std::string& scen
       Cb(static_cast<size_t>(s) * 6 * s);
   for (float& x : A) x = U(rng);
   for (float& x : B) x = U(rng);
-  row.block = time_reps(
+  row.block = bench::time_reps(
       reps, [&] { lidef::gemm_parallel(false, false, s, s, kb, A.data(), s, B.data(), kb, Cb.data(), s); });
   row.block_flops = 2.0 * s * s * kb;
   // The six blocks as one product (the implementation's call shape): s x 6s = (s x 3|H|)(3|H| x 6s).
-  row.fused = time_reps(reps, [&] {
+  row.fused = bench::time_reps(reps, [&] {
     lidef::gemm_parallel(false, false, s, 6 * s, kb, A.data(), s, B.data(), kb, Cb.data(), s);
   });
   row.fused_flops = 2.0 * s * 6.0 * s * kb;
@@ -344,34 +229,28 @@ struct ScenarioEntry {
   int rank = 0;
 };
 
-void usage() {
-  std::cerr
-      << "usage: bench_deform [DATA_DIR] [--scenarios DIR] [--only a,b] [--iterations N] [--cap N]\n"
-         "                    [--threads T] [--reps R] [--cache-dir DIR] [--hessian-models bar,animal]\n"
-         "                    [--no-compare] [--markdown]\n";
-}
-
 void print_iterations(const RunResult& r) {
   std::cout << "\n### " << r.scenario << " (dynamic weighting " << r.variant << ")\n\n";
   if (!r.ok) {
     std::cout << "ERROR: " << r.error << "\n";
     return;
   }
-  std::cout << "stop: " << stop_text(r) << " — " << r.res.message << "; solve " << fmt(r.res.seconds, 2)
-            << " s\n\n";
+  std::cout << "stop: " << stop_text(r) << " — " << r.res.message << "; solve "
+            << bench::fixed(r.res.seconds, 2) << " s\n\n";
   std::cout << "| it | energy | t | armijo rej | cert rej | refined | min σ3 LB | min σ3 sampled | max "
                "handle err | λ1 | λ2 | action | "
                "grad ms | Hess ms | solve ms | LS ms | cert ms | total ms |\n";
   std::cout << "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n";
   for (const IterationRecord& it : r.hist)
-    std::cout << "| " << it.iteration << " | " << sci(it.terms.total, 6) << " | " << sci(it.step, 3) << " | "
-              << it.armijo_rejections << " | " << it.certificate_rejections << " | " << it.refined << " | "
-              << fmt(it.min_lower_bound, 4) << " | " << fmt(it.min_sigma3, 4) << " | "
-              << sci(it.max_handle_error, 3) << " | " << sci(it.lambda_p2p, 3) << " | "
-              << sci(it.lambda_smooth, 3) << " | " << it.weight_action << " | " << fmt(it.ms_gradient, 1)
-              << " | " << fmt(it.ms_hessian, 1) << " | " << fmt(it.ms_solve, 1) << " | "
-              << fmt(it.ms_line_search, 1) << " | " << fmt(it.ms_certificate, 1) << " | "
-              << fmt(it.ms_total, 1) << " |\n";
+    std::cout << "| " << it.iteration << " | " << bench::sci(it.terms.total, 6) << " | "
+              << bench::sci(it.step, 3) << " | " << it.armijo_rejections << " | " << it.certificate_rejections
+              << " | " << it.refined << " | " << bench::fixed(it.min_lower_bound, 4) << " | "
+              << bench::fixed(it.min_sigma3, 4) << " | " << bench::sci(it.max_handle_error, 3) << " | "
+              << bench::sci(it.lambda_p2p, 3) << " | " << bench::sci(it.lambda_smooth, 3) << " | "
+              << it.weight_action << " | " << bench::fixed(it.ms_gradient, 1) << " | "
+              << bench::fixed(it.ms_hessian, 1) << " | " << bench::fixed(it.ms_solve, 1) << " | "
+              << bench::fixed(it.ms_line_search, 1) << " | " << bench::fixed(it.ms_certificate, 1) << " | "
+              << bench::fixed(it.ms_total, 1) << " |\n";
 }
 
 }  // namespace
@@ -379,57 +258,38 @@ void print_iterations(const RunResult& r) {
 int main(int argc, char** argv) {
   lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
   Options opt;
-  if (const char* env = std::getenv("LIDEF_SHARED_DATA"); env && *env) opt.data = env;
-  if (opt.data.empty()) opt.data = LIDEF_SHARED_DATA_DIR;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        usage();
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    try {
-      if (a == "--scenarios")
-        opt.scenarios = next();
-      else if (a == "--only")
-        opt.only = split_list(next());
-      else if (a == "--newton-cg-steps")
-        opt.cg_steps = std::stoi(next());
-      else if (a == "--iterations" || a == "--max-iterations")
-        opt.iterations = std::stoi(next());
-      else if (a == "--cap")
-        opt.cap = std::stoi(next());
-      else if (a == "--threads")
-        opt.threads = std::stoi(next());
-      else if (a == "--reps")
-        opt.reps = std::stoi(next());
-      else if (a == "--cache-dir")
-        opt.cache_dir = next();
-      else if (a == "--hessian-models")
-        opt.hessian_models = split_list(next());
-      else if (a == "--no-compare")
-        opt.compare = false;
-      else if (a == "--markdown")
-        opt.markdown_only = true;
-      else if (a == "-h" || a == "--help") {
-        usage();
-        return 0;
-      } else if (!a.empty() && a[0] == '-') {
-        usage();
-        return 2;
-      } else
-        opt.data = a;
-    } catch (const std::exception&) {
-      usage();
-      return 2;
-    }
-  }
-  if (opt.iterations < 0 || opt.cap < 1 || opt.threads < 0 || opt.reps < 1) {
-    usage();
-    return 2;
-  }
+  opt.data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR);
+  std::string only, hessian_models = "bar,animal";
+  bool no_compare = false;
+  CLI::App app{
+      "bench_deform: the deformation solver on the handle scenarios (Table 1 / Fig. 13 of the paper, "
+      "dynamic weighting on vs off, the reduced Hessian against a plain SYRK, per-iteration targets); "
+      "a markdown report on stdout"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("DATA_DIR", opt.data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  app.add_option("--scenarios", opt.scenarios, "folder of scenario JSONs (default: DATA_DIR/scenarios)");
+  app.add_option("--only", only, "comma-separated scenario names (file stems) or model names");
+  app.add_option("--iterations,--max-iterations", opt.iterations,
+                 "max_iterations for every scenario (0: the scenario's own)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--cap", opt.cap, "max_iterations of the capped scenarios (bar_twist180)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--threads", opt.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  app.add_option("--reps", opt.reps,
+                 "timed repetitions of the Hessian / SYRK comparison (at least 5 are run)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--cache-dir", opt.cache_dir, "subspace cache folder");
+  app.add_option("--hessian-models", hessian_models,
+                 "comma-separated models whose first scenario gets the Hessian vs SYRK comparison");
+  app.add_option("--newton-cg-steps", opt.cg_steps,
+                 "DeformParams::newton_cg_steps for every scenario (-1: the scenario's own)")
+      ->check(CLI::Range(-1, 1 << 20));
+  app.add_flag("--no-compare", no_compare, "skip the second solve with dynamic weighting off");
+  app.add_flag("--markdown", opt.markdown_only, "the tables only, without the per-iteration details");
+  if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
+  opt.compare = !no_compare;
+  opt.only = bench::split_list(only);
+  opt.hessian_models = bench::split_list(hessian_models);
   if (opt.reps < 5) {
     // --reps is shared with the other benchmarks through scripts/bench.sh; a median needs at least 5 here.
     std::cerr << "bench_deform: --reps " << opt.reps << " raised to 5 for the Hessian / SYRK medians\n";
@@ -497,9 +357,9 @@ int main(int argc, char** argv) {
   // --- Machine.
   const std::string src = LIDEF_SOURCE_DIR;
   std::cout << "# bench_deform: the deformation solver on the handle scenarios\n\n";
-  std::cout << "- date: " << utc_now() << "\n";
+  std::cout << "- date: " << bench::utc_now() << "\n";
   std::cout << "- machine: " << lidef::bench::cpu_model() << "; nproc (online CPUs) "
-            << sysconf(_SC_NPROCESSORS_ONLN) << "; RAM " << mem_total() << "\n";
+            << sysconf(_SC_NPROCESSORS_ONLN) << "; RAM " << bench::mem_total() << "\n";
   std::cout << "- OpenMP: omp_get_max_threads() = " << omp_get_max_threads()
             << ", omp_get_num_procs() = " << omp_get_num_procs()
             << (opt.threads > 0 ? " (--threads " + std::to_string(opt.threads) + ")"
@@ -515,10 +375,12 @@ int main(int argc, char** argv) {
                            : "unknown")
             << " build; the library calls it in one thread per OpenMP thread (blas_kernel.h)\n";
   std::cout << "- compiler: GCC-compatible " << __VERSION__ << "; projected_newton.cpp compiled with "
-            << compile_flags("/deform/src/projected_newton.cpp") << "\n";
+            << bench::compile_flags(LIDEF_BUILD_DIR, "/deform/src/projected_newton.cpp") << "\n";
   {
-    const std::string head = command_output("git -C '" + src + "' log -1 --format='%h %cI %s' 2>/dev/null");
-    const std::string dirty = command_output("git -C '" + src + "' status --porcelain -- deform 2>/dev/null");
+    const std::string head =
+        bench::command_output("git -C '" + src + "' log -1 --format='%h %cI %s' 2>/dev/null");
+    const std::string dirty =
+        bench::command_output("git -C '" + src + "' status --porcelain -- deform 2>/dev/null");
     std::string d = dirty;
     std::replace(d.begin(), d.end(), '\n', ';');
     std::cout << "- source: " << (head.empty() ? "unknown (no git)" : head.substr(0, 100))
@@ -533,7 +395,8 @@ int main(int argc, char** argv) {
   std::cout << "; capped at " << opt.cap << " iterations: ";
   for (size_t k = 0; k < kCapped.size(); ++k) std::cout << (k ? ", " : "") << kCapped[k];
   std::cout << (opt.compare ? "; each scenario again with dynamic_weighting = false" : "") << "\n";
-  std::cout << "- load average at start: " << loadavg() << "; CPU pressure: " << cpu_pressure() << "\n";
+  std::cout << "- load average at start: " << bench::load_average()
+            << "; CPU pressure: " << bench::cpu_pressure() << "\n";
   std::cout.flush();
 
   // --- Runs.
@@ -576,7 +439,7 @@ int main(int argc, char** argv) {
         solver =
             std::make_unique<DeformationSolver>(model->cage, model->mesh, p, opt.cache_dir,
                                                 [](const std::string& s) { std::cerr << "  " << s << "\n"; });
-        preprocess_s = ms_since(t0) / 1000;
+        preprocess_s = seconds_since(t0);
         solver_key = key;
         if (!cached)
           notes.push_back(model_name +
@@ -651,8 +514,8 @@ int main(int argc, char** argv) {
           exit_code = 3;
         }
         std::cerr << "  -> " << stop_text(r) << ", " << r.hist.size() << " iterations, "
-                  << fmt(r.res.seconds, 2) << " s, max handle error " << sci(r.max_err) << ", min sigma3 LB "
-                  << fmt(r.min_lb, 4) << "\n";
+                  << bench::fixed(r.res.seconds, 2) << " s, max handle error " << bench::sci(r.max_err)
+                  << ", min sigma3 LB " << bench::fixed(r.min_lb, 4) << "\n";
       } catch (const std::exception& e) {
         r.error = e.what();
         std::cerr << "bench_deform: " << sc.name << ": " << e.what() << "\n";
@@ -670,11 +533,12 @@ int main(int argc, char** argv) {
   }
   solver.reset();
   model.reset();
-  const double total_s = ms_since(t_program) / 1000;
+  const double total_s = seconds_since(t_program);
 
   // --- Report.
-  std::cout << "- load average at end: " << loadavg() << "; CPU pressure: " << cpu_pressure()
-            << "; whole program " << fmt(total_s, 0) << " s\n";
+  std::cout << "- load average at end: " << bench::load_average()
+            << "; CPU pressure: " << bench::cpu_pressure() << "; whole program " << bench::fixed(total_s, 0)
+            << " s\n";
 
   std::vector<const RunResult*> on;
   for (const RunResult& r : runs)
@@ -694,11 +558,11 @@ int main(int argc, char** argv) {
     }
     std::cout << "| " << r->scenario << " | " << r->model << " | " << r->cage_v << " / " << r->cage_f << " | "
               << r->dof << " | " << r->samples << " | " << r->hsub << " | " << r->handles << " | "
-              << fmt(r->preprocess_s, 1) << (r->preprocess_shared ? " (shared)" : "") << " | "
-              << r->hist.size() << (r->capped ? " (cap)" : "") << " | " << fmt(r->res.seconds, 2) << " | "
-              << fmt(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | " << stop_text(*r) << " | "
-              << sci(r->max_err) << " | " << fmt(r->min_lb, 4) << " | " << fmt(r->min_sigma3, 4) << " | "
-              << (r->certified ? "yes" : "NO") << " |\n";
+              << bench::fixed(r->preprocess_s, 1) << (r->preprocess_shared ? " (shared)" : "") << " | "
+              << r->hist.size() << (r->capped ? " (cap)" : "") << " | " << bench::fixed(r->res.seconds, 2)
+              << " | " << bench::fixed(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | "
+              << stop_text(*r) << " | " << bench::sci(r->max_err) << " | " << bench::fixed(r->min_lb, 4)
+              << " | " << bench::fixed(r->min_sigma3, 4) << " | " << (r->certified ? "yes" : "NO") << " |\n";
   }
   std::cout
       << "\nPreprocessing = DeformationSolver construction (subspace from the cache, sampling, reduced basis "
@@ -730,11 +594,12 @@ int main(int argc, char** argv) {
     const double trials = mean_count(h, &IterationRecord::armijo_rejections) +
                           mean_count(h, &IterationRecord::certificate_rejections) +
                           mean_count(h, &IterationRecord::accepted);
-    std::cout << "| " << r->scenario << " | " << h.size() << " | " << fmt(g, 1) << " | " << fmt(H, 1) << " | "
-              << fmt(so, 1) << " | " << fmt(ls, 1) << " | " << fmt(ce, 1) << " | " << fmt(ls - ce, 1) << " | "
-              << fmt(to - g - H - so - ls, 1) << " | " << fmt(to, 1) << " | " << fmt(100 * ce / to, 0)
-              << "% | " << fmt(trials, 2) << " | " << fmt(mean_count(h, &IterationRecord::refined), 0)
-              << " |\n";
+    std::cout << "| " << r->scenario << " | " << h.size() << " | " << bench::fixed(g, 1) << " | "
+              << bench::fixed(H, 1) << " | " << bench::fixed(so, 1) << " | " << bench::fixed(ls, 1) << " | "
+              << bench::fixed(ce, 1) << " | " << bench::fixed(ls - ce, 1) << " | "
+              << bench::fixed(to - g - H - so - ls, 1) << " | " << bench::fixed(to, 1) << " | "
+              << bench::fixed(100 * ce / to, 0) << "% | " << bench::fixed(trials, 2) << " | "
+              << bench::fixed(mean_count(h, &IterationRecord::refined), 0) << " |\n";
   }
   std::cout
       << "\nColumns: means over all iterations of IterationRecord::ms_gradient (energy + gradient on all "
@@ -758,10 +623,10 @@ int main(int argc, char** argv) {
         continue;
       }
       std::cout << "| " << r.scenario << " | " << r.variant << " | " << r.hist.size()
-                << (r.capped ? " (cap)" : "") << " | " << fmt(r.res.seconds, 2) << " | "
-                << fmt(mean_of(r.hist, &IterationRecord::ms_total), 0) << " | " << sci(r.max_err) << " | "
-                << fmt(r.min_lb, 4) << " | " << stop_text(r) << " | " << sci(r.lambda1) << " / "
-                << sci(r.lambda2) << " |\n";
+                << (r.capped ? " (cap)" : "") << " | " << bench::fixed(r.res.seconds, 2) << " | "
+                << bench::fixed(mean_of(r.hist, &IterationRecord::ms_total), 0) << " | "
+                << bench::sci(r.max_err) << " | " << bench::fixed(r.min_lb, 4) << " | " << stop_text(r)
+                << " | " << bench::sci(r.lambda1) << " / " << bench::sci(r.lambda2) << " |\n";
     }
   }
 
@@ -779,12 +644,14 @@ int main(int argc, char** argv) {
     for (const HessRow& h : hess_rows) {
       const double ratio = h.hess.med() / h.syrk.med();
       std::cout << "| " << h.model << " | " << h.scenario << " | " << h.s << " | " << h.h << " | "
-                << fmt(h.hess.med(), 1) << " / " << fmt(h.hess.min(), 1) << " | " << fmt(h.psd.med(), 1)
-                << " | " << fmt(h.syrk.med(), 1) << " / " << fmt(h.syrk.min(), 1) << " | " << fmt(ratio, 2)
-                << " | ≤ 2: " << (ratio <= 2 ? "met" : "NOT met") << " | " << fmt(h.block.med(), 1) << " | "
-                << fmt(h.fused.med(), 1) << " | " << fmt(h.syrk_flops / (h.syrk.med() * 1e6), 1) << " | "
-                << fmt(h.fused_flops / (h.fused.med() * 1e6), 1) << " | "
-                << fmt(h.hess_flops / (h.hess.med() * 1e6), 1) << " |\n";
+                << bench::fixed(h.hess.med(), 1) << " / " << bench::fixed(h.hess.min(), 1) << " | "
+                << bench::fixed(h.psd.med(), 1) << " | " << bench::fixed(h.syrk.med(), 1) << " / "
+                << bench::fixed(h.syrk.min(), 1) << " | " << bench::fixed(ratio, 2)
+                << " | ≤ 2: " << (ratio <= 2 ? "met" : "NOT met") << " | " << bench::fixed(h.block.med(), 1)
+                << " | " << bench::fixed(h.fused.med(), 1) << " | "
+                << bench::fixed(h.syrk_flops / (h.syrk.med() * 1e6), 1) << " | "
+                << bench::fixed(h.fused_flops / (h.fused.med() * 1e6), 1) << " | "
+                << bench::fixed(h.hess_flops / (h.hess.med() * 1e6), 1) << " |\n";
     }
     std::cout
         << "\nMedian / min of " << opt.reps
@@ -813,12 +680,12 @@ int main(int argc, char** argv) {
     const std::string avg =
         r->hist.size() >= 2 ? "2.." + std::to_string(r->hist.size()) : "none (1 iteration)";
     std::cout << "| " << r->scenario << " | " << r->model << " | " << r->dof << " | " << avg << " | "
-              << fmt(m2, 0) << " | ≤ " << fmt(t->second, 0) << " | "
+              << bench::fixed(m2, 0) << " | ≤ " << bench::fixed(t->second, 0) << " | "
               << (std::isnan(m2)    ? "n/a"
                   : m2 <= t->second ? "met"
                                     : "NOT met")
-              << " | " << fmt(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | "
-              << fmt(mean_of(r->hist, &IterationRecord::ms_certificate, 1), 0) << " |\n";
+              << " | " << bench::fixed(mean_of(r->hist, &IterationRecord::ms_total), 0) << " | "
+              << bench::fixed(mean_of(r->hist, &IterationRecord::ms_certificate, 1), 0) << " |\n";
   }
   if (!any_target) std::cout << "| (no bar or animal scenario was run) | | | | | | | | |\n";
 

@@ -23,6 +23,7 @@
 #include <numeric>
 #include <string>
 
+#include "bench_util.h"
 #include "lidef/deformation_energy.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
@@ -104,20 +105,17 @@ void systematic(const VecXd& q, const VecXd& v, int m, std::vector<int>& idx, Ve
 
 int main(int argc, char** argv) {
   std::string path, cache = "/tmp/lidef-bench-cache";
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--cache-dir" && i + 1 < argc)
-      cache = argv[++i];
-    else if (a == "--help" || a == "-h" || !path.empty()) {
-      std::cerr << "usage: bench_hessian_subset DATA_DIR|SCENARIO.json [--cache-dir DIR]\n";
-      return a == "--help" || a == "-h" ? 0 : 2;
-    } else
-      path = a;
-  }
-  if (path.empty()) {
-    std::cerr << "usage: bench_hessian_subset DATA_DIR|SCENARIO.json [--cache-dir DIR]\n";
-    return 2;
-  }
+  CLI::App app{
+      "bench_hessian_subset: the linear rate of Newton with each Hessian-subset estimate against the "
+      "all-sample Hessian, at every iterate of a scenario's solve; a markdown table on stdout"};
+  app.option_defaults()->always_capture_default();
+  app.add_option(
+         "DATA_DIR", path,
+         "a scenario JSON, or a data folder (its scenarios/bar_bend.json: scripts/bench.sh passes the "
+         "shared data folder)")
+      ->required();
+  app.add_option("--cache-dir", cache, "subspace cache folder");
+  if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
   if (std::filesystem::is_directory(path)) path += "/scenarios/bar_bend.json";
   try {
     const Scenario sc = read_scenario(path);

@@ -38,12 +38,6 @@ struct Timing {
   double cpu_stored_s = 0;  // process CPU time until then
 };
 
-double cpu_seconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
 Timing open_once(const std::string& model_dir, const std::string& cache_dir, const DeformParams& p) {
   std::mutex m;
   std::vector<std::pair<std::string, Clock::time_point>> marks;
@@ -57,12 +51,12 @@ Timing open_once(const std::string& model_dir, const std::string& cache_dir, con
   s.set_cache(cache_dir);
   Timing t;
   const auto t0 = Clock::now();
-  const double c0 = cpu_seconds();
+  const double c0 = bench::cpu_ms();
   s.open_model(model_dir, p);
   const auto t1 = Clock::now();
   if (!s.wait_until_resting(3600)) std::fprintf(stderr, "bench_open: %s did not finish\n", model_dir.c_str());
   const auto t2 = Clock::now();
-  t.cpu_s = cpu_seconds() - c0;
+  t.cpu_s = (bench::cpu_ms() - c0) / 1e3;
   t.load_s = std::chrono::duration<double>(t1 - t0).count();
   t.total_s = std::chrono::duration<double>(t2 - t0).count();
   for (size_t i = 0; i < marks.size(); ++i) {
@@ -74,7 +68,7 @@ Timing open_once(const std::string& model_dir, const std::string& cache_dir, con
   // written, and the CPU time of the whole opening with it.
   s.wait_for_cache_store();
   t.stored_s = seconds_since(t2);
-  t.cpu_stored_s = cpu_seconds() - c0;
+  t.cpu_stored_s = (bench::cpu_ms() - c0) / 1e3;
   return t;
 }
 
@@ -88,20 +82,19 @@ std::string stages_text(const Timing& t) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::fprintf(stderr, "usage: bench_open DATA_DIR [MODEL...] [--threads T]\n");
-    return 2;
-  }
-  const std::string data = argv[1];
+  std::string data;
   std::vector<std::string> models;
   DeformParams p;
-  for (int i = 2; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--threads" && i + 1 < argc)
-      p.threads = std::stoi(argv[++i]);
-    else
-      models.push_back(a);
-  }
+  CLI::App app{
+      "bench_open: opening a model in the studio's engine (preprocessing to a resting session) "
+      "without the cache, the first time with an empty cache and reopened; a markdown table on stdout"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("DATA_DIR", data, "shared data folder (its models/ folder)")->required();
+  app.add_option("MODEL", models,
+                 "model names (looked up in DATA_DIR/models) or model folders (default: animal)");
+  app.add_option("--threads", p.threads, "DeformParams::threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
+  if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
   if (models.empty()) models = {"animal"};
   const std::string cache = (std::filesystem::temp_directory_path() / "lidef-bench-open-cache").string();
   std::printf("- machine: %s; nproc %d; OpenMP threads %d\n", bench::cpu_model().c_str(), omp_get_num_procs(),

@@ -47,28 +47,16 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string f(double x, int prec = 3) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*f", prec, x);
-  return b;
-}
 std::string e(double x) {
   char b[64];
   std::snprintf(b, sizeof b, "%.1e", x);
   return b;
 }
 
+// Median wall-clock ms of `reps` timed runs of `work` after one warm-up.
 template <class F>
-double median_ms(int reps, F&& fn) {
-  fn();  // warm-up
-  std::vector<double> t;
-  for (int r = 0; r < reps; ++r) {
-    const auto t0 = Clock::now();
-    fn();
-    t.push_back(ms_since(t0));
-  }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
+double median_ms(int reps, F&& work) {
+  return bench::time_reps(reps, work).med();
 }
 
 struct Run {
@@ -115,44 +103,24 @@ StageMeans means(const std::vector<IterationRecord>& h) {
 
 int main(int argc, char** argv) {
   lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
-  std::string data_dir, only, cache_dir = "/tmp/lidef-bench-cache";
+  std::string data_dir = bench::default_data_dir(LIDEF_SHARED_DATA_DIR), only,
+              cache_dir = "/tmp/lidef-bench-cache";
   int iterations = 0, cap = 8, reps = 5, threads = 0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << "bench_opencl: " << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--only")
-      only = next();
-    else if (a == "--iterations")
-      iterations = std::atoi(next().c_str());
-    else if (a == "--cap")
-      cap = std::atoi(next().c_str());
-    else if (a == "--reps")
-      reps = std::max(1, std::atoi(next().c_str()));
-    else if (a == "--threads")
-      threads = std::atoi(next().c_str());
-    else if (a == "--cache-dir")
-      cache_dir = next();
-    else if (a == "--help" || a == "-h") {
-      std::cout << "usage: bench_opencl [DATA_DIR] [--only a,b] [--iterations N] [--cap N] [--reps R] "
-                   "[--threads T] [--cache-dir DIR]\n";
-      return 0;
-    } else if (!a.empty() && a[0] == '-') {
-      std::cerr << "bench_opencl: unknown option " << a << "\n";
-      return 2;
-    } else
-      data_dir = a;
-  }
+  CLI::App app{
+      "bench_opencl: the OpenCL backend against the CPU backend in one process: whole solves with "
+      "their parity, and each stage alone; a markdown report on stdout"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("DATA_DIR", data_dir, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  app.add_option("--only", only, "comma-separated scenario names (file stems)");
+  app.add_option("--iterations", iterations, "max_iterations for every scenario (0: the scenario's own)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--cap", cap, "max_iterations of bar_twist180 on both backends")->check(CLI::PositiveNumber);
+  app.add_option("--reps", reps, "timed repetitions of each stage alone (median reported)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--threads", threads, "OpenMP threads (0: the default)")->check(CLI::NonNegativeNumber);
+  app.add_option("--cache-dir", cache_dir, "subspace and kernel cache folder");
+  if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
   if (threads > 0) omp_set_num_threads(threads);
-  if (data_dir.empty()) {
-    const char* env = std::getenv("LIDEF_SHARED_DATA");
-    data_dir = env ? env : LIDEF_SHARED_DATA_DIR;
-  }
   std::vector<Scenario> scenarios;
   try {
     std::vector<fs::path> files;
@@ -233,12 +201,14 @@ int main(int argc, char** argv) {
       const Run& r = b == 0 ? rc : rg;
       const StageMeans m = means(r.history);
       solve_table << "| " << sc.name << " | " << (b == 0 ? "cpu" : "opencl") << " | " << r.history.size()
-                  << " | " << f(m.total, 1) << " | " << f(m.grad, 1) << " | " << f(m.hess, 1) << " | "
-                  << f(m.solve, 1) << " | " << f(m.ls, 1) << " | " << f(m.cert, 1) << " | "
-                  << f(r.result.seconds, 2) << " | " << (b == 0 ? "" : (same ? "yes" : "**no**")) << " | "
-                  << (b == 0 ? "" : e(diff)) << " |\n";
+                  << " | " << bench::fixed(m.total, 1) << " | " << bench::fixed(m.grad, 1) << " | "
+                  << bench::fixed(m.hess, 1) << " | " << bench::fixed(m.solve, 1) << " | "
+                  << bench::fixed(m.ls, 1) << " | " << bench::fixed(m.cert, 1) << " | "
+                  << bench::fixed(r.result.seconds, 2) << " | " << (b == 0 ? "" : (same ? "yes" : "**no**"))
+                  << " | " << (b == 0 ? "" : e(diff)) << " |\n";
     }
-    std::cerr << "  preprocessing ms: cpu " << f(pre_cpu, 0) << ", opencl " << f(pre_gpu, 0) << "\n";
+    std::cerr << "  preprocessing ms: cpu " << bench::fixed(pre_cpu, 0) << ", opencl "
+              << bench::fixed(pre_gpu, 0) << "\n";
 
     // --- Stages alone, once per model, at the CPU run's final map.
     const std::string key = sc.model_dir;
@@ -255,8 +225,8 @@ int main(int argc, char** argv) {
       k->set_direction(d);
     }
     auto row = [&](const std::string& stage, double a, double b) {
-      stage_table << "| " << sc.model << " | " << stage << " | " << f(a, 2) << " | " << f(b, 2) << " | "
-                  << f(b / a, 2) << " |\n";
+      stage_table << "| " << sc.model << " | " << stage << " | " << bench::fixed(a, 2) << " | "
+                  << bench::fixed(b, 2) << " | " << bench::fixed(b / a, 2) << " |\n";
     };
     row("Jacobians G y (" + std::to_string(en.num_samples()) + " samples)",
         median_ms(reps, [&] { kc->set_current(y); }), median_ms(reps, [&] { kg->set_current(y); }));

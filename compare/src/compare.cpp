@@ -13,6 +13,7 @@
 #include "lidef/continuation.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/geometry.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
@@ -369,13 +370,6 @@ const std::vector<std::string>& compare_methods() {
   return m;
 }
 
-double mesh_volume(const MatX3d& V, const MatX3i& F) {
-  double v = 0;
-  for (Eigen::Index t = 0; t < F.rows(); ++t)
-    v += V.row(F(t, 0)).dot(V.row(F(t, 1)).cross(V.row(F(t, 2)))) / 6.0;
-  return v;
-}
-
 double crease_measure(const TriMesh& rest, const MatX3d& X) {
   // Interior edges: pairs of faces sharing an (unordered) edge.
   std::map<std::pair<int, int>, std::vector<int>> edge_faces;
@@ -412,7 +406,7 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
     if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end()) order.push_back(m);
   Shared s{sc, model, opt, progress, nullptr, std::nullopt, std::nullopt};
   std::vector<MethodResult> rows;
-  const double rest_volume = mesh_volume(model.mesh.V, model.mesh.F);
+  const double rest_volume = signed_volume(model.mesh.V, model.mesh.F);
   // "Reached" means what `lidef deform` means: max handle error within handle_tolerance of the model's size.
   const double handle_tolerance = sc.params.handle_tolerance * Frame::of(model.cage).scale;
   for (const std::string& m : order) {
@@ -432,7 +426,7 @@ std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model,
         run_pwl_tri(s, r);
       r.ok = true;
       r.reached = r.max_handle_error <= handle_tolerance ? 1 : 0;
-      r.volume_ratio = mesh_volume(r.V, model.mesh.F) / rest_volume;
+      r.volume_ratio = signed_volume(r.V, model.mesh.F) / rest_volume;
       r.crease_deg = crease_measure(model.mesh, r.V);
       s.say(m, status_of(r) + " (" + r.stop + ") after " + std::to_string(r.iterations) + " iterations, " +
                    format_g(r.seconds, 3) + " s");

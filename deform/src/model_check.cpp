@@ -190,67 +190,70 @@ bool check_indices_and_values(const TriMesh& m, const std::string& file, const M
   return ok;
 }
 
-// All cage checks. Returns true when the cage passed every check (the mesh-in-cage test may then run).
-bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckTolerances& tol,
-                ValidationReport& r) {
-  const std::string file = cage.source.empty() ? "cage" : cage.source;
-  const auto* vl = lines ? &lines->vertex : nullptr;
-  const auto* fl = lines ? &lines->face : nullptr;
-  const int nv = static_cast<int>(cage.V.rows()), nf = static_cast<int>(cage.F.rows());
-  const size_t errors_before = r.errors.size();
-  r.cage_file = file;
-  r.cage_vertices = nv;
-  r.cage_faces = nf;
-  if (nv < 4 || nf < 4) {
-    r.errors.push_back({file, "", 0,
-                        "a cage needs at least 4 vertices and 4 faces, found " + std::to_string(nv) +
-                            " and " + std::to_string(nf)});
-    return false;
-  }
-  if (!check_indices_and_values(cage, file, lines, r.errors)) return false;
-  const MatX3d& V = cage.V;
-  const MatX3i& F = cage.F;
-  r.cage_bbox_min = V.colwise().minCoeff().transpose();
-  r.cage_bbox_max = V.colwise().maxCoeff().transpose();
-  const double diag = bbox_diagonal(V);
+// The cage under check: its file (the name its issues carry), its arrays and the OBJ lines of its elements.
+struct CageInput {
+  std::string file;
+  const MatX3d& V;                        // #V by 3
+  const MatX3i& F;                        // #F by 3
+  const std::vector<long>* vertex_lines;  // per vertex, or null
+  const std::vector<long>* face_lines;    // per face, or null
+};
 
-  // Faces: repeated vertices, degenerate shape, duplicates; signed volume.
-  {
-    IssueList degenerate(r.errors, file, "degenerate faces");
-    IssueList duplicate(r.errors, file, "duplicate faces");
-    std::map<std::array<int, 3>, int> seen;
-    r.cage_volume = 0;
-    for (int t = 0; t < nf; ++t) {
-      const Vec3 a = V.row(F(t, 0)), b = V.row(F(t, 1)), c = V.row(F(t, 2));
-      double area;
-      if (F(t, 0) == F(t, 1) || F(t, 1) == F(t, 2) || F(t, 0) == F(t, 2))
-        degenerate.add(face_name(t), line_of(fl, t), "degenerate face: it uses a vertex twice");
-      else if (is_degenerate(a, b, c, diag, tol, &area))
-        degenerate.add(
-            face_name(t), line_of(fl, t),
-            "degenerate face (area " + format_g(area) + "): its corners are (nearly) collinear or coincide");
-      std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
-      std::sort(key.begin(), key.end());
-      const auto [it, fresh] = seen.emplace(key, t);
-      if (!fresh)
-        duplicate.add(face_name(t), line_of(fl, t),
-                      "duplicate of " + face_name(it->second) + " (same vertices)");
-    }
-    r.cage_volume = signed_volume(V, F);
-  }
+// The undirected edges of the cage, as the orientation and component stages need them.
+struct CageEdges {
+  std::vector<std::vector<std::pair<int, bool>>> adjacent;  // per face: (neighbour, orientation agrees)
+  std::vector<int> parent;  // union-find over faces: connected through shared edges (also non-manifold ones)
+  bool closed = true, manifold = true;
+};
 
-  // Unused vertices would add coefficient rows whose basis function is zero.
-  {
-    std::vector<char> used(nv, 0);
-    for (int t = 0; t < nf; ++t)
-      for (int k = 0; k < 3; ++k) used[F(t, k)] = 1;
-    IssueList unused(r.warnings, file, "vertices not used by any face");
-    for (int v = 0; v < nv; ++v)
-      if (!used[v]) unused.add(vertex_name(v), line_of(vl, v), "not used by any face");
-    r.euler_characteristic = static_cast<int>(std::count(used.begin(), used.end(), 1)) + nf;
-  }
+int find_root(std::vector<int>& parent, int x) {
+  while (parent[x] != x) x = parent[x] = parent[parent[x]];
+  return x;
+}
 
-  // Undirected edges: sort the 3F directed half-edges by their vertex pair; equal pairs form one edge.
+// Faces: repeated vertices, degenerate shape, duplicates; signed volume.
+void check_cage_faces(const CageInput& c, double diag, const CheckTolerances& tol, ValidationReport& r) {
+  IssueList degenerate(r.errors, c.file, "degenerate faces");
+  IssueList duplicate(r.errors, c.file, "duplicate faces");
+  std::map<std::array<int, 3>, int> seen;
+  const MatX3i& F = c.F;
+  for (int t = 0; t < F.rows(); ++t) {
+    const Vec3 a = c.V.row(F(t, 0)), b = c.V.row(F(t, 1)), cc = c.V.row(F(t, 2));
+    double area;
+    if (F(t, 0) == F(t, 1) || F(t, 1) == F(t, 2) || F(t, 0) == F(t, 2))
+      degenerate.add(face_name(t), line_of(c.face_lines, t), "degenerate face: it uses a vertex twice");
+    else if (is_degenerate(a, b, cc, diag, tol, &area))
+      degenerate.add(
+          face_name(t), line_of(c.face_lines, t),
+          "degenerate face (area " + format_g(area) + "): its corners are (nearly) collinear or coincide");
+    std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
+    std::sort(key.begin(), key.end());
+    const auto [it, fresh] = seen.emplace(key, t);
+    if (!fresh)
+      duplicate.add(face_name(t), line_of(c.face_lines, t),
+                    "duplicate of " + face_name(it->second) + " (same vertices)");
+  }
+  r.cage_volume = signed_volume(c.V, F);
+}
+
+// Unused vertices would add coefficient rows whose basis function is zero. Starts the Euler characteristic
+// (used vertices + faces; the edge stage subtracts the edges).
+void check_unused_vertices(const CageInput& c, ValidationReport& r) {
+  const int nv = static_cast<int>(c.V.rows()), nf = static_cast<int>(c.F.rows());
+  std::vector<char> used(nv, 0);
+  for (int t = 0; t < nf; ++t)
+    for (int k = 0; k < 3; ++k) used[c.F(t, k)] = 1;
+  IssueList unused(r.warnings, c.file, "vertices not used by any face");
+  for (int v = 0; v < nv; ++v)
+    if (!used[v]) unused.add(vertex_name(v), line_of(c.vertex_lines, v), "not used by any face");
+  r.euler_characteristic = static_cast<int>(std::count(used.begin(), used.end(), 1)) + nf;
+}
+
+// Undirected edges: sort the 3F directed half-edges by their vertex pair; equal pairs form one edge. Open
+// (one face) and non-manifold (more than two faces) edges are errors.
+CageEdges check_cage_edges(const CageInput& c, ValidationReport& r) {
+  const MatX3i& F = c.F;
+  const int nf = static_cast<int>(F.rows());
   struct HalfEdge {
     int lo, hi, face;
     bool forward;  // the face traverses lo -> hi
@@ -265,19 +268,14 @@ bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckToleranc
   std::sort(he.begin(), he.end(), [](const HalfEdge& x, const HalfEdge& y) {
     return std::tie(x.lo, x.hi, x.face) < std::tie(y.lo, y.hi, y.face);
   });
-  // Face adjacency through edges: (neighbour, orientation agrees). Union-find for components.
-  std::vector<std::vector<std::pair<int, bool>>> adj(nf);
-  std::vector<int> parent(nf);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](int x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  };
-  bool closed = true, manifold = true;
+  CageEdges e;
+  e.adjacent.resize(nf);
+  e.parent.resize(nf);
+  std::iota(e.parent.begin(), e.parent.end(), 0);
   int num_edges = 0;
   {
-    IssueList open(r.errors, file, "edges with only one face");
-    IssueList nonmanifold(r.errors, file, "edges with more than two faces");
+    IssueList open(r.errors, c.file, "edges with only one face");
+    IssueList nonmanifold(r.errors, c.file, "edges with more than two faces");
     for (size_t i = 0; i < he.size();) {
       size_t j = i;
       while (j < he.size() && he[j].lo == he[i].lo && he[j].hi == he[i].hi) ++j;
@@ -285,120 +283,161 @@ bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckToleranc
       const std::string edge = "edge " + std::to_string(he[i].lo + 1) + "-" + std::to_string(he[i].hi + 1);
       const size_t n = j - i;
       if (n == 1) {
-        closed = false;
-        open.add(edge, line_of(fl, he[i].face),
+        e.closed = false;
+        open.add(edge, line_of(c.face_lines, he[i].face),
                  "has only one face (" + face_name(he[i].face) +
                      "): the cage is not closed (a hole or a missing face)");
       } else if (n > 2) {
-        manifold = false;
+        e.manifold = false;
         std::string faces;
         for (size_t k = i; k < j && k < i + kMaxInline; ++k)
           faces += (k > i ? ", " : "") + std::to_string(he[k].face + 1);
-        nonmanifold.add(edge, line_of(fl, he[i].face),
+        nonmanifold.add(edge, line_of(c.face_lines, he[i].face),
                         "is shared by " + std::to_string(n) + " faces (" + faces +
                             "): the cage is not edge-manifold (every edge needs exactly 2 faces)");
       } else {
         // Two faces agree in orientation iff they traverse the shared edge in opposite directions.
         const bool agree = he[i].forward != he[i + 1].forward;
-        adj[he[i].face].push_back({he[i + 1].face, agree});
-        adj[he[i + 1].face].push_back({he[i].face, agree});
+        e.adjacent[he[i].face].push_back({he[i + 1].face, agree});
+        e.adjacent[he[i + 1].face].push_back({he[i].face, agree});
       }
-      for (size_t k = i + 1; k < j; ++k) parent[find(he[k].face)] = find(he[i].face);
+      for (size_t k = i + 1; k < j; ++k)
+        e.parent[find_root(e.parent, he[k].face)] = find_root(e.parent, he[i].face);
       i = j;
     }
   }
   r.cage_edges = num_edges;
   r.euler_characteristic -= num_edges;
+  return e;
+}
 
-  // Components and orientation: propagate a flip flag across manifold edges from each component's first face.
-  // The faces in the minority class of a component are the flipped ones.
+// Orientation: propagate a flip flag across manifold edges from each component's first face; the faces in
+// the minority class of a component are the flipped ones. Returns {orientable, consistently oriented}.
+std::pair<bool, bool> check_cage_orientation(const CageInput& c, const CageEdges& e, ValidationReport& r) {
+  const int nf = static_cast<int>(c.F.rows());
   std::vector<int> flip(nf, -1);
-  std::vector<int> comp_sizes;
   bool orientable = true, consistent = true;
-  {
-    IssueList flipped(r.errors, file, "flipped faces");
-    for (int seed = 0; seed < nf; ++seed) {
-      if (flip[seed] >= 0) continue;
-      std::vector<int> comp{seed};
-      flip[seed] = 0;
-      bool conflict = false;
-      for (size_t q = 0; q < comp.size(); ++q) {
-        const int f = comp[q];
-        for (const auto& [g, agree] : adj[f]) {
-          const int want = agree ? flip[f] : 1 - flip[f];
-          if (flip[g] < 0) {
-            flip[g] = want;
-            comp.push_back(g);
-          } else if (flip[g] != want) {
-            conflict = true;
-          }
+  IssueList flipped(r.errors, c.file, "flipped faces");
+  for (int seed = 0; seed < nf; ++seed) {
+    if (flip[seed] >= 0) continue;
+    std::vector<int> comp{seed};
+    flip[seed] = 0;
+    bool conflict = false;
+    for (size_t q = 0; q < comp.size(); ++q) {
+      const int f = comp[q];
+      for (const auto& [g, agree] : e.adjacent[f]) {
+        const int want = agree ? flip[f] : 1 - flip[f];
+        if (flip[g] < 0) {
+          flip[g] = want;
+          comp.push_back(g);
+        } else if (flip[g] != want) {
+          conflict = true;
         }
       }
-      if (conflict) {
-        orientable = false;
-        r.errors.push_back({file, face_name(seed), line_of(fl, seed),
-                            "the cage cannot be oriented consistently (the surface containing this face is "
-                            "non-orientable, e.g. a Moebius strip)"});
-        continue;
-      }
-      const int n1 =
-          static_cast<int>(std::count_if(comp.begin(), comp.end(), [&](int f) { return flip[f] == 1; }));
-      const int bad = 2 * n1 <= static_cast<int>(comp.size()) ? 1 : 0;
-      std::vector<int> bad_faces;
-      for (int f : comp)
-        if (flip[f] == bad) bad_faces.push_back(f);
-      std::sort(bad_faces.begin(), bad_faces.end());
-      for (int f : bad_faces) {
-        consistent = false;
-        std::vector<int> nb;
-        for (const auto& [g, agree] : adj[f])
-          if (!agree) nb.push_back(g);
-        flipped.add(face_name(f), line_of(fl, f),
-                    "flipped: its vertex order disagrees with its neighbours (" + first_few(nb) +
-                        "); the cage is inconsistently oriented");
-      }
     }
-    // Connected components through shared edges (also across non-manifold edges).
-    std::map<int, int> sizes;
-    for (int t = 0; t < nf; ++t) ++sizes[find(t)];
-    for (const auto& kv : sizes) comp_sizes.push_back(kv.second);
+    if (conflict) {
+      orientable = false;
+      r.errors.push_back({c.file, face_name(seed), line_of(c.face_lines, seed),
+                          "the cage cannot be oriented consistently (the surface containing this face is "
+                          "non-orientable, e.g. a Moebius strip)"});
+      continue;
+    }
+    const int n1 =
+        static_cast<int>(std::count_if(comp.begin(), comp.end(), [&](int f) { return flip[f] == 1; }));
+    const int bad = 2 * n1 <= static_cast<int>(comp.size()) ? 1 : 0;
+    std::vector<int> bad_faces;
+    for (int f : comp)
+      if (flip[f] == bad) bad_faces.push_back(f);
+    std::sort(bad_faces.begin(), bad_faces.end());
+    for (int f : bad_faces) {
+      consistent = false;
+      std::vector<int> nb;
+      for (const auto& [g, agree] : e.adjacent[f])
+        if (!agree) nb.push_back(g);
+      flipped.add(face_name(f), line_of(c.face_lines, f),
+                  "flipped: its vertex order disagrees with its neighbours (" + first_few(nb) +
+                      "); the cage is inconsistently oriented");
+    }
   }
+  return {orientable, consistent};
+}
+
+// Connected components through shared edges (also across non-manifold edges): a warning when there are
+// several; the genus of a closed, manifold, orientable cage.
+void check_cage_components(const CageInput& c, CageEdges& e, bool orientable, ValidationReport& r) {
+  std::map<int, int> sizes;
+  for (int t = 0; t < c.F.rows(); ++t) ++sizes[find_root(e.parent, t)];
+  std::vector<int> comp_sizes;
+  for (const auto& kv : sizes) comp_sizes.push_back(kv.second);
   r.cage_components = static_cast<int>(comp_sizes.size());
   if (r.cage_components > 1) {
     std::string s;
     for (int i = 0; i < static_cast<int>(comp_sizes.size()) && i < kMaxInline; ++i)
       s += (i ? ", " : "") + std::to_string(comp_sizes[i]);
-    r.warnings.push_back({file, "", 0,
+    r.warnings.push_back({c.file, "", 0,
                           "the cage has " + std::to_string(r.cage_components) + " connected components (" +
                               s + " faces); fine for nested shells, otherwise check for stray faces"});
   }
-  if (closed && manifold && orientable) r.genus = r.cage_components - r.euler_characteristic / 2;
+  if (e.closed && e.manifold && orientable) r.genus = r.cage_components - r.euler_characteristic / 2;
+}
 
-  // Outward orientation: meaningful only for a closed, consistently oriented surface.
-  if (closed && manifold && orientable && consistent && !(r.cage_volume > 0)) {
-    if (r.cage_volume < 0)
-      r.errors.push_back(
-          {file, "", 0,
-           "the cage is inverted: signed volume " + format_g(r.cage_volume) +
-               " < 0, its faces are clockwise seen from outside (reverse the vertex order of every face)"});
-    else
-      r.errors.push_back({file, "", 0, "the cage encloses zero volume"});
-  }
+// Outward orientation: meaningful only for a closed, consistently oriented surface.
+void check_cage_outward(const CageInput& c, ValidationReport& r) {
+  if (r.cage_volume > 0) return;
+  if (r.cage_volume < 0)
+    r.errors.push_back(
+        {c.file, "", 0,
+         "the cage is inverted: signed volume " + format_g(r.cage_volume) +
+             " < 0, its faces are clockwise seen from outside (reverse the vertex order of every face)"});
+  else
+    r.errors.push_back({c.file, "", 0, "the cage encloses zero volume"});
+}
 
-  r.self_intersections = find_self_intersections(V, F);
-  if (!r.self_intersections.empty()) {
-    const auto& si = r.self_intersections;
-    std::string pairs;
-    for (size_t i = 0; i < si.size() && i < 20; ++i)
-      pairs += (i ? ", " : "") + std::to_string(si[i].first + 1) + " & " + std::to_string(si[i].second + 1);
-    if (si.size() > 20) pairs += ", ...";
-    r.warnings.push_back(
-        {file, "faces " + std::to_string(si[0].first + 1) + " and " + std::to_string(si[0].second + 1),
-         line_of(fl, si[0].first),
-         "the cage intersects itself in " + std::to_string(si.size()) + " face pair" +
-             (si.size() > 1 ? "s" : "") + " (" + pairs +
-             "); near the crossing the winding number is 2 or 0 instead of 1"});
+// Self-intersections are a warning: near the crossing the winding number is 2 or 0 instead of 1.
+void check_cage_self_intersections(const CageInput& c, ValidationReport& r) {
+  r.self_intersections = find_self_intersections(c.V, c.F);
+  if (r.self_intersections.empty()) return;
+  const auto& si = r.self_intersections;
+  std::string pairs;
+  for (size_t i = 0; i < si.size() && i < 20; ++i)
+    pairs += (i ? ", " : "") + std::to_string(si[i].first + 1) + " & " + std::to_string(si[i].second + 1);
+  if (si.size() > 20) pairs += ", ...";
+  r.warnings.push_back(
+      {c.file, "faces " + std::to_string(si[0].first + 1) + " and " + std::to_string(si[0].second + 1),
+       line_of(c.face_lines, si[0].first),
+       "the cage intersects itself in " + std::to_string(si.size()) + " face pair" +
+           (si.size() > 1 ? "s" : "") + " (" + pairs +
+           "); near the crossing the winding number is 2 or 0 instead of 1"});
+}
+
+// All cage checks, in this order. Returns true when the cage passed every check (the mesh-in-cage test may
+// then run).
+bool check_cage(const TriMesh& cage, const MeshLines* lines, const CheckTolerances& tol,
+                ValidationReport& r) {
+  const CageInput c{cage.source.empty() ? "cage" : cage.source, cage.V, cage.F,
+                    lines ? &lines->vertex : nullptr, lines ? &lines->face : nullptr};
+  const int nv = static_cast<int>(cage.V.rows()), nf = static_cast<int>(cage.F.rows());
+  const size_t errors_before = r.errors.size();
+  r.cage_file = c.file;
+  r.cage_vertices = nv;
+  r.cage_faces = nf;
+  if (nv < 4 || nf < 4) {
+    r.errors.push_back({c.file, "", 0,
+                        "a cage needs at least 4 vertices and 4 faces, found " + std::to_string(nv) +
+                            " and " + std::to_string(nf)});
+    return false;
   }
+  if (!check_indices_and_values(cage, c.file, lines, r.errors)) return false;
+  r.cage_bbox_min = cage.V.colwise().minCoeff().transpose();
+  r.cage_bbox_max = cage.V.colwise().maxCoeff().transpose();
+
+  check_cage_faces(c, bbox_diagonal(cage.V), tol, r);
+  check_unused_vertices(c, r);
+  CageEdges edges = check_cage_edges(c, r);
+  const auto [orientable, consistent] = check_cage_orientation(c, edges, r);
+  check_cage_components(c, edges, orientable, r);
+  if (edges.closed && edges.manifold && orientable && consistent) check_cage_outward(c, r);
+  check_cage_self_intersections(c, r);
   return r.errors.size() == errors_before;
 }
 

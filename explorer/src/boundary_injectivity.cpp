@@ -56,16 +56,14 @@ BoundaryEmbedding check_boundary_embedding(const ExplorerMap& map, const Ball& b
   for (int i = 0; i < nv; ++i) out.image.V.row(i) = map.value(out.source.V.row(i).transpose()).transpose();
   if (!out.image.V.allFinite()) throw Error("the image of the boundary sphere has non-finite points");
   out.min_image_edge = INFINITY;
-  double vol = 0;
   for (int f = 0; f < out.image.F.rows(); ++f) {
     const Vec3 a = out.image.V.row(out.image.F(f, 0)), b = out.image.V.row(out.image.F(f, 1)),
                c = out.image.V.row(out.image.F(f, 2));
     out.min_image_edge = std::min({out.min_image_edge, (b - a).norm(), (c - b).norm(), (a - c).norm()});
-    vol += a.dot(b.cross(c)) / 6;
   }
-  out.signed_volume = vol;
+  out.signed_volume = signed_volume(out.image.V, out.image.F);
   out.intersecting_pairs = static_cast<long>(find_self_intersections(out.image.V, out.image.F).size());
-  out.embedded = out.intersecting_pairs == 0 && out.min_image_edge > 0 && vol > 0;
+  out.embedded = out.intersecting_pairs == 0 && out.min_image_edge > 0 && out.signed_volume > 0;
   return out;
 }
 

@@ -104,9 +104,6 @@ std::vector<MethodResult> run_comparison(const Scenario& scenario, const Model& 
 // them apart). rest: the mesh, deformed: #V by 3.
 double crease_measure(const TriMesh& rest, const MatX3d& deformed);
 
-// Signed volume of a closed triangle mesh (V #V by 3, F #F by 3).
-double mesh_volume(const MatX3d& V, const MatX3i& F);
-
 // The table (one row per method, in run order): CSV with a header, and Markdown shaped like Table 1.
 std::string comparison_table_csv(const std::vector<MethodResult>& rows);
 std::string comparison_table_md(const std::vector<MethodResult>& rows, const Scenario& scenario);
