@@ -4,15 +4,23 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "lidef/cage.h"
 #include "lidef/coefficients.h"
+#include "lidef/deform_params.h"
+#include "lidef/errors.h"
 #include "lidef/geometry.h"
 #include "lidef/global_injectivity.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/model_check.h"
+#include "lidef/procedural_models.h"
+#include "lidef/projected_newton.h"
 #include "lidef/self_intersections.h"
+#include "test_beam.h"
+#include "test_cli_outputs.h"
 #include "test_support.h"
 
 namespace lidef {
@@ -198,6 +206,95 @@ TEST(GlobalInjectivity, BarFoldedOntoItselfIsProvenToOverlapWhereverTheModelIsMo
       EXPECT_LT((g.overlap_point - c).norm(), r + 1e-3 * s * diag) << "scale " << s << ", triangle " << f;
     }
   }
+}
+
+// The solver's mode (deform_params.h `injectivity`): a table row with its two names, local by default.
+TEST(GlobalInjectivityMode, IsAParameterWithTwoNamesAndLocalByDefault) {
+  const ParamInfo* p = find_param("injectivity");
+  ASSERT_NE(p, nullptr);
+  EXPECT_EQ(std::string(p->group), "certificate");
+  EXPECT_EQ(param_flag(*p), "--injectivity");
+  EXPECT_EQ(param_choices(*p), (std::vector<std::string>{"local", "global"}));
+  DeformParams d;
+  EXPECT_EQ(d.injectivity, InjectivityMode::kLocal);
+  set_param_from_text(d, "injectivity", "global", "--injectivity");
+  EXPECT_EQ(d.injectivity, InjectivityMode::kGlobal);
+  EXPECT_THROW(set_param_from_text(d, "injectivity", "globl", "--injectivity"), InputError);
+}
+
+// Global mode never acts as local: where the verdict cannot be decided (a rest mesh that intersects itself,
+// the voxel grid as domain), the first step says why and changes nothing; local mode steps as before.
+TEST(GlobalInjectivityMode, RefusesToStartWhereGlobalInjectivityCannotBeDecided) {
+  const Model& m = test::beam().model;
+  // A vertex of the end x = max pulled through the beam to just beyond its other end (still inside the cage):
+  // its triangles cross the end face x = min, and the mesh stays one closed manifold.
+  TriMesh crossed = m.mesh;
+  Eigen::Index v = 0;
+  const double x_max = crossed.V.col(0).maxCoeff(&v), x_min = crossed.V.col(0).minCoeff();
+  crossed.V.row(v) = Vec3(x_min - 0.005 * (x_max - x_min), 0, 0).transpose();
+  ASSERT_FALSE(find_self_intersections(crossed.V, crossed.F).empty());
+  DeformParams p;
+  p.samples = 3000;
+  p.reduced_dof = 40;
+  p.injectivity = InjectivityMode::kGlobal;
+  MatX3d src(2, 3), dst(2, 3);
+  src << -0.9, 0, 0, 0.9, 0, 0;
+  dst << -0.9, 0, 0, 0.9, 0.05, 0;
+  struct Case {
+    const TriMesh* mesh;
+    DomainKind domain;
+    const char* reason;
+  };
+  for (const Case& c : {Case{&crossed, DomainKind::kMesh, "the rest-state mesh intersects itself"},
+                        Case{&m.mesh, DomainKind::kVoxels, "the voxel grid"}}) {
+    p.domain = c.domain;
+    p.injectivity = InjectivityMode::kGlobal;
+    DeformationSolver solver(m.cage, *c.mesh, p, test::beam().cache.str());
+    solver.set_handles(src, dst);
+    const MatS3 y0 = solver.reduced_coefficients();
+    try {
+      solver.step();
+      ADD_FAILURE() << "global mode stepped although its verdict cannot be decided (" << c.reason << ")";
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("global injectivity cannot be decided: "), std::string::npos) << what;
+      EXPECT_NE(what.find(c.reason), std::string::npos) << what;
+    }
+    EXPECT_TRUE(solver.reduced_coefficients() == y0);
+    EXPECT_TRUE(solver.history().empty());
+    p.injectivity = InjectivityMode::kLocal;
+    solver.set_params(p);
+    EXPECT_TRUE(solver.step().accepted);
+  }
+}
+
+// The beam bent into a tight U whose free end is laid onto its fixed half (data/scenarios/
+// beam_fold_onto_itself.json; the beam's rest mesh is embedded, so the verdict is decided). Local mode
+// reaches the handles with a map that is locally injective but passes through itself, and the report says so
+// with the place; the winding number of the deformed surface at the images of interior points (an independent
+// count of preimages) reaches 2. Global mode on this scenario is not run here: the beam's tight cage makes
+// one check cost tens of seconds (docs/benchmarks.md, "Global injectivity mode").
+TEST(DeformSlow, BeamFoldPassesThroughItselfInLocalModeAndTheReportSaysWhere) {
+  test::TempDir tmp;
+  const std::string scenario = test::project_data() + "/scenarios/beam_fold_onto_itself.json";
+  const std::string local = tmp.str() + "/local";
+  std::string out;
+  test::run_lidef_cli("deform " + test::shell_quote(scenario) + " --out " + test::shell_quote(local) +
+                          " --models " + test::shell_quote(test::project_data() + "/models") +
+                          " --quiet --cache-dir " + test::shell_quote(tmp.str() + "/cache"),
+                      &out);
+  std::ifstream in(local + "/certificate.json");
+  ASSERT_TRUE(in.good()) << out;
+  const nlohmann::json lc = nlohmann::json::parse(in);
+  EXPECT_EQ(lc["certified"], true) << out;
+  EXPECT_EQ(lc["globally_injective"], false) << out;
+  ASSERT_TRUE(lc.contains("overlap")) << out;
+  EXPECT_EQ(lc["overlap"]["point"].size(), 3u);
+  EXPECT_NE(lc["global_reason"].get<std::string>().find("overlaps itself near ("), std::string::npos);
+  const Model m = load_model(test::project_data() + "/models/beam");
+  EXPECT_GT(
+      max_image_winding(m.cage, m.mesh, read_coefficients(local + "/coefficients.txt", m.cage), 0.03, 0.02),
+      1.5);
 }
 
 }  // namespace

@@ -93,6 +93,11 @@ std::vector<ParamInfo> make_table() {
        "above 0: a bound K on the distortion sigma1/sigma3: a map is certified only when every leaf's upper "
        "bound of sigma1/sigma3 is <= K (leaves above it are refined); the line search accepts only such maps "
        "(0 = off; docs/certificate.md, 'Bounded distortion')"},
+      {"injectivity", "certificate", &D::injectivity, 0, 0,
+       "what the line search proves of an accepted map: \"local\" (the octree certificate) or \"global\" "
+       "(also that the shape does not pass through itself: a step that would is shortened, the solve stops "
+       "'blocked'; needs the mesh domain and a surface that does not intersect itself at rest; costs a "
+       "check per accepted step; docs/solver.md)"},
       // --- Dynamic weighting
       {"dynamic_weighting", "weighting", &D::dynamic_weighting, 0, 0,
        "adapt lambda1 and lambda2 during the solve (Sec. 7.3; kappa1, kappa2 below)"},
@@ -154,6 +159,10 @@ struct EnumNames<BackendKind> {
 template <>
 struct EnumNames<DomainKind> {
   static constexpr const char* names[] = {"mesh", "voxels"};
+};
+template <>
+struct EnumNames<InjectivityMode> {
+  static constexpr const char* names[] = {"local", "global"};
 };
 
 template <class T>
@@ -333,6 +342,10 @@ const char* to_string(BackendKind b) {
 
 const char* to_string(DomainKind d) {
   return EnumNames<DomainKind>::names[static_cast<int>(d)];
+}
+
+const char* to_string(InjectivityMode m) {
+  return EnumNames<InjectivityMode>::names[static_cast<int>(m)];
 }
 
 std::string param_flag(const ParamInfo& p) {

@@ -299,6 +299,8 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
       backend_(backend ? std::move(backend) : cpu_backend()) {
   validate_params(params_, "parameters");
   if (params_.threads > 0) omp_set_num_threads(params_.threads);
+  if (setup.mesh) mesh_ = *setup.mesh;
+  mesh_domain_ = setup.mesh && params_.domain == DomainKind::kMesh;
   const auto t_all = Clock::now();
   Precompute pc(*this, setup);
   pc.subspace();
@@ -350,6 +352,28 @@ DeformationSolver::~DeformationSolver() {
 
 SamplingParams DeformationSolver::sampling_params() const {
   return sampling_params_of(params_);
+}
+
+std::string DeformationSolver::global_problem() const {
+  if (mesh_.V.rows() == 0) return "the solver was given no mesh";
+  if (!mesh_domain_)
+    return "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)";
+  if (mesh_.F.rows() == 0) return "a point cloud has no surface whose image could be checked";
+  return "";
+}
+
+GlobalInjectivity DeformationSolver::check_global(const MatS3& y) const {
+  if (!global_checker_) global_checker_ = std::make_unique<GlobalInjectivityChecker>(cage_, mesh_);
+  return global_checker_->check(
+      frame_.coefficients_from_normalized(subspace_.basis * y, cage_.num_vertices()));
+}
+
+GlobalInjectivity DeformationSolver::global_injectivity() const {
+  if (global_y_.rows() == y_.rows() && global_y_ == y_) return global_verdict_;
+  const std::string problem = global_problem();
+  global_verdict_ = problem.empty() ? check_global(y_) : global_injectivity_not_decided(problem);
+  global_y_ = y_;
+  return global_verdict_;
 }
 
 std::string DeformationSolver::distortion_note() const {
@@ -550,10 +574,21 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   bool may_reuse =
       dragging_ && params_.drag_hessian_reuse > 0 && targets_version_ != stepped_targets_version_;
   stepped_targets_version_ = targets_version_;
+  const bool global = params_.injectivity == InjectivityMode::kGlobal;
+  if (global) {
+    // Each accepted step keeps global injectivity only if the map it starts from has it: say so before any
+    // step rather than act as local.
+    const GlobalInjectivity g0 = global_injectivity();
+    if (g0.verdict == GlobalInjectivity::Verdict::kNotDecided)
+      throw InputError("injectivity", "global injectivity cannot be decided: " + g0.reason);
+    if (g0.verdict == GlobalInjectivity::Verdict::kOverlap)
+      throw InputError("injectivity", "the starting map is not globally injective: " + g0.reason);
+  }
+  global_rejection_.clear();
   for (int attempt = 0; attempt < max_attempts && !interrupted; ++attempt) {
     rec.lambda_p2p = weights_.p2p;
     rec.lambda_smooth = weights_.smooth;
-    rec.armijo_rejections = rec.certificate_rejections = 0;
+    rec.armijo_rejections = rec.certificate_rejections = rec.global_rejections = 0;
     distortion_rejection_.clear();
 
     auto t0 = Clock::now();
@@ -673,6 +708,27 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
           break;
         }
         continue;
+      }
+      if (global) {  // only trials the local certificate accepted (the degree argument needs it)
+        const auto tg = Clock::now();
+        const GlobalInjectivity g = check_global(yt);
+        rec.ms_global += ms_since(tg);
+        if (trace) std::fprintf(stderr, "  global: %s %.1f ms\n", to_json_literal(g.verdict), ms_since(tg));
+        if (g.verdict != GlobalInjectivity::Verdict::kInjective) {
+          const Vec3& x = g.overlap_point;
+          global_rejection_ = g.verdict == GlobalInjectivity::Verdict::kOverlap
+                                  ? "the shape would pass through itself near (" + format_g(x.x()) + ", " +
+                                        format_g(x.y()) + ", " + format_g(x.z()) + ")"
+                                  : "global injectivity not proven (" + g.reason + ")";
+          ++rec.global_rejections;
+          if (may_retry) {
+            retry = true;
+            break;
+          }
+          continue;
+        }
+        global_y_ = yt;
+        global_verdict_ = g;
       }
       rec.accepted = true;
       rec.step = t;
@@ -842,6 +898,10 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
             std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
         history_.back().weight_action = "p2p*,smooth* (no step)";
         rec.weight_action = history_.back().weight_action;
+      } else if (rec.global_rejections > 0) {
+        res.reason = StopReason::kBlocked;
+        res.message = "blocked: " + global_rejection_;
+        done = true;
       } else {
         res.reason = StopReason::kNoCertifiedStep;
         res.message = "no certified step of decreasing energy in " + std::to_string(params_.max_halvings) +
@@ -856,7 +916,11 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
       const double decrease = rec.energy_before - rec.terms.total;
       const bool small_decrease =
           decrease <= params_.energy_tolerance * std::max(std::abs(rec.energy_before), 1e-300);
-      if ((small_step || small_decrease) && rec.certificate_rejections > 0) {
+      if ((small_step || small_decrease) && rec.global_rejections > 0) {
+        res.reason = StopReason::kBlocked;
+        res.message = "blocked: " + global_rejection_;
+        done = true;
+      } else if ((small_step || small_decrease) && rec.certificate_rejections > 0) {
         res.reason = StopReason::kBlocked;
         res.message = "the certificate limits the step to " + format_g(rec.step, 4) +
                       ": the map is at the boundary of the certified region" + distortion_note();

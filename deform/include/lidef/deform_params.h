@@ -20,9 +20,13 @@ enum class BackendKind { kCpu, kOpenCL, kAuto };
 // What the voxels (energy samples and certified leaves) cover: the mesh and its solid (domain_sampling.h), or
 // the paper's grid of cells clear of the cage (sample_voxels), kept for comparison with the paper.
 enum class DomainKind { kMesh, kVoxels };
+// What the line search proves of an accepted map: local injectivity (the octree certificate), or also that
+// the shape does not pass through itself (global_injectivity.h; docs/solver.md, "Global injectivity mode").
+enum class InjectivityMode { kLocal, kGlobal };
 const char* to_string(HessianPrecision p);  // "single" / "double"
 const char* to_string(BackendKind b);       // "cpu" / "opencl" / "auto"
 const char* to_string(DomainKind d);        // "mesh" / "voxels"
+const char* to_string(InjectivityMode m);   // "local" / "global"
 
 struct DeformParams {
   // --- Subspace and sampling
@@ -69,6 +73,10 @@ struct DeformParams {
                                // this fraction of the smallest sampled σ3 (CertifyParams::bound_tolerance)
   double max_distortion =
       0;  // > 0: certified maps have σ1/σ3 ≤ this on every leaf (CertifyParams::max_distortion)
+  // global: an accepted step must also be proven globally injective on the mesh's solid (the shape stops
+  // where it would pass through itself). local by default: the check costs far more than a Newton step
+  // (docs/solver.md, "Global injectivity mode").
+  InjectivityMode injectivity = InjectivityMode::kLocal;
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
   bool dynamic_weighting = true;
   double e0 = 1e-4;                // E_P2P threshold, relative to the squared cage bounding-box diagonal
@@ -106,7 +114,7 @@ struct ParamInfo {
       std::variant<int DeformParams::*, long DeformParams::*, double DeformParams::*, bool DeformParams::*,
                    std::string DeformParams::*, LipschitzBound DeformParams::*,
                    HessianPrecision DeformParams::*, BackendKind DeformParams::*, DomainKind DeformParams::*,
-                   RefinementEval DeformParams::*>;
+                   RefinementEval DeformParams::*, InjectivityMode DeformParams::*>;
   const char* name;   // JSON key; the CLI flag is "--" + name with '_' → '-'
   const char* group;  // "sampling", "energy", "newton", "certificate", "weighting", "execution", "testing"
   Member member;

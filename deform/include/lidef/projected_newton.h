@@ -37,6 +37,7 @@
 #include "lidef/deform_params.h"
 #include "lidef/deformation_energy.h"
 #include "lidef/errors.h"
+#include "lidef/global_injectivity.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/normalization.h"
 #include "lidef/octree_certifier.h"
@@ -87,6 +88,8 @@ struct IterationRecord {
   double step_norm = 0;                      // t ‖δ‖
   int armijo_rejections = 0;       // halvings because the energy did not decrease enough (or became +∞)
   int certificate_rejections = 0;  // halvings because the certificate failed
+  // halvings because the locally certified trial was not proven globally injective (injectivity "global")
+  int global_rejections = 0;
   bool accepted = false;
   bool certified = false;  // the current map (accepted point, or the previous one) is certified
   // The line search's certificate of the current map: min σ3 at the evaluated voxel centers, and min over
@@ -102,6 +105,7 @@ struct IterationRecord {
   // ms_solve: the Cholesky solve and the direction (its Jacobians G δ and the CG iterates, newton_cg_steps);
   // before 2026-11-24 the Jacobian pass was counted in ms_line_search.
   double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, ms_certificate = 0, ms_total = 0;
+  double ms_global = 0;  // the global injectivity checks of the line search (part of ms_line_search)
 };
 
 enum class StopReason {
@@ -109,6 +113,7 @@ enum class StopReason {
                // or at adjusted ones once max_weight_resets is used up (SolveResult::message says so)
   kMaxIterations,
   kBlocked,          // the certificate shortened the step to below the tolerance: at the injectivity boundary
+                     // (injectivity "global": also where the shape would pass through itself)
   kNoCertifiedStep,  // no step length in max_halvings halvings was both decreasing and certified
   kInterrupted,      // the callback or the stop flag asked to stop
   kReached,  // solve_to_targets only: every handle within handle_tolerance of its target with a certified
@@ -210,6 +215,12 @@ class DeformationSolver {
   // The reason of the last line-search trial of the last iteration that the distortion bound
   // (max_distortion) rejected: "distortion bound K not proven at (x, y, z)"; empty when none.
   const std::string& distortion_rejection() const { return distortion_rejection_; }
+  // Injectivity "global": why the last line-search trial refused by the global check was refused ("the shape
+  // would pass through itself near (x, y, z)", model units); empty when none of the last iteration was.
+  const std::string& global_rejection() const { return global_rejection_; }
+  // The global injectivity verdict of the current map (global_injectivity.h; model units), computed on
+  // demand and kept until the map changes. Not decided without the mesh domain or without a surface.
+  GlobalInjectivity global_injectivity() const;
   // A full certificate of the current map with leaves (for reports), model units.
   Certificate certify_current(bool keep_leaves = true) const;
   EnergyTerms energy() const;  // at the current map, current weights (E_P2P on normalized distances)
@@ -292,6 +303,19 @@ class DeformationSolver {
   // (CertifyParams::max_distortion), in the model's frame; empty when none was.
   std::string distortion_rejection_;
   std::string distortion_note() const;  // "; the distortion bound blocks it (...)" or ""
+  // Global injectivity (injectivity "global"): the rest-state surface (#V by 3, #F by 3) when the domain is
+  // the mesh's solid, its checker (built on first use, then reused for every trial), the last map proven
+  // globally injective and the last refusal's reason.
+  TriMesh mesh_;
+  bool mesh_domain_ = false;
+  mutable std::unique_ptr<GlobalInjectivityChecker> global_checker_;
+  mutable MatS3 global_y_;  // the map global_verdict_ is about (empty: none)
+  mutable GlobalInjectivity global_verdict_;
+  std::string global_rejection_;
+  // Why global injectivity cannot be decided for this solver at all ("" when it can).
+  std::string global_problem() const;
+  // The verdict for reduced coefficients ỹ (normalized frame; the report in model units).
+  GlobalInjectivity check_global(const MatS3& y) const;
   // ≥ ‖d‖_F for the kernels' direction d, bounding the rounding of its Jacobians (CertifyParams::
   // direction_scale): Σ_k |α_k| ‖p_k‖_F when they were combined from CG iterates.
   double direction_scale_ = 0;
