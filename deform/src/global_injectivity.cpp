@@ -285,6 +285,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                                                   const GlobalInjectivityParams& params) const {
   const auto t_start = std::chrono::steady_clock::now();
   const Impl& im = *impl_;
+  auto cancelled = [&] { return params.cancel && params.cancel->load(std::memory_order_relaxed); };
   auto finish = [&](GlobalInjectivity g) {
     g.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
     return g;
@@ -506,7 +507,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     };
 #pragma omp for schedule(dynamic, 64)
     for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
-      if (k > first_crossing.load(std::memory_order_relaxed)) continue;
+      if (k > first_crossing.load(std::memory_order_relaxed) || cancelled()) continue;
       const int fa = pairs[k].first, fb = pairs[k].second;
       PairResult& res = results[k];
       std::array<int, 3> sv;
@@ -524,7 +525,8 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       stack.clear();
       stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
       while (!stack.empty()) {
-        if ((res.tests & 63) == 63 && k > first_crossing.load(std::memory_order_relaxed)) break;
+        if ((res.tests & 63) == 63 && (k > first_crossing.load(std::memory_order_relaxed) || cancelled()))
+          break;
         const Task task = stack.back();
         stack.pop_back();
         const Piece &P = task.P, &Q = task.Q;
@@ -587,6 +589,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     }
   }
 
+  if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
   // --- 5. Verdict.
   // Over the pairs up to the first crossing (all of them when there is none): processed in full whatever the
   // thread schedule, so these counts are deterministic.

@@ -22,8 +22,9 @@ struct DeformOutputOptions {
 // iterations.csv, summary.json, scenario.json (`scenario` with the parameters used), field.vti when
 // options.grid > 0, and deformed.ply when the model comes from a PLY file whose vertices are the model's mesh
 // vertices (a point cloud, Gaussian splats, a PLY mesh without unused vertices; point_cloud_io.h,
-// gaussian_splats.h). A field.vti or deformed.ply of an earlier run that this one does not write is removed. `scenario.model_dir` names the model in the certificate. Throws InputError naming
-// `dir` when it cannot be a folder.
+// gaussian_splats.h). A field.vti or deformed.ply of an earlier run that this one does not write is removed.
+// `scenario.model_dir` names the model in the certificate. Throws InputError naming `dir` when it cannot be a
+// folder.
 struct DeformOutputs {
   std::string dir;
   std::vector<std::string> files;  // the names written, in the order above
@@ -33,6 +34,11 @@ struct DeformOutputs {
 };
 DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
                                    const DeformResult& result, const DeformOutputOptions& options = {});
+
+// The PLY file the model was made from (deformed.ply's source; the studio's point colours): the scenario's
+// model when it is a .ply file, else the input named by the model folder's model.json (an automatic cage); ""
+// when the model does not come from a PLY file.
+std::string source_ply(const Model& model, const Scenario& scenario);
 
 // The CSV header and row of iterations.csv.
 extern const char* const kIterationsHeader;
