@@ -22,9 +22,8 @@ struct DeformOutputOptions {
 // iterations.csv, summary.json, scenario.json (`scenario` with the parameters used), field.vti when
 // options.grid > 0, and deformed.ply when the model comes from a PLY file whose vertices are the model's mesh
 // vertices (a point cloud, Gaussian splats, a PLY mesh without unused vertices; point_cloud_io.h,
-// gaussian_splats.h). A field.vti or deformed.ply of an earlier run that this one does not write is removed.
-// `scenario.model_dir` names the model in the certificate. Throws InputError naming `dir` when it cannot be a
-// folder.
+// gaussian_splats.h). A field.vti or deformed.ply of an earlier run that this one does not write is removed. `scenario.model_dir` names the model in the certificate. Throws InputError naming
+// `dir` when it cannot be a folder.
 struct DeformOutputs {
   std::string dir;
   std::vector<std::string> files;  // the names written, in the order above
