@@ -8,7 +8,7 @@
 // `--global on|off` sets the check for the drag rows (the check runs only when the engine rests).
 //
 // Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset|refinement|global]
-// [--global on|off] [--steps N]. Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
+// [--global on|off] [--steps N] [--scenario NAME]. Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
@@ -211,11 +212,12 @@ StepResult drag_steps(StudioWindow& w, int steps) {
 
 int global_steps(const std::string& scenario, int steps) {
   std::printf(
-      "Machine: %s, %d threads (OpenMP). bar_bend in the window (1280x800), mesh view; %d drag steps of the\n"
+      "Machine: %s, %d threads (OpenMP). %s in the window (1280x800), mesh view; %d drag steps of the\n"
       "pushed end along the circle of the drag rows (radius 5%% of the bounding-box diagonal), each waited "
       "until\n"
       "the window shows the resting map (and, with the check, its verdict).\n\n",
-      lidef::bench::cpu_model().c_str(), omp_get_max_threads(), steps);
+      lidef::bench::cpu_model().c_str(), omp_get_max_threads(),
+      std::filesystem::path(scenario).stem().string().c_str(), steps);
   std::printf(
       "| parameters | global check | ms per step (to the shown rest) | ms per check (mean / max) | verdicts "
       "(injective / overlap / not decided) |\n|---|---|---:|---:|---|\n");
@@ -256,7 +258,7 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: bench_studio DATA_DIR [--seconds S] [--configs "
-                 "all|quick|default|lipschitz|subset|refinement|global] [--global on|off] [--steps N]\n");
+                 "all|quick|default|lipschitz|subset|refinement|global] [--global on|off] [--steps N] [--scenario NAME]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
@@ -275,17 +277,19 @@ int main(int argc, char** argv) {
   std::string which = "all";
   bool global = ViewSettings{}.global_injectivity;
   int steps = 8;
+  std::string global_scenario = "bar_bend";  // --configs global: a shared scenario's name
   for (int i = 2; i + 1 < argc; ++i) {
     if (!std::strcmp(argv[i], "--seconds")) seconds = std::atof(argv[i + 1]);
     if (!std::strcmp(argv[i], "--configs")) which = argv[i + 1];
     if (!std::strcmp(argv[i], "--global")) global = !std::strcmp(argv[i + 1], "on");
     if (!std::strcmp(argv[i], "--steps")) steps = std::max(1, std::atoi(argv[i + 1]));
+    if (!std::strcmp(argv[i], "--scenario")) global_scenario = argv[i + 1];
   }
   setenv("QT_QPA_PLATFORM", "xcb", 1);
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
   std::setlocale(LC_NUMERIC, "C");  // as lidef-studio does (gui/src/main.cpp): printf keeps its '.'
-  if (which == "global") return global_steps(data + "/scenarios/bar_bend.json", steps);
+  if (which == "global") return global_steps(data + "/scenarios/" + global_scenario + ".json", steps);
   std::vector<Config> configs = {{"default (300 DOF/coord, 30k voxels)", 300, 30000, View::kMesh},
                                  {"200 DOF/coord, 20k voxels", 200, 20000, View::kMesh},
                                  {"interactive preset (100 DOF/coord, 10k voxels)", 100, 10000, View::kMesh},

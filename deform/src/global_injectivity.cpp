@@ -344,12 +344,14 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     std::vector<float> row;
 #pragma omp for schedule(dynamic, 256)
     for (long f = 0; f < nf; ++f) {
+      if (cancelled()) continue;  // the result is dropped below
       std::array<Vec3, 3> p, q;
       for (int k = 0; k < 3; ++k) p[k] = mesh.V.row(mesh.F(f, k)), q[k] = fV.row(mesh.F(f, k));
       pieces[f] = make_piece(p, q, static_cast<int>(f), 0, row);
     }
 #pragma omp for schedule(dynamic, 256)
     for (long v = 0; v < nv; ++v) {
+      if (cancelled()) continue;
       const Vec3 c = mesh.V.row(v);
       double R = 0;
       for (int f : im.vertex_faces[v])
@@ -358,6 +360,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       star_ok[v] = im.injective_ball(fm, delta, c, R, row);
     }
   }
+  if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
   // A triangle's own points: its ball, or the star ball of one of its corners, must be an injectivity ball.
   std::vector<char> face_ok(nf, 0);
 #pragma omp parallel
