@@ -3,7 +3,7 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// `--configs global` instead times drag *steps* with pauses (move the targets, wait until the window shows
+// `--configs global` (`global-quick`: the interactive preset only) instead times drag *steps* with pauses (move the targets, wait until the window shows
 // the resting map and, with the check on, its global injectivity verdict), with the global check off and on;
 // `--global on|off` sets the check for the drag rows (the check runs only when the engine rests).
 //
@@ -210,7 +210,7 @@ StepResult drag_steps(StudioWindow& w, int steps) {
   return r;
 }
 
-int global_steps(const std::string& scenario, int steps) {
+int global_steps(const std::string& scenario, int steps, bool preset_only) {
   std::printf(
       "Machine: %s, %d threads (OpenMP). %s in the window (1280x800), mesh view; %d drag steps of the\n"
       "pushed end along the circle of the drag rows (radius 5%% of the bounding-box diagonal), each waited "
@@ -226,6 +226,7 @@ int global_steps(const std::string& scenario, int steps) {
       {"default (300 DOF/coord, 30k voxels)", {300, 30000}}};
   for (const auto& [name, dims] : params)
     for (const bool global : {false, true}) {
+      if (preset_only && dims.first != 100) continue;
       DeformParams p;
       p.reduced_dof = dims.first;
       p.samples = dims.second;
@@ -258,7 +259,7 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: bench_studio DATA_DIR [--seconds S] [--configs "
-                 "all|quick|default|lipschitz|subset|refinement|global] [--global on|off] [--steps N] [--scenario NAME]\n");
+                 "all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] [--steps N] [--scenario NAME]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
@@ -289,7 +290,8 @@ int main(int argc, char** argv) {
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
   std::setlocale(LC_NUMERIC, "C");  // as lidef-studio does (gui/src/main.cpp): printf keeps its '.'
-  if (which == "global") return global_steps(data + "/scenarios/" + global_scenario + ".json", steps);
+  if (which == "global" || which == "global-quick")
+    return global_steps(data + "/scenarios/" + global_scenario + ".json", steps, which == "global-quick");
   std::vector<Config> configs = {{"default (300 DOF/coord, 30k voxels)", 300, 30000, View::kMesh},
                                  {"200 DOF/coord, 20k voxels", 200, 20000, View::kMesh},
                                  {"interactive preset (100 DOF/coord, 10k voxels)", 100, 10000, View::kMesh},

@@ -36,6 +36,9 @@ const char* to_string(SessionState s) {
 
 namespace {
 using Clock = std::chrono::steady_clock;
+// Seconds the engine rests with no command before it checks global injectivity (a pause of the drag).
+constexpr double kGlobalCheckPause = 0.25;
+
 double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
@@ -892,6 +895,14 @@ bool InteractiveSession::Engine::compute_global() {
     g = global_injectivity_not_decided(why);
   } else {
     publish_frame(make_frame());
+    // A drag that goes on posts its next targets within a few frames: the check starts only after a pause,
+    // so that a drag does not pay for the uncancellable start of checks it would cancel at once.
+    {
+      std::unique_lock<std::mutex> lk(session.mutex_);
+      if (session.wake_.wait_for(lk, std::chrono::duration<double>(kGlobalCheckPause),
+                                 [this] { return !session.queue_.empty() || session.quit_; }))
+        return false;
+    }
     if (!checker || checker_model != model_version) {
       checker.reset();  // the old model's checker is freed before the new one is built
       checker = std::make_unique<GlobalInjectivityChecker>(model->cage, model->mesh);

@@ -100,9 +100,9 @@ struct ExtrasRequest {
   bool leaves = false;
   bool field = false;
   bool mesh_distortion = false;  // σ1/σ3 at the mesh vertices with every frame (a signed SVD per vertex)
-  // Global injectivity (global_injectivity.h) of the map the engine rests at: one GlobalInjectivityChecker
-  // per model, one check per resting map; a command posted meanwhile cancels the check (it runs again at the
-  // next rest).
+  // Global injectivity (global_injectivity.h) of the map the engine rests at, once it has rested 0.25 s with
+  // no command: one GlobalInjectivityChecker per model, one check per resting map; a command posted meanwhile
+  // cancels the check (it runs again at the next rest).
   bool global_injectivity = false;
   int field_resolution = 48;     // grid points along the longest axis of the cage's bounding box
   double extras_interval = 1.0;  // seconds between extras while iterating (0 = every frame)
