@@ -76,7 +76,7 @@ ExtrasRequest extras_for(const ViewSettings& s);
 // The faces of the rest mesh (#F by 3) within `rings` face rings of the given faces (sharing a vertex with
 // the ring before), sorted: the neighbourhoods of an overlap's two triangles, drawn red.
 std::vector<int> faces_near(const MatX3i& F, const std::vector<int>& faces, int rings);
-constexpr int kOverlapRings = 3;
+constexpr int kOverlapRings = 6;
 
 // A point cloud's own colours, RGB bytes per point: a Gaussian splat's degree-0 colour (0.5 + C0 f_dc, C0 the
 // degree-0 spherical harmonic, clamped to [0, 1]) or the PLY's red green blue (bytes, or floats in [0, 1]);
