@@ -3,12 +3,14 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// `--configs global` (`global-quick`: the interactive preset only) instead times drag *steps* with pauses (move the targets, wait until the window shows
-// the resting map and, with the check on, its global injectivity verdict), with the global check off and on;
+// `--configs global` (`global-quick`: the interactive preset only) instead times drag *steps* with pauses
+// (move the targets, wait until the window shows the resting map and, with the check on, its global
+// injectivity verdict), with the global check off and on;
 // `--global on|off` sets the check for the drag rows (the check runs only when the engine rests).
 //
-// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset|refinement|global]
-// [--global on|off] [--steps N] [--scenario NAME]. Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
+// Usage: bench_studio DATA_DIR [--seconds S]
+// [--configs all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] [--steps N]
+// [--scenario NAME]. Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -259,7 +261,8 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: bench_studio DATA_DIR [--seconds S] [--configs "
-                 "all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] [--steps N] [--scenario NAME]\n");
+                 "all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] "
+                 "[--steps N] [--scenario NAME]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
