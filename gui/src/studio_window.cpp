@@ -1668,7 +1668,11 @@ void StudioWindow::load_point_colors(const Model& model) {
   std::vector<unsigned char> rgb;
   if (model.mesh.F.rows() == 0) {
     try {
-      const std::string ply = source_ply(model, session_->scenario());
+      // The file opened (or named by the scenario) first: a cached automatic cage's model.json names the file
+      // it was first made from, which may be gone.
+      Scenario sc = session_->scenario();
+      sc.model_dir = shown_source_;
+      const std::string ply = source_ply(model, sc);
       if (!ply.empty()) {
         const PlyCloud cloud = read_ply_cloud(ply);
         if (cloud.points() == model.mesh.V) rgb = point_cloud_colors(cloud);
