@@ -3,8 +3,14 @@
 // second (frames rendered that show a new certified map), Newton steps per second, and the time of each part;
 // the same drag on the engine alone (no window) shows whether rendering slows the solver.
 //
-// Usage: bench_studio DATA_DIR [--seconds S] [--configs all|quick|default|lipschitz|subset|refinement]. Needs
-// an X display; without DISPLAY it re-runs itself under xvfb-run.
+// `--configs global` (`global-quick`: the interactive preset only) instead times drag *steps* with pauses
+// (move the targets, wait until the window shows the resting map and, with the check on, its global
+// injectivity verdict), with the global check off and on;
+// `--global on|off` sets the check for the drag rows (the check runs only when the engine rests).
+//
+// Usage: bench_studio DATA_DIR [--seconds S]
+// [--configs all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] [--steps N]
+// [--scenario NAME]. Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -17,6 +23,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
@@ -162,13 +169,100 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
   return r;
 }
 
+// Drag steps with pauses: each moves the pushed targets 1/steps of the circle on and waits until the window
+// shows the resting map (with the check on: and its global verdict). Times per step (wall, from the target
+// change to the shown rest) and per check.
+struct StepResult {
+  double ms_step = 0, ms_check = 0, ms_check_max = 0;
+  long checks = 0, injective = 0, overlap = 0, not_decided = 0;
+  bool ok = true;
+};
+
+StepResult drag_steps(StudioWindow& w, int steps) {
+  InteractiveSession& s = w.session();
+  const Scenario sc = s.scenario();
+  const auto m = s.model();
+  const double amp = 0.05 * (m->cage.bbox_max - m->cage.bbox_min).norm();
+  const bool global = w.settings().global_injectivity;
+  StepResult r;
+  for (int k = 1; k <= steps; ++k) {
+    const auto t0 = Clock::now();
+    s.set_targets(drag_targets(sc.sources, sc.targets, 4.0 * k / steps, amp));
+    bool done = false;
+    while (!done && since(t0) < 600) {
+      QApplication::processEvents(QEventLoop::AllEvents, 5);
+      if (!s.wait_until_resting(0.0)) continue;
+      const auto f = s.latest_frame();
+      const auto shown = w.shown_frame();
+      done = f && shown && f->serial == shown->serial && (!global || f->global_version == f->map_version);
+    }
+    r.ok = r.ok && done;
+    r.ms_step += 1000 * since(t0) / steps;
+    const auto f = w.shown_frame();
+    if (global && f->global && f->global_version == f->map_version) {
+      ++r.checks;
+      r.ms_check += f->global->ms;
+      r.ms_check_max = std::max(r.ms_check_max, f->global->ms);
+      r.injective += f->global->verdict == GlobalInjectivity::Verdict::kInjective;
+      r.overlap += f->global->verdict == GlobalInjectivity::Verdict::kOverlap;
+      r.not_decided += f->global->verdict == GlobalInjectivity::Verdict::kNotDecided;
+    }
+  }
+  if (r.checks) r.ms_check /= static_cast<double>(r.checks);
+  return r;
+}
+
+int global_steps(const std::string& scenario, int steps, bool preset_only) {
+  std::printf(
+      "Machine: %s, %d threads (OpenMP). %s in the window (1280x800), mesh view; %d drag steps of the\n"
+      "pushed end along the circle of the drag rows (radius 5%% of the bounding-box diagonal), each waited "
+      "until\n"
+      "the window shows the resting map (and, with the check, its verdict).\n\n",
+      lidef::bench::cpu_model().c_str(), omp_get_max_threads(),
+      std::filesystem::path(scenario).stem().string().c_str(), steps);
+  std::printf(
+      "| parameters | global check | ms per step (to the shown rest) | ms per check (mean / max) | verdicts "
+      "(injective / overlap / not decided) |\n|---|---|---:|---:|---|\n");
+  const std::pair<const char*, std::pair<int, int>> params[] = {
+      {"interactive preset (100 DOF/coord, 10k voxels)", {100, 10000}},
+      {"default (300 DOF/coord, 30k voxels)", {300, 30000}}};
+  for (const auto& [name, dims] : params)
+    for (const bool global : {false, true}) {
+      if (preset_only && dims.first != 100) continue;
+      DeformParams p;
+      p.reduced_dof = dims.first;
+      p.samples = dims.second;
+      StudioWindow win;
+      win.set_error_sink([](const std::string& e) { std::fprintf(stderr, "bench_studio: %s\n", e.c_str()); });
+      win.resize(1280, 800);
+      win.show();
+      pump(0.3);
+      if (!win.open_path(scenario)) return 1;
+      win.set_params(p);
+      ViewSettings vs;
+      vs.global_injectivity = global;
+      win.set_settings(vs);
+      if (!settle(win.session(), &win, 600)) return 1;
+      const StepResult r = drag_steps(win, steps);
+      if (!r.ok) std::fprintf(stderr, "bench_studio: a step did not settle\n");
+      if (global)
+        std::printf("| %s | on | %.0f | %.0f / %.0f | %ld / %ld / %ld |\n", name, r.ms_step, r.ms_check,
+                    r.ms_check_max, r.injective, r.overlap, r.not_decided);
+      else
+        std::printf("| %s | off | %.0f | – | – |\n", name, r.ms_step);
+      std::fflush(stdout);
+    }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: bench_studio DATA_DIR [--seconds S] [--configs "
-                 "all|quick|default|lipschitz|subset|refinement]\n");
+                 "all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] "
+                 "[--steps N] [--scenario NAME]\n");
     return 2;
   }
   if (!std::getenv("DISPLAY")) {
@@ -185,14 +279,22 @@ int main(int argc, char** argv) {
   const std::string data = argv[1];
   double seconds = 10;
   std::string which = "all";
+  bool global = ViewSettings{}.global_injectivity;
+  int steps = 8;
+  std::string global_scenario = "bar_bend";  // --configs global: a shared scenario's name
   for (int i = 2; i + 1 < argc; ++i) {
     if (!std::strcmp(argv[i], "--seconds")) seconds = std::atof(argv[i + 1]);
     if (!std::strcmp(argv[i], "--configs")) which = argv[i + 1];
+    if (!std::strcmp(argv[i], "--global")) global = !std::strcmp(argv[i + 1], "on");
+    if (!std::strcmp(argv[i], "--steps")) steps = std::max(1, std::atoi(argv[i + 1]));
+    if (!std::strcmp(argv[i], "--scenario")) global_scenario = argv[i + 1];
   }
   setenv("QT_QPA_PLATFORM", "xcb", 1);
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
   std::setlocale(LC_NUMERIC, "C");  // as lidef-studio does (gui/src/main.cpp): printf keeps its '.'
+  if (which == "global" || which == "global-quick")
+    return global_steps(data + "/scenarios/" + global_scenario + ".json", steps, which == "global-quick");
   std::vector<Config> configs = {{"default (300 DOF/coord, 30k voxels)", 300, 30000, View::kMesh},
                                  {"200 DOF/coord, 20k voxels", 200, 20000, View::kMesh},
                                  {"interactive preset (100 DOF/coord, 10k voxels)", 100, 10000, View::kMesh},
@@ -212,10 +314,12 @@ int main(int argc, char** argv) {
                {"default, refinement batched", 300, 30000, View::kMesh, -1, -1, -1,
                 static_cast<int>(RefinementEval::kPerEdgeBatched)}};
   else if (which != "all") {
-    std::fprintf(stderr, "bench_studio: --configs all, quick, default, lipschitz, subset or refinement\n");
+    std::fprintf(stderr,
+                 "bench_studio: --configs all, quick, default, lipschitz, subset, refinement or global\n");
     return 2;
   }
-  std::printf("OMP_WAIT_POLICY=%s. ", std::getenv("OMP_WAIT_POLICY"));
+  std::printf("OMP_WAIT_POLICY=%s. Global injectivity check %s. ", std::getenv("OMP_WAIT_POLICY"),
+              global ? "on" : "off");
   std::printf(
       "Machine: %s, %d threads (OpenMP). Scripted drag of bar_bend's pushed end (circle of radius 5%% of\n"
       "the bounding-box diagonal, 4 s period, target updates at 60 Hz) for %.0f s per row after the\n"
@@ -251,6 +355,7 @@ int main(int argc, char** argv) {
       win.set_params(p);
       ViewSettings vs;
       vs.view = c.view;
+      vs.global_injectivity = global;
       win.set_settings(vs);
       if (!settle(win.session(), &win, 600)) {
         std::fprintf(stderr, "bench_studio: %s did not settle\n", c.name);
@@ -264,6 +369,7 @@ int main(int argc, char** argv) {
       s.set_params(p);
       ExtrasRequest ex;
       ex.leaves = c.view == View::kLipschitz;
+      ex.global_injectivity = global;
       s.set_extras(ex);
       if (!settle(s, nullptr, 600)) return 1;
       alone = drag(s, nullptr, seconds);

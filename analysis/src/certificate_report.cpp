@@ -124,14 +124,19 @@ std::uint64_t coefficients_hash(const MatX3d& y) {
   return fnv1a64(bytes);
 }
 
+std::string global_injectivity_undecidable(const Certificate& cert, const std::string& domain,
+                                           const TriMesh& mesh) {
+  if (!cert.certified) return "the local certificate failed";
+  if (domain != "mesh")
+    return "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)";
+  if (mesh.F.rows() == 0) return "a point cloud has no surface whose image could be checked";
+  return "";
+}
+
 GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
                                             const Cage& cage, const TriMesh& mesh, const MatX3d& y) {
-  if (!cert.certified) return global_injectivity_not_decided("the local certificate failed");
-  if (domain != "mesh")
-    return global_injectivity_not_decided(
-        "the certified domain is the voxel grid, not the mesh's solid (use the mesh domain)");
-  if (mesh.F.rows() == 0)
-    return global_injectivity_not_decided("a point cloud has no surface whose image could be checked");
+  const std::string why = global_injectivity_undecidable(cert, domain, mesh);
+  if (!why.empty()) return global_injectivity_not_decided(why);
   return check_global_injectivity(cage, mesh, y);
 }
 

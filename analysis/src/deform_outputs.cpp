@@ -169,26 +169,6 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   return sj;
 }
 
-// The point file the model was made from (.ply or .xyz): the scenario's model when it is such a file, else
-// the input named by the model folder's model.json (an automatic cage); "" when the model comes from neither.
-std::string source_points_file(const Model& model, const Scenario& scenario) {
-  auto is_points = [](const std::string& p) {
-    const std::string ext = lowercase_extension(p);
-    return ext == ".ply" || ext == ".xyz";
-  };
-  std::error_code ec;
-  if (is_points(scenario.model_dir) && fs::is_regular_file(scenario.model_dir, ec)) return scenario.model_dir;
-  const fs::path json = fs::path(model.dir) / "model.json";
-  if (model.dir.empty() || !fs::is_regular_file(json, ec)) return "";
-  std::ifstream in(json);
-  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
-  if (j.is_discarded() || !j.contains("input") || !j["input"].contains("file") ||
-      !j["input"]["file"].is_string())
-    return "";
-  const std::string file = j["input"]["file"];
-  return is_points(file) && fs::is_regular_file(file, ec) ? file : "";
-}
-
 // J(p_i)ᵀ at the points P (#P by 3) as 3#P by 3 (mesh_fields.h's layout), a block of points at a time so that
 // the basis gradients (3 rows per point, #V+#F columns) stay small for large clouds.
 MatXd jacobians_at(const HarmonicBasis& basis, const MatX3d& y, const MatX3d& P) {
@@ -266,6 +246,24 @@ DeformedInput deformed_input(const std::string& file, const Model& model, const 
 }
 
 }  // namespace
+
+std::string source_points_file(const Model& model, const Scenario& scenario) {
+  auto is_points = [](const std::string& p) {
+    const std::string ext = lowercase_extension(p);
+    return ext == ".ply" || ext == ".xyz";
+  };
+  std::error_code ec;
+  if (is_points(scenario.model_dir) && fs::is_regular_file(scenario.model_dir, ec)) return scenario.model_dir;
+  const fs::path json = fs::path(model.dir) / "model.json";
+  if (model.dir.empty() || !fs::is_regular_file(json, ec)) return "";
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (j.is_discarded() || !j.contains("input") || !j["input"].contains("file") ||
+      !j["input"]["file"].is_string())
+    return "";
+  const std::string file = j["input"]["file"];
+  return is_points(file) && fs::is_regular_file(file, ec) ? file : "";
+}
 
 DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
                                    const DeformResult& r, const DeformOutputOptions& options) {

@@ -8,7 +8,9 @@
 #include <future>
 #include <limits>
 
+#include "lidef/analysis/certificate_report.h"
 #include "lidef/blas_kernel.h"
+#include "lidef/coefficients.h"
 #include "lidef/continuation.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
@@ -34,6 +36,9 @@ const char* to_string(SessionState s) {
 
 namespace {
 using Clock = std::chrono::steady_clock;
+// Seconds the engine rests with no command before it checks global injectivity (a pause of the drag).
+constexpr double kGlobalCheckPause = 0.25;
+
 double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
@@ -46,6 +51,8 @@ struct InteractiveSession::Command {
   std::shared_ptr<const Model> model;
   Scenario scenario;  // kLoad
   bool iterate = false;
+  MatX3d initial;            // kLoad: the map to start from (0 rows: the identity)
+  std::string initial_from;  // its file
   MatX3d sources, targets;
   DeformParams params;
   ExtrasRequest extras;
@@ -81,6 +88,11 @@ struct InteractiveSession::Engine {
   long field_version = -1;
   std::shared_ptr<const VerificationResult> verification;
   long verification_version = -1;
+  // Global injectivity: the checker of the model of model_version checker_model (built at its first check).
+  std::unique_ptr<GlobalInjectivityChecker> checker;
+  long checker_model = -1;
+  std::shared_ptr<const GlobalInjectivity> global;
+  long global_version = -1;
   Clock::time_point last_extras = Clock::now() - std::chrono::hours(1);
   int verify_samples = 0;  // > 0: a verification is pending
   Scenario scenario;       // what the engine runs (restored into scenario_ when a command fails)
@@ -127,6 +139,7 @@ struct InteractiveSession::Engine {
   void compute_leaves();
   void compute_field();
   void compute_verification();
+  bool compute_global();  // false: cancelled by a posted command
 
   // --- What the other threads see.
   void rest();  // extras up to date, then a frame of the final state
@@ -167,13 +180,15 @@ void InteractiveSession::post(Command c) {
       interrupt_.store(true);
     // A newer model replaces one still being prepared.
     if (c.kind == Command::kLoad) cancel_.store(true);
+    posted_.store(true);
     queue_.push_back(std::move(c));
     idle_ = false;
   }
   wake_.notify_all();
 }
 
-void InteractiveSession::open_scenario(const std::string& path, const std::string& models_dir) {
+void InteractiveSession::open_scenario(const std::string& path, const std::string& models_dir,
+                                       const std::string& coefficients) {
   Scenario sc = read_scenario(path, models_dir);
   if (resolver_) sc.model_dir = resolver_(sc.model_dir);
   auto model = std::make_shared<const Model>(load_model(sc.model_dir));
@@ -181,7 +196,9 @@ void InteractiveSession::open_scenario(const std::string& path, const std::strin
     const std::string why = handle_source_problem(model->cage, sc.sources.row(i).transpose());
     if (!why.empty()) throw InputError(path, "handle " + std::to_string(i + 1) + ": source " + why);
   }
-  load(model, sc, true);
+  if (coefficients.empty()) return load(model, sc, true);
+  MatX3d y = read_coefficients(coefficients, model->cage);
+  load(model, sc, false, std::move(y), coefficients);
 }
 
 void InteractiveSession::open_model(const std::string& model_dir, const DeformParams& params) {
@@ -197,11 +214,14 @@ void InteractiveSession::open_model(const std::string& model_dir, const DeformPa
   load(model, sc, false);
 }
 
-void InteractiveSession::load(std::shared_ptr<const Model> model, const Scenario& sc, bool iterate) {
+void InteractiveSession::load(std::shared_ptr<const Model> model, const Scenario& sc, bool iterate,
+                              MatX3d initial, const std::string& initial_from) {
   Command c(Command::kLoad);
   c.model = model;
   c.scenario = sc;
   c.iterate = iterate;
+  c.initial = std::move(initial);
+  c.initial_from = initial_from;
   {
     std::lock_guard<std::mutex> lk(mutex_);
     model_ = std::move(model);
@@ -428,6 +448,7 @@ bool InteractiveSession::Engine::take_commands(std::vector<Command>& cmds) {
   cmds.swap(session.queue_);
   session.interrupt_.store(false);  // every interrupting command is in `cmds`
   session.cancel_.store(false);     // a cancel is of a preparation that ended (these commands come after it)
+  session.posted_.store(false);
   session.idle_ = false;
   return true;
 }
@@ -492,6 +513,18 @@ void InteractiveSession::Engine::apply_load(const Command& c) {
   scenario = c.scenario;
   waypoints = c.scenario.waypoints;
   publish_state(SessionState::kResting, sources.rows() > 0 ? "loaded" : "loaded: no handles yet");
+  if (c.initial.rows() > 0) {
+    // The model is loaded whatever happens here: a map the solver refuses leaves it at the identity.
+    try {
+      solver->set_initial_map(c.initial, c.initial_from);
+      ++map_version;
+      waypoints.clear();
+      publish_state(SessionState::kResting, "loaded the map of " + c.initial_from + " (not solved)");
+    } catch (const std::exception& e) {
+      publish_state(SessionState::kResting, std::string("error: ") + e.what());
+      report_error(e.what());
+    }
+  }
 }
 
 void InteractiveSession::Engine::apply_handles(const Command& c) {
@@ -676,6 +709,8 @@ void InteractiveSession::Engine::build_solver_stages(const std::shared_ptr<const
   field_deformed.reset();
   verification.reset();
   leaves_version = field_version = verification_version = -1;
+  global.reset();
+  global_version = -1;
   if (session.stage_hook_) session.stage_hook_("ready");
 }
 
@@ -758,6 +793,8 @@ bool InteractiveSession::Engine::compute_extras(bool resting) {
     compute_verification();
     did = true;
   }
+  // Seconds per map: only at rest (a drag's intermediate maps are never checked), after the other extras.
+  if (extras.global_injectivity && resting && global_version != map_version) did = compute_global() || did;
   if (did) last_extras = Clock::now();
   return did;
 }
@@ -847,6 +884,43 @@ void InteractiveSession::Engine::compute_verification() {
   verify_samples = 0;
 }
 
+// The verdict of the current map. A certified map on the mesh's solid is checked with the model's checker;
+// otherwise the verdict is not decided for the reason certificate_report.h states. While it runs, a resting
+// frame says so (the view shows "checking" for this map rather than the verdict of an earlier one).
+bool InteractiveSession::Engine::compute_global() {
+  const Certificate& cert = solver->certificate();
+  const std::string why = global_injectivity_undecidable(cert, solver->sampling().domain, model->mesh);
+  GlobalInjectivity g;
+  if (!why.empty()) {
+    g = global_injectivity_not_decided(why);
+  } else {
+    publish_frame(make_frame());
+    // A drag that goes on posts its next targets within a few frames: the check starts only after a pause,
+    // so that a drag does not pay for the uncancellable start of checks it would cancel at once.
+    {
+      std::unique_lock<std::mutex> lk(session.mutex_);
+      if (session.wake_.wait_for(lk, std::chrono::duration<double>(kGlobalCheckPause),
+                                 [this] { return !session.queue_.empty() || session.quit_; }))
+        return false;
+    }
+    if (!checker || checker_model != model_version) {
+      checker.reset();  // the old model's checker is freed before the new one is built
+      checker = std::make_unique<GlobalInjectivityChecker>(model->cage, model->mesh);
+      checker_model = model_version;
+    }
+    GlobalInjectivityParams gp;
+    gp.cancel = &session.posted_;
+    g = checker->check(solver->coefficients(), gp);
+    // Stopped early by a command (the map is about to change): no verdict; the next rest checks again.
+    if (session.posted_.load() && g.verdict == GlobalInjectivity::Verdict::kNotDecided &&
+        g.reason == "cancelled")
+      return false;
+  }
+  global = std::make_shared<const GlobalInjectivity>(std::move(g));
+  global_version = map_version;
+  return true;
+}
+
 // --- What the other threads see.
 
 void InteractiveSession::Engine::rest() {
@@ -886,6 +960,8 @@ std::shared_ptr<SessionFrame> InteractiveSession::Engine::make_frame() {
   f->field_version = field_version;
   f->verification = verification;
   f->verification_version = verification_version;
+  f->global = global;
+  f->global_version = global_version;
   f->stage = stage;  // a verification in progress (preparing frames are make_preparing_frame's)
   f->progress = progress;
   if (solver) {

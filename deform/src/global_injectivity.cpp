@@ -285,6 +285,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                                                   const GlobalInjectivityParams& params) const {
   const auto t_start = std::chrono::steady_clock::now();
   const Impl& im = *impl_;
+  auto cancelled = [&] { return params.cancel && params.cancel->load(std::memory_order_relaxed); };
   auto finish = [&](GlobalInjectivity g) {
     g.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
     return g;
@@ -343,12 +344,14 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     std::vector<float> row;
 #pragma omp for schedule(dynamic, 256)
     for (long f = 0; f < nf; ++f) {
+      if (cancelled()) continue;  // the result is dropped below
       std::array<Vec3, 3> p, q;
       for (int k = 0; k < 3; ++k) p[k] = mesh.V.row(mesh.F(f, k)), q[k] = fV.row(mesh.F(f, k));
       pieces[f] = make_piece(p, q, static_cast<int>(f), 0, row);
     }
 #pragma omp for schedule(dynamic, 256)
     for (long v = 0; v < nv; ++v) {
+      if (cancelled()) continue;
       const Vec3 c = mesh.V.row(v);
       double R = 0;
       for (int f : im.vertex_faces[v])
@@ -357,6 +360,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       star_ok[v] = im.injective_ball(fm, delta, c, R, row);
     }
   }
+  if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
   // A triangle's own points: its ball, or the star ball of one of its corners, must be an injectivity ball.
   std::vector<char> face_ok(nf, 0);
 #pragma omp parallel
@@ -523,7 +527,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     };
 #pragma omp for schedule(dynamic, 64)
     for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
-      if (k > first_crossing.load(std::memory_order_relaxed)) continue;
+      if (k > first_crossing.load(std::memory_order_relaxed) || cancelled()) continue;
       const int fa = pairs[k].first, fb = pairs[k].second;
       PairResult& res = results[k];
       std::array<int, 3> sv;
@@ -541,7 +545,8 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       stack.clear();
       stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
       while (!stack.empty()) {
-        if ((res.tests & 63) == 63 && k > first_crossing.load(std::memory_order_relaxed)) break;
+        if ((res.tests & 63) == 63 && (k > first_crossing.load(std::memory_order_relaxed) || cancelled()))
+          break;
         const Task task = stack.back();
         stack.pop_back();
         const Piece &P = task.P, &Q = task.Q;
@@ -604,6 +609,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     }
   }
 
+  if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
   // --- 5. Verdict.
   // Over the pairs up to the first crossing (all of them when there is none): processed in full whatever the
   // thread schedule, so these counts are deterministic.

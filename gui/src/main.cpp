@@ -34,6 +34,10 @@ int main(int argc, char** argv) {
       "A scenario/session JSON, a model folder, or a mesh file (.obj/.off/.ply/.stl: automatic cage)");
   app.add_option("--scenario", scenario, "Scenario or saved session JSON to open");
   app.add_option("--model", model, "Model folder or mesh file to open (no handles)");
+  std::string coefficients;
+  app.add_option("--coefficients", coefficients,
+                 "With a scenario: start from this map (a coefficients.txt of `lidef deform` with the same "
+                 "parameters) instead of solving");
   app.add_option(
       "--compare", compare,
       "A `lidef compare --out` folder: every method's mesh side by side (with --screenshot: that picture)");
@@ -41,6 +45,10 @@ int main(int argc, char** argv) {
   bool distortion = false;
   app.add_flag("--distortion", distortion,
                "Colour the view by sigma1/sigma3 (the Lipschitz view: its certified upper bound per leaf)");
+  bool global = ViewSettings{}.global_injectivity;
+  app.add_flag("--global-injectivity,!--no-global-injectivity", global,
+               "Check global injectivity when the solver rests (badge; an overlap drawn red with a yellow "
+               "marker); on by default");
   app.add_option(
       "--screenshot", screenshot,
       "Solve until the solver rests, render --view, write this PNG and exit (0 written, 1 timed out, "
@@ -74,6 +82,7 @@ int main(int argc, char** argv) {
   try {
     settings.view = view_from_string(view);
     settings.distortion = distortion;
+    settings.global_injectivity = global;
   } catch (const std::exception& e) {
     std::cerr << "lidef-studio: " << e.what() << "\n";
     return 2;
@@ -131,7 +140,11 @@ int main(int argc, char** argv) {
   win.show();
   win.set_settings(settings);
   const std::string path = !scenario.empty() ? scenario : model;
-  if (!path.empty() && !win.open_path(path)) {
+  if (!coefficients.empty() && scenario.empty()) {
+    std::cerr << "lidef-studio: --coefficients needs a scenario (PATH or --scenario)\n";
+    return 2;
+  }
+  if (!path.empty() && !win.open_path(path, coefficients)) {
     if (headless) return 2;
   }
   if (!compare.empty() && !win.open_comparison(compare) && headless) return 2;
@@ -156,6 +169,7 @@ int main(int argc, char** argv) {
     if (ex.leaves && f->leaves_version != f->map_version) return;
     if (ex.field && f->field_version != f->map_version) return;
     if (ex.mesh_distortion && f->mesh_distortion.size() != f->mesh_V.rows()) return;
+    if (ex.global_injectivity && f->global_version != f->map_version) return;
     poll.stop();
     if (!win.save_screenshot(screenshot, 0, 0, transparent)) {
       exit_code = 2;
@@ -163,7 +177,8 @@ int main(int argc, char** argv) {
       return;
     }
     std::cout << "lidef-studio: " << to_string(win.settings().view) << " view of " << path << " written to "
-              << screenshot << " (" << w << "x" << h << "); " << win.caption() << "\n";
+              << screenshot << " (" << w << "x" << h << "); " << win.caption() << "\n"
+              << "badge:" << win.badge_text() << "\n";
     qapp.exit(0);
   });
   poll.start(50);

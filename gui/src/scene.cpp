@@ -15,6 +15,7 @@
 #include <vtkPolyData.h>
 #include <vtkPolyDataMapper.h>
 #include <vtkProperty.h>
+#include <vtkRenderWindow.h>
 #include <vtkRenderer.h>
 #include <vtkScalarBarActor.h>
 #include <vtkScalarsToColors.h>
@@ -22,14 +23,17 @@
 #include <vtkSphereSource.h>
 #include <vtkTextActor.h>
 #include <vtkTextProperty.h>
+#include <vtkUnsignedCharArray.h>
 #include <vtkVariant.h>
 #include <vtkVolume.h>
 #include <vtkVolumeProperty.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <utility>
 
 #include "lidef/errors.h"
@@ -91,6 +95,8 @@ nlohmann::json settings_to_json(const ViewSettings& s) {
           {"rest_cage", s.rest_cage},
           {"deformed_cage", s.deformed_cage},
           {"mesh_edges", s.mesh_edges},
+          {"point_colors", s.point_colors},
+          {"global_injectivity", s.global_injectivity},
           {"distortion", s.distortion},
           {"sigma_deformed_space", s.sigma_deformed_space},
           {"slice", {s.slice[0], s.slice[1], s.slice[2]}},
@@ -117,6 +123,8 @@ void settings_from_json(const nlohmann::json& j, ViewSettings& s, const std::str
     get("rest_cage", s.rest_cage);
     get("deformed_cage", s.deformed_cage);
     get("mesh_edges", s.mesh_edges);
+    get("point_colors", s.point_colors);
+    get("global_injectivity", s.global_injectivity);
     get("distortion", s.distortion);
     get("sigma_deformed_space", s.sigma_deformed_space);
     for (int a = 0; a < 3; ++a) {
@@ -156,13 +164,74 @@ ExtrasRequest extras_for(const ViewSettings& s) {
   r.mesh_distortion = s.view == View::kMesh && s.distortion;
   r.leaves = r.leaves || r.mesh_distortion;
   r.field_resolution = s.field_resolution;
+  r.global_injectivity = s.global_injectivity;
   return r;
+}
+
+std::vector<unsigned char> point_cloud_colors(const PlyCloud& cloud) {
+  int c[3] = {cloud.column("f_dc_0"), cloud.column("f_dc_1"), cloud.column("f_dc_2")};
+  const bool dc = c[0] >= 0 && c[1] >= 0 && c[2] >= 0;
+  if (!dc) {
+    c[0] = cloud.column("red"), c[1] = cloud.column("green"), c[2] = cloud.column("blue");
+    if (c[0] < 0 || c[1] < 0 || c[2] < 0) return {};
+  }
+  bool bytes = !dc;
+  for (int k = 0; k < 3 && bytes; ++k) {
+    const std::string& t = cloud.types[static_cast<size_t>(c[k])];
+    bytes = t != "float" && t != "double" && t != "float32" && t != "float64";
+  }
+  const double kC0 = 0.28209479177387814;  // Y_0^0 = 1 / (2 sqrt(pi))
+  const Eigen::Index n = cloud.values.rows();
+  std::vector<unsigned char> rgb(3 * static_cast<size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double v = cloud.values(i, c[k]);
+      const double unit = dc ? 0.5 + kC0 * v : bytes ? v / 255.0 : v;
+      rgb[3 * static_cast<size_t>(i) + k] = static_cast<unsigned char>(
+          std::lround(255 * std::clamp(std::isfinite(unit) ? unit : 0.0, 0.0, 1.0)));
+    }
+  return rgb;
+}
+
+std::vector<int> faces_near(const MatX3i& F, const std::vector<int>& faces, int rings) {
+  std::vector<std::vector<int>> vertex_faces(static_cast<size_t>(F.size() ? F.maxCoeff() + 1 : 0));
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) vertex_faces[static_cast<size_t>(F(f, k))].push_back(f);
+  std::set<int> in;
+  std::vector<int> front;
+  for (int f : faces)
+    if (f >= 0 && f < F.rows() && in.insert(f).second) front.push_back(f);
+  for (int r = 0; r < rings && !front.empty(); ++r) {
+    std::vector<int> next;
+    for (int f : front)
+      for (int k = 0; k < 3; ++k)
+        for (int g : vertex_faces[static_cast<size_t>(F(f, k))])
+          if (in.insert(g).second) next.push_back(g);
+    front.swap(next);
+  }
+  return {in.begin(), in.end()};
 }
 
 namespace {
 
 template <class T>
 using Ptr = vtkSmartPointer<T>;
+
+// One vertex cell per point (a point cloud: cell k is point k, so a picked cell names its point).
+vtkSmartPointer<vtkPolyData> point_set(const MatX3d& V) {
+  auto pts = vtkSmartPointer<vtkPoints>::New();
+  pts->SetNumberOfPoints(V.rows());
+  auto verts = vtkSmartPointer<vtkCellArray>::New();
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    pts->SetPoint(i, V(i, 0), V(i, 1), V(i, 2));
+    const vtkIdType id = i;
+    verts->InsertNextCell(1, &id);
+  }
+  auto pd = vtkSmartPointer<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  pd->SetVerts(verts);
+  return pd;
+}
 
 // Polygons on points, with optional point scalars.
 Ptr<vtkPolyData> polydata(vtkPoints* pts, vtkCellArray* polys, vtkDataArray* scalars = nullptr) {
@@ -278,6 +347,26 @@ struct Scene::Impl {
   bool picked_valid = false;
   Vec3 picked_rest = Vec3::Zero(), picked_image = Vec3::Zero();
   void update_picked(const SessionFrame& f, const ViewSettings& s);
+  // A point cloud (the model's mesh has no faces): drawn as points, with the file's colours when given.
+  bool points = false;
+  std::vector<unsigned char> point_rgb;
+  bool point_rgb_shown = false;  // the last mesh view showed point_rgb instead of a field
+  // Global injectivity: an overlap's neighbourhoods (red, on the deformed mesh) and a marker at its point.
+  Ptr<vtkActor> overlap = Ptr<vtkActor>::New();
+  Ptr<vtkPolyDataMapper> overlap_mapper = Ptr<vtkPolyDataMapper>::New();
+  Ptr<vtkActor> overlap_marker = Ptr<vtkActor>::New();
+  Ptr<vtkSphereSource> overlap_sphere = Ptr<vtkSphereSource>::New();
+  std::vector<int> overlap_faces;               // drawn in the last shown frame
+  std::vector<int> overlap_list;                // of overlap_key
+  Ptr<vtkCellArray> overlap_cells;              // of overlap_key
+  std::array<long, 3> overlap_key{-1, -1, -1};  // model version, face a, face b of overlap_faces
+  bool marker_shown = false;
+  Vec3 marker_at = Vec3::Zero();
+  // The overlap is drawn in a layer over the model (same camera and viewport): the two parts of an overlap
+  // meet where the shape passes through itself, often inside it or behind it.
+  Ptr<vtkRenderer> overlay;
+  void attach_overlay();
+  void update_overlap(const SessionFrame& f, const ViewSettings& s);
   // What the leaf glyphs were last built from (show_leaves_view rebuilds them only when this changes).
   std::shared_ptr<const Certificate> glyph_leaves;
   std::string glyph_settings;
@@ -298,7 +387,7 @@ struct Scene::Impl {
   std::string show_leaves_view(const SessionFrame& f, const ViewSettings& s);
   const char* color_leaves(const Certificate& c, const ViewSettings& s, double lo, double hi);
   void show_bar(vtkScalarsToColors* colors, const char* title);
-  void set_caption(const std::string& what, const SessionFrame& f);
+  void set_caption(const std::string& what, const SessionFrame& f, const ViewSettings& s);
   void set_caption_text(const std::string& c);  // wrapped to the view's width
 };
 
@@ -396,11 +485,34 @@ Scene::Scene(vtkRenderer* renderer, vtkRenderer* bar_renderer) : impl_(std::make
   I.picked->GetProperty()->SetColor(1.0, 0.55, 0.0);
   I.picked->PickableOff();
   I.mesh_actor->GetProperty()->SetEdgeColor(0.25, 0.25, 0.25);
+  // An overlap: pure red without shading (no heat-map colour is), drawn over the coincident mesh faces.
+  vtkMapper::SetResolveCoincidentTopologyToPolygonOffset();
+  I.overlap_mapper->ScalarVisibilityOff();
+  I.overlap_mapper->SetRelativeCoincidentTopologyPolygonOffsetParameters(-2, -4);
+  I.overlap->SetMapper(I.overlap_mapper);
+  I.overlap->GetProperty()->SetColor(1.0, 0.0, 0.0);
+  I.overlap->GetProperty()->LightingOff();
+  I.overlap->PickableOff();
+  I.overlap_sphere->SetThetaResolution(20);
+  I.overlap_sphere->SetPhiResolution(14);
+  auto marker_mapper = Ptr<vtkPolyDataMapper>::New();
+  marker_mapper->SetInputConnection(I.overlap_sphere->GetOutputPort());
+  I.overlap_marker->SetMapper(marker_mapper);
+  I.overlap_marker->GetProperty()->SetColor(1.0, 0.85, 0.0);
+  I.overlap_marker->PickableOff();
   for (vtkProp* p : std::initializer_list<vtkProp*>{I.mesh_actor, I.context_mesh, I.rest_cage, I.def_cage,
                                                     I.images, I.slices, I.volume, I.leaves, I.marks,
                                                     I.outline, I.misses, I.picked, I.text}) {
     p->VisibilityOff();
     renderer->AddViewProp(p);
+  }
+  I.overlay = Ptr<vtkRenderer>::New();
+  I.overlay->SetLayer(1);
+  I.overlay->InteractiveOff();
+  I.overlay->PreserveDepthBufferOff();
+  for (vtkProp* p : std::initializer_list<vtkProp*>{I.overlap, I.overlap_marker}) {
+    p->VisibilityOff();
+    I.overlay->AddViewProp(p);
   }
   I.bar->VisibilityOff();
   (bar_renderer ? bar_renderer : renderer)->AddViewProp(I.bar);
@@ -436,6 +548,18 @@ void Scene::set_picked(bool valid, const Vec3& rest, const Vec3& image) {
   impl_->picked_valid = valid;
   impl_->picked_rest = rest;
   impl_->picked_image = image;
+}
+void Scene::set_point_colors(std::vector<unsigned char> rgb) {
+  impl_->point_rgb = std::move(rgb);
+}
+const std::vector<int>& Scene::overlap_faces() const {
+  return impl_->overlap_faces;
+}
+bool Scene::overlap_marker_shown() const {
+  return impl_->marker_shown;
+}
+Vec3 Scene::overlap_marker_at() const {
+  return impl_->marker_at;
 }
 vtkActor* Scene::leaves_actor() const {
   return impl_->leaves;
@@ -637,8 +761,10 @@ std::string glyph_key(const ViewSettings& s) {
 void Scene::Impl::hide_all() {
   for (vtkProp* p :
        std::initializer_list<vtkProp*>{mesh_actor, context_mesh, rest_cage, def_cage, images, slices, volume,
-                                       leaves, marks, outline, misses, picked, bar})
+                                       leaves, marks, outline, misses, picked, overlap, overlap_marker, bar})
     p->VisibilityOff();
+  overlap_faces.clear();
+  marker_shown = false;
   unreached = 0;
   bar->SetNumberOfLabels(5);
   range = {0, 0};
@@ -653,11 +779,19 @@ void Scene::Impl::adopt_model(const SessionFrame& f) {
   if (model_version == f.model_version) return;
   const Model& model = *f.model;
   model_version = f.model_version;
-  auto pd = wireframe(f.mesh_V, model.mesh.F);
+  points = model.mesh.F.rows() == 0;
+  auto pd = points ? point_set(f.mesh_V) : wireframe(f.mesh_V, model.mesh.F);
   mesh->SetPoints(pd->GetPoints());
-  mesh->SetPolys(pd->GetPolys());
+  mesh->SetPolys(points ? Ptr<vtkCellArray>::New().Get() : pd->GetPolys());
+  mesh->SetVerts(points ? pd->GetVerts() : Ptr<vtkCellArray>::New().Get());
+  // Points as small shaded spheres: a few pixels each, smaller for dense clouds.
+  vtkProperty* mp = mesh_actor->GetProperty();
+  mp->SetRenderPointsAsSpheres(points);
+  mp->SetPointSize(f.mesh_V.rows() > 20000 ? 3 : f.mesh_V.rows() > 5000 ? 5 : 7);
+  context_mesh->GetProperty()->SetRenderPointsAsSpheres(points);
+  context_mesh->GetProperty()->SetPointSize(3);
   rest_cage_pd = wireframe(model.cage.V, model.cage.F);
-  rest_mesh = wireframe(model.mesh.V, model.mesh.F);
+  rest_mesh = points ? point_set(model.mesh.V) : wireframe(model.mesh.V, model.mesh.F);
   def_cage_pd = wireframe(f.cage_V, model.cage.F);
   static_cast<vtkPolyDataMapper*>(rest_cage->GetMapper())->SetInputData(rest_cage_pd);
   static_cast<vtkPolyDataMapper*>(def_cage->GetMapper())->SetInputData(def_cage_pd);
@@ -684,7 +818,20 @@ void Scene::Impl::update_mesh(const SessionFrame& f, const ViewSettings& s) {
                                          : "E_iso - 6");
   arr->SetNumberOfValues(v.size());
   for (Eigen::Index i = 0; i < v.size(); ++i) arr->SetValue(i, v(i));
-  mesh->GetPointData()->SetScalars(arr);
+  point_rgb_shown = points && s.point_colors && s.view == View::kMesh &&
+                    point_rgb.size() == 3 * static_cast<size_t>(f.mesh_V.rows());
+  if (point_rgb_shown) {
+    auto rgb = Ptr<vtkUnsignedCharArray>::New();
+    rgb->SetName("colour of the file");
+    rgb->SetNumberOfComponents(3);
+    rgb->SetNumberOfTuples(f.mesh_V.rows());
+    std::copy(point_rgb.begin(), point_rgb.end(), rgb->GetPointer(0));
+    mesh->GetPointData()->SetScalars(rgb);
+    mesh_mapper->SetColorModeToDirectScalars();
+  } else {
+    mesh->GetPointData()->SetScalars(arr);
+    mesh_mapper->SetColorModeToMapScalars();
+  }
   mesh->Modified();
   vtkPoints* cp = def_cage_pd->GetPoints();
   for (Eigen::Index i = 0; i < f.cage_V.rows(); ++i)
@@ -810,12 +957,59 @@ std::string Scene::Impl::show_mesh_view(const SessionFrame& f, const ViewSetting
   mesh_lut->Build();
   mesh_mapper->SetScalarRange(mesh_lut->GetTableRange());
   range = {mesh_lut->GetTableRange()[0], mesh_lut->GetTableRange()[1]};
+  update_overlap(f, s);
+  if (point_rgb_shown) {
+    range = {0, 0};
+    return "deformed points, colours of the file";
+  }
+  const std::string things = points ? "deformed points, " : "deformed mesh, ";
   if (fld == Field::kDistortion) {
     show_bar(mesh_lut, "sigma1/sigma3");
-    return "deformed mesh, distortion sigma1/sigma3 at the vertices" + distortion_bound_text(f);
+    return things + "distortion sigma1/sigma3 at the vertices" + distortion_bound_text(f);
   }
   show_bar(mesh_lut, fld == Field::kDetJ ? "det J" : "E_iso - 6");
-  return std::string("deformed mesh, ") + (fld == Field::kDetJ ? "local volume ratio det J" : "E_iso - 6");
+  return things + (fld == Field::kDetJ ? "local volume ratio det J" : "E_iso - 6");
+}
+
+void Scene::Impl::attach_overlay() {
+  vtkRenderWindow* w = ren->GetRenderWindow();
+  if (!w) return;
+  if (!w->HasRenderer(overlay)) {
+    w->SetNumberOfLayers(std::max(2, w->GetNumberOfLayers()));
+    w->AddRenderer(overlay);
+  }
+  overlay->SetViewport(ren->GetViewport());
+  overlay->SetActiveCamera(ren->GetActiveCamera());
+}
+
+// A proven overlap of the map on screen (its verdict, not an earlier map's): the neighbourhoods of its two
+// rest-mesh triangles red on the deformed mesh, and a marker at the point where the surface meets itself.
+void Scene::Impl::update_overlap(const SessionFrame& f, const ViewSettings& s) {
+  const bool shown = s.global_injectivity && f.global && f.global_version == f.map_version &&
+                     f.global->verdict == GlobalInjectivity::Verdict::kOverlap && !points;
+  if (!shown) return;
+  const GlobalInjectivity& g = *f.global;
+  const MatX3i& F = f.model->mesh.F;
+  const std::array<long, 3> key{f.model_version, g.overlap_face_a, g.overlap_face_b};
+  if (key != overlap_key) {
+    overlap_key = key;
+    overlap_cells = Ptr<vtkCellArray>::New();
+    for (int t : faces_near(F, {g.overlap_face_a, g.overlap_face_b}, kOverlapRings)) {
+      const vtkIdType ids[3] = {F(t, 0), F(t, 1), F(t, 2)};
+      overlap_cells->InsertNextCell(3, ids);
+    }
+    overlap_list = faces_near(F, {g.overlap_face_a, g.overlap_face_b}, kOverlapRings);
+  }
+  attach_overlay();
+  overlap_faces = overlap_list;
+  overlap_mapper->SetInputData(polydata(mesh->GetPoints(), overlap_cells));
+  overlap->VisibilityOn();
+  const Model& model = *f.model;
+  overlap_sphere->SetCenter(g.overlap_point.x(), g.overlap_point.y(), g.overlap_point.z());
+  overlap_sphere->SetRadius(0.015 * (model.cage.bbox_max - model.cage.bbox_min).norm());
+  overlap_marker->VisibilityOn();
+  marker_shown = true;
+  marker_at = g.overlap_point;
 }
 
 // σ3 view: slices (and in rest space optionally a volume rendering) of the field grid, over a faint mesh.
@@ -1090,8 +1284,23 @@ void Scene::Impl::set_caption_text(const std::string& c) {
   text->SetInput(caption.c_str());
 }
 
-void Scene::Impl::set_caption(const std::string& what, const SessionFrame& f) {
-  const std::string cert = f.certified ? "certified" : "NOT certified";
+namespace {
+// The global verdict of the map on screen, for the caption ("" when not asked for or not certified).
+std::string global_text(const SessionFrame& f, const ViewSettings& s) {
+  if (!s.global_injectivity || !f.certified) return "";
+  if (!f.global || f.global_version != f.map_version) return "; global injectivity: checking...";
+  const GlobalInjectivity& g = *f.global;
+  if (g.verdict == GlobalInjectivity::Verdict::kInjective) return "; globally injective";
+  if (g.verdict == GlobalInjectivity::Verdict::kOverlap)
+    return "; overlaps itself at (" + format_g(g.overlap_point.x(), 3) + ", " +
+           format_g(g.overlap_point.y(), 3) + ", " + format_g(g.overlap_point.z(), 3) +
+           ") (red, yellow marker)";
+  return "; global injectivity not decided";
+}
+}  // namespace
+
+void Scene::Impl::set_caption(const std::string& what, const SessionFrame& f, const ViewSettings& s) {
+  const std::string cert = (f.certified ? "certified" : "NOT certified") + global_text(f, s);
   set_caption_text((model_name.empty() ? "" : model_name + ": ") + what + "\n" + cert +
                    ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) + ", iteration " +
                    std::to_string(f.history.size()));
@@ -1115,7 +1324,7 @@ void Scene::show(const SessionFrame& f, const ViewSettings& s) {
     what = I.show_sigma3_view(f, s);
   else
     what = I.show_leaves_view(f, s);
-  I.set_caption(what, f);
+  I.set_caption(what, f, s);
 }
 
 }  // namespace lidef::studio

@@ -4,9 +4,11 @@
 #include <vtkSmartPointer.h>
 
 #include <string>
+#include <vector>
 
 #include "color_range.h"
 #include "lidef/analysis/interactive_session.h"
+#include "lidef/point_cloud_io.h"
 
 class vtkActor;
 class vtkRenderer;
@@ -28,6 +30,12 @@ struct ViewSettings {
   bool mesh_volume_ratio = false;  // colour by det J instead of E_iso − 6
   bool rest_cage = false, deformed_cage = true;
   bool mesh_edges = false;  // the mesh's triangle edges over its colours
+  // Point clouds and Gaussian splats: their own colours (a splat's f_dc, a PLY's red green blue) instead of
+  // the field, where the file has them (Scene::set_point_colors).
+  bool point_colors = true;
+  // Global injectivity of the map on screen (global_injectivity.h): checked when the engine rests; an
+  // overlap is drawn on the mesh (red triangles, a yellow marker).
+  bool global_injectivity = true;
   // Distortion σ1/σ3 instead of each view's own quantity: per vertex (mesh view), on the slices (σ3 view),
   // the certified upper bound per leaf (Lipschitz view). The octree view is unchanged.
   bool distortion = false;
@@ -65,6 +73,16 @@ constexpr double kLeafDrawnSide = 0.97;
 // The extras a view needs from the engine.
 ExtrasRequest extras_for(const ViewSettings& s);
 
+// The faces of the rest mesh (#F by 3) within `rings` face rings of the given faces (sharing a vertex with
+// the ring before), sorted: the neighbourhoods of an overlap's two triangles, drawn red.
+std::vector<int> faces_near(const MatX3i& F, const std::vector<int>& faces, int rings);
+constexpr int kOverlapRings = 6;
+
+// A point cloud's own colours, RGB bytes per point: a Gaussian splat's degree-0 colour (0.5 + C0 f_dc, C0 the
+// degree-0 spherical harmonic, clamped to [0, 1]) or the PLY's red green blue (bytes, or floats in [0, 1]);
+// empty when the cloud has neither.
+std::vector<unsigned char> point_cloud_colors(const PlyCloud& cloud);
+
 class Scene {
  public:
   // The colour bar goes into `bar_renderer` (a viewport beside the model's, so it never covers the model)
@@ -93,6 +111,14 @@ class Scene {
   int unreached_handles() const;
   // The picked point, marked by an orange sphere: at f(p) in the deformed-space views, at p in rest space.
   void set_picked(bool valid, const Vec3& rest, const Vec3& image);
+  // Colours of a point cloud's points (#P by 3 bytes, RGB, the model's mesh vertex order; empty: none). Shown
+  // in the mesh view when ViewSettings::point_colors is set. Kept until the next call.
+  void set_point_colors(std::vector<unsigned char> rgb);
+  // The last shown frame's global verdict as drawn: the red faces of an overlap (empty when none is drawn)
+  // and whether the marker is shown at `overlap_marker_at()`.
+  const std::vector<int>& overlap_faces() const;
+  bool overlap_marker_shown() const;
+  Vec3 overlap_marker_at() const;
   // The leaves glyph actor (Lipschitz/octree views) and the σ3 slices, for picking.
   vtkActor* leaves_actor() const;
   vtkActor* slices_actor() const;

@@ -73,6 +73,7 @@
 #include "compare_view.h"
 #include "explorer_panel.h"
 #include "lidef/analysis/certificate_report.h"
+#include "lidef/analysis/deform_outputs.h"
 #include "lidef/analysis/mesh_export.h"
 #include "lidef/analysis/vtk_export.h"
 #include "lidef/atomic_file.h"
@@ -80,6 +81,7 @@
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
 #include "lidef/mesh_fields.h"
+#include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/opencl/opencl_backend.h"
 #include "lidef/subspace.h"
@@ -596,6 +598,18 @@ QWidget* StudioWindow::build_view_panel() {
         this, [this] { refresh_view_panel(); }, Qt::QueuedConnection);
   });
   vl->addWidget(dist);
+  auto* global = new QCheckBox("Check global injectivity");
+  global->setObjectName("view_global_injectivity");
+  global->setChecked(settings_.global_injectivity);
+  global->setToolTip(
+      "When the solver rests, prove or refute that the deformed shape does not pass through itself (one "
+      "check takes seconds; while it runs the badge says 'checking'). An overlap is drawn: the two touching "
+      "parts of the surface red, a yellow sphere where they meet");
+  connect(global, &QCheckBox::toggled, this, [this](bool on) {
+    settings_.global_injectivity = on;
+    settings_changed();
+  });
+  vl->addWidget(global);
   lay->addWidget(views);
   lay->addWidget(build_range_controls());
   auto check = [&](QLayout* l, const char* text, bool* field, const char* tip) {
@@ -617,6 +631,9 @@ QWidget* StudioWindow::build_view_panel() {
   check(ml, "Deformed cage", &settings_.deformed_cage, "Wireframe of the vertex coefficients y_v");
   check(ml, "Triangle edges", &settings_.mesh_edges,
         "The mesh's edges over its colours (View > Mesh edges, E)");
+  check(ml, "Point colours of the file", &settings_.point_colors,
+        "A point cloud or Gaussian splats: the colours of the PLY file (a splat's f_dc, red green blue) "
+        "instead of the field");
   lay->addWidget(mesh);
   auto* sig = new QGroupBox("sigma3 field");
   auto* sl = new QVBoxLayout(sig);
@@ -808,13 +825,15 @@ void StudioWindow::cancel_opening() {
     session_->cancel_preparation();
 }
 
-bool StudioWindow::open_path(const std::string& path) {
+bool StudioWindow::open_path(const std::string& path, const std::string& coefficients) {
   model_note_.clear();
   OpenRecord rec;
   rec.path = path;
   try {
     std::error_code ec;
     if (std::filesystem::is_directory(path, ec) || is_mesh_file(path)) {
+      if (!coefficients.empty())
+        throw InputError(coefficients, "a map to start from needs a scenario, and " + path + " is a model");
       const std::string dir = resolve_model(path);
       session_->open_model(dir, params_->params());
       rec.name = std::filesystem::path(path).filename().string();
@@ -833,7 +852,7 @@ bool StudioWindow::open_path(const std::string& path) {
           rec.has_views = true;
         }
       }
-      session_->open_scenario(path);
+      session_->open_scenario(path, "", coefficients);
       const Scenario sc = session_->scenario();
       rec.name = sc.name;
       rec.camera = sc.studio;
@@ -921,6 +940,7 @@ void StudioWindow::adopt_shown_model(const SessionFrame& f) {
   plots_->clear_verification();
   plots_->set_model_name(QString::fromStdString(shown_name_));
   scene_->set_model_name(shown_name_);
+  if (f.model) load_point_colors(*f.model);
   shown_verification_version_ = -1;
   pending_camera_ = rec.camera;
   camera_to_reset_ = f.model != nullptr;
@@ -1591,6 +1611,85 @@ void StudioWindow::set_status_line(const std::string& text) {
   status_->setToolTip(QString::fromStdString(text));
 }
 
+namespace {
+// The first `n` characters of a reason (at a word boundary), for the badge; the tooltip has all of it.
+std::string shortened(const std::string& s, size_t n) {
+  if (s.size() <= n) return s;
+  const size_t cut = s.rfind(' ', n);
+  return s.substr(0, cut == std::string::npos || cut < n / 2 ? n : cut) + "…";
+}
+}  // namespace
+
+// The badge says what is proven about the map on screen: the local certificate, and with the global check its
+// verdict for this map ("checking" until the engine has it: never an earlier map's verdict).
+void StudioWindow::update_badge(const SessionFrame& f, const std::string& name) {
+  const std::string about = "the map of " + shown_name_ + " on screen";
+  std::string text, tip, style;
+  const char* green = "background:#2e7d32; color:white; font-weight:bold";
+  const char* red = "background:#c62828; color:white; font-weight:bold";
+  const char* amber = "background:#f9a825; color:black; font-weight:bold";
+  const char* orange = "background:#e65100; color:white; font-weight:bold";
+  if (!f.certified) {
+    text = "NOT certified";
+    tip = "the certificate of " + about + ": " + f.not_certified_reason;
+    style = red;
+  } else if (!settings_.global_injectivity) {
+    text = "CERTIFIED locally injective";
+    tip = "the certificate of " + about + " (global injectivity is not checked: View panel)";
+    style = green;
+  } else if (!f.global || f.global_version != f.map_version) {
+    text = "locally injective (global: checking…)";
+    tip = "the local certificate of " + about + " holds; global injectivity is checked when the solver rests";
+    style = amber;
+  } else if (f.global->verdict == GlobalInjectivity::Verdict::kInjective) {
+    text = "CERTIFIED injective";
+    tip = "the local certificate of " + about +
+          " holds and the map is globally injective on the mesh's "
+          "solid (checked in " +
+          format_g(f.global->ms / 1000, 2) + " s)";
+    style = green;
+  } else if (f.global->verdict == GlobalInjectivity::Verdict::kOverlap) {
+    text = "locally injective — overlaps itself";
+    tip = "the local certificate of " + about + " holds, but " + f.global->reason +
+          " (red: the two parts that meet; yellow sphere: where)";
+    style = orange;
+  } else {
+    text = "locally injective (global: not decided — " + shortened(f.global->reason, 60) + ")";
+    tip = "the local certificate of " + about + " holds; global injectivity not decided: " + f.global->reason;
+    style = amber;
+  }
+  badge_->setText(QString::fromStdString(" " + name + text + " "));
+  badge_->setToolTip(QString::fromStdString(tip));
+  badge_->setStyleSheet(QString::fromStdString(style));
+}
+
+// A point cloud made from a PLY file shows that file's colours (when it has some and its points are the
+// model's, in order); anything else shows the field.
+void StudioWindow::load_point_colors(const Model& model) {
+  std::vector<unsigned char> rgb;
+  if (model.mesh.F.rows() == 0) {
+    try {
+      // The file opened (or named by the scenario) first: a cached automatic cage's model.json names the file
+      // it was first made from, which may be gone.
+      Scenario sc = session_->scenario();
+      sc.model_dir = shown_source_;
+      const std::string ply = source_points_file(model, sc);
+      if (lowercase_extension(ply) == ".ply") {
+        const PlyCloud cloud = read_ply_cloud(ply);
+        if (cloud.points() == model.mesh.V) rgb = point_cloud_colors(cloud);
+      }
+    } catch (const std::exception& e) {  // the model itself is fine: its points show the field
+      status_->setText(QString::fromStdString(std::string("point colours not shown: ") + e.what()));
+    }
+  }
+  has_point_colors_ = !rgb.empty();
+  scene_->set_point_colors(std::move(rgb));
+}
+
+std::string StudioWindow::badge_text() const {
+  return badge_->text().toStdString();
+}
+
 void StudioWindow::update_status(const SessionFrame& f) {
   const bool preparing = f.state == SessionState::kPreparing;
   const bool busy = preparing || f.progress >= 0;  // preparing, or verifying the map on screen
@@ -1618,12 +1717,7 @@ void StudioWindow::update_status(const SessionFrame& f) {
     set_status_line(f.status);
     return;
   }
-  badge_->setText(QString::fromStdString(" " + name) +
-                  (f.certified ? "CERTIFIED locally injective " : "NOT certified "));
-  badge_->setToolTip(QString::fromStdString("the certificate of the map of " + shown_name_ + " on screen" +
-                                            (f.certified ? "" : ": " + f.not_certified_reason)));
-  badge_->setStyleSheet(f.certified ? "background:#2e7d32; color:white; font-weight:bold"
-                                    : "background:#c62828; color:white; font-weight:bold");
+  update_badge(f, name);
   std::ostringstream s;
   s << name << to_string(f.state) << " | " << stop_reason_in_words(f.status) << " | iteration "
     << f.history.size() << " | energy " << format_g(f.energy.total, 4) << " | min sigma3 LB "
@@ -1725,15 +1819,21 @@ bool StudioWindow::add_handle(const Vec3& source) {
 
 bool StudioWindow::mesh_rest_point_at_display(int x, int y, Vec3& rest) {
   auto picker = vtkSmartPointer<vtkCellPicker>::New();
-  picker->SetTolerance(0.0005);
+  const MatX3i& F = shown_->model->mesh.F;
+  const MatX3d& V = shown_->model->mesh.V;
+  // A point cloud's points are a few pixels wide: a wider tolerance (of the window's diagonal) reaches them.
+  picker->SetTolerance(F.rows() == 0 ? 0.005 : 0.0005);
   picker->PickFromListOn();
   picker->AddPickList(scene_->mesh_actor());
   if (!picker->Pick(x, y, 0, renderer_) || picker->GetCellId() < 0) return false;
+  const vtkIdType t = picker->GetCellId();
+  if (F.rows() == 0) {  // a point cloud: cell t is point t
+    if (t >= V.rows()) return false;
+    rest = V.row(t).transpose();
+    return true;
+  }
   // The picked point pulled back to rest space: the same barycentric combination of the rest triangle's
   // corners (the shown mesh is the deformed one).
-  const vtkIdType t = picker->GetCellId();
-  const MatX3i& F = shown_->model->mesh.F;
-  const MatX3d& V = shown_->model->mesh.V;
   if (t >= F.rows()) return false;
   const double* pc = picker->GetPCoords();
   const double w[3] = {1 - pc[0] - pc[1], pc[0], pc[1]};

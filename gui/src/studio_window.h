@@ -53,7 +53,9 @@ class StudioWindow : public QMainWindow {
   // handles, title, camera, panels) until the engine has the new one ready, then swaps all of it at once. A
   // cancelled or failed preparation leaves the window as it was: what is on screen is always the model the
   // engine's solver holds (InteractiveSession::solver_model()).
-  bool open_path(const std::string& path);
+  // `coefficients` (a scenario only): start from that map instead of solving
+  // (InteractiveSession::open_scenario).
+  bool open_path(const std::string& path, const std::string& coefficients = "");
   // Cancel (status bar, cage dialog): stops the cage maker at its next step, else the engine's preparation.
   void cancel_opening();
   // Test hook: called on the cage maker's thread with each of its progress lines, before the cancel is
@@ -160,6 +162,14 @@ class StudioWindow : public QMainWindow {
   vtkPolyData* mesh_data() const { return scene_->mesh_data(); }
   // Handles of the shown frame whose image misses the target (red lines in the mesh view).
   int unreached_handles() const { return scene_->unreached_handles(); }
+  // The badge's words about the map on screen (certificate and global injectivity) and the overlap as drawn
+  // (red rest-mesh faces, the marker), for tests.
+  std::string badge_text() const;
+  const std::vector<int>& overlap_faces() const { return scene_->overlap_faces(); }
+  bool overlap_marker_shown() const { return scene_->overlap_marker_shown(); }
+  Vec3 overlap_marker_at() const { return scene_->overlap_marker_at(); }
+  // Whether the shown point cloud has colours from its file (a splat's f_dc, a PLY's red green blue).
+  bool has_point_colors() const { return has_point_colors_; }
   // MSAA samples of the 3D view (0 by default: interaction speed; call before the window is first shown).
   void set_multisamples(int n);
   // Headless use (--screenshot): only the 3D view, no docks or bars.
@@ -227,6 +237,7 @@ class StudioWindow : public QMainWindow {
   void on_frame(std::shared_ptr<const SessionFrame> f);  // any thread
   void render_pending();                                 // UI thread
   void update_status(const SessionFrame& f);
+  void update_badge(const SessionFrame& f, const std::string& name);
   void sync_widgets();  // handle widgets from sources_/targets_
   void push_undo();
   void send_handles();
@@ -247,6 +258,8 @@ class StudioWindow : public QMainWindow {
   vtkRenderer* renderer_ = nullptr;
   vtkRenderer* bar_renderer_ = nullptr;  // the colour bar's viewport, right of the model's
   std::unique_ptr<Scene> scene_;
+  bool has_point_colors_ = false;
+  void load_point_colors(const Model& model);
   ParamsPanel* params_ = nullptr;
   PlotsPanel* plots_ = nullptr;
   // A mesh file's model folder (lidef/cage/auto_cage.h), made on a worker thread while a progress dialog

@@ -10,6 +10,7 @@
 // An overlap is reported only where it is proven: an edge of one piece pierces the other piece's affine
 // image with margins larger than both radii, so the true surfaces cross there (intersection number ±1).
 #pragma once
+#include <atomic>
 #include <memory>
 #include <string>
 #include <vector>
@@ -23,6 +24,9 @@ namespace lidef {
 struct GlobalInjectivityParams {
   int max_depth = 5;               // 1-to-4 splits of a surface triangle at most
   long max_tests_per_pair = 4096;  // piece pairs examined below one pair of surface triangles at most
+  // Set (by another thread) to stop a check early: it then returns kNotDecided with reason "cancelled" (an
+  // interactive caller drops that result: its map has changed).
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 struct GlobalInjectivity {

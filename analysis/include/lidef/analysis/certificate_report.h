@@ -67,6 +67,11 @@ std::uint64_t coefficients_hash(const MatX3d& y);
 // the reason.
 GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::string& domain,
                                             const Cage& cage, const TriMesh& mesh, const MatX3d& y);
+// Why the global verdict cannot be decided whatever the map's shape (the local certificate failed, the voxel
+// domain, a point cloud); "" when the surface check can decide it. decide_global_injectivity states these
+// reasons; the studio, which holds one GlobalInjectivityChecker per model, asks this first.
+std::string global_injectivity_undecidable(const Certificate& cert, const std::string& domain,
+                                           const TriMesh& mesh);
 
 // Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,

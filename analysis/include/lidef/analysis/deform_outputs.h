@@ -35,6 +35,11 @@ struct DeformOutputs {
 DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
                                    const DeformResult& result, const DeformOutputOptions& options = {});
 
+// The point file the model was made from (.ply or .xyz; deformed.ply's or deformed.xyz's source, the studio's
+// point colours): the scenario's model when it is such a file, else the input named by the model folder's
+// model.json (an automatic cage); "" when the model comes from neither.
+std::string source_points_file(const Model& model, const Scenario& scenario);
+
 // The CSV header and a row of iterations.csv (one column per field of IterationRecord; docs/outputs.md).
 std::string iterations_header();
 std::string iteration_row(const IterationRecord& r);

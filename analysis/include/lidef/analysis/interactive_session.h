@@ -29,6 +29,7 @@
 #include "lidef/analysis/field_grid.h"
 #include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
+#include "lidef/global_injectivity.h"
 #include "lidef/model_check.h"
 #include "lidef/projected_newton.h"
 #include "lidef/scenario.h"
@@ -86,6 +87,11 @@ struct SessionFrame {
   long field_version = -1;
   std::shared_ptr<const VerificationResult> verification;  // dense-sampling check of `leaves` (Fig. 5)
   long verification_version = -1;
+  // Global injectivity of the map (ExtrasRequest::global_injectivity; global_injectivity.h): checked only
+  // when the engine rests, since one check takes seconds. A new map leaves global_version behind map_version
+  // until its own check ends (a view says "checking" meanwhile, never the verdict of an earlier map).
+  std::shared_ptr<const GlobalInjectivity> global;
+  long global_version = -1;
   double ms_frame = 0;  // time to build this frame's geometry
 };
 
@@ -94,6 +100,10 @@ struct ExtrasRequest {
   bool leaves = false;
   bool field = false;
   bool mesh_distortion = false;  // σ1/σ3 at the mesh vertices with every frame (a signed SVD per vertex)
+  // Global injectivity (global_injectivity.h) of the map the engine rests at, once it has rested 0.25 s with
+  // no command: one GlobalInjectivityChecker per model, one check per resting map; a command posted meanwhile
+  // cancels the check (it runs again at the next rest).
+  bool global_injectivity = false;
   int field_resolution = 48;     // grid points along the longest axis of the cage's bounding box
   double extras_interval = 1.0;  // seconds between extras while iterating (0 = every frame)
 };
@@ -120,7 +130,11 @@ class InteractiveSession {
   // caches an automatic cage for a mesh file, lidef/cage/auto_cage.h); identity by default.
   using ModelResolver = std::function<std::string(const std::string& path)>;
   void set_model_resolver(ModelResolver resolver) { resolver_ = std::move(resolver); }
-  void open_scenario(const std::string& path, const std::string& models_dir = "");
+  // `coefficients` (optional): a coefficients.txt of this scenario's model (written by `lidef deform` with
+  // the same parameters) to start from instead of solving: the engine rests at that map (InputError naming
+  // the file when it cannot be read; an error when the solver's subspace or certificate does not take it).
+  void open_scenario(const std::string& path, const std::string& models_dir = "",
+                     const std::string& coefficients = "");
   void open_model(const std::string& model_dir, const DeformParams& params = {});
 
   // The session as a scenario (handles, parameters; `studio` left for the caller), for saving. Empty
@@ -178,7 +192,8 @@ class InteractiveSession {
   struct Command;
   struct Engine;
   void post(Command c);
-  void load(std::shared_ptr<const Model> model, const Scenario& sc, bool iterate);
+  void load(std::shared_ptr<const Model> model, const Scenario& sc, bool iterate, MatX3d initial = {},
+            const std::string& initial_from = "");
   void run();
 
   FrameCallback on_frame_;
@@ -194,6 +209,7 @@ class InteractiveSession {
   bool quit_ = false;
   std::atomic<bool> interrupt_{false};
   std::atomic<bool> cancel_{false};  // cancel_preparation(); cleared when the engine takes new commands
+  std::atomic<bool> posted_{false};  // a command waits: a running global check stops (cleared as cancel_)
   std::shared_ptr<const SessionFrame> latest_;
   SessionState state_ = SessionState::kEmpty;
   bool idle_ = true;  // engine waiting with an empty queue and nothing to do
