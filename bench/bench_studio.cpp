@@ -68,7 +68,7 @@ struct Config {
   const char* name;
   int dof, samples;
   View view;
-  int hessian_reuse = -1;  // DeformParams::drag_hessian_reuse; -1: the table's default
+  int hessian_reuse = -1;        // DeformParams::drag_hessian_reuse; -1: the table's default
   double hessian_fraction = -1;  // DeformParams::hessian_fraction; < 0: the table's default
   int cg_steps = -1;             // DeformParams::newton_cg_steps; -1: the table's default
   int refinement = -1;           // DeformParams::refinement (RefinementEval); -1: the table's default

@@ -4,7 +4,8 @@
 //
 // Cases per input kind here: models 8 (lidef certify), scenarios 9 and saved sessions 2 (lidef deform),
 // coefficient files 5 (lidef certify), certificates 7 (lidef verify), PLY/STL/OFF meshes 6 (lidef cage) and
-// 2 (a mesh file as a scenario's model). The other suites add their own tables (docs/cli.md, "Bad input and interrupted runs").
+// 2 (a mesh file as a scenario's model). The other suites add their own tables (docs/cli.md, "Bad input and
+// interrupted runs").
 #include <gtest/gtest.h>
 
 #include <cstdint>

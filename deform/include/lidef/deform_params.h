@@ -30,11 +30,11 @@ const char* to_string(InjectivityMode m);   // "local" / "global"
 
 struct DeformParams {
   // --- Subspace and sampling
-  int reduced_dof = 300;           // s: reduced coefficients per coordinate (3s unknowns)
-  int samples = 30000;             // |I|: target number of voxels (the side is searched to match)
-  double voxel_side = 0;           // > 0: use this voxel side instead of searching from `samples`
-  double safety = 1.5;             // voxel center to cage >= safety * voxel radius
-  double hessian_fraction = 0.05;  // |H| / |I|
+  int reduced_dof = 300;                  // s: reduced coefficients per coordinate (3s unknowns)
+  int samples = 30000;                    // |I|: target number of voxels (the side is searched to match)
+  double voxel_side = 0;                  // > 0: use this voxel side instead of searching from `samples`
+  double safety = 1.5;                    // voxel center to cage >= safety * voxel radius
+  double hessian_fraction = 0.05;         // |H| / |I|
   DomainKind domain = DomainKind::kMesh;  // the certified domain (samples = its leaf count)
   // --- Energy E = E_dis + λ1 E_P2P + λ2 E_smooth
   double lambda_p2p = 1e5;     // λ1
@@ -59,14 +59,14 @@ struct DeformParams {
   // the largest extent of the cage's bounding box), so that it means the same for a scaled model.
   double handle_tolerance = 1e-3;
   // --- Continuation (target_path.h, continuation.h; docs/solver.md)
-  bool continuation = true;           // rotation-aware intermediate targets for large motions and stalls
-  double continuation_angle = 90;     // degrees: the largest rotation of a handle group per stage
+  bool continuation = true;               // rotation-aware intermediate targets for large motions and stalls
+  double continuation_angle = 90;         // degrees: the largest rotation of a handle group per stage
   int continuation_stage_iterations = 3;  // Newton iterations at most per intermediate stage
   // --- Certificate (line search and output)
   int max_depth = 6;
-  LipschitzBound bound = LipschitzBound::kThirdOrder;  // first (17) or third (21) order
+  LipschitzBound bound = LipschitzBound::kThirdOrder;     // first (17) or third (21) order
   RefinementEval refinement = RefinementEval::kFarField;  // how octree children are evaluated (CertifyParams)
-  long max_refined = 200000;                           // child voxels evaluated per certification of a result
+  long max_refined = 200000;             // child voxels evaluated per certification of a result
   long line_search_max_refined = 20000;  // the same budget for line-search trials: a trial that needs more is
                                          // rejected (sound: "not certified") and the step halved
   double bound_tolerance = 0;  // > 0: refine a certified map's leaves until the lower bound of σ3 is within

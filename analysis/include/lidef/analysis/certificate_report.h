@@ -2,12 +2,12 @@
 // voxels.csv (one row per octree leaf), plus the reader `lidef verify` uses. No VTK here (see vtk_export.h).
 // Every field and column is documented in docs/outputs.md.
 //
-// Determinism: both files are a pure function of the model, the coefficients and the parameters — byte-identical
-// for the same input whatever the thread count. Wall-clock timings are therefore NOT part of them; `lidef
-// certify` writes them to a separate timings.json. Doubles use the shortest decimal form that reads back to the
-// identical double (format_double), so the files round-trip exactly; non-finite values (the NaN σ3 and infinite
-// L of a leaf left unevaluated when the refinement budget ran out) are written as nan / inf / -inf in the CSV
-// and as the JSON strings "nan" / "inf" / "-inf".
+// Determinism: both files are a pure function of the model, the coefficients and the parameters —
+// byte-identical for the same input whatever the thread count. Wall-clock timings are therefore NOT part of
+// them; `lidef certify` writes them to a separate timings.json. Doubles use the shortest decimal form that
+// reads back to the identical double (format_double), so the files round-trip exactly; non-finite values (the
+// NaN σ3 and infinite L of a leaf left unevaluated when the refinement budget ran out) are written as nan /
+// inf / -inf in the CSV and as the JSON strings "nan" / "inf" / "-inf".
 #pragma once
 #include <cstdint>
 #include <string>
@@ -26,17 +26,17 @@ namespace lidef {
 
 // Everything certificate.json records: the certifier's result plus its provenance.
 struct CertificateReport {
-  Certificate cert;               // verdict, counts, minima, failing leaves; leaves go to voxels.csv
+  Certificate cert;  // verdict, counts, minima, failing leaves; leaves go to voxels.csv
   // Global injectivity on D (global_injectivity.h): decided only when the local certificate covers the
   // mesh's solid; otherwise not decided, with the reason.
   GlobalInjectivity global;
-  std::string model;              // model folder as given on the command line
-  std::string coefficients;       // coefficient file as given, or "identity"
-  std::uint64_t cage_hash = 0;    // FNV-1a 64 of the cage (subspace_cage_hash)
+  std::string model;                    // model folder as given on the command line
+  std::string coefficients;             // coefficient file as given, or "identity"
+  std::uint64_t cage_hash = 0;          // FNV-1a 64 of the cage (subspace_cage_hash)
   std::uint64_t coefficients_hash = 0;  // coefficients_hash(y)
   int cage_vertices = 0, cage_faces = 0, cage_edges = 0;
   long mesh_vertices = 0;
-  double mesh_coverage = 0;             // fraction of mesh vertices inside the union of the base voxels
+  double mesh_coverage = 0;  // fraction of mesh vertices inside the union of the base voxels
   long mesh_vertices_uncovered = 0;
   // The certified domain (docs/certificate.md): "mesh" (D = the mesh's triangles and solid, sample_domain)
   // or "voxels" (the paper's grid); the leaves that meet D (exact test, cubes_meeting_mesh_domain) and the
@@ -47,14 +47,14 @@ struct CertificateReport {
   std::string domain_statement, domain_definition;
   long leaves_meeting_domain = 0;
   long uncleared_voxels = 0;
-  SamplingParams sampling_params;       // as requested (voxel_side 0 = searched from target_count)
+  SamplingParams sampling_params;  // as requested (voxel_side 0 = searched from target_count)
   // As obtained (the VoxelSampling fields that the report needs; the centers are not stored).
   double sampling_radius = 0;
   Vec3 sampling_origin = Vec3::Zero();
   bool sampling_target_met = true;
   int sampling_search_iterations = 0;
   int hessian_subset = 0;
-  CertifyParams params;                 // bound, max_depth, budgets
+  CertifyParams params;                   // bound, max_depth, budgets
   std::string voxels_csv = "voxels.csv";  // leaf table, relative to the certificate's folder
   std::uint64_t voxels_csv_hash = 0;      // FNV-1a 64 of the exact bytes of voxels.csv
 };

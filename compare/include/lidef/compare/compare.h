@@ -4,7 +4,8 @@
 // Methods (names as on the command line):
 //   lidef         this project's certified projected Newton in the harmonic subspace (projected_newton.h)
 //   pwl-tet       PWL(Tet) on a coarse tet mesh: the model's tet.node/tet.ele (Table 1's DOF), else TetGen
-//                 (coarse_min_dof: at least that many DOF, TetGen's volume searched where the model's is coarser)
+//                 (coarse_min_dof: at least that many DOF, TetGen's volume searched where the model's is
+//                 coarser)
 //   pwl-tet-fine  PWL(Tet) on a fine TetGen mesh (max tet volume = factor × lidef's voxel volume; Fig. 3)
 //   vhm           Variational Harmonic Maps (vhm.h) on the model's vhm_anchors.xyz; its result is certified
 //                 with lidef's certificate on lidef's voxels (Fig. 11)
@@ -17,12 +18,12 @@
 #include <string>
 #include <vector>
 
-#include "lidef/model_check.h"
 #include "lidef/compare/pwl_tet.h"
 #include "lidef/compare/sr_arap.h"
-#include "lidef/scenario.h"
 #include "lidef/compare/tet_mesh.h"
 #include "lidef/compare/vhm.h"
+#include "lidef/model_check.h"
+#include "lidef/scenario.h"
 
 namespace lidef {
 
@@ -39,7 +40,7 @@ struct CompareOptions {
   // else TetGen with its max volume searched for them (tetrahedralize_min_vertices; coarse_tet.max_volume is
   // not used). Table 1 at the paper's resolution.
   long coarse_min_dof = 0;
-  TetgenOptions fine_tet;      // fine mesh; fine_tet.max_volume <= 0: fine_volume_factor × voxel side³
+  TetgenOptions fine_tet;  // fine mesh; fine_tet.max_volume <= 0: fine_volume_factor × voxel side³
   double fine_volume_factor = 1.0;
   int tet_max_iterations = 200;
   // VHM
@@ -63,10 +64,11 @@ struct MethodResult {
       std::numeric_limits<double>::quiet_NaN();  // meshing, basis, subspace, factor setup
   int iterations = 0;
   double max_handle_error = std::numeric_limits<double>::quiet_NaN();
-  // 1 when max_handle_error ≤ handle_tolerance × the model's size (as `lidef deform` judges), 0 not, -1 failed.
+  // 1 when max_handle_error ≤ handle_tolerance × the model's size (as `lidef deform` judges), 0 not, -1
+  // failed.
   int reached = -1;
-  double mean_e_iso = std::numeric_limits<double>::quiet_NaN();    // mean of E_iso − 6 over mesh vertices
-  double max_e_iso = std::numeric_limits<double>::quiet_NaN();     // max (+∞ if some vertex is inverted)
+  double mean_e_iso = std::numeric_limits<double>::quiet_NaN();  // mean of E_iso − 6 over mesh vertices
+  double max_e_iso = std::numeric_limits<double>::quiet_NaN();   // max (+∞ if some vertex is inverted)
   // Harmonic methods (lidef, VHM): the volume-weighted mean of E_iso − 6 over the samples of lidef's
   // certified domain (the mesh's solid, or the grid with domain "voxels") — what lidef minimizes, on the same
   // samples for both; +∞ if some sample is inverted; NaN for the other methods.
@@ -86,7 +88,7 @@ struct MethodResult {
   MatX3d V;
   VecXd e_iso, det_j;
   MatX3d coefficients;  // harmonic methods (lidef, vhm): the map's #V+#F by 3 cage coefficients; else empty
-  std::string log;  // one line per iteration
+  std::string log;      // one line per iteration
 };
 
 // Progress: (method, line) for every iteration and stage.
