@@ -37,8 +37,8 @@ std::string input_error(F&& f) {
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
   // Counted by hand in deform_params.h: 6 sampling + 2 energy + 13 newton (3 of them continuation) +
-  // 6 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 45;
+  // 8 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
+  const int kFields = 46;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -79,7 +79,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "max_refined",
                                              "line_search_max_refined",
                                              "bound_tolerance",
-                                             "max_distortion",  // certificate
+                                             "max_distortion",
+                                             "injectivity",  // certificate
                                              "dynamic_weighting",
                                              "e0",
                                              "kappa1",
