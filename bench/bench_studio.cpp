@@ -29,22 +29,18 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "lidef/internal/stopwatch.h"
 #include "omp_wait.h"
 #include "studio_window.h"
 
 using namespace lidef;
 using namespace lidef::studio;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
-double since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
-
 void pump(double seconds) {
   const auto t0 = Clock::now();
-  while (since(t0) < seconds) {
+  while (seconds_since(t0) < seconds) {
     QApplication::processEvents(QEventLoop::AllEvents, 10);
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
@@ -52,7 +48,7 @@ void pump(double seconds) {
 
 bool settle(InteractiveSession& s, StudioWindow* w, double seconds) {
   const auto t0 = Clock::now();
-  while (since(t0) < seconds) {
+  while (seconds_since(t0) < seconds) {
     if (w) QApplication::processEvents(QEventLoop::AllEvents, 10);
     if (s.wait_until_resting(0.01)) {
       if (!w) return true;
@@ -119,10 +115,10 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
     });
   const auto t0 = Clock::now();
   long engine_maps = 0;
-  while (since(t0) < seconds) {
-    s.set_targets(drag_targets(sc.sources, sc.targets, since(t0), amp));
+  while (seconds_since(t0) < seconds) {
+    s.set_targets(drag_targets(sc.sources, sc.targets, seconds_since(t0), amp));
     const auto tick = Clock::now();
-    while (since(tick) < 0.016) {  // ~60 Hz mouse events
+    while (seconds_since(tick) < 0.016) {  // ~60 Hz mouse events
       if (w)
         QApplication::processEvents(QEventLoop::AllEvents, 5);
       else
@@ -136,7 +132,7 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
       }
     }
   }
-  r.seconds = since(t0);
+  r.seconds = seconds_since(t0);
   const auto f = s.latest_frame();
   if (w) {
     QObject::disconnect(conn);
@@ -189,7 +185,7 @@ StepResult drag_steps(StudioWindow& w, int steps) {
     const auto t0 = Clock::now();
     s.set_targets(drag_targets(sc.sources, sc.targets, 4.0 * k / steps, amp));
     bool done = false;
-    while (!done && since(t0) < 600) {
+    while (!done && seconds_since(t0) < 600) {
       QApplication::processEvents(QEventLoop::AllEvents, 5);
       if (!s.wait_until_resting(0.0)) continue;
       const auto f = s.latest_frame();
@@ -197,7 +193,7 @@ StepResult drag_steps(StudioWindow& w, int steps) {
       done = f && shown && f->serial == shown->serial && (!global || f->global_version == f->map_version);
     }
     r.ok = r.ok && done;
-    r.ms_step += 1000 * since(t0) / steps;
+    r.ms_step += 1000 * seconds_since(t0) / steps;
     const auto f = w.shown_frame();
     if (global && f->global && f->global_version == f->map_version) {
       ++r.checks;

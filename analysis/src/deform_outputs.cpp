@@ -71,6 +71,8 @@ const IterationColumn kIterationColumns[] = {
     {"ms_total", [](const IterationRecord& r) { return ms(r.ms_total); }},
     {"cg_steps", [](const IterationRecord& r) { return std::to_string(r.cg_steps); }},
     {"cg_scale", [](const IterationRecord& r) { return num(r.cg_scale); }},
+    {"global_rejections", [](const IterationRecord& r) { return std::to_string(r.global_rejections); }},
+    {"ms_global", [](const IterationRecord& r) { return ms(r.ms_global); }},
 };
 
 }  // namespace

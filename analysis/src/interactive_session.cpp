@@ -13,35 +13,25 @@
 #include "lidef/coefficients.h"
 #include "lidef/continuation.h"
 #include "lidef/errors.h"
+#include "lidef/internal/enum_names.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/precompute_cache.h"
 
 namespace lidef {
 
+template <>
+struct EnumNames<SessionState> {
+  static constexpr const char* names[] = {"empty", "preparing", "iterating", "resting", "failed"};
+};
+
 const char* to_string(SessionState s) {
-  switch (s) {
-    case SessionState::kEmpty:
-      return "empty";
-    case SessionState::kPreparing:
-      return "preparing";
-    case SessionState::kIterating:
-      return "iterating";
-    case SessionState::kResting:
-      return "resting";
-    case SessionState::kFailed:
-      return "failed";
-  }
-  return "?";
+  return enum_name(s);
 }
 
 namespace {
-using Clock = std::chrono::steady_clock;
 // Seconds the engine rests with no command before it checks global injectivity (a pause of the drag).
 constexpr double kGlobalCheckPause = 0.25;
-
-double seconds_since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
 
 }  // namespace
 

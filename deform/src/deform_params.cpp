@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lidef/errors.h"
+#include "lidef/internal/enum_names.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
@@ -136,34 +137,6 @@ std::vector<ParamInfo> make_table() {
        "OpenCL: pretend the device allows buffers of at most this many bytes (0 = the device's limit)"},
   };
 }
-
-// The names of each enum parameter type, in enum order.
-template <class T>
-struct EnumNames;
-template <>
-struct EnumNames<LipschitzBound> {
-  static constexpr const char* names[] = {"first", "third", "combined", "spectral"};
-};
-template <>
-struct EnumNames<RefinementEval> {
-  static constexpr const char* names[] = {"per-face", "per-edge", "batched", "far-field"};
-};
-template <>
-struct EnumNames<HessianPrecision> {
-  static constexpr const char* names[] = {"single", "double"};
-};
-template <>
-struct EnumNames<BackendKind> {
-  static constexpr const char* names[] = {"cpu", "opencl", "auto"};
-};
-template <>
-struct EnumNames<DomainKind> {
-  static constexpr const char* names[] = {"mesh", "voxels"};
-};
-template <>
-struct EnumNames<InjectivityMode> {
-  static constexpr const char* names[] = {"local", "global"};
-};
 
 template <class T>
 constexpr bool is_enum_param_v = std::is_enum_v<T>;
@@ -333,19 +306,19 @@ bool is_test_hook(const ParamInfo& p) {
 }
 
 const char* to_string(HessianPrecision p) {
-  return EnumNames<HessianPrecision>::names[static_cast<int>(p)];
+  return enum_name(p);
 }
 
 const char* to_string(BackendKind b) {
-  return EnumNames<BackendKind>::names[static_cast<int>(b)];
+  return enum_name(b);
 }
 
 const char* to_string(DomainKind d) {
-  return EnumNames<DomainKind>::names[static_cast<int>(d)];
+  return enum_name(d);
 }
 
 const char* to_string(InjectivityMode m) {
-  return EnumNames<InjectivityMode>::names[static_cast<int>(m)];
+  return enum_name(m);
 }
 
 std::string param_flag(const ParamInfo& p) {

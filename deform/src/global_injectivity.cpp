@@ -19,6 +19,7 @@
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/internal/mesh_queries.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/number_format.h"
 #include "lidef/self_intersections.h"
@@ -283,11 +284,11 @@ bool robust_pierce(const Vec3& s0, const Vec3& s1, const std::array<Vec3, 3>& t,
 
 GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                                                   const GlobalInjectivityParams& params) const {
-  const auto t_start = std::chrono::steady_clock::now();
+  const auto t_start = Clock::now();
   const Impl& im = *impl_;
   auto cancelled = [&] { return params.cancel && params.cancel->load(std::memory_order_relaxed); };
   auto finish = [&](GlobalInjectivity g) {
-    g.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+    g.ms = ms_since(t_start);
     return g;
   };
   if (y_model.rows() != im.basis.size())

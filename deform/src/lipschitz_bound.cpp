@@ -9,6 +9,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/enum_names.h"
 
 namespace lidef {
 namespace {
@@ -223,25 +224,12 @@ double grad_beta_norm2_closed_form(const Vec3& u, const Vec3& w, const Vec3& q) 
 }
 
 const char* to_string(LipschitzBound b) {
-  switch (b) {
-    case LipschitzBound::kFirstOrder:
-      return "first";
-    case LipschitzBound::kThirdOrder:
-      return "third";
-    case LipschitzBound::kCombined:
-      return "combined";
-    case LipschitzBound::kSpectral:
-      return "spectral";
-  }
-  return "third";
+  return enum_name(b);
 }
 
 LipschitzBound lipschitz_bound_from_string(const std::string& s) {
-  if (s == "first") return LipschitzBound::kFirstOrder;
-  if (s == "third") return LipschitzBound::kThirdOrder;
-  if (s == "combined") return LipschitzBound::kCombined;
-  if (s == "spectral") return LipschitzBound::kSpectral;
-  throw InputError("", "unknown bound '" + s + "' (expected 'first', 'third', 'combined' or 'spectral')");
+  if (const auto b = enum_from_name<LipschitzBound>(s)) return *b;
+  throw InputError("", "unknown bound '" + s + "' (expected " + enum_name_list<LipschitzBound>() + ")");
 }
 
 }  // namespace lidef

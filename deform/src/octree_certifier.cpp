@@ -11,7 +11,9 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
 #include "lidef/internal/edge_jet.h"
+#include "lidef/internal/enum_names.h"
 #include "lidef/internal/mesh_queries.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/number_format.h"
 #include "lidef/signed_svd.h"
@@ -19,10 +21,6 @@
 namespace lidef {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Full 27-entry Frobenius norm of a Hessian tensor given as 3 symmetric 6-entry rows (xx,xy,xz,yy,yz,zz).
@@ -1675,17 +1673,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 }
 
 const char* to_string(RefinementEval r) {
-  switch (r) {
-    case RefinementEval::kPerFace:
-      return "per-face";
-    case RefinementEval::kPerEdge:
-      return "per-edge";
-    case RefinementEval::kPerEdgeBatched:
-      return "batched";
-    case RefinementEval::kFarField:
-      return "far-field";
-  }
-  return "batched";
+  return enum_name(r);
 }
 
 std::string distortion_reason(double max_distortion, const Vec3& where) {

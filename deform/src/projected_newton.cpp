@@ -12,7 +12,9 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/internal/enum_names.h"
 #include "lidef/internal/newton_cg.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 
 // LAPACK Cholesky from OpenBLAS (blocked and threaded; several times faster than Eigen::LLT at 900 x 900).
@@ -44,11 +46,6 @@ bool cholesky_solve(MatXd& H, VecXd& b) {
   return cholesky_solve_factored(H, b);
 }
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
 bool stop_requested(const std::atomic<bool>* stop) {
   return stop && stop->load(std::memory_order_relaxed);
 }
@@ -63,24 +60,15 @@ void check_finite(const MatX3d& P, const std::string& where, const char* what) {
 
 }  // namespace
 
+template <>
+struct EnumNames<StopReason> {
+  static constexpr const char* names[] = {"converged",          "max_iterations", "blocked_by_certificate",
+                                          "no_certified_step",  "interrupted",    "reached_not_converged",
+                                          "targets_unreachable"};
+};
+
 const char* to_string(StopReason r) {
-  switch (r) {
-    case StopReason::kConverged:
-      return "converged";
-    case StopReason::kMaxIterations:
-      return "max_iterations";
-    case StopReason::kBlocked:
-      return "blocked_by_certificate";
-    case StopReason::kNoCertifiedStep:
-      return "no_certified_step";
-    case StopReason::kInterrupted:
-      return "interrupted";
-    case StopReason::kReached:
-      return "reached_not_converged";
-    case StopReason::kUnreachable:
-      return "targets_unreachable";
-  }
-  return "?";
+  return enum_name(r);
 }
 
 // The stages of the constructor, with progress, cancellation and the precomputation cache around them.
@@ -555,13 +543,14 @@ MatX3d DeformationSolver::handle_positions() const {
   return frame_.points_from_normalized(energy_->handle_positions(y_));
 }
 
+// One Newton iteration, as its named stages: the direction (newton_direction), the certified line search
+// along it (certified_line_search: each trial's energy, certificate and, in global mode, global injectivity),
+// and with dynamic weighting the direction recomputed with weaker handles (weaken_handles) when its full step
+// fails the certificate while the handles are still far.
 IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   const auto t_iter = Clock::now();
   IterationRecord rec;
   rec.iteration = static_cast<int>(history_.size()) + 1;
-  const int s = subspace_.size();
-  const bool trace = params_.trace_line_search;
-  bool interrupted = false;
 
   // With dynamic weighting, a direction whose full step fails the certificate while the handles are still far
   // (E_P2P >= E0) is recomputed with weaker handles and more smoothness before the step is shortened: this
@@ -574,176 +563,24 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
   bool may_reuse =
       dragging_ && params_.drag_hessian_reuse > 0 && targets_version_ != stepped_targets_version_;
   stepped_targets_version_ = targets_version_;
-  const bool global = params_.injectivity == InjectivityMode::kGlobal;
-  if (global) {
-    // Each accepted step keeps global injectivity only if the map it starts from has it: say so before any
-    // step rather than act as local.
-    const GlobalInjectivity g0 = global_injectivity();
-    if (g0.verdict == GlobalInjectivity::Verdict::kNotDecided)
-      throw InputError("injectivity", "global injectivity cannot be decided: " + g0.reason);
-    if (g0.verdict == GlobalInjectivity::Verdict::kOverlap)
-      throw InputError("injectivity", "the starting map is not globally injective: " + g0.reason);
-  }
+  if (params_.injectivity == InjectivityMode::kGlobal) require_globally_injective_start();
   global_rejection_.clear();
+  bool interrupted = false;
   for (int attempt = 0; attempt < max_attempts && !interrupted; ++attempt) {
     rec.lambda_p2p = weights_.p2p;
     rec.lambda_smooth = weights_.smooth;
     rec.armijo_rejections = rec.certificate_rejections = rec.global_rejections = 0;
     distortion_rejection_.clear();
-
-    auto t0 = Clock::now();
-    const EnergyTerms e0 = energy_->terms(kernels_->distortion_sum(0), y_, weights_);
-    rec.energy_before = e0.total;
-    const MatS3 g = energy_->gradient_from(kernels_->distortion_gradient_sum(), y_, weights_);
-    rec.gradient_norm = g.norm();
-    rec.ms_gradient += ms_since(t0);
-
-    const VecXd gvec = Eigen::Map<const VecXd>(g.data(), 3 * s);
-    VecXd dvec = -gvec;
-    MatXd F;                      // this step's factor (when not kept in factor_)
-    const MatXd* L = &factor_.L;  // the factor dvec was solved with
     const bool reuse = may_reuse && factor_.L.size() > 0 && factor_.reuses < params_.drag_hessian_reuse &&
                        factor_.weights.p2p == weights_.p2p && factor_.weights.smooth == weights_.smooth;
     rec.hessian_reused = reuse;
-    if (reuse) {
-      t0 = Clock::now();
-      if (!cholesky_solve_factored(factor_.L, dvec))
-        throw NumericalError("projected Newton: solving with the kept Hessian factor failed");
-      ++factor_.reuses;
-      rec.ms_solve += ms_since(t0);
-    } else {
-      t0 = Clock::now();
-      MatXd H = energy_->hessian_from(
-          kernels_->distortion_pair_blocks(params_.hessian_precision == HessianPrecision::kDouble), weights_);
-      H.diagonal().array() += params_.diagonal_shift;
-      rec.ms_hessian += ms_since(t0);
-
-      t0 = Clock::now();
-      F = H;
-      bool ok = cholesky_solve(F, dvec);
-      for (double extra = 1e-6; !ok && extra < 1e6; extra *= 100) {
-        // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision
-        // rounding can still break that, in which case the shift grows.
-        H.diagonal().array() += extra * (1.0 + H.diagonal().cwiseAbs().maxCoeff());
-        F = H;
-        dvec = -gvec;
-        ok = cholesky_solve(F, dvec);
-      }
-      if (!ok) throw NumericalError("projected Newton: the reduced Hessian is not positive definite");
-      if (dragging_ && params_.drag_hessian_reuse > 0) {
-        factor_ = {std::move(F), weights_, 0};
-        L = &factor_.L;
-      } else {
-        factor_ = {};
-        L = &F;
-      }
-      rec.ms_solve += ms_since(t0);
-    }
-    t0 = Clock::now();
-    if (params_.newton_cg_steps > 0)
-      dvec = conjugate_gradient_correction(gvec, dvec, *L, rec);  // leaves the kernels' direction at dvec
-    else {
-      kernels_->set_direction(Eigen::Map<const MatS3>(dvec.data(), s, 3));
-      direction_scale_ = dvec.norm() * (1 + 1e-12);
-    }
-    rec.ms_solve += ms_since(t0);
-    const MatS3 delta = Eigen::Map<const MatS3>(dvec.data(), s, 3);
-    rec.newton_decrement = -gvec.dot(dvec);
-
-    t0 = Clock::now();
-    const double slope = gvec.dot(dvec);  // < 0 for a descent direction
-    const bool may_retry = attempt + 1 < max_attempts && e0.p2p >= p2p_far &&
+    const NewtonDirection d = newton_direction(reuse, rec);
+    const bool may_retry = attempt + 1 < max_attempts && d.e0.p2p >= p2p_far &&
                            (weights_.p2p > params_.min_p2p_factor * params_.lambda_p2p ||
                             weights_.smooth < params_.max_smooth_factor * params_.lambda_smooth);
-    bool retry = false;
-    double t = 1;
-    for (int trial = 0; trial <= params_.max_halvings; ++trial, t *= 0.5) {
-      if (stop_requested(stop)) {
-        interrupted = true;
-        break;
-      }
-      const MatS3 yt = y_ + t * delta;
-      const EnergyTerms et = energy_->terms(kernels_->distortion_sum(t), yt, weights_);
-      if (!(et.total <= e0.total + params_.armijo * t * slope)) {
-        if (trace) std::fprintf(stderr, "  trial t=%.4g E=%.6g > E0=%.6g (Armijo)\n", t, et.total, e0.total);
-        ++rec.armijo_rejections;
-        continue;
-      }
-      const auto tc = Clock::now();
-      CertifyParams cp = certify_params(true, false);
-      cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
-      cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
-      cp.distortion_probes = distortion_probes_;
-      if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
-        cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
-        cp.previous_lower = &perturb_lower_;
-        cp.previous_upper = &perturb_upper_;
-        cp.perturbation_floor = params_.epsilon;  // condition (36) then decides as without them
-        if (const MatJT* dJ = kernels_->direction_jacobians()) {  // the center term from G d (Step 4e)
-          cp.direction = &delta;
-          cp.direction_jacobians = dJ;
-          cp.direction_step = t;
-          cp.direction_scale = direction_scale_;
-        }
-      }
-      Certificate c = certifier_->certify_reduced(yt, cp);
-      if (!c.certified) {
-        line_search_failed_ = c.failed_voxels;
-        // The last rejection by the distortion bound, named in the model's frame (the stop message says it).
-        distortion_rejection_ = c.distortion_failed ? frame_.from_normalized(Certificate(c)).reason : "";
-        if (c.distortion_failed) {  // the next trials look there first
-          distortion_probes_.clear();
-          for (const CertLeaf& l : c.failing) distortion_probes_.push_back(l.center);
-        }
-      }
-      rec.ms_certificate += ms_since(tc);
-      if (trace)
-        std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms\n", t,
-                     et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
-                     ms_since(tc));
-      if (!c.certified) {
-        ++rec.certificate_rejections;
-        if (may_retry) {
-          retry = true;
-          break;
-        }
-        continue;
-      }
-      if (global) {  // only trials the local certificate accepted (the degree argument needs it)
-        const auto tg = Clock::now();
-        const GlobalInjectivity g = check_global(yt);
-        rec.ms_global += ms_since(tg);
-        if (trace) std::fprintf(stderr, "  global: %s %.1f ms\n", to_json_literal(g.verdict), ms_since(tg));
-        if (g.verdict != GlobalInjectivity::Verdict::kInjective) {
-          const Vec3& x = g.overlap_point;
-          global_rejection_ = g.verdict == GlobalInjectivity::Verdict::kOverlap
-                                  ? "the shape would pass through itself near (" + format_g(x.x()) + ", " +
-                                        format_g(x.y()) + ", " + format_g(x.z()) + ")"
-                                  : "global injectivity not proven (" + g.reason + ")";
-          ++rec.global_rejections;
-          if (may_retry) {
-            retry = true;
-            break;
-          }
-          continue;
-        }
-        global_y_ = yt;
-        global_verdict_ = g;
-      }
-      rec.accepted = true;
-      rec.step = t;
-      rec.step_norm = t * delta.norm();
-      rec.terms = et;
-      y_ = yt;
-      kernels_->accept(t);
-      perturb_y_ = yt;
-      perturb_lower_ = c.base_lower;
-      perturb_upper_ = c.base_upper;
-      cert_ = frame_.from_normalized(std::move(c));
-      break;
-    }
-    rec.ms_line_search += ms_since(t0);
-    if (!rec.accepted) rec.terms = e0;
+    const LineSearchEnd end = certified_line_search(d, may_retry, rec, stop);
+    interrupted = end == LineSearchEnd::kInterrupted;
+    const bool retry = end == LineSearchEnd::kRetry;
     if (reuse && !rec.accepted && !retry && !interrupted) {
       // The kept factor's direction found no certified decrease: this iteration assembles its own.
       may_reuse = false;
@@ -752,11 +589,208 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
       continue;
     }
     if (!retry) break;
-    weights_.p2p = std::max(params_.min_p2p_factor * params_.lambda_p2p, weights_.p2p * params_.kappa1);
-    weights_.smooth =
-        std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
-    rec.weight_action += "retry,";
+    weaken_handles(rec);
   }
+  finish_record(rec, interrupted, weights_at_start);
+  rec.ms_total = ms_since(t_iter);
+  history_.push_back(rec);
+  return rec;
+}
+
+void DeformationSolver::require_globally_injective_start() {
+  // Each accepted step keeps global injectivity only if the map it starts from has it: say so before any step
+  // rather than act as local.
+  const GlobalInjectivity g0 = global_injectivity();
+  if (g0.verdict == GlobalInjectivity::Verdict::kNotDecided)
+    throw InputError("injectivity", "global injectivity cannot be decided: " + g0.reason);
+  if (g0.verdict == GlobalInjectivity::Verdict::kOverlap)
+    throw InputError("injectivity", "the starting map is not globally injective: " + g0.reason);
+}
+
+DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reuse, IterationRecord& rec) {
+  const int s = subspace_.size();
+  NewtonDirection d;
+  auto t0 = Clock::now();
+  d.e0 = energy_->terms(kernels_->distortion_sum(0), y_, weights_);
+  rec.energy_before = d.e0.total;
+  const MatS3 g = energy_->gradient_from(kernels_->distortion_gradient_sum(), y_, weights_);
+  rec.gradient_norm = g.norm();
+  rec.ms_gradient += ms_since(t0);
+
+  d.gvec = Eigen::Map<const VecXd>(g.data(), 3 * s);
+  VecXd& dvec = d.dvec;
+  dvec = -d.gvec;
+  MatXd F;                      // this step's factor (when not kept in factor_)
+  const MatXd* L = &factor_.L;  // the factor dvec was solved with
+  if (reuse) {
+    t0 = Clock::now();
+    if (!cholesky_solve_factored(factor_.L, dvec))
+      throw NumericalError("projected Newton: solving with the kept Hessian factor failed");
+    ++factor_.reuses;
+    rec.ms_solve += ms_since(t0);
+  } else {
+    t0 = Clock::now();
+    MatXd H = energy_->hessian_from(
+        kernels_->distortion_pair_blocks(params_.hessian_precision == HessianPrecision::kDouble), weights_);
+    H.diagonal().array() += params_.diagonal_shift;
+    rec.ms_hessian += ms_since(t0);
+
+    t0 = Clock::now();
+    F = H;
+    bool ok = cholesky_solve(F, dvec);
+    for (double extra = 1e-6; !ok && extra < 1e6; extra *= 100) {
+      // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision
+      // rounding can still break that, in which case the shift grows.
+      H.diagonal().array() += extra * (1.0 + H.diagonal().cwiseAbs().maxCoeff());
+      F = H;
+      dvec = -d.gvec;
+      ok = cholesky_solve(F, dvec);
+    }
+    if (!ok) throw NumericalError("projected Newton: the reduced Hessian is not positive definite");
+    if (dragging_ && params_.drag_hessian_reuse > 0) {
+      factor_ = {std::move(F), weights_, 0};
+      L = &factor_.L;
+    } else {
+      factor_ = {};
+      L = &F;
+    }
+    rec.ms_solve += ms_since(t0);
+  }
+  t0 = Clock::now();
+  if (params_.newton_cg_steps > 0)
+    dvec = conjugate_gradient_correction(d.gvec, dvec, *L, rec);  // leaves the kernels' direction at dvec
+  else {
+    kernels_->set_direction(Eigen::Map<const MatS3>(dvec.data(), s, 3));
+    direction_scale_ = dvec.norm() * (1 + 1e-12);
+  }
+  rec.ms_solve += ms_since(t0);
+  rec.newton_decrement = -d.gvec.dot(dvec);
+  return d;
+}
+
+DeformationSolver::LineSearchEnd DeformationSolver::certified_line_search(const NewtonDirection& d,
+                                                                          bool may_retry,
+                                                                          IterationRecord& rec,
+                                                                          const std::atomic<bool>* stop) {
+  const MatS3 delta = Eigen::Map<const MatS3>(d.dvec.data(), subspace_.size(), 3);
+  const auto t0 = Clock::now();
+  const double slope = d.gvec.dot(d.dvec);  // < 0 for a descent direction
+  LineSearchEnd end = LineSearchEnd::kExhausted;
+  double t = 1;
+  for (int trial = 0; trial <= params_.max_halvings; ++trial, t *= 0.5) {
+    if (stop_requested(stop)) {
+      end = LineSearchEnd::kInterrupted;
+      break;
+    }
+    const MatS3 yt = y_ + t * delta;
+    const EnergyTerms et = energy_->terms(kernels_->distortion_sum(t), yt, weights_);
+    if (!(et.total <= d.e0.total + params_.armijo * t * slope)) {
+      if (params_.trace_line_search)
+        std::fprintf(stderr, "  trial t=%.4g E=%.6g > E0=%.6g (Armijo)\n", t, et.total, d.e0.total);
+      ++rec.armijo_rejections;
+      continue;
+    }
+    Certificate c = certify_trial(yt, t, delta, et, rec);
+    if (!c.certified) ++rec.certificate_rejections;
+    // Global injectivity: only of trials the local certificate accepted (the degree argument needs it).
+    const bool accepted =
+        c.certified && (params_.injectivity != InjectivityMode::kGlobal || globally_injective_trial(yt, rec));
+    if (!accepted) {
+      if (may_retry) {
+        end = LineSearchEnd::kRetry;
+        break;
+      }
+      continue;
+    }
+    accept_trial(yt, t, delta, et, std::move(c), rec);
+    end = LineSearchEnd::kAccepted;
+    break;
+  }
+  rec.ms_line_search += ms_since(t0);
+  if (!rec.accepted) rec.terms = d.e0;
+  return end;
+}
+
+Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const MatS3& delta,
+                                             const EnergyTerms& et, IterationRecord& rec) {
+  const auto tc = Clock::now();
+  CertifyParams cp = certify_params(true, false);
+  cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
+  cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
+  cp.distortion_probes = distortion_probes_;
+  if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
+    cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
+    cp.previous_lower = &perturb_lower_;
+    cp.previous_upper = &perturb_upper_;
+    cp.perturbation_floor = params_.epsilon;                  // condition (36) then decides as without them
+    if (const MatJT* dJ = kernels_->direction_jacobians()) {  // the center term from G d (Step 4e)
+      cp.direction = &delta;
+      cp.direction_jacobians = dJ;
+      cp.direction_step = t;
+      cp.direction_scale = direction_scale_;
+    }
+  }
+  Certificate c = certifier_->certify_reduced(yt, cp);
+  if (!c.certified) {
+    line_search_failed_ = c.failed_voxels;
+    // The last rejection by the distortion bound, named in the model's frame (the stop message says it).
+    distortion_rejection_ = c.distortion_failed ? frame_.from_normalized(Certificate(c)).reason : "";
+    if (c.distortion_failed) {  // the next trials look there first
+      distortion_probes_.clear();
+      for (const CertLeaf& l : c.failing) distortion_probes_.push_back(l.center);
+    }
+  }
+  rec.ms_certificate += ms_since(tc);
+  if (params_.trace_line_search)
+    std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms\n", t,
+                 et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
+                 ms_since(tc));
+  return c;
+}
+
+bool DeformationSolver::globally_injective_trial(const MatS3& yt, IterationRecord& rec) {
+  const auto tg = Clock::now();
+  const GlobalInjectivity g = check_global(yt);
+  rec.ms_global += ms_since(tg);
+  if (params_.trace_line_search)
+    std::fprintf(stderr, "  global: %s %.1f ms\n", to_json_literal(g.verdict), ms_since(tg));
+  if (g.verdict != GlobalInjectivity::Verdict::kInjective) {
+    const Vec3& x = g.overlap_point;
+    global_rejection_ = g.verdict == GlobalInjectivity::Verdict::kOverlap
+                            ? "the shape would pass through itself near (" + format_g(x.x()) + ", " +
+                                  format_g(x.y()) + ", " + format_g(x.z()) + ")"
+                            : "global injectivity not proven (" + g.reason + ")";
+    ++rec.global_rejections;
+    return false;
+  }
+  global_y_ = yt;
+  global_verdict_ = g;
+  return true;
+}
+
+void DeformationSolver::accept_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et,
+                                     Certificate&& c, IterationRecord& rec) {
+  rec.accepted = true;
+  rec.step = t;
+  rec.step_norm = t * delta.norm();
+  rec.terms = et;
+  y_ = yt;
+  kernels_->accept(t);
+  perturb_y_ = yt;
+  perturb_lower_ = c.base_lower;
+  perturb_upper_ = c.base_upper;
+  cert_ = frame_.from_normalized(std::move(c));
+}
+
+void DeformationSolver::weaken_handles(IterationRecord& rec) {
+  weights_.p2p = std::max(params_.min_p2p_factor * params_.lambda_p2p, weights_.p2p * params_.kappa1);
+  weights_.smooth =
+      std::min(params_.max_smooth_factor * params_.lambda_smooth, weights_.smooth * params_.kappa2);
+  rec.weight_action += "retry,";
+}
+
+void DeformationSolver::finish_record(IterationRecord& rec, bool interrupted,
+                                      const EnergyWeights& weights_at_start) {
   rec.certified = cert_.certified;
   rec.min_sigma3 = cert_.min_sigma3_center;
   rec.min_lower_bound = cert_.min_lower_bound;
@@ -773,9 +807,6 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     weights_ = weights_at_start;
     rec.weight_action = "interrupted";
   }
-  rec.ms_total = ms_since(t_iter);
-  history_.push_back(rec);
-  return rec;
 }
 
 VecXd DeformationSolver::conjugate_gradient_correction(const VecXd& gvec, const VecXd& p0, const MatXd& L,

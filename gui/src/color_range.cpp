@@ -7,39 +7,28 @@
 #include <nlohmann/json.hpp>
 
 #include "lidef/errors.h"
+#include "lidef/internal/enum_names.h"
+
+namespace lidef {
+template <>
+struct EnumNames<studio::Field> {
+  static constexpr const char* names[] = {"e_iso",  "det_j",      "sigma3",          "lipschitz",
+                                          "margin", "distortion", "distortion_upper"};
+};
+template <>
+struct EnumNames<studio::ColorRange::Mode> {
+  static constexpr const char* names[] = {"auto", "percentile", "manual"};
+};
+}  // namespace lidef
 
 namespace lidef::studio {
 
 const char* to_string(Field f) {
-  switch (f) {
-    case Field::kEiso:
-      return "e_iso";
-    case Field::kDetJ:
-      return "det_j";
-    case Field::kSigma3:
-      return "sigma3";
-    case Field::kL:
-      return "lipschitz";
-    case Field::kMargin:
-      return "margin";
-    case Field::kDistortion:
-      return "distortion";
-    case Field::kDistortionBound:
-      return "distortion_upper";
-  }
-  return "?";
+  return enum_name(f);
 }
 
 const char* to_string(ColorRange::Mode m) {
-  switch (m) {
-    case ColorRange::Mode::kAuto:
-      return "auto";
-    case ColorRange::Mode::kPercentile:
-      return "percentile";
-    case ColorRange::Mode::kManual:
-      return "manual";
-  }
-  return "?";
+  return enum_name(m);
 }
 
 nlohmann::json range_to_json(const ColorRange& r) {
@@ -51,14 +40,9 @@ void range_from_json(const nlohmann::json& j, ColorRange& r, const std::string& 
   try {
     if (j.contains("mode")) {
       const std::string m = j.at("mode").get<std::string>();
-      if (m == "auto")
-        r.mode = ColorRange::Mode::kAuto;
-      else if (m == "percentile")
-        r.mode = ColorRange::Mode::kPercentile;
-      else if (m == "manual")
-        r.mode = ColorRange::Mode::kManual;
-      else
-        throw InputError(where, "colour range mode \"" + m + "\" (auto, percentile, manual)");
+      const auto mode = enum_from_name<ColorRange::Mode>(m);
+      if (!mode) throw InputError(where, "colour range mode \"" + m + "\" (auto, percentile, manual)");
+      r.mode = *mode;
     }
     if (j.contains("percentile")) r.percentile = std::clamp(j.at("percentile").get<double>(), 50.0, 100.0);
     if (j.contains("min")) r.min = j.at("min").get<double>();

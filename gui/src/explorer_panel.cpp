@@ -44,6 +44,7 @@
 #include "lidef/explorer/ball_fields.h"
 #include "lidef/explorer/explorer_example.h"
 #include "lidef/explorer/sigma_minima.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "lidef/signed_svd.h"
 #include "studio_common.h"
@@ -59,10 +60,6 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kBoundarySubdivisions = 4;  // 2,562 points on the sphere, as `lidef explore search`
 constexpr int kRangeGrid = 32;            // grid (per axis) that sets the colour range over the ball
 constexpr int kMaxLabels = 5;             // labelled minima (the lowest)
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // f(i) for i in [0, n) on all cores (the map's jacobian is thread-safe; the library evaluates it from OpenMP
 // loops too).
@@ -99,7 +96,7 @@ struct Analysis {
 };
 
 Analysis analyse(const ExplorerExample& ex) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   Analysis a;
   a.minima = find_sigma3_minima(*ex.map, ex.ball);
   std::tie(a.boundary_min, a.boundary_where) =
@@ -131,7 +128,7 @@ struct Slices {
 };
 
 Slices compute_slices(const ExplorerMap& map, const Ball& ball, double t, int resolution) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   Slices s;
   s.rings = std::max(2, resolution / 2);
   s.segments = std::max(16, 4 * static_cast<int>(std::ceil(M_PI * resolution / 4)));
@@ -553,7 +550,7 @@ bool ExplorerPanel::busy() const {
 }
 
 bool ExplorerPanel::wait_until_idle(double seconds) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   while (busy()) {
     if (seconds_since(t0) > seconds) return false;
     QApplication::processEvents(QEventLoop::AllEvents, 20);

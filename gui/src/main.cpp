@@ -13,6 +13,7 @@
 
 #include "compare_view.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "omp_wait.h"
 #include "scene.h"
 #include "studio_common.h"
@@ -151,10 +152,10 @@ int main(int argc, char** argv) {
   if (!headless) return qapp.exec();
 
   // Headless: wait until the engine rests with the view's extras for the final map, then grab.
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = lidef::Clock::now();
   QTimer poll;
   QObject::connect(&poll, &QTimer::timeout, [&] {
-    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double waited = lidef::seconds_since(t0);
     if (waited > timeout) {
       std::cerr << "lidef-studio: timed out after " << timeout << " s waiting for the solver\n";
       exit_code = 1;

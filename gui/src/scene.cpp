@@ -37,28 +37,25 @@
 #include <utility>
 
 #include "lidef/errors.h"
+#include "lidef/internal/enum_names.h"
 #include "lidef/number_format.h"
 #include "studio_common.h"
+
+namespace lidef {
+template <>
+struct EnumNames<studio::View> {
+  static constexpr const char* names[] = {"mesh", "sigma3", "lipschitz", "octree"};
+};
+}  // namespace lidef
 
 namespace lidef::studio {
 
 const char* to_string(View v) {
-  switch (v) {
-    case View::kMesh:
-      return "mesh";
-    case View::kSigma3:
-      return "sigma3";
-    case View::kLipschitz:
-      return "lipschitz";
-    case View::kOctree:
-      return "octree";
-  }
-  return "?";
+  return enum_name(v);
 }
 
 View view_from_string(const std::string& name) {
-  for (View v : {View::kMesh, View::kSigma3, View::kLipschitz, View::kOctree})
-    if (name == to_string(v)) return v;
+  if (const auto v = enum_from_name<View>(name)) return *v;
   throw InputError("--view", "unknown view \"" + name + "\" (mesh, sigma3, lipschitz, octree)");
 }
 

@@ -80,6 +80,7 @@
 #include "lidef/cage/auto_cage.h"
 #include "lidef/coefficients.h"
 #include "lidef/errors.h"
+#include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
@@ -1553,7 +1554,7 @@ void StudioWindow::render_pending() {
   if (new_model) adopt_shown_model(*f);
   refresh_picked(*f);
   scene_->set_handle_tolerance(params_->params().handle_tolerance);
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   scene_->set_certified_domain(session_->scenario().params.domain);
   scene_->show(*f, settings_);
   if (camera_to_reset_ && f->mesh_V.rows() > 0) {
@@ -1566,7 +1567,7 @@ void StudioWindow::render_pending() {
   if (new_model) sync_widgets();
   shown_ = f;
   window_->Render();
-  last_render_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  last_render_ms_ = ms_since(t0);
   ++rendered_;
   show_range_used();
   update_status(*f);

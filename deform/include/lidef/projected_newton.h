@@ -257,6 +257,24 @@ class DeformationSolver {
   CertifyParams certify_params(bool stop_on_failure, bool keep_leaves) const;
 
  private:
+  // --- The stages of step()
+  struct NewtonDirection {
+    EnergyTerms e0;  // the energy at y_
+    VecXd gvec;      // ∇E at y_ (3s)
+    VecXd dvec;      // the direction (3s); the kernels' direction is set to it
+  };
+  enum class LineSearchEnd { kAccepted, kRetry, kExhausted, kInterrupted };
+  void require_globally_injective_start();  // injectivity "global": throws InputError unless proven
+  NewtonDirection newton_direction(bool reuse_factor, IterationRecord& rec);
+  LineSearchEnd certified_line_search(const NewtonDirection& d, bool may_retry, IterationRecord& rec,
+                                      const std::atomic<bool>* stop);
+  Certificate certify_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et,
+                            IterationRecord& rec);
+  bool globally_injective_trial(const MatS3& yt, IterationRecord& rec);
+  void accept_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et, Certificate&& c,
+                    IterationRecord& rec);
+  void weaken_handles(IterationRecord& rec);  // dynamic weighting's retry: weaker handles, more smoothness
+  void finish_record(IterationRecord& rec, bool interrupted, const EnergyWeights& weights_at_start);
   void update_weights(IterationRecord& rec);
   void check_targets(const MatX3d& targets, const std::string& where) const;
   const Cage& cage_;  // as given
