@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The GPU measurements in one go, for a lent GPU host whose minutes should go to measuring, not to setting up:
 # builds what the OpenCL measurements need (no studio, no Python), checks the device (it must list an OpenCL
-# device with fp64, and the OpenCL parity tests must pass on it), then runs bench_opencl (CPU vs OpenCL, whole
-# solves and each stage alone) and `lidef deform` on each scenario with both backends, and prints one markdown
+# device with fp64, and the OpenCL parity tests must pass on it), then runs `lidef deform` on each scenario with both
+# backends and bench_opencl (CPU vs OpenCL, whole solves and each stage alone), and prints one markdown
 # table: iterations, solve time and mean ms per Newton iteration per backend, and whether both wrote the same
 # verdicts. docs/benchmarks.md, "OpenCL backend", records what it printed, with the device.
 #
@@ -11,7 +11,7 @@
 #   OUT_DIR    where results go (default /tmp/lidef-gpu); the table is also written to OUT_DIR/gpu.md
 # Environment: BUILD (build folder, default build-gpu; an existing build is reused), DEVICE (a substring of the
 # OpenCL device's name, as --opencl-device), SCENARIOS (space-separated names, default the five easy shared
-# scenarios and bar_twist180), QUICK=1 (one scenario and one repetition: a check of this script).
+# scenarios and bar_twist180), REPS (timed repetitions of each stage alone, default 5), QUICK=1 (one scenario and one repetition: a check of this script).
 # The studio's drag rate needs Qt, VTK and an X server and is not measured here (bench_studio).
 set -euo pipefail
 if [ $# -lt 1 ]; then
@@ -23,7 +23,7 @@ OUT=${2:-/tmp/lidef-gpu}
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD=${BUILD:-$ROOT/build-gpu}
 SCENARIOS=${SCENARIOS:-bar_bend bar_twist90 spot_head_turn horse_leg_lift animal_tail_lift bar_twist180}
-REPS=5
+REPS=${REPS:-5}
 if [ "${QUICK:-0}" = 1 ]; then
   SCENARIOS=${SCENARIOS%% *}
   REPS=1
@@ -32,16 +32,21 @@ THREADS=$(nproc)
 mkdir -p "$OUT"
 log() { echo "[gpu.sh $(date -u +%H:%M:%S)] $*" >&2; }
 
-# --- Build (only what is measured)
-if [ ! -x "$BUILD/app/lidef" ] || [ ! -x "$BUILD/bench/bench_opencl" ]; then
+# --- Build (only what is measured). A folder with the three programs and no CMakeCache.txt is a bundle built
+# elsewhere (bench/gpu-bundle.sh) and is used as it is: a lent host may lack the build's dependencies.
+if [ -x "$BUILD/app/lidef" ] && [ ! -f "$BUILD/CMakeCache.txt" ]; then
+  log "using the prebuilt programs in $BUILD"
+elif [ ! -x "$BUILD/app/lidef" ] || [ ! -x "$BUILD/bench/bench_opencl" ]; then
   log "configuring $BUILD"
   generator=()
   command -v ninja > /dev/null && generator=(-G Ninja)
   cmake -S "$ROOT" -B "$BUILD" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release -DLIDEF_BUILD_STUDIO=OFF \
     -DLIDEF_BUILD_PYTHON=OFF -DLIDEF_BUILD_TESTS=ON -DLIDEF_BUILD_BENCH=ON > "$OUT/configure.log"
 fi
-log "building"
-cmake --build "$BUILD" -j "$THREADS" --target lidef bench_opencl lidef_opencl_tests > "$OUT/build.log"
+if [ -f "$BUILD/CMakeCache.txt" ]; then
+  log "building"
+  cmake --build "$BUILD" -j "$THREADS" --target lidef bench_opencl lidef_opencl_tests > "$OUT/build.log"
+fi
 
 # --- The device: listed with fp64, and the backend's parity tests pass on it
 "$BUILD/app/lidef" devices | tee "$OUT/devices.txt"
@@ -54,12 +59,6 @@ if ! LIDEF_OPENCL_DEVICE=${DEVICE:-} LIDEF_SHARED_DATA=$DATA "$BUILD/tests/lidef
   echo "gpu.sh: the OpenCL tests fail on this device; no measurement is made" >&2
   exit 1
 fi
-
-# --- Whole solves and each stage alone, CPU against OpenCL (bench_opencl's own tables)
-log "bench_opencl"
-only=$(echo $SCENARIOS | tr ' ' ',')
-LIDEF_OPENCL_DEVICE=${DEVICE:-} "$BUILD/bench/bench_opencl" "$DATA" --only "$only" --reps "$REPS" \
-  --threads "$THREADS" --cache-dir "$OUT/cache" > "$OUT/bench_opencl.md"
 
 # --- lidef deform per scenario and backend: the user's command, its summary and iterations
 mean_ms() {  # mean ms_total over iterations 2..N of iterations.csv (the first carries one-time uploads)
@@ -93,8 +92,14 @@ for s in $SCENARIOS; do
     log "$s: the certificates differ (rounding of the two backends; compare the verdicts in the table)"
   fi
 done
+# --- After the user's command (a time limit cuts this part first): whole solves and each stage alone, CPU against OpenCL (bench_opencl's own tables)
+log "bench_opencl"
+only=$(echo $SCENARIOS | tr ' ' ',')
+LIDEF_OPENCL_DEVICE=${DEVICE:-} "$BUILD/bench/bench_opencl" "$DATA" --only "$only" --reps "$REPS" \
+  --threads "$THREADS" --cache-dir "$OUT/cache" > "$OUT/bench_opencl.md"
+
 echo
-echo "# lidef on $(sed -n 's/^--backend auto -> //p' "$OUT/devices.txt" | head -1) ($(date -u +%Y-%m-%dT%H:%M:%SZ), $THREADS CPU threads)"
+echo "# lidef on $(sed -n 's/^--backend auto -> \([^;]*\).*/\1/p' "$OUT/devices.txt" | head -1) ($(date -u +%Y-%m-%dT%H:%M:%SZ), $THREADS CPU threads)"
 echo
 cat "$table"
 echo

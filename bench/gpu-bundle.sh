@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# A lent GPU host may have a driver but none of lidef's build dependencies (CGAL, Eigen, VTK, OpenBLAS, ocl-icd), and
+# cannot fetch them. This packs the three programs bench/gpu.sh measures with the shared libraries they load (all
+# but glibc's) and the shared data into one archive built here, and runs gpu.sh from it there.
+#
+# Usage:
+#   bench/gpu-bundle.sh pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz   # here: BUILD_DIR is a Release build with benchmarks
+#   bench/gpu-bundle.sh run ARCHIVE.tar.xz RESULT_DIR            # there: unpacks to /tmp/lidef-bundle, runs gpu.sh
+# `run` passes REPS, SCENARIOS, DEVICE, QUICK on to gpu.sh. Without an OpenCL ICD registered on the host it registers
+# the NVIDIA driver's libnvidia-opencl.so.1 where it finds one (OCL_ICD_VENDORS). The programs are built for the
+# packing machine's CPU (LIDEF_NATIVE): pack on a machine whose instruction set the host has.
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+programs=(app/lidef bench/bench_opencl tests/lidef_opencl_tests)
+
+pack() {
+  local build=$1 data=$2 archive=$3
+  stage=$(mktemp -d)  # global: the EXIT trap runs after this function returns
+  trap 'rm -rf "$stage"' EXIT
+  mkdir -p "$stage/lib" "$stage/data"
+  for p in "${programs[@]}"; do
+    mkdir -p "$stage/$(dirname "$p")"
+    cp "$build/$p" "$stage/$p"
+  done
+  # Every shared library the programs load except the C library's own (the host's is newer and must be used).
+  for p in "${programs[@]}"; do ldd "$build/$p"; done | awk '$3 ~ /^\// { print $3 }' | sort -u |
+    grep -v -E '/(libc|libm|libdl|libpthread|librt|ld-linux[^/]*)\.so' |
+    while read -r lib; do cp -L "$lib" "$stage/lib/"; done
+  chmod -R u+w "$stage"
+  strip --strip-unneeded "$stage"/app/* "$stage"/bench/* "$stage"/tests/* "$stage"/lib/*
+  cp -r "$data/models" "$data/scenarios" "$stage/data/"
+  tar -cJf "$archive" -C "$stage" .
+  echo "$archive: $(du -h "$archive" | cut -f1)"
+}
+
+run() {
+  local archive=$1 result=$2 dir=/tmp/lidef-bundle
+  rm -rf "$dir" && mkdir -p "$dir" "$result"
+  # Python's tarfile: the host may lack xz.
+  python3 -c "import sys, tarfile; tarfile.open(sys.argv[1]).extractall(sys.argv[2])" "$archive" "$dir"
+  # A newer host C++ runtime serves the bundle's programs too; an older one would not.
+  for l in libstdc++.so.6 libgcc_s.so.1; do
+    for d in /usr/lib/x86_64-linux-gnu /lib/x86_64-linux-gnu /usr/lib64; do
+      [ -e "$d/$l" ] && rm -f "$dir/lib/$l" && break
+    done
+  done
+  export LD_LIBRARY_PATH=$dir/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+  if [ -z "${OCL_ICD_VENDORS:-}" ] && [ -z "$(ls /etc/OpenCL/vendors 2> /dev/null)" ]; then
+    local icd
+    icd=$(find / -xdev \( -name 'libnvidia-opencl.so.1' -o -name 'libnvidia-opencl.so.*' \) 2> /dev/null | head -1 || true)
+    [ -z "$icd" ] && icd=$(find /usr/local/nvidia /usr/lib* -name 'libnvidia-opencl.so*' 2> /dev/null | head -1 || true)
+    if [ -n "$icd" ]; then
+      mkdir -p "$dir/icd" && echo "$icd" > "$dir/icd/nvidia.icd"
+      export OCL_ICD_VENDORS=$dir/icd
+      echo "gpu-bundle.sh: OpenCL ICD $icd" >&2
+    fi
+  fi
+  BUILD=$dir "$ROOT/bench/gpu.sh" "$dir/data" "$result"
+}
+
+case "${1:-}" in
+  pack) [ $# -eq 4 ] || { echo "usage: $0 pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz" >&2; exit 2; }; pack "$2" "$3" "$4" ;;
+  run) [ $# -eq 3 ] || { echo "usage: $0 run ARCHIVE.tar.xz RESULT_DIR" >&2; exit 2; }; run "$2" "$3" ;;
+  *) echo "usage: $0 pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz | run ARCHIVE.tar.xz RESULT_DIR" >&2; exit 2 ;;
+esac
