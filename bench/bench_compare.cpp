@@ -53,15 +53,12 @@ int main(int argc, char** argv) {
       "bench_compare: every method of `lidef compare` (the paper's Table 1) on every shared scenario, "
       "in one process; per scenario the Table-1-style table, then solve times and ratios to lidef"};
   app.option_defaults()->always_capture_default();
-  app.add_option("DATA_DIR", data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  lidef::bench::add_data_options(app, data, threads, cache);
   app.add_option("--only", only_list, "comma-separated scenario or model names");
   app.add_option("--methods", methods, "comma-separated methods");
-  app.add_option("--threads", threads, "OpenMP and OpenBLAS threads for every method (0: the default)")
-      ->check(CLI::NonNegativeNumber);
   app.add_option("--fine-volume-factor", opt.fine_volume_factor,
                  "pwl-tet-fine: TetGen's max tet volume over lidef's voxel volume");
   app.add_option("--tet-max-iterations", opt.tet_max_iterations, "iteration limit of the tet methods");
-  app.add_option("--cache-dir", cache, "lidef's subspace cache folder");
   if (const int rc = lidef::bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
   const std::vector<std::string> only = lidef::bench::split_list(only_list);
   opt.methods = lidef::bench::split_list(methods);

@@ -266,7 +266,7 @@ int main(int argc, char** argv) {
       "dynamic weighting on vs off, the reduced Hessian against a plain SYRK, per-iteration targets); "
       "a markdown report on stdout"};
   app.option_defaults()->always_capture_default();
-  app.add_option("DATA_DIR", opt.data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  bench::add_data_options(app, opt.data, opt.threads, opt.cache_dir);
   app.add_option("--scenarios", opt.scenarios, "folder of scenario JSONs (default: DATA_DIR/scenarios)");
   app.add_option("--only", only, "comma-separated scenario names (file stems) or model names");
   app.add_option("--iterations,--max-iterations", opt.iterations,
@@ -274,11 +274,9 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--cap", opt.cap, "max_iterations of the capped scenarios (bar_twist180)")
       ->check(CLI::PositiveNumber);
-  app.add_option("--threads", opt.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
   app.add_option("--reps", opt.reps,
                  "timed repetitions of the Hessian / SYRK comparison (at least 5 are run)")
       ->check(CLI::PositiveNumber);
-  app.add_option("--cache-dir", opt.cache_dir, "subspace cache folder");
   app.add_option("--hessian-models", hessian_models,
                  "comma-separated models whose first scenario gets the Hessian vs SYRK comparison");
   app.add_option("--newton-cg-steps", opt.cg_steps,

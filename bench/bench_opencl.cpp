@@ -110,15 +110,13 @@ int main(int argc, char** argv) {
       "bench_opencl: the OpenCL backend against the CPU backend in one process: whole solves with "
       "their parity, and each stage alone; a markdown report on stdout"};
   app.option_defaults()->always_capture_default();
-  app.add_option("DATA_DIR", data_dir, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  bench::add_data_options(app, data_dir, threads, cache_dir);
   app.add_option("--only", only, "comma-separated scenario names (file stems)");
   app.add_option("--iterations", iterations, "max_iterations for every scenario (0: the scenario's own)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--cap", cap, "max_iterations of bar_twist180 on both backends")->check(CLI::PositiveNumber);
   app.add_option("--reps", reps, "timed repetitions of each stage alone (median reported)")
       ->check(CLI::PositiveNumber);
-  app.add_option("--threads", threads, "OpenMP threads (0: the default)")->check(CLI::NonNegativeNumber);
-  app.add_option("--cache-dir", cache_dir, "subspace and kernel cache folder");
   if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
   if (threads > 0) omp_set_num_threads(threads);
   std::vector<Scenario> scenarios;

@@ -8,9 +8,9 @@
 // injectivity verdict), with the global check off and on;
 // `--global on|off` sets the check for the drag rows (the check runs only when the engine rests).
 //
-// Usage: bench_studio DATA_DIR [--seconds S]
+// Usage: bench_studio [DATA_DIR] [--seconds S]
 // [--configs all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] [--steps N]
-// [--scenario NAME]. Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
+// [--scenario NAME] (--help). Needs an X display; without DISPLAY it re-runs itself under xvfb-run.
 #include <QVTKOpenGLNativeWidget.h>
 #include <omp.h>
 #include <unistd.h>
@@ -24,6 +24,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -165,6 +166,25 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
   return r;
 }
 
+// The studio's window at 1280x800 with `scenario` open under parameters `p` and view settings `vs`, resting;
+// null (after a message) when the scenario does not open or settle within 600 s.
+std::unique_ptr<StudioWindow> open_window(const std::string& scenario, const DeformParams& p,
+                                          const ViewSettings& vs) {
+  auto win = std::make_unique<StudioWindow>();
+  win->set_error_sink([](const std::string& e) { std::fprintf(stderr, "bench_studio: %s\n", e.c_str()); });
+  win->resize(1280, 800);
+  win->show();
+  pump(0.3);
+  if (!win->open_path(scenario)) return nullptr;
+  win->set_params(p);
+  win->set_settings(vs);
+  if (!settle(win->session(), win.get(), 600)) {
+    std::fprintf(stderr, "bench_studio: %s did not settle\n", scenario.c_str());
+    return nullptr;
+  }
+  return win;
+}
+
 // Drag steps with pauses: each moves the pushed targets 1/steps of the circle on and waits until the window
 // shows the resting map (with the check on: and its global verdict). Times per step (wall, from the target
 // change to the shown rest) and per check.
@@ -228,18 +248,11 @@ int global_steps(const std::string& scenario, int steps, bool preset_only) {
       DeformParams p;
       p.reduced_dof = dims.first;
       p.samples = dims.second;
-      StudioWindow win;
-      win.set_error_sink([](const std::string& e) { std::fprintf(stderr, "bench_studio: %s\n", e.c_str()); });
-      win.resize(1280, 800);
-      win.show();
-      pump(0.3);
-      if (!win.open_path(scenario)) return 1;
-      win.set_params(p);
       ViewSettings vs;
       vs.global_injectivity = global;
-      win.set_settings(vs);
-      if (!settle(win.session(), &win, 600)) return 1;
-      const StepResult r = drag_steps(win, steps);
+      const auto win = open_window(scenario, p, vs);
+      if (!win) return 1;
+      const StepResult r = drag_steps(*win, steps);
       if (!r.ok) std::fprintf(stderr, "bench_studio: a step did not settle\n");
       if (global)
         std::printf("| %s | on | %.0f | %.0f / %.0f | %ld / %ld / %ld |\n", name, r.ms_step, r.ms_check,
@@ -254,13 +267,27 @@ int global_steps(const std::string& scenario, int steps, bool preset_only) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::fprintf(stderr,
-                 "usage: bench_studio DATA_DIR [--seconds S] [--configs "
-                 "all|quick|default|lipschitz|subset|refinement|global|global-quick] [--global on|off] "
-                 "[--steps N] [--scenario NAME]\n");
-    return 2;
-  }
+  std::string data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR), which = "all", on_off;
+  double seconds = 10;
+  int steps = 8;
+  std::string global_scenario = "bar_bend";  // --configs global: a shared scenario's name
+  CLI::App cli{
+      "bench_studio: lidef-studio while dragging bar_bend's pushed end (view updates per second, the time of "
+      "each part, the engine alone), or with --configs global drag steps with pauses and the global "
+      "injectivity check off and on; a markdown report on stdout. Needs an X display (else re-runs itself "
+      "under xvfb-run)"};
+  cli.option_defaults()->always_capture_default();
+  cli.add_option("DATA_DIR", data, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  cli.add_option("--seconds", seconds, "seconds of dragging per row")->check(CLI::PositiveNumber);
+  cli.add_option("--configs", which, "rows to run")
+      ->check(CLI::IsMember(
+          {"all", "quick", "default", "lipschitz", "subset", "refinement", "global", "global-quick"}));
+  cli.add_option("--global", on_off, "the global injectivity check in the drag rows (default: the studio's)")
+      ->check(CLI::IsMember({"on", "off"}));
+  cli.add_option("--steps", steps, "--configs global: drag steps")->check(CLI::PositiveNumber);
+  cli.add_option("--scenario", global_scenario, "--configs global: a shared scenario's name");
+  if (const int rc = bench::parse_command_line(cli, argc, argv); rc >= 0) return rc;
+  const bool global = on_off.empty() ? ViewSettings{}.global_injectivity : on_off == "on";
   if (!std::getenv("DISPLAY")) {
     std::vector<char*> args = {const_cast<char*>("xvfb-run"), const_cast<char*>("-a"),
                                const_cast<char*>("-s"), const_cast<char*>("-screen 0 1280x800x24")};
@@ -272,19 +299,6 @@ int main(int argc, char** argv) {
   }
   ensure_studio_environment(
       argv);  // as lidef-studio does (omp_wait.h); OMP_WAIT_POLICY=ACTIVE measures the default
-  const std::string data = argv[1];
-  double seconds = 10;
-  std::string which = "all";
-  bool global = ViewSettings{}.global_injectivity;
-  int steps = 8;
-  std::string global_scenario = "bar_bend";  // --configs global: a shared scenario's name
-  for (int i = 2; i + 1 < argc; ++i) {
-    if (!std::strcmp(argv[i], "--seconds")) seconds = std::atof(argv[i + 1]);
-    if (!std::strcmp(argv[i], "--configs")) which = argv[i + 1];
-    if (!std::strcmp(argv[i], "--global")) global = !std::strcmp(argv[i + 1], "on");
-    if (!std::strcmp(argv[i], "--steps")) steps = std::max(1, std::atoi(argv[i + 1]));
-    if (!std::strcmp(argv[i], "--scenario")) global_scenario = argv[i + 1];
-  }
   setenv("QT_QPA_PLATFORM", "xcb", 1);
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication app(argc, argv);
@@ -309,11 +323,6 @@ int main(int argc, char** argv) {
     configs = {configs[0],
                {"default, refinement batched", 300, 30000, View::kMesh, -1, -1, -1,
                 static_cast<int>(RefinementEval::kPerEdgeBatched)}};
-  else if (which != "all") {
-    std::fprintf(stderr,
-                 "bench_studio: --configs all, quick, default, lipschitz, subset, refinement or global\n");
-    return 2;
-  }
   std::printf("OMP_WAIT_POLICY=%s. Global injectivity check %s. ", std::getenv("OMP_WAIT_POLICY"),
               global ? "on" : "off");
   std::printf(
@@ -342,22 +351,12 @@ int main(int argc, char** argv) {
     if (c.refinement >= 0) p.refinement = static_cast<RefinementEval>(c.refinement);
     Result with_window, alone;
     {
-      StudioWindow win;
-      win.set_error_sink([](const std::string& e) { std::fprintf(stderr, "bench_studio: %s\n", e.c_str()); });
-      win.resize(1280, 800);
-      win.show();
-      pump(0.3);
-      if (!win.open_path(scenario)) return 1;
-      win.set_params(p);
       ViewSettings vs;
       vs.view = c.view;
       vs.global_injectivity = global;
-      win.set_settings(vs);
-      if (!settle(win.session(), &win, 600)) {
-        std::fprintf(stderr, "bench_studio: %s did not settle\n", c.name);
-        return 1;
-      }
-      with_window = drag(win.session(), &win, seconds);
+      const auto win = open_window(scenario, p, vs);
+      if (!win) return 1;
+      with_window = drag(win->session(), win.get(), seconds);
     }
     {
       InteractiveSession s({}, {});

@@ -35,6 +35,15 @@ inline int parse_command_line(CLI::App& app, int argc, char** argv) {
   return -1;
 }
 
+// The options of every benchmark over the shared data: the data folder (positional), --threads, --cache-dir.
+inline void add_data_options(CLI::App& app, std::string& data_dir, int& threads, std::string& cache_dir) {
+  app.add_option("DATA_DIR", data_dir, "shared data folder (default: $LIDEF_SHARED_DATA, else the build's)");
+  app.add_option("--threads", threads,
+                 "OpenMP threads; OpenBLAS runs one per calling thread (0: the default)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--cache-dir", cache_dir, "subspace (and OpenCL kernel) cache folder");
+}
+
 // The shared data folder when none is given: $LIDEF_SHARED_DATA when set, else `fallback` (the build's).
 inline std::string default_data_dir(const std::string& fallback) {
   const char* env = std::getenv("LIDEF_SHARED_DATA");

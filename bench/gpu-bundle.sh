@@ -29,6 +29,10 @@ pack() {
   chmod -R u+w "$stage"
   strip --strip-unneeded "$stage"/app/* "$stage"/bench/* "$stage"/tests/* "$stage"/lib/*
   cp -r "$data/models" "$data/scenarios" "$stage/data/"
+  # The tests know the source tree and the CLI by the absolute paths of this build; `run` recreates them as links.
+  local source
+  source=$(sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$build/CMakeCache.txt")
+  printf '%s\n%s\n' "${source:-$ROOT}" "$(cd "$build" && pwd)/app/lidef" > "$stage/paths.txt"
   tar -cJf "$archive" -C "$stage" .
   echo "$archive: $(du -h "$archive" | cut -f1)"
 }
@@ -45,14 +49,20 @@ run() {
     done
   done
   export LD_LIBRARY_PATH=$dir/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
-  if [ -z "${OCL_ICD_VENDORS:-}" ] && [ -z "$(ls /etc/OpenCL/vendors 2> /dev/null)" ]; then
+  { read -r source; read -r cli; } < "$dir/paths.txt"
+  [ -e "$source" ] || { mkdir -p "$(dirname "$source")" && ln -s "$ROOT" "$source"; }
+  [ -e "$cli" ] || { mkdir -p "$(dirname "$cli")" && ln -s "$dir/app/lidef" "$cli"; }
+  # The NVIDIA driver's OpenCL library is often present without its ICD file (a container image that registers
+  # only PoCL): register it beside whatever is registered.
+  if [ -z "${OCL_ICD_VENDORS:-}" ] && ! grep -qs nvidia /etc/OpenCL/vendors/*; then
     local icd
-    icd=$(find / -xdev \( -name 'libnvidia-opencl.so.1' -o -name 'libnvidia-opencl.so.*' \) 2> /dev/null | head -1 || true)
-    [ -z "$icd" ] && icd=$(find /usr/local/nvidia /usr/lib* -name 'libnvidia-opencl.so*' 2> /dev/null | head -1 || true)
+    icd=$(find /usr/lib /usr/lib64 /usr/local/nvidia /usr/lib/x86_64-linux-gnu -name 'libnvidia-opencl.so.1' 2> /dev/null |
+      head -1 || true)
     if [ -n "$icd" ]; then
       mkdir -p "$dir/icd" && echo "$icd" > "$dir/icd/nvidia.icd"
+      cp /etc/OpenCL/vendors/*.icd "$dir/icd/" 2> /dev/null || true
       export OCL_ICD_VENDORS=$dir/icd
-      echo "gpu-bundle.sh: OpenCL ICD $icd" >&2
+      echo "gpu-bundle.sh: registered the OpenCL ICD $icd" >&2
     fi
   fi
   BUILD=$dir "$ROOT/bench/gpu.sh" "$dir/data" "$result"

@@ -83,6 +83,7 @@ for s in $SCENARIOS; do
       continue
     fi
     solve=$(sed -n 's/^ *"solve": \([0-9.e+-]*\).*/\1/p' "$dir/summary.json" | head -1)
+    solve=$(awk -v s="$solve" 'BEGIN { printf "%.3f", s }')
     echo "| $s | $b | $(field "$dir/summary.json" iterations) | $solve | $(mean_ms "$dir/iterations.csv") |" \
       "$(field "$dir/summary.json" certified) | $(field "$dir/summary.json" stop_reason) |" >> "$table"
   done
