@@ -300,7 +300,7 @@ struct OctreeCertifier::Run {
   const bool combined;    // per leaf min(first-order loss, Taylor form with ‖H(c)‖_op)
   const bool spectral;    // combined, and the Taylor σ3 lower bound as a third candidate (Step 3c)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
-  const bool far_mode;    // far-field refinement (third-order bound, CPU)
+  const bool far_mode;    // far-field refinement (third-order bound; on the host with every backend)
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
   // Base voxels.
@@ -338,7 +338,7 @@ struct OctreeCertifier::Run {
         combined(params.bound == LipschitzBound::kCombined || params.bound == LipschitzBound::kSpectral),
         spectral(params.bound == LipschitzBound::kSpectral),
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
-        far_mode(params.refinement == RefinementEval::kFarField && third && !combined && !im.kernels),
+        far_mode(params.refinement == RefinementEval::kFarField && third && !combined),
         fm(o.basis_.face_matrices(y_)) {
     cert.bound = p.bound;
     cert.voxel_side = side;
@@ -601,7 +601,10 @@ struct OctreeCertifier::Run {
         scaleH(i) = im.scale_H(i) * cmax;
       }
       if (im.kernels && !combined) {
-        device_Y = std::move(Ycols);  // the backend's base stage also forms T (stage 3)
+        // The backend's base stage also forms T (stage 3). The far field of the few voxels it leaves to
+        // refine is built here from their stored rows: the device would evaluate every cage face per child.
+        if (far_mode) stored_cols = Ycols;
+        device_Y = std::move(Ycols);
       } else {
         stored_derivatives(Ycols);
         if (far_mode) stored_cols = std::move(Ycols);
@@ -623,6 +626,23 @@ struct OctreeCertifier::Run {
     return Ycols;
   }
   std::vector<double> stored_cols;  // far mode: the coefficient columns (stored_hessian)
+  // J at base center i from its 3 stored gradient rows (as stored_derivatives forms it), for the far fields
+  // when the backend's base stage kept J on the device.
+  Mat3 stored_jacobian(long i) const {
+    const long m = im.m;
+    const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
+    Mat3 J;
+    for (int b = 0; b < 3; ++b)
+      for (int a = 0; a < 3; ++a) {
+        const float* g = blk + b * m;
+        const double* ya = stored_cols.data() + a * m;
+        double acc = 0;
+#pragma omp simd reduction(+ : acc)
+        for (long k = 0; k < m; ++k) acc += static_cast<double>(g[k]) * ya[k];
+        J(a, b) = acc;
+      }
+    return J;
+  }
   // H at base center i from its 6 stored Hessian rows (xx, xy, xz, yy, yz, zz) times the coefficients.
   void stored_hessian(long i, std::array<Mat3, 3>& H) const {
     const long m = im.m;
@@ -928,6 +948,10 @@ struct OctreeCertifier::Run {
   void evaluate_batch(const std::vector<int>& batch, std::vector<NodeValues>& vals) const {
     const long nb = static_cast<long>(batch.size());
     vals.assign(nb, {});
+    if (far_mode) {  // before the backend's node kernel: the far field is cheaper than every face per child
+      evaluate_far_batch(batch, vals);
+      return;
+    }
     if (im.kernels && !combined && nb > 0) {
       MatX3d bc(nb, 3);
       VecXd brad(nb);
@@ -936,10 +960,6 @@ struct OctreeCertifier::Run {
         brad(q) = 0.5 * std::sqrt(3.0) * tree[batch[q]].side;
       }
       im.kernels->evaluate_nodes(fm.A, fm.AD, fm.A_abs, delta, third, bc, brad, vals);
-      return;
-    }
-    if (far_mode) {
-      evaluate_far_batch(batch, vals);
       return;
     }
     if (p.refinement != RefinementEval::kPerFace) {
@@ -1260,7 +1280,7 @@ struct OctreeCertifier::Run {
         v.eps_J = kFloatStorageRel * scaleJ(i);
         v.eps_H = kFloatStorageRel * scaleH(i);
         Jet jet;
-        jet.J = Jc[i];
+        jet.J = device_Y.empty() ? Jc[i] : stored_jacobian(i);
         stored_hessian(i, jet.H);
         base_far(far[first + k], i, oc.sampling_.radius_of(static_cast<int>(i)), v, jet, rows);
       }
