@@ -385,7 +385,12 @@ GlobalInjectivityChecker::Impl::Nesting GlobalInjectivityChecker::Impl::nesting(
       if (j == i) continue;
       bool found = false;
       for (size_t k = 0; k < faces.size() && !found; k += stride) {
-        const Vec3 p = W.row(F(faces[k], 0));
+        // A vertex of the mesh itself (a refinement's midpoints are rounded, a hair off S): f(v) ∈ f(S_i).
+        int v = -1;
+        for (int c = 0; c < 3 && v < 0; ++c)
+          if (F(faces[k], c) < mesh.V.rows()) v = F(faces[k], c);
+        if (v < 0) continue;
+        const Vec3 p = W.row(v);
         if (!clear_of_tubes(W, F, comps[j], rho, p, eps, slack)) continue;
         const std::optional<int> w = exact_winding_number(W, F, comps[j], p);
         if (!w) continue;
