@@ -6,11 +6,13 @@
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <numeric>
 
 #include "lidef/cage.h"
 #include "lidef/coefficients.h"
 #include "lidef/deform_params.h"
 #include "lidef/errors.h"
+#include "lidef/exact_winding.h"
 #include "lidef/geometry.h"
 #include "lidef/global_injectivity.h"
 #include "lidef/green_coordinates.h"
@@ -205,6 +207,150 @@ TEST(GlobalInjectivity, BarFoldedOntoItselfIsProvenToOverlapWhereverTheModelIsMo
                                  (fP.row(2).transpose() - c).norm()});
       EXPECT_LT((g.overlap_point - c).norm(), r + 1e-3 * s * diag) << "scale " << s << ", triangle " << f;
     }
+  }
+}
+
+// --- Surfaces of several components (docs/certificate.md, Step G5): the nesting of their images.
+
+// The union of two surfaces (b's vertex indices shifted), b's orientation reversed when `flip_b`.
+TriMesh join(const TriMesh& a, const TriMesh& b, bool flip_b = false) {
+  TriMesh t;
+  t.V.resize(a.V.rows() + b.V.rows(), 3);
+  t.V << a.V, b.V;
+  t.F.resize(a.F.rows() + b.F.rows(), 3);
+  MatX3i fb = b.F.array() + static_cast<int>(a.V.rows());
+  if (flip_b) fb.col(1).swap(fb.col(2));
+  t.F << a.F, fb;
+  return t;
+}
+
+TriMesh moved(TriMesh t, const Vec3& by) {
+  t.V.rowwise() += by.transpose();
+  return t;
+}
+
+// The exact winding number against the cases it must get right: nested boxes, a reversed surface, points
+// outside, and a point on the surface (not decided rather than a guess).
+TEST(ExactWindingNumber, CountsNestedAndReversedSurfacesAndRefusesPointsOnTheSurface) {
+  const TriMesh outer = box_surface(Vec3(-1, -1, -1), Vec3(1, 1, 1), Eigen::Vector3i(3, 3, 3));
+  const TriMesh inner = box_surface(Vec3(-0.5, -0.5, -0.5), Vec3(0.5, 0.5, 0.5), Eigen::Vector3i(2, 2, 2));
+  for (const bool flip : {false, true}) {
+    const TriMesh t = join(outer, inner, flip);
+    std::vector<int> all(t.F.rows()), in_only;
+    std::iota(all.begin(), all.end(), 0);
+    for (int f = static_cast<int>(outer.F.rows()); f < t.F.rows(); ++f) in_only.push_back(f);
+    const int s = flip ? -1 : 1;
+    EXPECT_EQ(exact_winding_number(t.V, t.F, all, Vec3(0, 0, 0)), 1 + s);  // mesh vertices lie on this axis
+    EXPECT_EQ(exact_winding_number(t.V, t.F, all, Vec3(0.75, 0.1, -0.3)), 1);
+    EXPECT_EQ(exact_winding_number(t.V, t.F, all, Vec3(3, 0.2, 0.1)), 0);
+    EXPECT_EQ(exact_winding_number(t.V, t.F, in_only, Vec3(0.1, 0.2, 0.3)), s);
+    EXPECT_EQ(exact_winding_number(t.V, t.F, in_only, Vec3(0.75, 0, 0)), 0);
+    EXPECT_FALSE(exact_winding_number(t.V, t.F, in_only, Vec3(0.5, 0.1, 0.2)).has_value());  // on a face
+  }
+}
+
+// A ball with a cavity (outer sphere outward, cavity sphere facing into the cavity) in the ball's cage.
+struct HollowBall {
+  Model ball = make_ball({1.0, 0.1, 3, 2});
+  TriMesh mesh;
+  explicit HollowBall(const Vec3& cavity_center, double cavity_radius = 0.35, bool flip = true) {
+    mesh = join(ball.mesh, moved(icosphere(cavity_radius, 2), cavity_center), flip);
+  }
+};
+
+// The identity, an affine shear, and a smooth map pushing the (off-center) cavity towards the outer surface
+// while it stays inside: all proven injective, and the winding numbers of the deformed surface at the images
+// of interior points (an independent count of preimages) never reach 2.
+TEST(GlobalInjectivity, BallWithACavityIsInjectiveUnderTheIdentityAShearAndAPushOfTheCavity) {
+  const HollowBall h(Vec3(0.2, 0, 0));
+  const Cage& cage = h.ball.cage;
+  const GlobalInjectivityChecker checker(cage, h.mesh);
+  const GlobalInjectivity id = checker.check(cage.identity_coefficients());
+  EXPECT_EQ(id.verdict, Verdict::kInjective) << id.reason;
+  Mat3 A;
+  A << 1.1, 0.15, 0, 0, 0.95, 0.1, 0.05, 0, 1.0;
+  const MatX3d shear = coefficients_of(
+      cage, [&](const Vec3& p) -> Vec3 { return A * p; }, [&](const Vec3&) { return A; });
+  // p + 0.3 (1 − |p|²) e_x: det J = 1 − 0.6 p_x > 0 inside the ball; the cavity moves by up to ~0.27.
+  auto push = [](const Vec3& p) -> Vec3 { return p + 0.3 * (1 - p.squaredNorm()) * Vec3::UnitX(); };
+  auto push_j = [](const Vec3& p) -> Mat3 {
+    Mat3 J = Mat3::Identity();
+    J.row(0) -= 0.6 * p.transpose();
+    return J;
+  };
+  const MatX3d pushed = coefficients_of(cage, push, push_j);
+  for (const MatX3d* y : {&shear, &pushed}) {
+    const GlobalInjectivity g = checker.check(*y);
+    EXPECT_EQ(g.verdict, Verdict::kInjective) << g.reason;
+    EXPECT_LT(max_image_winding(cage, h.mesh, *y, 0.08, 0.03), 1.5);
+  }
+}
+
+// The cavity's triangles facing out of the cavity: the winding number is 2 inside it, so the surface does
+// not bound one solid as oriented and nothing is decided (not even the identity).
+TEST(GlobalInjectivity, CavityOrientedLikeTheOuterSurfaceIsNotDecided) {
+  const HollowBall h(Vec3(0.2, 0, 0), 0.35, false);
+  const GlobalInjectivity g =
+      check_global_injectivity(h.ball.cage, h.mesh, h.ball.cage.identity_coefficients());
+  EXPECT_EQ(g.verdict, Verdict::kNotDecided);
+  EXPECT_NE(g.reason.find("not oriented as the boundary of one solid"), std::string::npos) << g.reason;
+}
+
+// Two separate boxes, a large one A and a small one B, each in a box cage of its own (one cage of two
+// components). A map that is the identity on A's cage and a translation on B's is exactly that map on each
+// solid (Green coordinates reproduce an affine map per component, and a component's boundary integrals
+// vanish outside it).
+struct TwoBoxes {
+  TriMesh a = box_surface(Vec3(-1, -0.5, -0.5), Vec3(0.1, 0.5, 0.5), Eigen::Vector3i(8, 6, 6));
+  TriMesh b = box_surface(Vec3(0.5, -0.2, -0.2), Vec3(0.9, 0.2, 0.2), Eigen::Vector3i(3, 3, 3));
+  TriMesh mesh = join(a, b);
+  Cage cage{join(box_surface(Vec3(-1.1, -0.6, -0.6), Vec3(0.2, 0.6, 0.6), Eigen::Vector3i(2, 2, 2)),
+                 box_surface(Vec3(0.4, -0.3, -0.3), Vec3(1.0, 0.3, 0.3), Eigen::Vector3i(2, 2, 2)))};
+  MatX3d move_b(const Vec3& t) const {
+    MatX3d y = cage.identity_coefficients();
+    const int split = static_cast<int>(cage.V.rows()) / 2;  // both cage boxes have the same vertex count
+    y.block(split, 0, cage.V.rows() - split, 3).rowwise() += t.transpose();
+    return y;
+  }
+};
+
+TEST(GlobalInjectivity, TwoBoxesAreInjectiveApartAndOverlapWhenOneIsMovedIntoOrInsideTheOther) {
+  const TwoBoxes tb;
+  ASSERT_EQ(tb.cage.V.rows() % 2, 0);
+  const GlobalInjectivityChecker checker(tb.cage, tb.mesh);
+  const int first_b = static_cast<int>(tb.a.F.rows());
+  // Apart: the identity, and B moved towards A but not into it.
+  for (const Vec3& t : {Vec3(0, 0, 0), Vec3(-0.3, 0.1, 0)}) {
+    const MatX3d y = tb.move_b(t);
+    const GlobalInjectivity g = checker.check(y);
+    EXPECT_EQ(g.verdict, Verdict::kInjective) << g.reason;
+    EXPECT_LT(max_image_winding(tb.cage, tb.mesh, y, 0.05, 0.02), 1.5);
+  }
+  // B half into A: the surfaces cross (the pair stage proves it, between a triangle of each box).
+  {
+    const MatX3d y = tb.move_b(Vec3(-0.6, 0, 0));
+    const GlobalInjectivity g = checker.check(y);
+    ASSERT_EQ(g.verdict, Verdict::kOverlap) << g.reason;
+    EXPECT_NE(g.reason.find("mesh triangles"), std::string::npos) << g.reason;
+    EXPECT_EQ(std::min(g.overlap_face_a, g.overlap_face_b) < first_b,
+              std::max(g.overlap_face_a, g.overlap_face_b) >= first_b);
+    EXPECT_GT(max_image_winding(tb.cage, tb.mesh, y, 0.05, 0.02), 1.5);
+  }
+  // B entirely inside A: no two triangles' images meet, yet every point of B's image has two preimages.
+  {
+    const MatX3d y = tb.move_b(Vec3(-1.2, 0.05, 0));
+    const GlobalInjectivity g = checker.check(y);
+    ASSERT_EQ(g.verdict, Verdict::kOverlap) << g.reason;
+    EXPECT_NE(g.reason.find("the image of surface component 1 (mesh triangle " + std::to_string(first_b) +
+                            ") lies inside the image of surface component 0 (mesh triangle 0)"),
+              std::string::npos)
+        << g.reason;
+    EXPECT_EQ(g.overlap_face_a, first_b);
+    EXPECT_EQ(g.overlap_face_b, 0);
+    // The reported point is on B's image, inside A.
+    EXPECT_GT(g.overlap_point.x(), -1.0);
+    EXPECT_LT(g.overlap_point.x(), -0.25);
+    EXPECT_GT(max_image_winding(tb.cage, tb.mesh, y, 0.05, 0.02), 1.5);
   }
 }
 

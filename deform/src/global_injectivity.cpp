@@ -3,7 +3,8 @@
 //   2. one piece per surface triangle (ball, L₁, tube radius ρ) and per mesh vertex its star ball;
 //   3. candidate pairs: triangles whose tube boxes overlap (a sorted cell list, deterministic);
 //   4. per pair: separate, cover by an injectivity ball, prove a crossing, or split (bounded);
-//   5. the verdict (the first overlap in pair order, else the first undecided pair, else injective).
+//   5. the verdict (the first overlap in pair order, else the first undecided pair, else — for a surface of
+//      several components — the nesting of their images, else injective).
 #include "lidef/global_injectivity.h"
 
 #include <omp.h>
@@ -17,6 +18,7 @@
 #include <numeric>
 
 #include "lidef/errors.h"
+#include "lidef/exact_winding.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/internal/stopwatch.h"
@@ -48,6 +50,8 @@ struct Piece {
   double R = 0, diam = 0, L1 = kInf, rho = kInf;
   int face = -1, depth = 0;
 };
+
+double separation_lower_bound(const std::array<Vec3, 3>& a, const std::array<Vec3, 3>& b, double slack);
 
 double tri_diameter(const std::array<Vec3, 3>& p) {
   return std::max({(p[0] - p[1]).norm(), (p[1] - p[2]).norm(), (p[2] - p[0]).norm()});
@@ -86,6 +90,8 @@ struct GlobalInjectivityChecker::Impl {
   WindingNumber cage_winding;
   std::vector<std::vector<int>> vertex_faces;  // per mesh vertex the faces around it
   std::string structure_problem;               // why the surface argument does not apply ("" = it does)
+  // The surface's connected components (numbered in the order of their first triangle) and their faces.
+  std::vector<std::vector<int>> component_faces;
   double cage_diameter = 0;
 
   static TriMesh normalized(const MatX3d& V, const MatX3i& F, const Vec3& center, double scale) {
@@ -115,6 +121,8 @@ struct GlobalInjectivityChecker::Impl {
         rest_problem = "the rest-state mesh intersects itself (" + std::to_string(rest_intersections.size()) +
                        " pairs of triangles, the first " + std::to_string(rest_intersections[0].first) +
                        " and " + std::to_string(rest_intersections[0].second) + ")";
+      else if (component_faces.size() > 1)
+        rest_nesting_problem = check_rest_nesting(m.V);
     }
   }
 
@@ -136,7 +144,7 @@ struct GlobalInjectivityChecker::Impl {
 
   // The degree argument needs ∂D to be one closed surface: every undirected edge used once in each
   // direction, and the faces connected.
-  std::string check_structure() const {
+  std::string check_structure() {
     const long nf = mesh.F.rows();
     if (nf == 0) return "the mesh has no triangles";
     std::vector<std::array<int, 3>> half;  // (min, max, +1/-1)
@@ -165,13 +173,62 @@ struct GlobalInjectivityChecker::Impl {
     };
     for (const auto& faces : vertex_faces)
       for (size_t k = 1; k < faces.size(); ++k) parent[find(faces[k])] = find(faces[0]);
-    long components = 0;
-    for (long f = 0; f < nf; ++f) components += find(f) == f;
-    if (components != 1)
-      return "the mesh surface has " + std::to_string(components) +
-             " connected components; their nesting is not compared with the rest state";
+    std::vector<int> label(nf, -1);
+    component_faces.clear();
+    for (long f = 0; f < nf; ++f) {
+      const long r = find(f);
+      if (label[r] < 0) {
+        label[r] = static_cast<int>(component_faces.size());
+        component_faces.emplace_back();
+      }
+      component_faces[label[r]].push_back(static_cast<int>(f));
+    }
+    // The nesting stage costs (#components) × #F triangle tests.
+    const double nesting_work = static_cast<double>(component_faces.size()) * static_cast<double>(nf);
+    if (component_faces.size() > 1 && nesting_work > kMaxNestingWork)
+      return "the mesh surface has " + std::to_string(component_faces.size()) +
+             " connected components; comparing their nesting would take too many triangle tests";
     return "";
   }
+
+  // --- The nesting of several surface components (docs/certificate.md, Step G5).
+  static constexpr double kMaxNestingWork = 4e8;
+  std::string rest_nesting_problem;  // the rest components do not bound one solid as oriented ("" = they do)
+
+  // The image of each component and the windings that decide the mapping degree next to it: (W #V' by 3,
+  // F #F' by 3) the surface, or a conforming refinement of it, under the map, comps its faces per component,
+  // rho (per face of F, nullptr at rest) the tube radii of the faces' images about their affine triangles on
+  // W, eps the evaluation error of a point of W, slack the rounding slack.
+  struct Nesting {
+    std::vector<int> outside;  // per component i: Σ_{j≠i} w(f(S_j), f(S_i)), the degree beside f(S_i) outside
+    std::vector<int> sign;     // per component: its image's winding number on its bounded side (±1)
+    std::vector<int> encloser;  // per component: the first j whose image winds about it (-1: none)
+    std::vector<Vec3> point;    // per component: the point of its image used for that j
+    std::string problem;        // why the nesting is not decided ("" = decided)
+  };
+  std::string component_name(int i) const {
+    return "surface component " + std::to_string(i) + " (mesh triangle " +
+           std::to_string(component_faces[i].front()) + ")";
+  }
+  // Is p farther than rho_f + extra from the affine image of every face of component j (always at rest)?
+  static bool clear_of_tubes(const MatX3d& W, const MatX3i& F, const std::vector<int>& faces,
+                             const std::vector<double>* rho, const Vec3& p, double extra, double slack) {
+    if (!rho) return true;
+    for (int f : faces) {
+      const double r = (*rho)[f] + extra;
+      if (!std::isfinite(r)) return false;
+      const std::array<Vec3, 3> t{W.row(F(f, 0)).transpose(), W.row(F(f, 1)).transpose(),
+                                  W.row(F(f, 2)).transpose()};
+      const Vec3 lo = t[0].cwiseMin(t[1]).cwiseMin(t[2]), hi = t[0].cwiseMax(t[1]).cwiseMax(t[2]);
+      const double gap = std::max((lo - p).maxCoeff(), (p - hi).maxCoeff());
+      if (gap - slack > r) continue;
+      if (!(separation_lower_bound({p, p, p}, t, slack) > r)) return false;
+    }
+    return true;
+  }
+  Nesting nesting(const MatX3d& W, const MatX3i& F, const std::vector<std::vector<int>>& comps,
+                  const std::vector<double>* rho, double eps, double slack) const;
+  std::string check_rest_nesting(const MatX3d& V) const;
 
   // f(p) for coefficients y (the basis values times y).
   Vec3 eval_f(const MatX3d& y, const Vec3& p, std::vector<double>& buf) const {
@@ -281,6 +338,97 @@ bool robust_pierce(const Vec3& s0, const Vec3& s1, const std::array<Vec3, 3>& t,
 }
 
 }  // namespace
+
+GlobalInjectivityChecker::Impl::Nesting GlobalInjectivityChecker::Impl::nesting(
+    const MatX3d& W, const MatX3i& F, const std::vector<std::vector<int>>& comps,
+    const std::vector<double>* rho, double eps, double slack) const {
+  const int nc = static_cast<int>(comps.size());
+  Nesting out;
+  out.outside.assign(nc, 0);
+  out.sign.assign(nc, 0);
+  out.encloser.assign(nc, -1);
+  out.point.assign(nc, Vec3::Zero());
+  std::vector<std::string> problem(nc);
+  // At most this many points of a component are tried (spread over its triangles) before giving up.
+  constexpr int kTries = 32;
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int i = 0; i < nc; ++i) {
+    const std::vector<int>& faces = comps[i];
+    const size_t stride = std::max<size_t>(1, faces.size() / kTries);
+    // The sign: the winding number of f(S_i) at a point beside one of its triangles, off every tube of S_i,
+    // that is not 0 (f(S_i) embedded: 0 outside, ±1 on its bounded side).
+    for (size_t k = 0; k < faces.size() && out.sign[i] == 0 && problem[i].empty(); k += stride) {
+      const int f = faces[k];
+      const Vec3 a = W.row(F(f, 0)), b = W.row(F(f, 1)), c = W.row(F(f, 2));
+      const Vec3 n = (b - a).cross(c - a);
+      if (!(n.norm() > 0)) continue;
+      const double h = (rho ? 1.5 * ((*rho)[f] + eps) + 4 * slack : 0) + 1e-3 * tri_diameter({a, b, c});
+      if (!std::isfinite(h)) continue;
+      for (const double side : {1.0, -1.0}) {
+        const Vec3 q = (a + b + c) / 3.0 + side * h * n.normalized();
+        if (!clear_of_tubes(W, F, faces, rho, q, eps, slack)) continue;
+        const std::optional<int> w = exact_winding_number(W, F, faces, q);
+        if (!w || *w == 0) continue;
+        if (std::abs(*w) != 1 || (out.sign[i] != 0 && out.sign[i] != *w)) {
+          problem[i] = "the image of " + component_name(i) + " has winding number " + std::to_string(*w) +
+                       " beside it, which an embedded surface cannot have";
+          break;
+        }
+        out.sign[i] = *w;
+      }
+    }
+    if (problem[i].empty() && out.sign[i] == 0)
+      problem[i] =
+          "no point beside the image of " + component_name(i) + " clear of its tubes has a winding number";
+    // The others' winding numbers about a point f(v) of f(S_i) off their tubes.
+    for (int j = 0; j < nc && problem[i].empty(); ++j) {
+      if (j == i) continue;
+      bool found = false;
+      for (size_t k = 0; k < faces.size() && !found; k += stride) {
+        // A vertex of the mesh itself (a refinement's midpoints are rounded, a hair off S): f(v) ∈ f(S_i).
+        int v = -1;
+        for (int c = 0; c < 3 && v < 0; ++c)
+          if (F(faces[k], c) < mesh.V.rows()) v = F(faces[k], c);
+        if (v < 0) continue;
+        const Vec3 p = W.row(v);
+        if (!clear_of_tubes(W, F, comps[j], rho, p, eps, slack)) continue;
+        const std::optional<int> w = exact_winding_number(W, F, comps[j], p);
+        if (!w) continue;
+        if (std::abs(*w) > 1) {
+          problem[i] = "the image of " + component_name(j) + " has winding number " + std::to_string(*w) +
+                       ", which an embedded surface cannot have";
+          break;
+        }
+        found = true;
+        out.outside[i] += *w;
+        if (*w != 0 && out.encloser[i] < 0) out.encloser[i] = j, out.point[i] = p;
+      }
+      if (!found && problem[i].empty())
+        problem[i] = "no point of the image of " + component_name(i) + " lies clear of the tubes of " +
+                     component_name(j);
+    }
+    if (out.encloser[i] < 0) out.point[i] = W.row(F(faces.front(), 0));
+  }
+  for (int i = 0; i < nc && out.problem.empty(); ++i) out.problem = problem[i];
+  return out;
+}
+
+// At rest (the identity: W the model's own vertices, the PL surface is S itself, winding numbers exact):
+// every component must have degree 0 on one side and 1 on the other, i.e. S oriented as the boundary of
+// D = {winding number ≥ 1/2}, the solid the local certificate covers.
+std::string GlobalInjectivityChecker::Impl::check_rest_nesting(const MatX3d& V) const {
+  const Nesting n = nesting(V, mesh.F, component_faces, nullptr, 0, 0);
+  if (!n.problem.empty())
+    return "the nesting of the rest-state surface components is not decided: " + n.problem;
+  for (size_t i = 0; i < component_faces.size(); ++i) {
+    const int out = n.outside[i], in = n.outside[i] + n.sign[i];
+    if (!((out == 0 && in == 1) || (out == 1 && in == 0)))
+      return "the rest-state " + component_name(static_cast<int>(i)) + " has winding numbers " +
+             std::to_string(out) + " and " + std::to_string(in) +
+             " on its two sides, not 0 and 1: the components are not oriented as the boundary of one solid";
+  }
+  return "";
+}
 
 GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                                                   const GlobalInjectivityParams& params) const {
@@ -654,6 +802,107 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
                              std::to_string(params.max_depth) + ")";
       return finish(out);
     }
+  if (im.component_faces.size() > 1) {  // f|S is injective: the nesting of the components' images decides
+    if (!im.rest_nesting_problem.empty()) {
+      out.reason = im.rest_nesting_problem;
+      return finish(out);
+    }
+    // The image surface's triangles, refined 1-to-4 (conforming: one new vertex per edge) where the tubes of
+    // the mesh triangles are too wide or infinite (triangles near the cage), at most kNestingDepth times.
+    constexpr int kNestingDepth = 2;
+    auto refine_surface = [&](const MatX3d& yy, MatX3d* Pp, MatX3d* Wp, MatX3i* Fp,
+                              std::vector<std::vector<int>>* cp) {
+      const MatX3i F0 = *Fp;
+      std::vector<std::array<long, 3>> edge_keys;  // (min, max, face·3 + k): one new vertex per edge
+      for (long f = 0; f < F0.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+          const int a = F0(f, k), b = F0(f, (k + 1) % 3);
+          edge_keys.push_back({std::min(a, b), std::max(a, b), 3 * f + k});
+        }
+      std::sort(edge_keys.begin(), edge_keys.end());
+      std::vector<int> mid(3 * F0.rows(), -1);
+      const long nv0 = Pp->rows();
+      long nv1 = nv0;
+      for (size_t i = 0; i < edge_keys.size(); ++i) {
+        if (i == 0 || edge_keys[i][0] != edge_keys[i - 1][0] || edge_keys[i][1] != edge_keys[i - 1][1]) ++nv1;
+        mid[edge_keys[i][2]] = static_cast<int>(nv1 - 1);
+      }
+      MatX3d P1(nv1, 3), W1(nv1, 3);
+      P1.topRows(nv0) = *Pp;
+      W1.topRows(nv0) = *Wp;
+      for (long f = 0; f < F0.rows(); ++f)
+        for (int k = 0; k < 3; ++k)
+          P1.row(mid[3 * f + k]) = 0.5 * (Pp->row(F0(f, k)) + Pp->row(F0(f, (k + 1) % 3)));
+#pragma omp parallel
+      {
+        std::vector<double> buf;
+#pragma omp for schedule(dynamic, 256)
+        for (long v = nv0; v < nv1; ++v) W1.row(v) = im.eval_f(yy, P1.row(v).transpose(), buf).transpose();
+      }
+      MatX3i F1(4 * F0.rows(), 3);
+      for (long f = 0; f < F0.rows(); ++f) {
+        const int a = F0(f, 0), b = F0(f, 1), c = F0(f, 2);
+        const int ab = mid[3 * f], bc = mid[3 * f + 1], ca = mid[3 * f + 2];
+        F1.row(4 * f) << a, ab, ca;
+        F1.row(4 * f + 1) << ab, b, bc;
+        F1.row(4 * f + 2) << ca, bc, c;
+        F1.row(4 * f + 3) << ab, bc, ca;
+      }
+      for (std::vector<int>& faces : *cp) {
+        std::vector<int> sub;
+        for (int f : faces)
+          for (int k = 0; k < 4; ++k) sub.push_back(4 * f + k);
+        faces.swap(sub);
+      }
+      *Pp = std::move(P1), *Wp = std::move(W1), *Fp = std::move(F1);
+    };
+    MatX3d P = mesh.V, W = fV;
+    MatX3i F = mesh.F;
+    std::vector<std::vector<int>> comps = im.component_faces;
+    std::vector<double> rho(nf);
+    for (long f = 0; f < nf; ++f) rho[f] = pieces[f].rho;
+    Impl::Nesting n = im.nesting(W, F, comps, &rho, eps, slack);
+    for (int depth = 1; depth <= kNestingDepth && !n.problem.empty() && !cancelled(); ++depth) {
+      refine_surface(y, &P, &W, &F, &comps);
+      rho.assign(F.rows(), kInf);
+#pragma omp parallel
+      {
+        std::vector<float> row;
+#pragma omp for schedule(dynamic, 256)
+        for (long f = 0; f < F.rows(); ++f) {
+          std::array<Vec3, 3> p, q;
+          for (int k = 0; k < 3; ++k) p[k] = P.row(F(f, k)), q[k] = W.row(F(f, k));
+          rho[f] = make_piece(p, q, -1, depth, row).rho;
+        }
+      }
+      n = im.nesting(W, F, comps, &rho, eps, slack);
+    }
+    if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
+    if (!n.problem.empty()) {
+      out.reason = "the nesting of the surface components' images is not decided: " + n.problem;
+      return finish(out);
+    }
+    const int nc = static_cast<int>(im.component_faces.size());
+    for (int i = 0; i < nc; ++i) {  // |degree| ≥ 2 beside f(S_i): proven not injective
+      const int d = std::abs(n.outside[i]) >= 2 ? n.outside[i] : n.outside[i] + n.sign[i];
+      if (std::abs(d) < 2) continue;
+      out.verdict = GlobalInjectivity::Verdict::kOverlap;
+      out.overlap_point = to_model(n.point[i]);
+      out.overlap_face_a = im.component_faces[i].front();
+      out.overlap_face_b = n.encloser[i] >= 0 ? im.component_faces[n.encloser[i]].front() : -1;
+      out.reason = "the shape overlaps itself near " + where(out.overlap_point) + ": the image of " +
+                   im.component_name(i) + " lies inside the image of " + im.component_name(n.encloser[i]) +
+                   ", where the mapping degree (the number of preimages) is " + std::to_string(d);
+      return finish(out);
+    }
+    for (int i = 0; i < nc; ++i) {
+      const int out_deg = n.outside[i], in_deg = n.outside[i] + n.sign[i];
+      if (out_deg >= 0 && out_deg <= 1 && in_deg >= 0 && in_deg <= 1) continue;
+      out.reason = "the image of " + im.component_name(i) + " has mapping degree " + std::to_string(out_deg) +
+                   " and " + std::to_string(in_deg) + " on its two sides (turned inside out)";
+      return finish(out);
+    }
+  }
   out.verdict = GlobalInjectivity::Verdict::kInjective;
   return finish(out);
 }

@@ -1,5 +1,5 @@
-// The only translation unit that includes CGAL (its headers are heavy and its interface needs
-// -frounding-math, which must not reach the numeric code; see deform/CMakeLists.txt).
+// One of the two translation units that include CGAL, with exact_winding.cpp (its headers are heavy and its
+// interface needs -frounding-math, which must not reach the numeric code; see deform/CMakeLists.txt).
 #include "lidef/self_intersections.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>

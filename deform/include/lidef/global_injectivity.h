@@ -2,8 +2,10 @@
 // through itself? docs/certificate.md, "Global injectivity", gives the argument step by step.
 //
 // The local certificate proves det J > 0 on D. Then f is injective on D as soon as its restriction to the
-// boundary surface ∂D is (degree argument; one closed connected surface). The boundary is checked piece by
-// piece: the image of a triangle piece lies within ρ = ½ L₁ diam² + ε of the affine triangle on its mapped
+// boundary surface ∂D is (degree argument) and, for a surface of several closed components (a cavity,
+// separate solids), the components' images are nested so that no point is covered twice (exact winding
+// numbers of the piecewise-linear image about points clear of the tubes below). The boundary is checked piece
+// by piece: the image of a triangle piece lies within ρ = ½ L₁ diam² + ε of the affine triangle on its mapped
 // corners (L₁ ≥ max ‖∇J‖ over a ball around the piece, ε the rounding of the mapped corners); two pieces are
 // cleared when their affine images are farther apart than the sum of their radii, or when both lie in one
 // ball on which f is injective (‖J(z) − J(c)‖ ≤ R L₁ < σ3(J(c))). Pieces that are neither are split 1-to-4.
