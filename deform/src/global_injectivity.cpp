@@ -229,6 +229,11 @@ struct GlobalInjectivityChecker::Impl {
   Nesting nesting(const MatX3d& W, const MatX3i& F, const std::vector<std::vector<int>>& comps,
                   const std::vector<double>* rho, double eps, double slack) const;
   std::string check_rest_nesting(const MatX3d& V) const;
+  // The surface (P #V' by 3 at rest, W its image under coefficients y, F #F' by 3, comps its faces per
+  // component) refined 1-to-4, conforming: one new vertex per edge, whose image is evaluated like the split
+  // pieces' corners (within the same ε).
+  void refine_image(const MatX3d& y, MatX3d& P, MatX3d& W, MatX3i& F,
+                    std::vector<std::vector<int>>& comps) const;
 
   // f(p) for coefficients y (the basis values times y).
   Vec3 eval_f(const MatX3d& y, const Vec3& p, std::vector<double>& buf) const {
@@ -411,6 +416,52 @@ GlobalInjectivityChecker::Impl::Nesting GlobalInjectivityChecker::Impl::nesting(
   }
   for (int i = 0; i < nc && out.problem.empty(); ++i) out.problem = problem[i];
   return out;
+}
+
+void GlobalInjectivityChecker::Impl::refine_image(const MatX3d& y, MatX3d& P, MatX3d& W, MatX3i& F,
+                                                  std::vector<std::vector<int>>& comps) const {
+  const MatX3i F0 = F;
+  std::vector<std::array<long, 3>> edge_keys;  // (min, max, face·3 + k): one new vertex per edge
+  for (long f = 0; f < F0.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = F0(f, k), b = F0(f, (k + 1) % 3);
+      edge_keys.push_back({std::min(a, b), std::max(a, b), 3 * f + k});
+    }
+  std::sort(edge_keys.begin(), edge_keys.end());
+  std::vector<int> mid(3 * F0.rows(), -1);
+  const long nv0 = P.rows();
+  long nv1 = nv0;
+  for (size_t i = 0; i < edge_keys.size(); ++i) {
+    if (i == 0 || edge_keys[i][0] != edge_keys[i - 1][0] || edge_keys[i][1] != edge_keys[i - 1][1]) ++nv1;
+    mid[edge_keys[i][2]] = static_cast<int>(nv1 - 1);
+  }
+  MatX3d P1(nv1, 3), W1(nv1, 3);
+  P1.topRows(nv0) = P;
+  W1.topRows(nv0) = W;
+  for (long f = 0; f < F0.rows(); ++f)
+    for (int k = 0; k < 3; ++k) P1.row(mid[3 * f + k]) = 0.5 * (P.row(F0(f, k)) + P.row(F0(f, (k + 1) % 3)));
+#pragma omp parallel
+  {
+    std::vector<double> buf;
+#pragma omp for schedule(dynamic, 256)
+    for (long v = nv0; v < nv1; ++v) W1.row(v) = eval_f(y, P1.row(v).transpose(), buf).transpose();
+  }
+  MatX3i F1(4 * F0.rows(), 3);
+  for (long f = 0; f < F0.rows(); ++f) {
+    const int a = F0(f, 0), b = F0(f, 1), c = F0(f, 2);
+    const int ab = mid[3 * f], bc = mid[3 * f + 1], ca = mid[3 * f + 2];
+    F1.row(4 * f) << a, ab, ca;
+    F1.row(4 * f + 1) << ab, b, bc;
+    F1.row(4 * f + 2) << ca, bc, c;
+    F1.row(4 * f + 3) << ab, bc, ca;
+  }
+  for (std::vector<int>& faces : comps) {
+    std::vector<int> sub;
+    for (int f : faces)
+      for (int k = 0; k < 4; ++k) sub.push_back(4 * f + k);
+    faces.swap(sub);
+  }
+  P = std::move(P1), W = std::move(W1), F = std::move(F1);
 }
 
 // At rest (the identity: W the model's own vertices, the PL surface is S itself, winding numbers exact):
@@ -807,55 +858,9 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       out.reason = im.rest_nesting_problem;
       return finish(out);
     }
-    // The image surface's triangles, refined 1-to-4 (conforming: one new vertex per edge) where the tubes of
-    // the mesh triangles are too wide or infinite (triangles near the cage), at most kNestingDepth times.
+    // Where the tubes of the mesh triangles are too wide or infinite (triangles near the cage), the image
+    // surface is refined 1-to-4 (refine_image), at most kNestingDepth times.
     constexpr int kNestingDepth = 2;
-    auto refine_surface = [&](const MatX3d& yy, MatX3d* Pp, MatX3d* Wp, MatX3i* Fp,
-                              std::vector<std::vector<int>>* cp) {
-      const MatX3i F0 = *Fp;
-      std::vector<std::array<long, 3>> edge_keys;  // (min, max, face·3 + k): one new vertex per edge
-      for (long f = 0; f < F0.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-          const int a = F0(f, k), b = F0(f, (k + 1) % 3);
-          edge_keys.push_back({std::min(a, b), std::max(a, b), 3 * f + k});
-        }
-      std::sort(edge_keys.begin(), edge_keys.end());
-      std::vector<int> mid(3 * F0.rows(), -1);
-      const long nv0 = Pp->rows();
-      long nv1 = nv0;
-      for (size_t i = 0; i < edge_keys.size(); ++i) {
-        if (i == 0 || edge_keys[i][0] != edge_keys[i - 1][0] || edge_keys[i][1] != edge_keys[i - 1][1]) ++nv1;
-        mid[edge_keys[i][2]] = static_cast<int>(nv1 - 1);
-      }
-      MatX3d P1(nv1, 3), W1(nv1, 3);
-      P1.topRows(nv0) = *Pp;
-      W1.topRows(nv0) = *Wp;
-      for (long f = 0; f < F0.rows(); ++f)
-        for (int k = 0; k < 3; ++k)
-          P1.row(mid[3 * f + k]) = 0.5 * (Pp->row(F0(f, k)) + Pp->row(F0(f, (k + 1) % 3)));
-#pragma omp parallel
-      {
-        std::vector<double> buf;
-#pragma omp for schedule(dynamic, 256)
-        for (long v = nv0; v < nv1; ++v) W1.row(v) = im.eval_f(yy, P1.row(v).transpose(), buf).transpose();
-      }
-      MatX3i F1(4 * F0.rows(), 3);
-      for (long f = 0; f < F0.rows(); ++f) {
-        const int a = F0(f, 0), b = F0(f, 1), c = F0(f, 2);
-        const int ab = mid[3 * f], bc = mid[3 * f + 1], ca = mid[3 * f + 2];
-        F1.row(4 * f) << a, ab, ca;
-        F1.row(4 * f + 1) << ab, b, bc;
-        F1.row(4 * f + 2) << ca, bc, c;
-        F1.row(4 * f + 3) << ab, bc, ca;
-      }
-      for (std::vector<int>& faces : *cp) {
-        std::vector<int> sub;
-        for (int f : faces)
-          for (int k = 0; k < 4; ++k) sub.push_back(4 * f + k);
-        faces.swap(sub);
-      }
-      *Pp = std::move(P1), *Wp = std::move(W1), *Fp = std::move(F1);
-    };
     MatX3d P = mesh.V, W = fV;
     MatX3i F = mesh.F;
     std::vector<std::vector<int>> comps = im.component_faces;
@@ -863,7 +868,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     for (long f = 0; f < nf; ++f) rho[f] = pieces[f].rho;
     Impl::Nesting n = im.nesting(W, F, comps, &rho, eps, slack);
     for (int depth = 1; depth <= kNestingDepth && !n.problem.empty() && !cancelled(); ++depth) {
-      refine_surface(y, &P, &W, &F, &comps);
+      im.refine_image(y, P, W, F, comps);
       rho.assign(F.rows(), kInf);
 #pragma omp parallel
       {

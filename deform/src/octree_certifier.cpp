@@ -626,38 +626,36 @@ struct OctreeCertifier::Run {
     return Ycols;
   }
   std::vector<double> stored_cols;  // far mode: the coefficient columns (stored_hessian)
-  // J at base center i from its 3 stored gradient rows (as stored_derivatives forms it), for the far fields
-  // when the backend's base stage kept J on the device.
-  Mat3 stored_jacobian(long i) const {
+  // Rows first..first+count−1 of base center i's 9 stored derivative rows (3 gradient rows, then the
+  // Hessian's xx, xy, xz, yy, yz, zz) times the coefficient columns: out[q][a].
+  void stored_rows(long i, int first, int count, double (*out)[3]) const {
     const long m = im.m;
-    const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
-    Mat3 J;
-    for (int b = 0; b < 3; ++b)
-      for (int a = 0; a < 3; ++a) {
-        const float* g = blk + b * m;
-        const double* ya = stored_cols.data() + a * m;
-        double acc = 0;
-#pragma omp simd reduction(+ : acc)
-        for (long k = 0; k < m; ++k) acc += static_cast<double>(g[k]) * ya[k];
-        J(a, b) = acc;
-      }
-    return J;
-  }
-  // H at base center i from its 6 stored Hessian rows (xx, xy, xz, yy, yz, zz) times the coefficients.
-  void stored_hessian(long i, std::array<Mat3, 3>& H) const {
-    const long m = im.m;
-    const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m) + 3 * m;
-    double h6[6][3];
-    for (int q = 0; q < 6; ++q) {
+    const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m) + first * m;
+    for (int q = 0; q < count; ++q) {
       const float* g = blk + q * m;
       for (int a = 0; a < 3; ++a) {
         const double* ya = stored_cols.data() + a * m;
         double acc = 0;
 #pragma omp simd reduction(+ : acc)
         for (long k = 0; k < m; ++k) acc += static_cast<double>(g[k]) * ya[k];
-        h6[q][a] = acc;
+        out[q][a] = acc;
       }
     }
+  }
+  // J at base center i (as stored_derivatives forms it), for the far fields when the backend's base stage
+  // kept J on the device.
+  Mat3 stored_jacobian(long i) const {
+    double g3[3][3];
+    stored_rows(i, 0, 3, g3);
+    Mat3 J;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) J(a, b) = g3[b][a];
+    return J;
+  }
+  // H at base center i from its 6 stored Hessian rows times the coefficients.
+  void stored_hessian(long i, std::array<Mat3, 3>& H) const {
+    double h6[6][3];
+    stored_rows(i, 3, 6, h6);
     for (int a = 0; a < 3; ++a)
       H[a] << h6[0][a], h6[1][a], h6[2][a], h6[1][a], h6[3][a], h6[4][a], h6[2][a], h6[4][a], h6[5][a];
   }
