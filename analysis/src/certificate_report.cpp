@@ -144,7 +144,8 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
                                           const MatX3d& y, const std::string& model,
                                           const std::string& coefficients,
                                           const SamplingParams& sampling_params,
-                                          const VoxelSampling& sampling, const CertifyParams& params) {
+                                          const VoxelSampling& sampling, const CertifyParams& params,
+                                          const GlobalInjectivity* known_global) {
   CertificateReport r;
   r.cert = cert;
   r.model = model;
@@ -190,7 +191,11 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
     r.domain_definition = dom.definition();
   }
   r.leaves_meeting_domain = std::count(meets.begin(), meets.end(), 1);
-  r.global = decide_global_injectivity(cert, r.domain, cage, mesh, y);
+  // A verdict already computed for this very map (the solver's, global mode) is the one a new check would
+  // give: the check is deterministic.
+  r.global = known_global && global_injectivity_undecidable(cert, r.domain, mesh).empty()
+                 ? *known_global
+                 : decide_global_injectivity(cert, r.domain, cage, mesh, y);
   return r;
 }
 

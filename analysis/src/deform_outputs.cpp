@@ -275,9 +275,9 @@ std::string source_points_file(const Model& model, const Scenario& scenario) {
 DeformOutputs write_deform_outputs(const std::string& dir, const Model& model, const Scenario& scenario,
                                    const DeformResult& r, const DeformOutputOptions& options) {
   const MatX3d& y = r.coefficients;
-  CertificateReport report =
-      make_certificate_report(r.certificate, model.cage, model.mesh, y, scenario.model_dir,
-                              "coefficients.txt", r.sampling_params, r.sampling, r.certify_params);
+  CertificateReport report = make_certificate_report(
+      r.certificate, model.cage, model.mesh, y, scenario.model_dir, "coefficients.txt", r.sampling_params,
+      r.sampling, r.certify_params, r.global ? &*r.global : nullptr);
   const double volume_ratio =
       signed_volume(r.deformed_vertices, model.mesh.F) / signed_volume(model.mesh.V, model.mesh.F);
   DeformOutputs written;

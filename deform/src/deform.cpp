@@ -17,6 +17,10 @@ DeformResult deform_result(const DeformationSolver& solver, const TriMesh& mesh,
   r.path = path;
   r.coefficients = solver.coefficients();
   r.certificate = solver.certify_current(true);
+  if (const GlobalInjectivity* g = solver.held_global_injectivity()) {
+    r.global = *g;
+    r.global->ms = 0;
+  }
   if (!r.certificate.certified)
     throw NumericalError("internal: the final map is not certified although every accepted step was (" +
                          r.certificate.reason + ")");

@@ -38,6 +38,12 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kValueRel = 1e-8;
 // Relative allowance for J and the bounds (as the local certificate's kRoundingRel).
 constexpr double kRoundingRel = 1e-9;
+// A piece's corners are rounded midpoints: at split depth d each lies within d · kCornerRel · C of the exact
+// point of the mesh triangle (C the largest coordinate magnitude; one rounding of a + b per level, the
+// halving is exact: |fl(a + b)/2 − (a + b)/2| ≤ 2⁻⁵³ C per coordinate, √3 · 2⁻⁵³ = 1.93e-16 in norm). Balls
+// are widened by the error of kDepthCap levels, which covers every piece and its descendants.
+constexpr double kCornerRel = 2e-16;
+constexpr int kDepthCap = 32;
 // Relative slack of the geometric predicates on the affine image triangles (dot products, distances of
 // points of magnitude M carry errors of a few 1e-16 M; 1e-12 M is far above them).
 constexpr double kGeomRel = 1e-12;
@@ -48,7 +54,9 @@ struct Piece {
   std::array<Vec3, 3> p, q;
   Vec3 c = Vec3::Zero();
   double R = 0, diam = 0, L1 = kInf, rho = kInf;
+  double jb = kInf;  // depth > 0: an upper bound of ‖J‖₂ on a ball containing the piece (its ancestor's)
   int face = -1, depth = 0;
+  int top = -1;  // the top piece it was split from (index into the check's top pieces; -1 before)
 };
 
 double separation_lower_bound(const std::array<Vec3, 3>& a, const std::array<Vec3, 3>& b, double slack);
@@ -229,6 +237,7 @@ struct GlobalInjectivityChecker::Impl {
   Nesting nesting(const MatX3d& W, const MatX3i& F, const std::vector<std::vector<int>>& comps,
                   const std::vector<double>* rho, double eps, double slack) const;
   std::string check_rest_nesting(const MatX3d& V) const;
+  struct MapCheck;  // one check of one map (check())
   // The surface (P #V' by 3 at rest, W its image under coefficients y, F #F' by 3, comps its faces per
   // component) refined 1-to-4, conforming: one new vertex per edge, whose image is evaluated like the split
   // pieces' corners (within the same ε).
@@ -481,111 +490,192 @@ std::string GlobalInjectivityChecker::Impl::check_rest_nesting(const MatX3d& V) 
   return "";
 }
 
-GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
-                                                  const GlobalInjectivityParams& params) const {
-  const auto t_start = Clock::now();
-  const Impl& im = *impl_;
-  auto cancelled = [&] { return params.cancel && params.cancel->load(std::memory_order_relaxed); };
-  auto finish = [&](GlobalInjectivity g) {
-    g.ms = ms_since(t_start);
-    return g;
+// One check of one map (the stages of the file comment, one method each); the per-cage data is the Impl's.
+// Everything here is in the cage's normalized frame.
+struct GlobalInjectivityChecker::Impl::MapCheck {
+  enum Outcome : char { kCleared, kCrossing, kOpen };
+  struct PairResult {
+    Outcome outcome = kCleared;
+    Vec3 where = Vec3::Zero();
+    long tests = 0;
+    int depth = 0;
   };
-  if (y_model.rows() != im.basis.size())
-    throw InputError("", "coefficients have " + std::to_string(y_model.rows()) +
-                             " rows, expected #V+#F = " + std::to_string(im.basis.size()));
-  if (!y_model.allFinite()) throw InputError("", "coefficients contain NaN or Inf");
-  // The map in the normalized frame: f'(p') = (f(center + scale p') − center) / scale, so y_v' = (y_v −
-  // center) / scale and y_t' = y_t (the face rows are linear parts, unchanged).
-  MatX3d y = y_model;
-  const int ncv0 = im.cage.num_vertices();
-  y.topRows(ncv0) = (y_model.topRows(ncv0).rowwise() - im.center.transpose()) / im.scale;
-  auto to_model = [&](const Vec3& p) -> Vec3 { return im.center + im.scale * p; };
-  if (!im.structure_problem.empty()) return finish(global_injectivity_not_decided(im.structure_problem));
-  const TriMesh& mesh = im.mesh;
-  const long nv = mesh.V.rows(), nf = mesh.F.rows();
+  // A piece pair to clear, or (self) one piece whose own points must be shown to have distinct images;
+  // touching: the pieces may share points in the rest state (no crossing is reported for them).
+  struct Task {
+    Piece P, Q;
+    bool self, touching;
+  };
+  // Per thread: the factor row and basis buffers, the pair stage's stack of tasks.
+  struct Scratch {
+    std::vector<float> row;
+    std::vector<double> buf;
+    std::vector<Task> stack;
+  };
+
+  const Impl& im;
+  const GlobalInjectivityParams& params;
+  const TriMesh& mesh;
+  const long nv, nf;
+  MatX3d y;  // the coefficients in the normalized frame
+  HarmonicBasis::FaceMatrices fm;
+  VecXd delta;  // per cage edge ‖δ_e‖ with its rounding
+  MatX3d fV;    // the mapped mesh vertices
+  double eps = 0, slack = 0;
+  // Rounded corners (docs/certificate.md, Step G3): a piece of depth d has its corners within corner_error(d)
+  // of the exact points; every ball is widened by `reach`, which covers the exact points of the piece and of
+  // its descendants, and the tube of a piece of depth d by jb · corner_error(d), the motion of f between the
+  // exact and the computed points.
+  double corner_unit = 0, reach = 0;
+  std::vector<Piece> pieces;  // per mesh triangle
+  std::vector<char> star_ok;  // per mesh vertex: its star ball is an injectivity ball
+  std::vector<char> face_ok;  // per mesh triangle: it lies in one injectivity ball
+  std::vector<Piece> top;     // the top pieces (stage 2b)
+  std::vector<std::atomic<double>>
+      top_jb;  // per top piece of depth 0: jacobian_bound of its ball (NaN: not yet)
+  std::vector<std::pair<int, int>> pairs;  // pairs of top pieces (stage 3), then of mesh triangles (stage 5)
+  std::vector<PairResult> results;         // per pair (stage 4)
+  // The smallest index of a pair with a proven crossing so far: pairs after it cannot change the verdict
+  // (the first crossing in pair order), so they are skipped — the verdict stays independent of the threads.
+  std::atomic<long> first_crossing{std::numeric_limits<long>::max()};
+  GlobalInjectivity out;
 
   // --- 1. Map constants.
-  const HarmonicBasis::FaceMatrices fm = im.basis.face_matrices(y);
-  VecXd delta(im.cage.num_edges());
-  for (int e = 0; e < im.cage.num_edges(); ++e) {
-    const CageEdge& ce = im.cage.edges[e];
-    delta(e) = (fm.A[ce.f0] - fm.A[ce.f1]).norm() * (1 + kRoundingRel) +
-               kRoundingRel * (fm.A_abs[ce.f0] + fm.A_abs[ce.f1]);
+  MapCheck(const Impl& impl, const MatX3d& y_model, const GlobalInjectivityParams& p)
+      : im(impl), params(p), mesh(impl.mesh), nv(impl.mesh.V.rows()), nf(impl.mesh.F.rows()) {
+    // The map in the normalized frame: f'(p') = (f(center + scale p') − center) / scale, so y_v' = (y_v −
+    // center) / scale and y_t' = y_t (the face rows are linear parts, unchanged).
+    y = y_model;
+    const int ncv = im.cage.num_vertices();
+    y.topRows(ncv) = (y_model.topRows(ncv).rowwise() - im.center.transpose()) / im.scale;
+    fm = im.basis.face_matrices(y);
+    delta.resize(im.cage.num_edges());
+    for (int e = 0; e < im.cage.num_edges(); ++e) {
+      const CageEdge& ce = im.cage.edges[e];
+      delta(e) = (fm.A[ce.f0] - fm.A[ce.f1]).norm() * (1 + kRoundingRel) +
+                 kRoundingRel * (fm.A_abs[ce.f0] + fm.A_abs[ce.f1]);
+    }
+    fV = im.basis.map_values(y, mesh.V);
+    const double yv = y.topRows(ncv).cwiseAbs().maxCoeff();
+    const double yt = y.bottomRows(y.rows() - ncv).cwiseAbs().maxCoeff();
+    // ε: the evaluation error of a mapped point, relative to the coefficients' contributions (y_v φ_v with
+    // Σ|φ_v| of order one, y_t ψ_t with ψ_t at most of the order of the cage's size).
+    eps = kValueRel * (yv + yt * im.cage_diameter) * 8;
+    slack = kGeomRel * (fV.cwiseAbs().maxCoeff() + eps);
+    corner_unit = kCornerRel * mesh.V.cwiseAbs().maxCoeff() * (1 + 1e-9);
+    reach = 2 * corner_error(kDepthCap);
   }
-  const MatX3d fV = im.basis.map_values(y, mesh.V);
-  const int ncv = im.cage.num_vertices();
-  const double yv = y.topRows(ncv).cwiseAbs().maxCoeff();
-  const double yt = y.bottomRows(y.rows() - ncv).cwiseAbs().maxCoeff();
-  // ε: the evaluation error of a mapped point, relative to the coefficients' contributions (y_v φ_v with
-  // Σ|φ_v| of order one, y_t ψ_t with ψ_t at most of the order of the cage's size).
-  const double eps = kValueRel * (yv + yt * im.cage_diameter) * 8;
-  const double geom_scale = fV.cwiseAbs().maxCoeff() + eps;
-  const double slack = kGeomRel * geom_scale;
 
-  auto make_piece = [&](const std::array<Vec3, 3>& p, const std::array<Vec3, 3>& q, int face, int depth,
-                        std::vector<float>& row) {
+  bool cancelled() const { return params.cancel && params.cancel->load(std::memory_order_relaxed); }
+  Vec3 to_model(const Vec3& p) const { return im.center + im.scale * p; }
+  static std::string where(const Vec3& p) {
+    return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
+  }
+  double corner_error(int depth) const { return depth * corner_unit; }
+  // An upper bound of ‖J‖₂ on B(c, R): ‖J̃(c)‖_F, its rounding, and R L1 (mean value); +∞ where L1 is.
+  double jacobian_bound(const Vec3& c, double R, double L1) const {
+    if (!std::isfinite(L1)) return kInf;
+    double sJ = 0;
+    const MapJet jet = im.basis.differential_jet(fm, c, 1, &sJ);
+    return (jet.J.norm() + kRoundingRel * sJ + R * L1) * (1 + 1e-9);
+  }
+  // jb: for depth > 0 a bound of ‖J‖ on a ball containing the piece (its parent's), else +∞ (then the
+  // piece's own ball gives one).
+  Piece make_piece(const std::array<Vec3, 3>& p, const std::array<Vec3, 3>& q, int face, int depth, double jb,
+                   std::vector<float>& row) const {
     Piece P;
     P.p = p, P.q = q, P.face = face, P.depth = depth;
     P.c = (p[0] + p[1] + p[2]) / 3.0;
     P.R = 0;
     for (const Vec3& v : p) P.R = std::max(P.R, (v - P.c).norm());
-    P.R = P.R * (1 + 1e-12) + 1e-15 * P.c.cwiseAbs().maxCoeff();
+    P.R = (P.R + reach) * (1 + 1e-12) + 1e-15 * P.c.cwiseAbs().maxCoeff();
     P.diam = tri_diameter(p);
     P.L1 = im.lipschitz(delta, P.c, P.R, row);
-    P.rho = std::isfinite(P.L1) ? 0.5 * P.L1 * P.diam * P.diam * (1 + 1e-9) + eps : kInf;
+    if (depth > 0 && !std::isfinite(jb)) jb = jacobian_bound(P.c, P.R, P.L1);
+    P.jb = depth > 0 ? jb : kInf;
+    const double moved = depth > 0 ? P.jb * corner_error(depth) : 0.0;
+    P.rho = std::isfinite(P.L1) && std::isfinite(moved)
+                ? (0.5 * P.L1 * P.diam * P.diam + moved) * (1 + 1e-9) + eps
+                : kInf;
     return P;
-  };
+  }
+  // A piece split 1-to-4 at its edges' midpoints (their images evaluated): the corners' pieces, then the
+  // middle one; the children keep the parent's bound of ‖J‖ (its ball contains them).
+  void split(const Piece& P, std::array<Piece, 4>* ch, Scratch& s) {
+    std::array<Vec3, 3> mp, mq;
+    for (int k = 0; k < 3; ++k) {
+      mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
+      mq[k] = im.eval_f(y, mp[k], s.buf);
+    }
+    double jb = P.jb;
+    if (P.depth == 0) {
+      if (P.top >= 0) {  // each thread computes the same value
+        jb = top_jb[P.top].load(std::memory_order_relaxed);
+        if (std::isnan(jb))
+          top_jb[P.top].store(jb = jacobian_bound(P.c, P.R, P.L1), std::memory_order_relaxed);
+      } else {
+        jb = jacobian_bound(P.c, P.R, P.L1);
+      }
+    }
+    const int f = P.face, d = P.depth + 1;
+    (*ch)[0] = make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, f, d, jb, s.row);
+    (*ch)[1] = make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, f, d, jb, s.row);
+    (*ch)[2] = make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, f, d, jb, s.row);
+    (*ch)[3] = make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, f, d, jb, s.row);
+    for (Piece& c : *ch) c.top = P.top;
+  }
 
-  // --- 2. Pieces and star balls.
-  std::vector<Piece> pieces(nf);
-  std::vector<char> star_ok(nv, 0);
+  // --- 2. One piece per mesh triangle and per mesh vertex its star ball; which triangles lie in one
+  // injectivity ball (a triangle's own points: its ball, or the star ball of one of its corners).
+  void pieces_and_star_balls() {
+    pieces.resize(nf);
+    star_ok.assign(nv, 0);
 #pragma omp parallel
-  {
-    std::vector<float> row;
+    {
+      std::vector<float> row;
 #pragma omp for schedule(dynamic, 256)
-    for (long f = 0; f < nf; ++f) {
-      if (cancelled()) continue;  // the result is dropped below
-      std::array<Vec3, 3> p, q;
-      for (int k = 0; k < 3; ++k) p[k] = mesh.V.row(mesh.F(f, k)), q[k] = fV.row(mesh.F(f, k));
-      pieces[f] = make_piece(p, q, static_cast<int>(f), 0, row);
-    }
+      for (long f = 0; f < nf; ++f) {
+        if (cancelled()) continue;  // the result is dropped by the caller
+        std::array<Vec3, 3> p, q;
+        for (int k = 0; k < 3; ++k) p[k] = mesh.V.row(mesh.F(f, k)), q[k] = fV.row(mesh.F(f, k));
+        pieces[f] = make_piece(p, q, static_cast<int>(f), 0, kInf, row);
+      }
 #pragma omp for schedule(dynamic, 256)
-    for (long v = 0; v < nv; ++v) {
-      if (cancelled()) continue;
-      const Vec3 c = mesh.V.row(v);
-      double R = 0;
-      for (int f : im.vertex_faces[v])
-        for (int k = 0; k < 3; ++k) R = std::max(R, (Vec3(mesh.V.row(mesh.F(f, k))) - c).norm());
-      R = R * (1 + 1e-12);
-      star_ok[v] = im.injective_ball(fm, delta, c, R, row);
+      for (long v = 0; v < nv; ++v) {
+        if (cancelled()) continue;
+        const Vec3 c = mesh.V.row(v);
+        double R = 0;
+        for (int f : im.vertex_faces[v])
+          for (int k = 0; k < 3; ++k) R = std::max(R, (Vec3(mesh.V.row(mesh.F(f, k))) - c).norm());
+        R = (R + reach) * (1 + 1e-12);
+        star_ok[v] = im.injective_ball(fm, delta, c, R, row);
+      }
     }
-  }
-  if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
-  // A triangle's own points: its ball, or the star ball of one of its corners, must be an injectivity ball.
-  std::vector<char> face_ok(nf, 0);
+    if (cancelled()) return;
+    face_ok.assign(nf, 0);
 #pragma omp parallel
-  {
-    std::vector<float> row;
+    {
+      std::vector<float> row;
 #pragma omp for schedule(dynamic, 256)
-    for (long f = 0; f < nf; ++f)
-      face_ok[f] = star_ok[mesh.F(f, 0)] || star_ok[mesh.F(f, 1)] || star_ok[mesh.F(f, 2)] ||
-                   im.injective_ball(fm, delta, pieces[f].c, pieces[f].R, row);
+      for (long f = 0; f < nf; ++f)
+        face_ok[f] = star_ok[mesh.F(f, 0)] || star_ok[mesh.F(f, 1)] || star_ok[mesh.F(f, 2)] ||
+                     im.injective_ball(fm, delta, pieces[f].c, pieces[f].R, row);
+    }
+    double max_rho = 0;
+    for (const Piece& P : pieces)
+      if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
+    out.max_tube_radius = max_rho * im.scale;
   }
-  GlobalInjectivity out;
-  double max_rho = 0;
-  for (const Piece& P : pieces)
-    if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
-  out.max_tube_radius = max_rho * im.scale;
-  // The top pieces: the triangles, a triangle whose ball is not clear of the cage (no finite tube) replaced
-  // by its 1-to-4 splits until each has one (in face order, depth first: deterministic).
-  // A tube wider than a quarter of its piece (a triangle near the cage, where L₁ is large) would pair the
-  // piece with most of the surface: such pieces are split first too.
-  auto thin = [](const Piece& P) { return std::isfinite(P.rho) && P.rho <= 0.25 * P.diam; };
-  std::vector<Piece> top;
-  top.reserve(nf);
-  {
-    std::vector<float> row;
-    std::vector<double> buf;
+
+  // --- 2b. The top pieces: the triangles, a triangle whose ball is not clear of the cage (no finite tube)
+  // replaced by its 1-to-4 splits until each has one (in face order, depth first: deterministic). A tube
+  // wider than a quarter of its piece (a triangle near the cage, where L₁ is large) would pair the piece
+  // with most of the surface: such pieces are split first too. Returns why nothing can be decided ("" =
+  // the top pieces are made).
+  std::string top_pieces() {
+    auto thin = [](const Piece& P) { return std::isfinite(P.rho) && P.rho <= 0.25 * P.diam; };
+    top.reserve(nf);
+    Scratch s;
     std::vector<Piece> todo;
     for (long f = 0; f < nf; ++f) {
       if (thin(pieces[f])) {
@@ -601,72 +691,69 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
           continue;
         }
         if (P.depth >= params.max_depth)
-          return finish(global_injectivity_not_decided(
-              "mesh triangle " + std::to_string(f) + " lies too close to the cage for a bound near (" +
-              format_g(to_model(P.c).x()) + ", " + format_g(to_model(P.c).y()) + ", " +
-              format_g(to_model(P.c).z()) + ")"));
-        std::array<Vec3, 3> mp, mq;
-        for (int k = 0; k < 3; ++k) {
-          mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
-          mq[k] = im.eval_f(y, mp[k], buf);
-        }
-        const int d = P.depth + 1, fc = P.face;
-        todo.push_back(make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, fc, d, row));
-        todo.push_back(make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, fc, d, row));
-        todo.push_back(make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, fc, d, row));
-        todo.push_back(make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, fc, d, row));
+          return "mesh triangle " + std::to_string(f) + " lies too close to the cage for a bound near " +
+                 where(to_model(P.c));
+        std::array<Piece, 4> ch;
+        split(P, &ch, s);
+        for (int i = 3; i >= 0; --i) todo.push_back(ch[i]);
       }
     }
+    const long nt = static_cast<long>(top.size());
+    top_jb = std::vector<std::atomic<double>>(nt);
+    for (long i = 0; i < nt; ++i) {
+      top[i].top = static_cast<int>(i);
+      top_jb[i].store(std::numeric_limits<double>::quiet_NaN(), std::memory_order_relaxed);
+    }
+    return "";
   }
-  const long nt = static_cast<long>(top.size());
 
   // --- 3. Candidate pairs: boxes of the top pieces' tubes. A sorted list of (cell, piece) entries groups the
   // pieces by cell.
-  Vec3 lo = fV.colwise().minCoeff().transpose(), hi = fV.colwise().maxCoeff().transpose();
-  std::vector<Vec3> blo(nt), bhi(nt);
-  double mean_extent = 0;
-  for (long f = 0; f < nt; ++f) {
-    const Piece& P = top[f];
-    Vec3 a = P.q[0].cwiseMin(P.q[1]).cwiseMin(P.q[2]), b = P.q[0].cwiseMax(P.q[1]).cwiseMax(P.q[2]);
-    a.array() -= P.rho + slack, b.array() += P.rho + slack;
-    blo[f] = a, bhi[f] = b;
-    mean_extent += (b - a).maxCoeff();
-  }
-  mean_extent /= static_cast<double>(nt);
-  const double span = std::max((hi - lo).maxCoeff(), 1e-300);
-  const double cell = std::max(mean_extent, span / 256.0);
-  std::vector<std::pair<long, int>> entries;
-  for (long f = 0; f < nt; ++f) {
-    std::array<long, 3> a, b;
-    for (int k = 0; k < 3; ++k) {
-      a[k] = static_cast<long>(std::floor((std::max(blo[f](k), lo(k) - cell) - lo(k)) / cell));
-      b[k] = static_cast<long>(std::floor((std::min(bhi[f](k), hi(k) + cell) - lo(k)) / cell));
+  void candidate_pairs() {
+    const long nt = static_cast<long>(top.size());
+    Vec3 lo = fV.colwise().minCoeff().transpose(), hi = fV.colwise().maxCoeff().transpose();
+    std::vector<Vec3> blo(nt), bhi(nt);
+    double mean_extent = 0;
+    for (long f = 0; f < nt; ++f) {
+      const Piece& P = top[f];
+      Vec3 a = P.q[0].cwiseMin(P.q[1]).cwiseMin(P.q[2]), b = P.q[0].cwiseMax(P.q[1]).cwiseMax(P.q[2]);
+      a.array() -= P.rho + slack, b.array() += P.rho + slack;
+      blo[f] = a, bhi[f] = b;
+      mean_extent += (b - a).maxCoeff();
     }
-    for (long i = a[0]; i <= b[0]; ++i)
-      for (long j = a[1]; j <= b[1]; ++j)
-        for (long k = a[2]; k <= b[2]; ++k)
-          entries.emplace_back(((i + 2) * 1048576L + (j + 2)) * 1048576L + (k + 2), static_cast<int>(f));
-  }
-  std::sort(entries.begin(), entries.end());
-  std::vector<std::pair<int, int>> pairs;
-  for (size_t i = 0; i < entries.size();) {
-    size_t j = i;
-    while (j < entries.size() && entries[j].first == entries[i].first) ++j;
-    for (size_t a = i; a < j; ++a)
-      for (size_t b = a + 1; b < j; ++b) {
-        const int fa = entries[a].second, fb = entries[b].second;
-        if (((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all())
-          pairs.emplace_back(std::min(fa, fb), std::max(fa, fb));
+    mean_extent /= static_cast<double>(nt);
+    const double span = std::max((hi - lo).maxCoeff(), 1e-300);
+    const double cell = std::max(mean_extent, span / 256.0);
+    std::vector<std::pair<long, int>> entries;
+    for (long f = 0; f < nt; ++f) {
+      std::array<long, 3> a, b;
+      for (int k = 0; k < 3; ++k) {
+        a[k] = static_cast<long>(std::floor((std::max(blo[f](k), lo(k) - cell) - lo(k)) / cell));
+        b[k] = static_cast<long>(std::floor((std::min(bhi[f](k), hi(k) + cell) - lo(k)) / cell));
       }
-    i = j;
-  }
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-  out.candidate_pairs = static_cast<long>(pairs.size());
-  // Pairs of two triangles in the star ball of a common vertex where f is injective are cleared (step 4's
-  // first test); dropping them here keeps the order of the others, so the verdict and the counts are those
-  // of examining them, without the memory of millions of cleared pairs (a tight cage's wide tubes).
-  {
+      for (long i = a[0]; i <= b[0]; ++i)
+        for (long j = a[1]; j <= b[1]; ++j)
+          for (long k = a[2]; k <= b[2]; ++k)
+            entries.emplace_back(((i + 2) * 1048576L + (j + 2)) * 1048576L + (k + 2), static_cast<int>(f));
+    }
+    std::sort(entries.begin(), entries.end());
+    for (size_t i = 0; i < entries.size();) {
+      size_t j = i;
+      while (j < entries.size() && entries[j].first == entries[i].first) ++j;
+      for (size_t a = i; a < j; ++a)
+        for (size_t b = a + 1; b < j; ++b) {
+          const int fa = entries[a].second, fb = entries[b].second;
+          if (((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all())
+            pairs.emplace_back(std::min(fa, fb), std::max(fa, fb));
+        }
+      i = j;
+    }
+    std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    out.candidate_pairs = static_cast<long>(pairs.size());
+    // Pairs of two triangles in the star ball of a common vertex where f is injective are cleared (step 4's
+    // first test); dropping them here keeps the order of the others, so the verdict and the counts are those
+    // of examining them, without the memory of millions of cleared pairs (a tight cage's wide tubes).
     auto in_common_star = [&](int a, int b) {
       const int fa = top[a].face, fb = top[b].face;
       if (fa == fb) return false;
@@ -679,184 +766,166 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
         std::remove_if(pairs.begin(), pairs.end(),
                        [&](const std::pair<int, int>& pr) { return in_common_star(pr.first, pr.second); }),
         pairs.end());
+    // A triangle not covered by one injectivity ball is a work item of its own (split until its pieces are).
+    for (long i = 0; i < nt; ++i)
+      if (!face_ok[top[i].face]) pairs.emplace_back(static_cast<int>(i), static_cast<int>(i));
   }
-  // A triangle not covered by one injectivity ball is a work item of its own (split until its pieces are).
-  for (long i = 0; i < nt; ++i)
-    if (!face_ok[top[i].face]) pairs.emplace_back(static_cast<int>(i), static_cast<int>(i));
 
-  // --- 4. Per pair.
-  enum Outcome : char { kCleared, kCrossing, kOpen };
-  struct PairResult {
-    Outcome outcome = kCleared;
-    Vec3 where = Vec3::Zero();
-    long tests = 0;
-    int depth = 0;
-  };
-  std::vector<PairResult> results(pairs.size());
-  // The smallest index of a pair with a proven crossing so far: pairs after it cannot change the verdict
-  // (the first crossing in pair order), so they are skipped — the verdict stays independent of the threads.
-  std::atomic<long> first_crossing{std::numeric_limits<long>::max()};
-  auto shared_vertices = [&](int fa, int fb, std::array<int, 3>* sv) {
+  // --- 4. Per pair: separate, cover by an injectivity ball, prove a crossing, or split (bounded).
+  void examine_pairs() {
+    results.assign(pairs.size(), PairResult{});
+#pragma omp parallel
+    {
+      Scratch s;
+#pragma omp for schedule(dynamic, 64)
+      for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
+        if (k > first_crossing.load(std::memory_order_relaxed) || cancelled()) continue;
+        examine_pair(k, s);
+      }
+    }
+  }
+  int shared_vertices(int fa, int fb, std::array<int, 3>* sv) const {
     int n = 0;
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j)
         if (mesh.F(fa, i) == mesh.F(fb, j)) (*sv)[n++] = mesh.F(fa, i);
     return n;
-  };
-#pragma omp parallel
-  {
-    std::vector<float> row;
-    std::vector<double> buf;
-    // A piece pair to clear, or (self) one piece whose own points must be shown to have distinct images;
-    // touching: the pieces may share points in the rest state (no crossing is reported for them).
-    struct Task {
-      Piece P, Q;
-      bool self, touching;
-    };
-    std::vector<Task> stack;
-    auto split = [&](const Piece& P, std::array<Piece, 4>* ch) {
-      std::array<Vec3, 3> mp, mq;
-      for (int k = 0; k < 3; ++k) {
-        mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
-        mq[k] = im.eval_f(y, mp[k], buf);
-      }
-      (*ch)[0] = make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, P.face, P.depth + 1, row);
-      (*ch)[1] = make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, P.face, P.depth + 1, row);
-      (*ch)[2] = make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, P.face, P.depth + 1, row);
-      (*ch)[3] = make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, P.face, P.depth + 1, row);
-    };
-#pragma omp for schedule(dynamic, 64)
-    for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
-      if (k > first_crossing.load(std::memory_order_relaxed) || cancelled()) continue;
-      const int fa = pairs[k].first, fb = pairs[k].second;
-      PairResult& res = results[k];
-      std::array<int, 3> sv;
-      const int ffa = top[fa].face, ffb = top[fb].face;
-      int nshared = 3;
-      if (ffa == ffb)
-        for (int i = 0; i < 3; ++i) sv[i] = mesh.F(ffa, i);
-      else
-        nshared = shared_vertices(ffa, ffb, &sv);
-      if (fa != fb) {
-        bool star = false;
-        for (int i = 0; i < nshared; ++i) star = star || star_ok[sv[i]];
-        if (star) continue;  // both triangles lie in the star ball of a shared vertex, where f is injective
-      }
-      stack.clear();
-      stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
-      while (!stack.empty()) {
-        if ((res.tests & 63) == 63 && (k > first_crossing.load(std::memory_order_relaxed) || cancelled()))
-          break;
-        const Task task = stack.back();
-        stack.pop_back();
-        const Piece &P = task.P, &Q = task.Q;
-        ++res.tests;
-        res.depth = std::max({res.depth, P.depth, Q.depth});
-        std::array<Piece, 4> ch;
-        if (task.self) {  // the piece's own points: one injectivity ball, or split
-          if (im.injective_ball(fm, delta, P.c, P.R, row)) continue;
-          if (P.depth >= params.max_depth || res.tests >= params.max_tests_per_pair) {
-            res.outcome = kOpen;
-            res.where = (P.q[0] + P.q[1] + P.q[2]) / 3.0;
-            break;
-          }
-          split(P, &ch);
-          for (int i = 0; i < 4; ++i)
-            for (int j = i + 1; j < 4; ++j) stack.push_back({ch[i], ch[j], false, true});
-          for (int i = 0; i < 4; ++i) stack.push_back({ch[i], ch[i], true, true});
-          continue;
-        }
-        const bool tubes = std::isfinite(P.rho) && std::isfinite(Q.rho);
-        if (tubes && separation_lower_bound(P.q, Q.q, slack) > P.rho + Q.rho) continue;
-        // One ball around both pieces.
-        const Vec3 c = 0.5 * (P.c + Q.c);
-        double R = 0;
-        for (int i = 0; i < 3; ++i) R = std::max({R, (P.p[i] - c).norm(), (Q.p[i] - c).norm()});
-        if (im.injective_ball(fm, delta, c, R * (1 + 1e-12), row)) continue;
-        if (tubes && !task.touching) {
-          const double m = P.rho + Q.rho;
-          Vec3 x;
-          bool found = false;
-          for (int e = 0; e < 3 && !found; ++e) {
-            found = robust_pierce(P.q[e], P.q[(e + 1) % 3], Q.q, m, slack, &x) ||
-                    robust_pierce(Q.q[e], Q.q[(e + 1) % 3], P.q, m, slack, &x);
-          }
-          if (found) {
-            res.outcome = kCrossing;
-            res.where = x;
-            long cur = first_crossing.load();
-            while (k < cur && !first_crossing.compare_exchange_weak(cur, k)) {
-            }
-            break;
-          }
-        }
-        const bool can_split = P.depth < params.max_depth || Q.depth < params.max_depth;
-        if (!can_split || res.tests >= params.max_tests_per_pair) {
+  }
+  void examine_pair(long k, Scratch& s) {
+    const int fa = pairs[k].first, fb = pairs[k].second;
+    PairResult& res = results[k];
+    std::array<int, 3> sv;
+    const int ffa = top[fa].face, ffb = top[fb].face;
+    int nshared = 3;
+    if (ffa == ffb)
+      for (int i = 0; i < 3; ++i) sv[i] = mesh.F(ffa, i);
+    else
+      nshared = shared_vertices(ffa, ffb, &sv);
+    if (fa != fb) {
+      bool star = false;
+      for (int i = 0; i < nshared; ++i) star = star || star_ok[sv[i]];
+      if (star) return;  // both triangles lie in the star ball of a shared vertex, where f is injective
+    }
+    std::vector<Task>& stack = s.stack;
+    stack.clear();
+    stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
+    while (!stack.empty()) {
+      if ((res.tests & 63) == 63 && (k > first_crossing.load(std::memory_order_relaxed) || cancelled()))
+        break;
+      const Task task = stack.back();
+      stack.pop_back();
+      const Piece &P = task.P, &Q = task.Q;
+      ++res.tests;
+      res.depth = std::max({res.depth, P.depth, Q.depth});
+      std::array<Piece, 4> ch;
+      if (task.self) {  // the piece's own points: one injectivity ball, or split
+        if (im.injective_ball(fm, delta, P.c, P.R, s.row)) continue;
+        if (P.depth >= params.max_depth || res.tests >= params.max_tests_per_pair) {
           res.outcome = kOpen;
-          res.where = 0.5 * (P.q[0] + Q.q[0]);
+          res.where = (P.q[0] + P.q[1] + P.q[2]) / 3.0;
           break;
         }
-        // Split the larger piece (one that may still be split).
-        const bool split_p = Q.depth >= params.max_depth || (P.depth < params.max_depth && P.diam >= Q.diam);
-        if (split_p) {
-          split(P, &ch);
-          for (int i = 3; i >= 0; --i) stack.push_back({ch[i], Q, false, task.touching});
-        } else {
-          split(Q, &ch);
-          for (int i = 3; i >= 0; --i) stack.push_back({P, ch[i], false, task.touching});
+        split(P, &ch, s);
+        for (int i = 0; i < 4; ++i)
+          for (int j = i + 1; j < 4; ++j) stack.push_back({ch[i], ch[j], false, true});
+        for (int i = 0; i < 4; ++i) stack.push_back({ch[i], ch[i], true, true});
+        continue;
+      }
+      const bool tubes = std::isfinite(P.rho) && std::isfinite(Q.rho);
+      if (tubes && separation_lower_bound(P.q, Q.q, slack) > P.rho + Q.rho) continue;
+      // One ball around both pieces.
+      const Vec3 c = 0.5 * (P.c + Q.c);
+      double R = 0;
+      for (int i = 0; i < 3; ++i) R = std::max({R, (P.p[i] - c).norm(), (Q.p[i] - c).norm()});
+      if (im.injective_ball(fm, delta, c, (R + reach) * (1 + 1e-12) + 1e-15 * c.cwiseAbs().maxCoeff(), s.row))
+        continue;
+      if (tubes && !task.touching) {
+        const double m = P.rho + Q.rho;
+        Vec3 x;
+        bool found = false;
+        for (int e = 0; e < 3 && !found; ++e) {
+          found = robust_pierce(P.q[e], P.q[(e + 1) % 3], Q.q, m, slack, &x) ||
+                  robust_pierce(Q.q[e], Q.q[(e + 1) % 3], P.q, m, slack, &x);
         }
+        if (found) {
+          res.outcome = kCrossing;
+          res.where = x;
+          long cur = first_crossing.load();
+          while (k < cur && !first_crossing.compare_exchange_weak(cur, k)) {
+          }
+          break;
+        }
+      }
+      const bool can_split = P.depth < params.max_depth || Q.depth < params.max_depth;
+      if (!can_split || res.tests >= params.max_tests_per_pair) {
+        res.outcome = kOpen;
+        res.where = 0.5 * (P.q[0] + Q.q[0]);
+        break;
+      }
+      // Split the larger piece (one that may still be split).
+      const bool split_p = Q.depth >= params.max_depth || (P.depth < params.max_depth && P.diam >= Q.diam);
+      if (split_p) {
+        split(P, &ch, s);
+        for (int i = 3; i >= 0; --i) stack.push_back({ch[i], Q, false, task.touching});
+      } else {
+        split(Q, &ch, s);
+        for (int i = 3; i >= 0; --i) stack.push_back({P, ch[i], false, task.touching});
       }
     }
   }
 
-  if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
-  // --- 5. Verdict.
-  // Over the pairs up to the first crossing (all of them when there is none): processed in full whatever the
-  // thread schedule, so these counts are deterministic.
-  for (size_t k = 0; k < results.size() && static_cast<long>(k) <= first_crossing.load(); ++k) {
-    out.pair_tests += results[k].tests;
-    out.max_depth_used = std::max(out.max_depth_used, results[k].depth);
-  }
-  auto where = [](const Vec3& p) {
-    return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
-  };
-  for (auto& pr : pairs) pr = {top[pr.first].face, top[pr.second].face};
-  // The verdict `v` named by pair k: its place and its two mesh triangles.
-  auto at_pair = [&](GlobalInjectivity::Verdict v, size_t k) {
-    out.verdict = v;
-    out.overlap_point = to_model(results[k].where);
-    out.overlap_face_a = pairs[k].first;
-    out.overlap_face_b = pairs[k].second;
-  };
-  for (size_t k = 0; k < results.size(); ++k)
-    if (results[k].outcome == kCrossing) {
-      at_pair(GlobalInjectivity::Verdict::kOverlap, k);
-      out.reason = "the shape overlaps itself near " + where(out.overlap_point) + " (mesh triangles " +
-                   std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) + ")";
-      return finish(out);
+  // --- 5. The verdict: the first overlap in pair order, else the first undecided pair, else — for a surface
+  // of several components — the nesting of their images, else injective.
+  GlobalInjectivity verdict() {
+    // Over the pairs up to the first crossing (all of them when there is none): processed in full whatever
+    // the thread schedule, so these counts are deterministic.
+    for (size_t k = 0; k < results.size() && static_cast<long>(k) <= first_crossing.load(); ++k) {
+      out.pair_tests += results[k].tests;
+      out.max_depth_used = std::max(out.max_depth_used, results[k].depth);
     }
-  if (!im.rest_problem.empty()) {  // no crossing proven, and "true" needs an embedded rest surface
-    out.verdict = GlobalInjectivity::Verdict::kNotDecided;
-    out.reason = im.rest_problem;
-    return finish(out);
-  }
-  for (size_t k = 0; k < results.size(); ++k)
-    if (results[k].outcome == kOpen) {
-      at_pair(GlobalInjectivity::Verdict::kNotDecided, k);
-      out.reason = pairs[k].first == pairs[k].second
-                       ? "could not prove the map injective on mesh triangle " +
-                             std::to_string(pairs[k].first) + " near " + where(to_model(results[k].where)) +
-                             " (depth " + std::to_string(params.max_depth) + ")"
-                       : "could not separate the images of mesh triangles " + std::to_string(pairs[k].first) +
-                             " and " + std::to_string(pairs[k].second) + " near " +
-                             where(to_model(results[k].where)) + " (depth " +
-                             std::to_string(params.max_depth) + ")";
-      return finish(out);
+    for (auto& pr : pairs) pr = {top[pr.first].face, top[pr.second].face};
+    // The verdict `v` named by pair k: its place and its two mesh triangles.
+    auto at_pair = [&](GlobalInjectivity::Verdict v, size_t k) {
+      out.verdict = v;
+      out.overlap_point = to_model(results[k].where);
+      out.overlap_face_a = pairs[k].first;
+      out.overlap_face_b = pairs[k].second;
+    };
+    for (size_t k = 0; k < results.size(); ++k)
+      if (results[k].outcome == kCrossing) {
+        at_pair(GlobalInjectivity::Verdict::kOverlap, k);
+        out.reason = "the shape overlaps itself near " + where(out.overlap_point) + " (mesh triangles " +
+                     std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) + ")";
+        return out;
+      }
+    if (!im.rest_problem.empty()) {  // no crossing proven, and "true" needs an embedded rest surface
+      out.verdict = GlobalInjectivity::Verdict::kNotDecided;
+      out.reason = im.rest_problem;
+      return out;
     }
-  if (im.component_faces.size() > 1) {  // f|S is injective: the nesting of the components' images decides
+    for (size_t k = 0; k < results.size(); ++k)
+      if (results[k].outcome == kOpen) {
+        at_pair(GlobalInjectivity::Verdict::kNotDecided, k);
+        out.reason = pairs[k].first == pairs[k].second
+                         ? "could not prove the map injective on mesh triangle " +
+                               std::to_string(pairs[k].first) + " near " + where(to_model(results[k].where)) +
+                               " (depth " + std::to_string(params.max_depth) + ")"
+                         : "could not separate the images of mesh triangles " +
+                               std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) +
+                               " near " + where(to_model(results[k].where)) + " (depth " +
+                               std::to_string(params.max_depth) + ")";
+        return out;
+      }
+    if (im.component_faces.size() > 1) return nesting_verdict();
+    out.verdict = GlobalInjectivity::Verdict::kInjective;
+    return out;
+  }
+
+  // --- 5b. f|S is injective and S has several components: the nesting of their images decides (Step G5).
+  GlobalInjectivity nesting_verdict() {
     if (!im.rest_nesting_problem.empty()) {
       out.reason = im.rest_nesting_problem;
-      return finish(out);
+      return out;
     }
     // Where the tubes of the mesh triangles are too wide or infinite (triangles near the cage), the image
     // surface is refined 1-to-4 (refine_image), at most kNestingDepth times.
@@ -866,7 +935,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     std::vector<std::vector<int>> comps = im.component_faces;
     std::vector<double> rho(nf);
     for (long f = 0; f < nf; ++f) rho[f] = pieces[f].rho;
-    Impl::Nesting n = im.nesting(W, F, comps, &rho, eps, slack);
+    Nesting n = im.nesting(W, F, comps, &rho, eps, slack);
     for (int depth = 1; depth <= kNestingDepth && !n.problem.empty() && !cancelled(); ++depth) {
       im.refine_image(y, P, W, F, comps);
       rho.assign(F.rows(), kInf);
@@ -877,15 +946,15 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
         for (long f = 0; f < F.rows(); ++f) {
           std::array<Vec3, 3> p, q;
           for (int k = 0; k < 3; ++k) p[k] = P.row(F(f, k)), q[k] = W.row(F(f, k));
-          rho[f] = make_piece(p, q, -1, depth, row).rho;
+          rho[f] = make_piece(p, q, -1, depth, kInf, row).rho;
         }
       }
       n = im.nesting(W, F, comps, &rho, eps, slack);
     }
-    if (cancelled()) return finish(global_injectivity_not_decided("cancelled"));
+    if (cancelled()) return global_injectivity_not_decided("cancelled");
     if (!n.problem.empty()) {
       out.reason = "the nesting of the surface components' images is not decided: " + n.problem;
-      return finish(out);
+      return out;
     }
     const int nc = static_cast<int>(im.component_faces.size());
     for (int i = 0; i < nc; ++i) {  // |degree| ≥ 2 beside f(S_i): proven not injective
@@ -898,18 +967,45 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
       out.reason = "the shape overlaps itself near " + where(out.overlap_point) + ": the image of " +
                    im.component_name(i) + " lies inside the image of " + im.component_name(n.encloser[i]) +
                    ", where the mapping degree (the number of preimages) is " + std::to_string(d);
-      return finish(out);
+      return out;
     }
     for (int i = 0; i < nc; ++i) {
       const int out_deg = n.outside[i], in_deg = n.outside[i] + n.sign[i];
       if (out_deg >= 0 && out_deg <= 1 && in_deg >= 0 && in_deg <= 1) continue;
       out.reason = "the image of " + im.component_name(i) + " has mapping degree " + std::to_string(out_deg) +
                    " and " + std::to_string(in_deg) + " on its two sides (turned inside out)";
-      return finish(out);
+      return out;
     }
+    out.verdict = GlobalInjectivity::Verdict::kInjective;
+    return out;
   }
-  out.verdict = GlobalInjectivity::Verdict::kInjective;
-  return finish(out);
+};
+
+GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
+                                                  const GlobalInjectivityParams& params) const {
+  const auto t_start = Clock::now();
+  const Impl& im = *impl_;
+  auto finish = [&](GlobalInjectivity g) {
+    g.ms = ms_since(t_start);
+    return g;
+  };
+  if (y_model.rows() != im.basis.size())
+    throw InputError("", "coefficients have " + std::to_string(y_model.rows()) +
+                             " rows, expected #V+#F = " + std::to_string(im.basis.size()));
+  if (!y_model.allFinite()) throw InputError("", "coefficients contain NaN or Inf");
+  if (params.max_depth < 0 || params.max_depth > kDepthCap - 2)
+    throw InputError("", "global injectivity: max_depth " + std::to_string(params.max_depth) +
+                             " is outside [0, " + std::to_string(kDepthCap - 2) + "]");
+  if (!im.structure_problem.empty()) return finish(global_injectivity_not_decided(im.structure_problem));
+  Impl::MapCheck m(im, y_model, params);
+  m.pieces_and_star_balls();
+  if (m.cancelled()) return finish(global_injectivity_not_decided("cancelled"));
+  const std::string too_close = m.top_pieces();
+  if (!too_close.empty()) return finish(global_injectivity_not_decided(too_close));
+  m.candidate_pairs();
+  m.examine_pairs();
+  if (m.cancelled()) return finish(global_injectivity_not_decided("cancelled"));
+  return finish(m.verdict());
 }
 
 GlobalInjectivity check_global_injectivity(const Cage& cage, const TriMesh& mesh, const MatX3d& y,

@@ -433,7 +433,7 @@ void DeformationSolver::set_initial_map(const MatX3d& y, const std::string& wher
                                 "'lidef deform' with the same reduced_dof is in it.");
   std::string why;
   if (!set_reduced_map(yr, &why))
-    throw InputError(where, "the initial map is not certified locally injective on this sampling (" + why +
+    throw InputError(where, "the initial map is not certified on this sampling (" + why +
                                 "); lidef deform only starts from certified maps");
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
@@ -449,6 +449,16 @@ bool DeformationSolver::set_reduced_map(const MatS3& y, std::string* reason) {
   if (!c.certified) {
     if (reason) *reason = c.reason;
     return false;
+  }
+  if (params_.injectivity == InjectivityMode::kGlobal) {  // every current map of global mode is proven so
+    const std::string problem = global_problem();
+    const GlobalInjectivity g = problem.empty() ? check_global(y) : global_injectivity_not_decided(problem);
+    if (g.verdict != GlobalInjectivity::Verdict::kInjective) {
+      if (reason) *reason = "not proven globally injective: " + g.reason;
+      return false;
+    }
+    global_y_ = y;
+    global_verdict_ = g;
   }
   y_ = y;
   kernels_->set_current(y_);

@@ -157,7 +157,7 @@ struct PyCertificate {
     py::gil_scoped_release release;
     CertificateReport report =
         make_certificate_report(cert, model->cage, model->mesh, y, model->dir, coefficients_name,
-                                sampling_params, *sampling, certify_params);
+                                sampling_params, *sampling, certify_params, global_verdict.get());
     StagedOutputs out(dir);
     out.path("voxels.csv");
     out.path("certificate.json");
@@ -209,6 +209,7 @@ struct PyDeformResult {
     c.sampling_params = result->sampling_params;
     c.certify_params = result->certify_params;
     c.coefficients_name = "coefficients.txt";
+    if (result->global) c.global_verdict = std::make_shared<const GlobalInjectivity>(*result->global);
     return c;
   }
   void write(const std::string& dir) const {

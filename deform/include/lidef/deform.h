@@ -9,12 +9,14 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "lidef/compute_backend.h"
 #include "lidef/continuation.h"
 #include "lidef/deform_params.h"
+#include "lidef/global_injectivity.h"
 #include "lidef/model_check.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/projected_newton.h"
@@ -44,10 +46,13 @@ struct DeformOptions {
 
 // The last certified map and what a user looks at. Model units throughout.
 struct DeformResult {
-  SolveResult solve;           // why the solve stopped (reason, message, seconds)
-  PathSolveReport path;        // strategies, stages, the unreachability check
-  MatX3d coefficients;         // #V+#F by 3: the map (coefficients.txt)
-  Certificate certificate;     // of `coefficients`, with leaves (certified: always, see deform())
+  SolveResult solve;        // why the solve stopped (reason, message, seconds)
+  PathSolveReport path;     // strategies, stages, the unreachability check
+  MatX3d coefficients;      // #V+#F by 3: the map (coefficients.txt)
+  Certificate certificate;  // of `coefficients`, with leaves (certified: always, see deform())
+  // The solver's global injectivity verdict of `coefficients` where it holds one (global mode; its `ms` set
+  // to 0: not computed again), else empty and the report computes it.
+  std::optional<GlobalInjectivity> global;
   MatX3d deformed_vertices;    // #Vm by 3: the mesh's vertices mapped
   VecXd e_iso, det_j, sigma3;  // #Vm each: E_iso − 6 (NaN where det J ≤ 0), det J, σ3 at the mesh vertices
   VecXd sigma1, distortion;    // #Vm each: σ1 and σ1/σ3 (NaN where σ3 ≤ 0) at the mesh vertices

@@ -188,8 +188,9 @@ class DeformationSolver {
   // clears the history.
   void set_initial_map(const MatX3d& y, const std::string& where);
   // Makes ỹ (s by 3, normalized frame, as reduced_coefficients()) the current map if the solver's certificate
-  // certifies it; otherwise returns false with the certificate's reason and keeps the map. Weights and
-  // history are kept (the continuation's local/global warm start, continuation.h).
+  // certifies it — in global injectivity mode also proven globally injective, as every accepted step is —
+  // otherwise returns false with the reason and keeps the map. Weights and history are kept (the
+  // continuation's local/global warm start, continuation.h).
   bool set_reduced_map(const MatS3& y, std::string* reason = nullptr);
 
   // Newton iterations until a stop criterion. `on_iteration` is called after every iteration; returning false
@@ -221,6 +222,11 @@ class DeformationSolver {
   // The global injectivity verdict of the current map (global_injectivity.h; model units), computed on
   // demand and kept until the map changes. Not decided without the mesh domain or without a surface.
   GlobalInjectivity global_injectivity() const;
+  // That verdict where the solver already holds it (global mode holds the one of each accepted map), else
+  // nullptr; never computes.
+  const GlobalInjectivity* held_global_injectivity() const {
+    return global_y_.rows() == y_.rows() && global_y_ == y_ ? &global_verdict_ : nullptr;
+  }
   // A full certificate of the current map with leaves (for reports), model units.
   Certificate certify_current(bool keep_leaves = true) const;
   EnergyTerms energy() const;  // at the current map, current weights (E_P2P on normalized distances)

@@ -73,12 +73,15 @@ GlobalInjectivity decide_global_injectivity(const Certificate& cert, const std::
 std::string global_injectivity_undecidable(const Certificate& cert, const std::string& domain,
                                            const TriMesh& mesh);
 
-// Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage).
+// Fills the provenance fields of a report (hashes, sizes, sampling as obtained, mesh coverage) and the global
+// injectivity verdict: `known_global` where the caller holds the verdict of this very map (the solver's, in
+// global mode), else computed (decide_global_injectivity).
 CertificateReport make_certificate_report(const Certificate& cert, const Cage& cage, const TriMesh& mesh,
                                           const MatX3d& y, const std::string& model,
                                           const std::string& coefficients,
                                           const SamplingParams& sampling_params,
-                                          const VoxelSampling& sampling, const CertifyParams& params);
+                                          const VoxelSampling& sampling, const CertifyParams& params,
+                                          const GlobalInjectivity* known_global = nullptr);
 
 // voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,
 // distortion_upper`, one row per leaf in leaf order (base-voxel order, children depth-first), certified =
