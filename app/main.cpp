@@ -2,8 +2,10 @@
 // exceptions to messages and exit codes (cli_main.h).
 #include "cli_main.h"
 #include "compare_forward.h"
+#include "lidef/blas_kernel.h"
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   using namespace lidef::cli;
   // `lidef compare ...` runs lidef-compare (the only program linking TetGen and CHOLMOD); see
   // compare_forward.h.

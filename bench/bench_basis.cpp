@@ -108,6 +108,7 @@ std::string target_macros() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   Options opt;
   opt.data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR);
   std::string models = "animal,bar";

@@ -95,7 +95,7 @@ LeafTightness measure(const EdgeJet& ej, const EdgeJet::MapData& md, const Vec3&
 }  // namespace
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   Options opt;
   opt.data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR);
   std::string models = "bar,spot,horse,animal";

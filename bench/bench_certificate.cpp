@@ -194,7 +194,7 @@ StreamTiming time_read_dispatch(int e1, size_t n1, int e2, size_t n2, int reps, 
 }  // namespace
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   Options opt;
   opt.data = bench::default_data_dir(LIDEF_SHARED_DATA_DIR);
   std::string models = "bar,animal";

@@ -44,6 +44,7 @@ std::string g(double x, int p = 3) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   std::string data = lidef::bench::default_data_dir(LIDEF_SHARED_DATA_DIR), cache = "/tmp/lidef-bench-cache";
   std::string only_list, methods;
   lidef::CompareOptions opt;

@@ -24,6 +24,7 @@
 #include <string>
 
 #include "bench_util.h"
+#include "lidef/blas_kernel.h"
 #include "lidef/deformation_energy.h"
 #include "lidef/errors.h"
 #include "lidef/model_check.h"
@@ -104,6 +105,7 @@ void systematic(const VecXd& q, const VecXd& v, int m, std::vector<int>& idx, Ve
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   std::string path, cache = "/tmp/lidef-bench-cache";
   CLI::App app{
       "bench_hessian_subset: the linear rate of Newton with each Hessian-subset estimate against the "

@@ -82,6 +82,7 @@ std::string stages_text(const Timing& t) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   std::string data;
   std::vector<std::string> models;
   DeformParams p;

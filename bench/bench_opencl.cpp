@@ -102,7 +102,7 @@ StageMeans means(const std::vector<IterationRecord>& h) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   std::string data_dir = bench::default_data_dir(LIDEF_SHARED_DATA_DIR), only,
               cache_dir = "/tmp/lidef-bench-cache";
   int iterations = 0, cap = 8, reps = 5, threads = 0;

@@ -119,6 +119,12 @@ std::vector<std::pair<std::string, std::string>> blas_environment() {
   return {{"OPENBLAS_CORETYPE", info.recommended}};
 }
 
+std::vector<std::pair<std::string, std::string>> process_environment() {
+  auto env = blas_environment();
+  env.emplace_back("GLIBC_TUNABLES", "glibc.malloc.hugetlb=1");
+  return env;
+}
+
 void reexec_with_environment(char** argv, const std::vector<std::pair<std::string, std::string>>& env) {
   bool changed = false;
   for (const auto& [name, value] : env) {

@@ -14,7 +14,7 @@
 #include "lidef/blas_kernel.h"
 
 int main(int argc, char** argv) {
-  lidef::reexec_with_environment(argv, lidef::blas_environment());  // OpenBLAS kernels: blas_kernel.h
+  lidef::reexec_with_environment(argv, lidef::process_environment());  // blas_kernel.h
   ::testing::InitGoogleTest(&argc, argv);
   for (int i = 1; i < argc; ++i)
     if (std::strcmp(argv[i], "--gtest_list_tests") == 0) return RUN_ALL_TESTS();  // no display needed

@@ -46,6 +46,15 @@ void fix_blas_kernel();
 // (fix_blas_kernel could not replace it) and the user did not set OPENBLAS_CORETYPE; else nothing.
 std::vector<std::pair<std::string, std::string>> blas_environment();
 
+// What every lidef program re-executes itself with (reexec_with_environment, first thing in main()):
+// blas_environment(), and GLIBC_TUNABLES=glibc.malloc.hugetlb=1 (unless the user set GLIBC_TUNABLES) so that
+// malloc backs its large blocks with transparent huge pages. Why: touching fresh memory costs one page fault
+// per 4 KiB, and on a virtual machine each is slow — reopening the animal from the cache (781 MB read into
+// new buffers) took 9.1–9.3 s, 0.9–1.4 s with the tunable (docs/benchmarks.md, "Opening a model"). It changes
+// where memory comes from, never a result. A library cannot set it for its host (glibc reads it at startup):
+// the Python module's users set it themselves.
+std::vector<std::pair<std::string, std::string>> process_environment();
+
 // Sets each variable of `env` that is not already set and, when one was set, re-executes /proc/self/exe with
 // `argv` (returns only when there was nothing to set, or when exec failed: the program then runs as it is).
 // Call first thing in main(), before any thread starts. For variables a library reads only when it is loaded
