@@ -101,6 +101,7 @@ struct GlobalInjectivityChecker::Impl {
   // The surface's connected components (numbered in the order of their first triangle) and their faces.
   std::vector<std::vector<int>> component_faces;
   double cage_diameter = 0;
+  double corner_unit = 0;  // kCornerRel · the largest coordinate magnitude of the mesh (Step G3)
 
   static TriMesh normalized(const MatX3d& V, const MatX3i& F, const Vec3& center, double scale) {
     TriMesh t;
@@ -118,6 +119,7 @@ struct GlobalInjectivityChecker::Impl {
         cage_grid(cage.V, cage.F, (cage.bbox_max - cage.bbox_min).norm() / 64.0),
         cage_winding(cage.V, cage.F) {
     cage_diameter = (cage.bbox_max - cage.bbox_min).norm();
+    if (mesh.V.rows() > 0) corner_unit = kCornerRel * mesh.V.cwiseAbs().maxCoeff() * (1 + 1e-9);
     vertex_faces.resize(mesh.V.rows());
     for (int f = 0; f < mesh.F.rows(); ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
@@ -531,8 +533,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   std::vector<char> star_ok;  // per mesh vertex: its star ball is an injectivity ball
   std::vector<char> face_ok;  // per mesh triangle: it lies in one injectivity ball
   std::vector<Piece> top;     // the top pieces (stage 2b)
-  std::vector<std::atomic<double>>
-      top_jb;  // per top piece of depth 0: jacobian_bound of its ball (NaN: not yet)
+  // Per top piece of depth 0: jacobian_bound of its ball (NaN: not yet).
+  std::vector<std::atomic<double>> top_jb;
   std::vector<std::pair<int, int>> pairs;  // pairs of top pieces (stage 3), then of mesh triangles (stage 5)
   std::vector<PairResult> results;         // per pair (stage 4)
   // The smallest index of a pair with a proven crossing so far: pairs after it cannot change the verdict
@@ -562,7 +564,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     // Σ|φ_v| of order one, y_t ψ_t with ψ_t at most of the order of the cage's size).
     eps = kValueRel * (yv + yt * im.cage_diameter) * 8;
     slack = kGeomRel * (fV.cwiseAbs().maxCoeff() + eps);
-    corner_unit = kCornerRel * mesh.V.cwiseAbs().maxCoeff() * (1 + 1e-9);
+    corner_unit = im.corner_unit;
     reach = 2 * corner_error(kDepthCap);
   }
 
