@@ -355,6 +355,50 @@ TEST(GlobalInjectivity, TwoBoxesAreInjectiveApartAndOverlapWhenOneIsMovedIntoOrI
   }
 }
 
+// Two tetrahedra touching at one shared vertex (a bow tie): every edge is used once in each direction, yet
+// the surface is not a manifold at that vertex, where Jordan–Brouwer (Step G1) fails: surfaces touching at a
+// point may be nested without any two triangles' images crossing. Nothing is decided, not even the identity;
+// the same tetrahedra moved apart (two components, Step G5) are decided.
+TEST(GlobalInjectivity, SurfacePinchedAtAVertexIsNotDecided) {
+  const Model ball = make_ball({1.0, 0.1, 3, 2});
+  const Vec3 a[3] = {Vec3(-0.6, 0.3, -0.2), Vec3(-0.6, -0.3, -0.2), Vec3(-0.6, 0.0, 0.35)};
+  auto tetrahedra = [&](bool share_apex) {
+    TriMesh t;
+    t.V.resize(share_apex ? 7 : 8, 3);
+    t.V.row(0) = Vec3::Zero().transpose();
+    const Vec3 shift = share_apex ? Vec3::Zero() : Vec3(0.05, 0, 0);
+    for (int k = 0; k < 3; ++k) {
+      t.V.row(1 + k) = a[k].transpose();
+      t.V.row(4 + k) = (shift - a[k]).transpose();  // the point reflection: the second one on the other side
+    }
+    const int apex_b = share_apex ? 0 : 7;
+    if (!share_apex) t.V.row(7) = shift.transpose();
+    t.F.resize(8, 3);
+    t.F << 0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2,  //
+        apex_b, 4, 5, apex_b, 5, 6, apex_b, 6, 4, 4, 6, 5;
+    // Orient each tetrahedron outward (positive volume).
+    for (int half = 0; half < 2; ++half) {
+      const Eigen::Index first = 4 * half;
+      TriMesh part;
+      part.V = t.V;
+      part.F = t.F.middleRows(first, 4);
+      if (signed_volume(part.V, part.F) < 0)
+        for (Eigen::Index f = first; f < first + 4; ++f) std::swap(t.F(f, 1), t.F(f, 2));
+    }
+    return t;
+  };
+  const TriMesh pinched = tetrahedra(true);
+  ASSERT_TRUE(find_self_intersections(pinched.V, pinched.F).empty());
+  const GlobalInjectivity g = check_global_injectivity(ball.cage, pinched, ball.cage.identity_coefficients());
+  EXPECT_EQ(g.verdict, Verdict::kNotDecided);
+  EXPECT_NE(g.reason.find("pinched at vertex 0 (its triangles there form 2 fans"), std::string::npos)
+      << g.reason;
+
+  const TriMesh apart = tetrahedra(false);
+  const GlobalInjectivity h = check_global_injectivity(ball.cage, apart, ball.cage.identity_coefficients());
+  EXPECT_EQ(h.verdict, Verdict::kInjective) << h.reason;
+}
+
 // The solver's mode (deform_params.h `injectivity`): a table row with its two names, local by default.
 TEST(GlobalInjectivityMode, IsAParameterWithTwoNamesAndLocalByDefault) {
   const ParamInfo* p = find_param("injectivity");

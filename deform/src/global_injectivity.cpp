@@ -152,8 +152,42 @@ struct GlobalInjectivityChecker::Impl {
     return out;
   }
 
-  // The degree argument needs ∂D to be one closed surface: every undirected edge used once in each
-  // direction, and the faces connected.
+  // Jordan–Brouwer needs a manifold: the triangles around every vertex must form one fan (joined through the
+  // edges at the vertex). Two sheets meeting only at a vertex are not one: two spheres touching at a point
+  // may be nested, winding number 2 inside the inner one, without any two triangles' images crossing (Step
+  // G1). Called after the edges are known to be manifold. Returns "" or why the argument does not apply.
+  std::string find_pinched_vertex() const {
+    std::vector<std::pair<int, int>> around;  // (other vertex of an edge at v, face)
+    std::vector<int> parent;
+    for (size_t v = 0; v < vertex_faces.size(); ++v) {
+      const std::vector<int>& faces = vertex_faces[v];
+      if (faces.size() < 2) continue;
+      around.clear();
+      for (size_t k = 0; k < faces.size(); ++k)
+        for (int c = 0; c < 3; ++c)
+          if (const int u = mesh.F(faces[k], c); u != static_cast<int>(v))
+            around.push_back({u, static_cast<int>(k)});
+      std::sort(around.begin(), around.end());
+      parent.resize(faces.size());
+      std::iota(parent.begin(), parent.end(), 0);
+      auto find = [&](int x) {
+        while (parent[x] != x) x = parent[x] = parent[parent[x]];
+        return x;
+      };
+      for (size_t i = 1; i < around.size(); ++i)  // faces sharing the edge (v, u) are neighbours in the fan
+        if (around[i].first == around[i - 1].first)
+          parent[find(around[i].second)] = find(around[i - 1].second);
+      int fans = 0;
+      for (size_t k = 0; k < faces.size(); ++k) fans += find(static_cast<int>(k)) == static_cast<int>(k);
+      if (fans > 1)
+        return "the mesh surface is pinched at vertex " + std::to_string(v) + " (its triangles there form " +
+               std::to_string(fans) + " fans that share only the vertex: not a manifold)";
+    }
+    return "";
+  }
+
+  // The degree argument needs ∂D to be closed surfaces: every undirected edge used once in each direction,
+  // and every vertex one fan; several components go to the nesting stage (Step G5).
   std::string check_structure() {
     const long nf = mesh.F.rows();
     if (nf == 0) return "the mesh has no triangles";
@@ -174,7 +208,9 @@ struct GlobalInjectivityChecker::Impl {
                " triangles or twice in one direction)";
       i = j;
     }
-    // Connected components of faces through shared vertices (union-find).
+    if (std::string pinched = find_pinched_vertex(); !pinched.empty()) return pinched;
+    // Connected components of faces through shared vertices (union-find; with every vertex a single fan these
+    // are the components through shared edges).
     std::vector<long> parent(nf);
     std::iota(parent.begin(), parent.end(), 0L);
     auto find = [&](long x) {
