@@ -50,7 +50,7 @@ std::vector<std::pair<std::string, std::string>> blas_environment();
 // blas_environment(), and GLIBC_TUNABLES=glibc.malloc.hugetlb=1 (unless the user set GLIBC_TUNABLES) so that
 // malloc backs its large blocks with transparent huge pages. Why: touching fresh memory costs one page fault
 // per 4 KiB, and on a virtual machine each is slow — reopening the animal from the cache (781 MB read into
-// new buffers) took 8.2–8.3 s, 0.7–1.9 s with the tunable (docs/benchmarks.md, "Opening a model"). It changes
+// new buffers) took several times as long without the tunable (docs/benchmarks.md, "Opening a model"). It changes
 // where memory comes from, never a result. A library cannot set it for its host (glibc reads it at startup):
 // the Python module's users set it themselves.
 std::vector<std::pair<std::string, std::string>> process_environment();
