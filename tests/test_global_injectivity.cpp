@@ -7,6 +7,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <numeric>
+#include <random>
 #include <sstream>
 
 #include "lidef/cage.h"
@@ -18,6 +19,7 @@
 #include "lidef/global_injectivity.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/internal/mesh_queries.h"
+#include "lidef/lipschitz_bound.h"
 #include "lidef/model_check.h"
 #include "lidef/procedural_models.h"
 #include "lidef/projected_newton.h"
@@ -397,6 +399,105 @@ TEST(GlobalInjectivity, SurfacePinchedAtAVertexIsNotDecided) {
   const TriMesh apart = tetrahedra(false);
   const GlobalInjectivity h = check_global_injectivity(ball.cage, apart, ball.cage.identity_coefficients());
   EXPECT_EQ(h.verdict, Verdict::kInjective) << h.reason;
+}
+
+// Step G3's tube: the linear interpolation error on a triangle is at most ½ max‖D²f‖ Σλ_i|x − v_i|², and
+// Σλ_i|x − v_i|² ≤ r² for r = triangle_enclosing_radius. For f(x) = ½|x|² (D²f = I) the error is exactly
+// ½ Σλ_i|x − v_i|², whose maximum over the triangle is ½ r_min² (r_min: the smallest enclosing ball's
+// radius): sampled, it stays below ½ r² and comes within 0.2% of it; r is r_min computed independently (half
+// the longest side of an obtuse triangle, abc / 4·area of an acute one), and below the diameter's bound.
+TEST(GlobalInjectivity, TriangleEnclosingRadiusBoundsTheInterpolationErrorAndIsTheSmallestBall) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<std::array<Vec3, 3>> tris = {
+      {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, std::sqrt(0.75), 0)},                          // equilateral
+      {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},                                          // right
+      {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, 0.05, 0)},                                     // obtuse, flat
+      {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1e-3, 1e-3, 0)},                                    // needle
+      {Vec3(1e3, 1e3, 1e3), Vec3(1e3 + 1e-2, 1e3, 1e3), Vec3(1e3, 1e3 + 1e-2, 1e3 + 1e-2)}};  // far away
+  for (int i = 0; i < 40; ++i)
+    tris.push_back(
+        {Vec3(u(rng), u(rng), u(rng)), Vec3(u(rng), u(rng), u(rng)), Vec3(u(rng), u(rng), u(rng))});
+  for (const auto& t : tris) {
+    const double r = triangle_enclosing_radius(t[0], t[1], t[2]);
+    const double a = (t[1] - t[2]).norm(), b = (t[2] - t[0]).norm(), c = (t[0] - t[1]).norm();
+    const double longest = std::max({a, b, c});
+    const double others2 = a * a + b * b + c * c - longest * longest;
+    const double area = 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).norm();
+    const double r_min = longest * longest >= others2 ? longest / 2 : a * b * c / (4 * area);
+    EXPECT_GE(r, r_min * (1 - 1e-9));
+    EXPECT_LE(r, r_min * (1 + 1e-9) + 1e-12 * t[0].cwiseAbs().maxCoeff());
+    EXPECT_LE(r * r, longest * longest / 3 * (1 + 1e-9));  // Jung: r_min ≤ diam / √3
+    double worst = 0;
+    constexpr int n = 400;
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; i + j <= n; ++j) {
+        const double l0 = double(i) / n, l1 = double(j) / n, l2 = 1 - l0 - l1;
+        const Vec3 x = l0 * t[0] + l1 * t[1] + l2 * t[2];
+        worst = std::max(worst, l0 * (x - t[0]).squaredNorm() + l1 * (x - t[1]).squaredNorm() +
+                                    l2 * (x - t[2]).squaredNorm());
+      }
+    EXPECT_LE(worst, r * r);
+    EXPECT_GE(worst, r * r * 0.998);
+  }
+}
+
+// Step G3 on a harmonic map: per mesh triangle, the distance of sampled points' images from the affine
+// triangle on the mapped corners never exceeds ρ = ½ L₁ r² + ε, L₁ = Σ_e ‖δ_e‖ Γ_e(B) over the triangle's
+// ball (recomputed here from the public factor rows), on a bend of spot that makes the tubes matter.
+TEST(GlobalInjectivity, TubeRadiiBoundTheSampledDistanceOfTriangleImagesFromTheirAffineTriangles) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("spot"));
+  const MatX3d y = bend_coefficients(m.cage, 1.5);
+  const HarmonicBasis basis(m.cage);
+  const HarmonicBasis::FaceMatrices fm = basis.face_matrices(y);
+  std::vector<Vec3> u, w;
+  for (const CageEdge& e : m.cage.edges) u.push_back(m.cage.V.row(e.v0)), w.push_back(m.cage.V.row(e.v1));
+  const EdgeArrays edges(u, w);
+  std::vector<double> delta(m.cage.edges.size());
+  for (size_t e = 0; e < delta.size(); ++e)
+    delta[e] = (fm.A[m.cage.edges[e].f0] - fm.A[m.cage.edges[e].f1]).norm();
+  const WindingNumber cage_winding(m.cage.V, m.cage.F);
+  const TriangleGrid cage_grid(m.cage.V, m.cage.F, 0.05);
+  constexpr int n = 6;  // barycentric grid per triangle
+  MatX3d P(m.mesh.F.rows() * (n + 1) * (n + 2) / 2, 3), B(P.rows(), 3);
+  for (Eigen::Index f = 0, k = 0; f < m.mesh.F.rows(); ++f)
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; i + j <= n; ++j, ++k) {
+        B.row(k) << double(i) / n, double(j) / n, 1 - double(i + j) / n;
+        P.row(k) = B(k, 0) * m.mesh.V.row(m.mesh.F(f, 0)) + B(k, 1) * m.mesh.V.row(m.mesh.F(f, 1)) +
+                   B(k, 2) * m.mesh.V.row(m.mesh.F(f, 2));
+      }
+  const MatX3d fP = basis.map_values(y, P), fV = basis.map_values(y, m.mesh.V);
+  std::vector<float> row(edges.size());
+  double worst_ratio = 0, worst_deviation = 0;
+  long tubes = 0;
+  for (Eigen::Index f = 0, k = 0; f < m.mesh.F.rows(); ++f) {
+    std::array<Vec3, 3> p, q;
+    for (int c = 0; c < 3; ++c) p[c] = m.mesh.V.row(m.mesh.F(f, c)), q[c] = fV.row(m.mesh.F(f, c));
+    const Vec3 center = (p[0] + p[1] + p[2]) / 3.0;
+    double R = 0;
+    for (const Vec3& v : p) R = std::max(R, (v - center).norm());
+    double deviation = 0;
+    for (int s = 0; s < (n + 1) * (n + 2) / 2; ++s, ++k) {
+      const Vec3 affine = B(k, 0) * q[0] + B(k, 1) * q[1] + B(k, 2) * q[2];
+      deviation = std::max(deviation, (Vec3(fP.row(k)) - affine).norm());
+    }
+    worst_deviation = std::max(worst_deviation, deviation);
+    const bool clear = !cage_grid.any_within(center, R) && std::abs(cage_winding.at(center) - 1) < 1e-6;
+    if (!clear || !factor_row(edges, false, center, R, row.data())) continue;
+    double L1 = 0;
+    for (size_t e = 0; e < delta.size(); ++e) L1 += delta[e] * row[e];
+    const double r = triangle_enclosing_radius(p[0], p[1], p[2]);
+    const double rho = 0.5 * L1 * r * r + 1e-12;
+    ++tubes;
+    worst_ratio = std::max(worst_ratio, deviation / rho);
+  }
+  EXPECT_GT(tubes, m.mesh.F.rows() / 2);
+  EXPECT_GT(worst_deviation, 1e-5);  // the map bends the triangles: the test measures something
+  EXPECT_LE(worst_ratio, 1.0);
+  std::cout << "tubes " << tubes << " of " << m.mesh.F.rows() << ", largest sampled deviation / radius "
+            << worst_ratio << ", largest deviation " << worst_deviation << "\n";
 }
 
 // The solver's mode (deform_params.h `injectivity`): a table row with its two names, local by default.

@@ -1,5 +1,9 @@
 #include "lidef/geometry.h"
 
+#include <algorithm>
+#include <array>
+#include <limits>
+
 namespace lidef {
 
 TriangleClosestPoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
@@ -46,6 +50,26 @@ double signed_volume(const MatX3d& V, const MatX3i& F) {
 
 double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   return (closest_point_on_triangle(p, a, b, c).point - p).squaredNorm();
+}
+
+double triangle_enclosing_radius(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const std::array<Vec3, 3> p{a, b, c};
+  std::array<Vec3, 5> o{(a + b + c) / 3.0, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a), Vec3::Zero()};
+  int count = 4;
+  const Vec3 u = b - a, w = c - a, n = u.cross(w);
+  if (const double n2 = n.squaredNorm(); n2 > 0) {  // circumcenter a + (|u|² w × n + |w|² n × u) / (2|n|²)
+    const Vec3 cc = a + (u.squaredNorm() * w.cross(n) + w.squaredNorm() * n.cross(u)) / (2 * n2);
+    if (cc.allFinite()) o[count++] = cc;
+  }
+  double magnitude = 0;
+  for (const Vec3& v : p) magnitude = std::max(magnitude, v.cwiseAbs().maxCoeff());
+  double best = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < count; ++k) {
+    double r = 0;
+    for (const Vec3& v : p) r = std::max(r, (v - o[k]).norm());
+    best = std::min(best, r + 1e-15 * std::max(magnitude, o[k].cwiseAbs().maxCoeff()));
+  }
+  return best * (1 + 1e-12);
 }
 
 }  // namespace lidef

@@ -19,6 +19,7 @@
 
 #include "lidef/errors.h"
 #include "lidef/exact_winding.h"
+#include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/internal/stopwatch.h"
@@ -54,6 +55,7 @@ struct Piece {
   std::array<Vec3, 3> p, q;
   Vec3 c = Vec3::Zero();
   double R = 0, diam = 0, L1 = kInf, rho = kInf;
+  double r_enc = 0;  // triangle_enclosing_radius of the corners
   double jb = kInf;  // depth > 0: an upper bound of ‖J‖₂ on a ball containing the piece (its ancestor's)
   int face = -1, depth = 0;
   int top = -1;  // the top piece it was split from (index into the check's top pieces; -1 before)
@@ -120,6 +122,7 @@ struct GlobalInjectivityChecker::Impl {
         cage_winding(cage.V, cage.F) {
     cage_diameter = (cage.bbox_max - cage.bbox_min).norm();
     if (mesh.V.rows() > 0) corner_unit = kCornerRel * mesh.V.cwiseAbs().maxCoeff() * (1 + 1e-9);
+    reach = 2 * (kDepthCap * corner_unit);
     vertex_faces.resize(mesh.V.rows());
     for (int f = 0; f < mesh.F.rows(); ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
@@ -133,6 +136,7 @@ struct GlobalInjectivityChecker::Impl {
                        " and " + std::to_string(rest_intersections[0].second) + ")";
       else if (component_faces.size() > 1)
         rest_nesting_problem = check_rest_nesting(m.V);
+      cache_map_independent_parts();
     }
   }
 
@@ -291,22 +295,99 @@ struct GlobalInjectivityChecker::Impl {
     return out;
   }
 
-  // L1 ≥ max over B(c, R) of the full Hessian tensor norm (docs/certificate.md Steps 1–3, first order):
-  // Σ_e ‖δ_e‖ Γ_e(B); +∞ when the ball is not clear of the cage.
-  double lipschitz(const VecXd& delta, const Vec3& c, double R, std::vector<float>& row) const {
-    if (!c.allFinite() || !(R >= 0)) return kInf;
-    if (cage_grid.any_within(c, R * (1 + 1e-9)) || std::abs(cage_winding.at(c) - 1.0) > 1e-6) return kInf;
-    row.resize(edges.size());
-    if (!factor_row(edges, false, c, R, row.data())) return kInf;
+  // The factors Γ_e(B) of every cage edge for the ball B(c, R) (factor_row, first order), or false when the
+  // ball is not clear of the cage (then no L1). They depend on the ball only, not on the map.
+  bool ball_factors(const Vec3& c, double R, float* row) const {
+    if (!c.allFinite() || !(R >= 0)) return false;
+    if (cage_grid.any_within(c, R * (1 + 1e-9)) || std::abs(cage_winding.at(c) - 1.0) > 1e-6) return false;
+    return factor_row(edges, false, c, R, row);
+  }
+  // L1 ≥ max over the ball of the full Hessian tensor norm (docs/certificate.md Steps 1–3, first order):
+  // Σ_e ‖δ_e‖ Γ_e(B) for the ball's factors `row`.
+  double lipschitz_from(const VecXd& delta, const float* row) const {
     double L = 0;
     for (long e = 0; e < edges.size(); ++e) L += delta(e) * static_cast<double>(row[e]);
     return L * (1 + kRoundingRel);
+  }
+  // L1 of B(c, R); +∞ when the ball is not clear of the cage.
+  double lipschitz(const VecXd& delta, const Vec3& c, double R, std::vector<float>& row) const {
+    row.resize(edges.size());
+    return ball_factors(c, R, row.data()) ? lipschitz_from(delta, row.data()) : kInf;
+  }
+
+  // The ball of a mesh triangle's piece (its centroid, through its farthest corner, widened by `reach`) and
+  // the star ball of a mesh vertex (through the farthest corner of its triangles): the same in every check.
+  double reach = 0;  // 2 · the corner error of kDepthCap levels (Step G3)
+  void piece_ball(const std::array<Vec3, 3>& p, Vec3* c, double* R) const {
+    *c = (p[0] + p[1] + p[2]) / 3.0;
+    *R = 0;
+    for (const Vec3& v : p) *R = std::max(*R, (v - *c).norm());
+    *R = (*R + reach) * (1 + 1e-12) + 1e-15 * c->cwiseAbs().maxCoeff();
+  }
+  std::array<Vec3, 3> triangle(long f) const {
+    return {mesh.V.row(mesh.F(f, 0)).transpose(), mesh.V.row(mesh.F(f, 1)).transpose(),
+            mesh.V.row(mesh.F(f, 2)).transpose()};
+  }
+  void star_ball(long v, Vec3* c, double* R) const {
+    *c = mesh.V.row(v);
+    *R = 0;
+    for (int f : vertex_faces[v])
+      for (int k = 0; k < 3; ++k) *R = std::max(*R, (Vec3(mesh.V.row(mesh.F(f, k))) - *c).norm());
+    *R = (*R + reach) * (1 + 1e-12);
+  }
+
+  // What every check needs and no map changes, kept where it fits in kMaxCachedEntries numbers each: the
+  // basis values at the mesh vertices (f at the vertices is then one product per check), and the factor rows
+  // of the mesh triangles' balls and of the star balls (L1 is then one dot product with the map's ‖δ_e‖).
+  static constexpr double kMaxCachedEntries = 8e6;
+  MatXdR vertex_values;                        // #V by #V+#F of the cage, or empty
+  std::vector<float> face_rows, star_rows;     // #F by #E and #V by #E (cage edges), or empty
+  std::vector<char> face_row_ok, star_row_ok;  // the ball is clear of the cage
+  void cache_map_independent_parts() {
+    const long nv = mesh.V.rows(), nf = mesh.F.rows(), ne = edges.size();
+    if (static_cast<double>(nv) * basis.size() <= kMaxCachedEntries)
+      basis.evaluate_rows(mesh.V, true, false, false, vertex_values);
+    if (static_cast<double>(nv + nf) * static_cast<double>(ne) > 2 * kMaxCachedEntries) return;
+    face_rows.resize(nf * ne), star_rows.resize(nv * ne);
+    face_row_ok.assign(nf, 0), star_row_ok.assign(nv, 0);
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long f = 0; f < nf; ++f) {
+      Vec3 c;
+      double R;
+      piece_ball(triangle(f), &c, &R);
+      face_row_ok[f] = ball_factors(c, R, &face_rows[f * ne]);
+    }
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long v = 0; v < nv; ++v) {
+      Vec3 c;
+      double R;
+      star_ball(v, &c, &R);
+      star_row_ok[v] = ball_factors(c, R, &star_rows[v * ne]);
+    }
+  }
+  // f at the mesh vertices (#V by 3) for coefficients y: from the kept basis values where there are.
+  MatX3d mapped_vertices(const MatX3d& y) const {
+    if (vertex_values.rows() != mesh.V.rows()) return basis.map_values(y, mesh.V);
+    MatX3d out(mesh.V.rows(), 3);
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < out.rows(); ++i) out.row(i) = vertex_values.row(i) * y;
+    return out;
+  }
+  // L1 of mesh triangle i's ball (star: of vertex i's star ball) from the cache; NaN where not cached.
+  double cached_lipschitz(const VecXd& delta, bool star, long i) const {
+    const std::vector<float>& rows = star ? star_rows : face_rows;
+    if (rows.empty()) return std::numeric_limits<double>::quiet_NaN();
+    if (!(star ? star_row_ok : face_row_ok)[i]) return kInf;
+    return lipschitz_from(delta, &rows[i * edges.size()]);
   }
 
   // Is f injective on B(c, R)? ‖J(z) − J(c)‖₂ ≤ R L1 < σ3(J(c)) − rounding (docs/certificate.md).
   bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const VecXd& delta, const Vec3& c, double R,
                       std::vector<float>& row) const {
-    const double L = lipschitz(delta, c, R, row);
+    return injective_ball(fm, c, R, lipschitz(delta, c, R, row));
+  }
+  // The same for a ball whose L1 is known (+∞: not clear of the cage).
+  bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const Vec3& c, double R, double L) const {
     if (!std::isfinite(L)) return false;
     double sJ = 0;
     const MapJet jet = basis.differential_jet(fm, c, 1, &sJ);
@@ -569,14 +650,20 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   std::vector<char> star_ok;  // per mesh vertex: its star ball is an injectivity ball
   std::vector<char> face_ok;  // per mesh triangle: it lies in one injectivity ball
   std::vector<Piece> top;     // the top pieces (stage 2b)
-  // Per top piece of depth 0: jacobian_bound of its ball (NaN: not yet).
-  std::vector<std::atomic<double>> top_jb;
+  // Per top piece: its 1-to-4 split, made once by whichever thread needs it first (a top piece is split in
+  // many of its pairs, always into the same children) — null until then.
+  using Children = std::array<Piece, 4>;
+  std::vector<std::atomic<Children*>> top_children;
   std::vector<std::pair<int, int>> pairs;  // pairs of top pieces (stage 3), then of mesh triangles (stage 5)
   std::vector<PairResult> results;         // per pair (stage 4)
   // The smallest index of a pair with a proven crossing so far: pairs after it cannot change the verdict
   // (the first crossing in pair order), so they are skipped — the verdict stays independent of the threads.
   std::atomic<long> first_crossing{std::numeric_limits<long>::max()};
   GlobalInjectivity out;
+
+  ~MapCheck() {
+    for (auto& c : top_children) delete c.load();
+  }
 
   // --- 1. Map constants.
   MapCheck(const Impl& impl, const MatX3d& y_model, const GlobalInjectivityParams& p)
@@ -593,7 +680,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       delta(e) = (fm.A[ce.f0] - fm.A[ce.f1]).norm() * (1 + kRoundingRel) +
                  kRoundingRel * (fm.A_abs[ce.f0] + fm.A_abs[ce.f1]);
     }
-    fV = im.basis.map_values(y, mesh.V);
+    fV = im.mapped_vertices(y);
     const double yv = y.topRows(ncv).cwiseAbs().maxCoeff();
     const double yt = y.bottomRows(y.rows() - ncv).cwiseAbs().maxCoeff();
     // ε: the evaluation error of a mapped point, relative to the coefficients' contributions (y_v φ_v with
@@ -601,7 +688,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     eps = kValueRel * (yv + yt * im.cage_diameter) * 8;
     slack = kGeomRel * (fV.cwiseAbs().maxCoeff() + eps);
     corner_unit = im.corner_unit;
-    reach = 2 * corner_error(kDepthCap);
+    reach = im.reach;
   }
 
   bool cancelled() const { return params.cancel && params.cancel->load(std::memory_order_relaxed); }
@@ -619,42 +706,45 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   }
   // jb: for depth > 0 a bound of ‖J‖ on a ball containing the piece (its parent's), else +∞ (then the
   // piece's own ball gives one).
+  // known_L1: the L1 of the piece's ball where the caller has it (NaN: computed here).
   Piece make_piece(const std::array<Vec3, 3>& p, const std::array<Vec3, 3>& q, int face, int depth, double jb,
-                   std::vector<float>& row) const {
+                   std::vector<float>& row,
+                   double known_L1 = std::numeric_limits<double>::quiet_NaN()) const {
     Piece P;
     P.p = p, P.q = q, P.face = face, P.depth = depth;
-    P.c = (p[0] + p[1] + p[2]) / 3.0;
-    P.R = 0;
-    for (const Vec3& v : p) P.R = std::max(P.R, (v - P.c).norm());
-    P.R = (P.R + reach) * (1 + 1e-12) + 1e-15 * P.c.cwiseAbs().maxCoeff();
+    im.piece_ball(p, &P.c, &P.R);
     P.diam = tri_diameter(p);
-    P.L1 = im.lipschitz(delta, P.c, P.R, row);
+    P.r_enc = triangle_enclosing_radius(p[0], p[1], p[2]);
+    P.L1 = std::isnan(known_L1) ? im.lipschitz(delta, P.c, P.R, row) : known_L1;
     if (depth > 0 && !std::isfinite(jb)) jb = jacobian_bound(P.c, P.R, P.L1);
     P.jb = depth > 0 ? jb : kInf;
     const double moved = depth > 0 ? P.jb * corner_error(depth) : 0.0;
     P.rho = std::isfinite(P.L1) && std::isfinite(moved)
-                ? (0.5 * P.L1 * P.diam * P.diam + moved) * (1 + 1e-9) + eps
+                ? (0.5 * P.L1 * P.r_enc * P.r_enc + moved) * (1 + 1e-9) + eps
                 : kInf;
     return P;
   }
   // A piece split 1-to-4 at its edges' midpoints (their images evaluated): the corners' pieces, then the
   // middle one; the children keep the parent's bound of ‖J‖ (its ball contains them).
   void split(const Piece& P, std::array<Piece, 4>* ch, Scratch& s) {
+    if (P.depth > 0 || P.top < 0) return split_now(P, ch, s);
+    std::atomic<Children*>& slot = top_children[P.top];
+    if (const Children* done = slot.load(std::memory_order_acquire)) {
+      *ch = *done;
+      return;
+    }
+    split_now(P, ch, s);  // two threads may both get here: they make the same children, one is kept
+    auto* made = new Children(*ch);
+    Children* expected = nullptr;
+    if (!slot.compare_exchange_strong(expected, made, std::memory_order_acq_rel)) delete made;
+  }
+  void split_now(const Piece& P, std::array<Piece, 4>* ch, Scratch& s) const {
     std::array<Vec3, 3> mp, mq;
     for (int k = 0; k < 3; ++k) {
       mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
       mq[k] = im.eval_f(y, mp[k], s.buf);
     }
-    double jb = P.jb;
-    if (P.depth == 0) {
-      if (P.top >= 0) {  // each thread computes the same value
-        jb = top_jb[P.top].load(std::memory_order_relaxed);
-        if (std::isnan(jb))
-          top_jb[P.top].store(jb = jacobian_bound(P.c, P.R, P.L1), std::memory_order_relaxed);
-      } else {
-        jb = jacobian_bound(P.c, P.R, P.L1);
-      }
-    }
+    const double jb = P.depth == 0 ? jacobian_bound(P.c, P.R, P.L1) : P.jb;
     const int f = P.face, d = P.depth + 1;
     (*ch)[0] = make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, f, d, jb, s.row);
     (*ch)[1] = make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, f, d, jb, s.row);
@@ -674,31 +764,27 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
 #pragma omp for schedule(dynamic, 256)
       for (long f = 0; f < nf; ++f) {
         if (cancelled()) continue;  // the result is dropped by the caller
-        std::array<Vec3, 3> p, q;
-        for (int k = 0; k < 3; ++k) p[k] = mesh.V.row(mesh.F(f, k)), q[k] = fV.row(mesh.F(f, k));
-        pieces[f] = make_piece(p, q, static_cast<int>(f), 0, kInf, row);
+        std::array<Vec3, 3> q;
+        for (int k = 0; k < 3; ++k) q[k] = fV.row(mesh.F(f, k));
+        pieces[f] = make_piece(im.triangle(f), q, static_cast<int>(f), 0, kInf, row,
+                               im.cached_lipschitz(delta, false, f));
       }
 #pragma omp for schedule(dynamic, 256)
       for (long v = 0; v < nv; ++v) {
         if (cancelled()) continue;
-        const Vec3 c = mesh.V.row(v);
-        double R = 0;
-        for (int f : im.vertex_faces[v])
-          for (int k = 0; k < 3; ++k) R = std::max(R, (Vec3(mesh.V.row(mesh.F(f, k))) - c).norm());
-        R = (R + reach) * (1 + 1e-12);
-        star_ok[v] = im.injective_ball(fm, delta, c, R, row);
+        Vec3 c;
+        double R;
+        im.star_ball(v, &c, &R);
+        const double L = im.cached_lipschitz(delta, true, v);
+        star_ok[v] = std::isnan(L) ? im.injective_ball(fm, delta, c, R, row) : im.injective_ball(fm, c, R, L);
       }
     }
     if (cancelled()) return;
     face_ok.assign(nf, 0);
-#pragma omp parallel
-    {
-      std::vector<float> row;
-#pragma omp for schedule(dynamic, 256)
-      for (long f = 0; f < nf; ++f)
-        face_ok[f] = star_ok[mesh.F(f, 0)] || star_ok[mesh.F(f, 1)] || star_ok[mesh.F(f, 2)] ||
-                     im.injective_ball(fm, delta, pieces[f].c, pieces[f].R, row);
-    }
+#pragma omp parallel for schedule(dynamic, 256)
+    for (long f = 0; f < nf; ++f)  // the triangle's own ball: the piece's, whose L1 is known
+      face_ok[f] = star_ok[mesh.F(f, 0)] || star_ok[mesh.F(f, 1)] || star_ok[mesh.F(f, 2)] ||
+                   im.injective_ball(fm, pieces[f].c, pieces[f].R, pieces[f].L1);
     double max_rho = 0;
     for (const Piece& P : pieces)
       if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
@@ -737,10 +823,10 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       }
     }
     const long nt = static_cast<long>(top.size());
-    top_jb = std::vector<std::atomic<double>>(nt);
+    top_children = std::vector<std::atomic<Children*>>(nt);
     for (long i = 0; i < nt; ++i) {
       top[i].top = static_cast<int>(i);
-      top_jb[i].store(std::numeric_limits<double>::quiet_NaN(), std::memory_order_relaxed);
+      top_children[i].store(nullptr, std::memory_order_relaxed);
     }
     return "";
   }
@@ -762,36 +848,25 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     mean_extent /= static_cast<double>(nt);
     const double span = std::max((hi - lo).maxCoeff(), 1e-300);
     const double cell = std::max(mean_extent, span / 256.0);
+    // The cell of a coordinate, clamped to the grid's margin (monotone in x: a box's cells are those of its
+    // clamped corners, and a point of a box lies in one of them).
+    auto cell_of = [&](double x, int k) {
+      return static_cast<long>(
+          std::floor((std::min(std::max(x, lo(k) - cell), hi(k) + cell) - lo(k)) / cell));
+    };
+    auto key = [](long i, long j, long k) { return ((i + 2) * 1048576L + (j + 2)) * 1048576L + (k + 2); };
     std::vector<std::pair<long, int>> entries;
     for (long f = 0; f < nt; ++f) {
       std::array<long, 3> a, b;
-      for (int k = 0; k < 3; ++k) {
-        a[k] = static_cast<long>(std::floor((std::max(blo[f](k), lo(k) - cell) - lo(k)) / cell));
-        b[k] = static_cast<long>(std::floor((std::min(bhi[f](k), hi(k) + cell) - lo(k)) / cell));
-      }
+      for (int k = 0; k < 3; ++k) a[k] = cell_of(blo[f](k), k), b[k] = cell_of(bhi[f](k), k);
       for (long i = a[0]; i <= b[0]; ++i)
         for (long j = a[1]; j <= b[1]; ++j)
-          for (long k = a[2]; k <= b[2]; ++k)
-            entries.emplace_back(((i + 2) * 1048576L + (j + 2)) * 1048576L + (k + 2), static_cast<int>(f));
+          for (long k = a[2]; k <= b[2]; ++k) entries.emplace_back(key(i, j, k), static_cast<int>(f));
     }
     std::sort(entries.begin(), entries.end());
-    for (size_t i = 0; i < entries.size();) {
-      size_t j = i;
-      while (j < entries.size() && entries[j].first == entries[i].first) ++j;
-      for (size_t a = i; a < j; ++a)
-        for (size_t b = a + 1; b < j; ++b) {
-          const int fa = entries[a].second, fb = entries[b].second;
-          if (((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all())
-            pairs.emplace_back(std::min(fa, fb), std::max(fa, fb));
-        }
-      i = j;
-    }
-    std::sort(pairs.begin(), pairs.end());
-    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-    out.candidate_pairs = static_cast<long>(pairs.size());
     // Pairs of two triangles in the star ball of a common vertex where f is injective are cleared (step 4's
-    // first test); dropping them here keeps the order of the others, so the verdict and the counts are those
-    // of examining them, without the memory of millions of cleared pairs (a tight cage's wide tubes).
+    // first test); they are counted and not kept: the verdict and the counts are those of examining them,
+    // without the memory of millions of cleared pairs (a tight cage's wide tubes).
     auto in_common_star = [&](int a, int b) {
       const int fa = top[a].face, fb = top[b].face;
       if (fa == fb) return false;
@@ -800,10 +875,26 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
           if (mesh.F(fa, i) == mesh.F(fb, j) && star_ok[mesh.F(fa, i)]) return true;
       return false;
     };
-    pairs.erase(
-        std::remove_if(pairs.begin(), pairs.end(),
-                       [&](const std::pair<int, int>& pr) { return in_common_star(pr.first, pr.second); }),
-        pairs.end());
+    // Two overlapping boxes share the cells of the corner max(lo_a, lo_b) of their intersection: the pair is
+    // taken there only, once.
+    long candidates = 0;
+    for (size_t i = 0; i < entries.size();) {
+      size_t j = i;
+      while (j < entries.size() && entries[j].first == entries[i].first) ++j;
+      for (size_t a = i; a < j; ++a)
+        for (size_t b = a + 1; b < j; ++b) {
+          const int fa = entries[a].second, fb = entries[b].second;
+          if (!((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all()) continue;
+          const Vec3 corner = blo[fa].cwiseMax(blo[fb]);
+          if (key(cell_of(corner(0), 0), cell_of(corner(1), 1), cell_of(corner(2), 2)) != entries[i].first)
+            continue;
+          ++candidates;
+          if (!in_common_star(fa, fb)) pairs.emplace_back(std::min(fa, fb), std::max(fa, fb));
+        }
+      i = j;
+    }
+    std::sort(pairs.begin(), pairs.end());
+    out.candidate_pairs = candidates;
     // A triangle not covered by one injectivity ball is a work item of its own (split until its pieces are).
     for (long i = 0; i < nt; ++i)
       if (!face_ok[top[i].face]) pairs.emplace_back(static_cast<int>(i), static_cast<int>(i));

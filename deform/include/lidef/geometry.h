@@ -58,4 +58,12 @@ double signed_volume(const MatX3d& V, const MatX3i& F);
 // Squared distance from p to the closed triangle (a,b,c).
 double point_triangle_dist2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
+// An upper bound of max(|a − o|, |b − o|, |c − o|) for a point o, made as small as the candidates allow: the
+// centroid, the edge midpoints (the smallest enclosing ball of an obtuse or right triangle) and the
+// circumcenter (of an acute one), so at most the radius of the smallest enclosing ball plus rounding. Any o
+// bounds the linear interpolation error, Σ λ_i |x − v_i|² ≤ max_i |v_i − o|² (docs/certificate.md, Step
+// G3), so o needs no exactness: only the distances are rounded up (relative 1e-12 and 1e-15 of the largest
+// coordinate).
+double triangle_enclosing_radius(const Vec3& a, const Vec3& b, const Vec3& c);
+
 }  // namespace lidef
