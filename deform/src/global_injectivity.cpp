@@ -336,9 +336,10 @@ struct GlobalInjectivityChecker::Impl {
     *R = (*R + reach) * (1 + 1e-12);
   }
 
-  // What every check needs and no map changes, kept where it fits in kMaxCachedEntries numbers each: the
-  // basis values at the mesh vertices (f at the vertices is then one product per check), and the factor rows
-  // of the mesh triangles' balls and of the star balls (L1 is then one dot product with the map's ‖δ_e‖).
+  // What every check needs and no map changes, kept where it fits: the basis values at the mesh vertices
+  // (at most kMaxCachedEntries doubles; f at the vertices is then one product per check), and the factor rows
+  // of the mesh triangles' balls and of the star balls (at most 2 kMaxCachedEntries floats together; L1 is
+  // then one dot product with the map's ‖δ_e‖): 64 MB each at most.
   static constexpr double kMaxCachedEntries = 8e6;
   MatXdR vertex_values;                        // #V by #V+#F of the cage, or empty
   std::vector<float> face_rows, star_rows;     // #F by #E and #V by #E (cage edges), or empty
