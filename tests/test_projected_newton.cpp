@@ -468,6 +468,45 @@ TEST(ProjectedNewton, ConvergedAtAdjustedWeightsSaysSo) {
   }
 }
 
+// The line search stops halving once t‖δ‖ ≤ step_tolerance · max(1, ‖ỹ‖): a shorter step would end the solve
+// anyway (converged, or blocked when a trial was refused). A distortion target just above 1 refuses every
+// long step of beam_bend's first direction; with a step tolerance of 0.05 the trials stop while still long
+// (no step, the map unchanged), without one the halving goes on until a short step is certified.
+TEST(ProjectedNewton, LineSearchStopsAtTheStepTolerance) {
+  auto first_iteration = [](double step_tolerance) {
+    DeformParams p = fast_params();
+    p.dynamic_weighting = false;
+    p.max_distortion = 1.001;
+    p.step_tolerance = step_tolerance;
+    p.max_iterations = 1;
+    auto s = make_solver(p);
+    s->set_handles(beam().sources, beam().targets);
+    const MatS3 y0 = s->reduced_coefficients();
+    const IterationRecord rec = s->step();
+    std::printf(
+        "step_tolerance %g: accepted %d, t %g, |t delta| %.3e, %d certificate and %d energy rejections\n",
+        step_tolerance, rec.accepted ? 1 : 0, rec.step, rec.step_norm, rec.certificate_rejections,
+        rec.armijo_rejections);
+    return std::make_tuple(rec, bitwise_equal(y0, s->reduced_coefficients()),
+                           p.step_tolerance * std::max(1.0, y0.norm()));
+  };
+  const auto [cut, unchanged, shortest] = first_iteration(0.05);
+  EXPECT_FALSE(cut.accepted);
+  EXPECT_TRUE(unchanged);
+  EXPECT_GE(cut.certificate_rejections, 1);
+  const int trials = cut.certificate_rejections + cut.armijo_rejections;
+  EXPECT_LT(trials, fast_params().max_halvings + 1);
+
+  const auto [full, moved, unused] = first_iteration(0);
+  (void)unused;
+  ASSERT_TRUE(full.accepted) << "the target must allow a short step, else the first run proves nothing";
+  EXPECT_FALSE(moved);
+  // The same direction and trials up to the cut: the certified step is one the cut skipped, after the same
+  // refusals and more.
+  EXPECT_LE(full.step_norm, shortest);
+  EXPECT_GT(full.certificate_rejections + full.armijo_rejections, trials);
+}
+
 // Dragging (set_dragging, DeformParams::drag_hessian_reuse): the first step after new targets may solve with
 // the previous step's Hessian factor. The targets move along the beam_bend path in 12 increments, one step
 // each, as the studio's engine does; every accepted map must be certified by an independent full-space

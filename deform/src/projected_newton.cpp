@@ -686,12 +686,21 @@ DeformationSolver::LineSearchEnd DeformationSolver::certified_line_search(const 
   const auto t0 = Clock::now();
   const double slope = d.gvec.dot(d.dvec);  // < 0 for a descent direction
   LineSearchEnd end = LineSearchEnd::kExhausted;
+  // A step t‖δ‖ ≤ step_tolerance · max(1, ‖ỹ + tδ‖) would end the solve anyway (converged, or blocked when
+  // a trial was refused: docs/solver.md, "Stop"; ‖ỹ + tδ‖ ≥ ‖ỹ‖ − t‖δ‖), so such trials are not tried: a map
+  // held at the boundary of the certified region (a fold, the distortion bound, the shape touching itself)
+  // stops halving after ~20 trials instead of max_halvings.
+  const double ynorm = y_.norm(), dnorm = d.dvec.norm();
+  auto too_short = [&](double t) {
+    return t * dnorm <= params_.step_tolerance * std::max(1.0, ynorm - t * dnorm);
+  };
   double t = 1;
   for (int trial = 0; trial <= params_.max_halvings; ++trial, t *= 0.5) {
     if (stop_requested(stop)) {
       end = LineSearchEnd::kInterrupted;
       break;
     }
+    if (trial > 0 && too_short(t)) break;
     const MatS3 yt = y_ + t * delta;
     const EnergyTerms et = energy_->terms(kernels_->distortion_sum(t), yt, weights_);
     if (!(et.total <= d.e0.total + params_.armijo * t * slope)) {
