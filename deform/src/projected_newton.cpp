@@ -2,6 +2,7 @@
 
 #include <omp.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/internal/distortion_screen.h"
 #include "lidef/internal/enum_names.h"
 #include "lidef/internal/newton_cg.h"
 #include "lidef/internal/stopwatch.h"
@@ -57,6 +59,10 @@ void check_finite(const MatX3d& P, const std::string& where, const char* what) {
         throw InputError(where, "handle " + std::to_string(i + 1) + ": " + what + "[" + std::to_string(c) +
                                     "] is not a finite number");
 }
+
+// Points kept for the distortion probes: the failing leaves of about two refused trials
+// (CertifyParams::max_failing_reported each); each costs one exact evaluation per trial.
+constexpr size_t kMaxDistortionProbes = 40;
 
 }  // namespace
 
@@ -737,6 +743,7 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
   cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
   cp.distortion_probes = distortion_probes_;
+  screen_distortion(t, cp.distortion_probes);
   if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
     cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
     cp.previous_lower = &perturb_lower_;
@@ -754,9 +761,14 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
     line_search_failed_ = c.failed_voxels;
     // The last rejection by the distortion bound, named in the model's frame (the stop message says it).
     distortion_rejection_ = c.distortion_failed ? frame_.from_normalized(Certificate(c)).reason : "";
-    if (c.distortion_failed) {  // the next trials look there first
-      distortion_probes_.clear();
-      for (const CertLeaf& l : c.failing) distortion_probes_.push_back(l.center);
+    if (c.distortion_failed) {  // the next trials look there first, then where earlier trials failed
+      std::vector<Vec3> probes;
+      for (const CertLeaf& l : c.failing) probes.push_back(l.center);
+      for (const Vec3& q : distortion_probes_)
+        if (probes.size() < kMaxDistortionProbes &&
+            std::find(probes.begin(), probes.end(), q) == probes.end())
+          probes.push_back(q);
+      distortion_probes_ = std::move(probes);
     }
   }
   rec.ms_certificate += ms_since(tc);
@@ -765,6 +777,22 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
                  et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
                  ms_since(tc));
   return c;
+}
+
+// With a distortion target, the trial's sample of largest σ1/σ3 (from the kernels' Jacobians, which the
+// energy has just used) becomes the first probe when it seems above the target: the certifier evaluates it
+// exactly and refuses the trial at once if σ1/σ3 > K is proven there (docs/certificate.md, "Probes"), instead
+// of refining leaves toward a bound no certificate can reach. Only a proof refuses, so the verdict is the
+// certificate's. CPU kernels only (an OpenCL backend keeps its Jacobians on the device).
+void DeformationSolver::screen_distortion(double t, std::vector<Vec3>& probes) const {
+  const MatJT* dJ = params_.max_distortion > 0 ? kernels_->direction_jacobians() : nullptr;
+  if (!dJ) return;
+  const MatJT J0 = kernels_->current_jacobians();
+  if (J0.rows() != dJ->rows() || J0.rows() != 3 * nsampling_.centers.rows()) return;
+  double k = 0;
+  const long i = largest_distortion_sample(J0, *dJ, t, &k);
+  if (i >= 0 && k > params_.max_distortion)
+    probes.insert(probes.begin(), nsampling_.centers.row(i).transpose());
 }
 
 bool DeformationSolver::globally_injective_trial(const MatS3& yt, IterationRecord& rec) {

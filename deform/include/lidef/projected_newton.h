@@ -276,6 +276,7 @@ class DeformationSolver {
                                       const std::atomic<bool>* stop);
   Certificate certify_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et,
                             IterationRecord& rec);
+  void screen_distortion(double t, std::vector<Vec3>& probes) const;
   bool globally_injective_trial(const MatS3& yt, IterationRecord& rec);
   void accept_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et, Certificate&& c,
                     IterationRecord& rec);
