@@ -982,8 +982,11 @@ SolveResult DeformationSolver::solve(const std::function<bool(const IterationRec
         done = true;
       } else {
         res.reason = StopReason::kNoCertifiedStep;
-        res.message = "no certified step of decreasing energy in " + std::to_string(params_.max_halvings) +
-                      " halvings (" + std::to_string(rec.armijo_rejections) + " energy, " +
+        // The trials end at max_halvings or at the step tolerance (certified_line_search), whichever is
+        // first.
+        res.message = "no certified step of decreasing energy in " +
+                      std::to_string(rec.armijo_rejections + rec.certificate_rejections) + " trials (" +
+                      std::to_string(rec.armijo_rejections) + " energy, " +
                       std::to_string(rec.certificate_rejections) + " certificate rejections)" +
                       distortion_note();
         done = true;

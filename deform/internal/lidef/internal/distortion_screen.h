@@ -1,5 +1,5 @@
 // The solver's screen of a line-search trial against a distortion target (DeformParams::max_distortion;
-// docs/solver.md, "Bounded distortion"): the sample whose Jacobian has the largest σ1/σ3, found from the
+// docs/certificate.md, "Bounded distortion", "Probes"): the sample whose Jacobian has the largest σ1/σ3, found from the
 // Jacobians the energy has already computed, becomes the certifier's first probe. A guess only — the
 // certifier's exact evaluation at the probe decides (docs/certificate.md, "Probes").
 #pragma once
