@@ -315,6 +315,7 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   pc.enter("certificate of the identity", pc.end, cached || !pc.cache.enabled() ? 1.0 : 0.93);
   auto t0 = Clock::now();
   kernels_ = backend_->energy_kernels(*energy_);
+  hessian_blocks_ = MatXd();
   certifier_->set_backend(*backend_);
   if (!backend_->is_cpu())
     pc.say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
@@ -412,6 +413,7 @@ void DeformationSolver::reset() {
   y_ = subspace_.basis.transpose() *
        yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
   kernels_->set_current(y_);
+  hessian_blocks_ = MatXd();
   factor_ = {};
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
@@ -468,6 +470,7 @@ bool DeformationSolver::set_reduced_map(const MatS3& y, std::string* reason) {
   }
   y_ = y;
   kernels_->set_current(y_);
+  hessian_blocks_ = MatXd();
   factor_ = {};  // the map jumped
   cert_ = frame_.from_normalized(c);
   return true;
@@ -646,8 +649,7 @@ DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reus
     rec.ms_solve += ms_since(t0);
   } else {
     t0 = Clock::now();
-    MatXd H = energy_->hessian_from(
-        kernels_->distortion_pair_blocks(params_.hessian_precision == HessianPrecision::kDouble), weights_);
+    MatXd H = energy_->hessian_from(distortion_hessian_blocks(), weights_);
     H.diagonal().array() += params_.diagonal_shift;
     rec.ms_hessian += ms_since(t0);
 
@@ -682,6 +684,15 @@ DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reus
   rec.ms_solve += ms_since(t0);
   rec.newton_decrement = -d.gvec.dot(dvec);
   return d;
+}
+
+const MatXd& DeformationSolver::distortion_hessian_blocks() {
+  const bool dbl = params_.hessian_precision == HessianPrecision::kDouble;
+  if (hessian_blocks_.size() == 0 || hessian_blocks_double_ != dbl) {
+    hessian_blocks_ = kernels_->distortion_pair_blocks(dbl);
+    hessian_blocks_double_ = dbl;
+  }
+  return hessian_blocks_;
 }
 
 DeformationSolver::LineSearchEnd DeformationSolver::certified_line_search(const NewtonDirection& d,
@@ -823,6 +834,7 @@ void DeformationSolver::accept_trial(const MatS3& yt, double t, const MatS3& del
   rec.terms = et;
   y_ = yt;
   kernels_->accept(t);
+  hessian_blocks_ = MatXd();
   perturb_y_ = yt;
   perturb_lower_ = c.base_lower;
   perturb_upper_ = c.base_upper;

@@ -313,6 +313,13 @@ class DeformationSolver {
     EnergyWeights weights;  // the weights it was assembled with
     int reuses = 0;         // steps that took it after the one that assembled it
   } factor_;
+  // The distortion part of the reduced Hessian at the kernels' current map (distortion_pair_blocks), kept
+  // until that map changes (emptied where the kernels' map is set or a step accepted): a direction recomputed
+  // with other weights (dynamic weighting's retry, the iteration after a refused step) starts from the same
+  // map, and only the weighted quadratic terms of DeformationEnergy::hessian_from differ.
+  MatXd hessian_blocks_;
+  bool hessian_blocks_double_ = false;
+  const MatXd& distortion_hessian_blocks();
   bool dragging_ = false;
   // Base voxels whose proof failed in the last rejected line-search trial: the next trial refines them first
   // (CertifyParams::priority_voxels), so a trial failing at the same place is rejected early.

@@ -1,7 +1,7 @@
-// The solver's screen of a line-search trial against a distortion target (DeformParams::max_distortion;
-// docs/certificate.md, "Bounded distortion", "Probes"): the sample whose Jacobian has the largest σ1/σ3, found from the
-// Jacobians the energy has already computed, becomes the certifier's first probe. A guess only — the
-// certifier's exact evaluation at the probe decides (docs/certificate.md, "Probes").
+// The solver's screen of a line-search trial against a distortion target (DeformParams::max_distortion): the
+// sample whose Jacobian has the largest σ1/σ3, found from the Jacobians the energy has already computed,
+// becomes the certifier's first probe. A guess only — the certifier's exact evaluation at the probe decides
+// (docs/certificate.md, "Bounded distortion", "Probes").
 #pragma once
 #include "lidef/types.h"
 
