@@ -14,12 +14,16 @@
 // Output: markdown on stdout, progress on stderr. Exit 0; 2 on bad input; 3 when no OpenCL device works or
 // the two backends disagree on a verdict.
 //
+//  3. With --drag S: the studio's drag on the engine alone (no window), S seconds per scenario and backend:
+//     certified maps and Newton steps per second, and each step's stage split.
+//
 // Usage: bench_opencl [DATA_DIR] [--only a,b] [--iterations N] [--cap N] [--reps R] [--threads T]
-//                     [--cache-dir DIR]
+//                     [--cache-dir DIR] [--drag S] [--drag-only a,b]
 #include <omp.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -31,9 +35,12 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bench_util.h"
+#include "drag_path.h"
+#include "lidef/analysis/interactive_session.h"
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
 #include "lidef/internal/stopwatch.h"
@@ -99,6 +106,61 @@ StageMeans means(const std::vector<IterationRecord>& h) {
   return m;
 }
 
+// The studio's drag on the engine alone (InteractiveSession, no window): the scenario solved to rest on
+// `kind`, then its pushed handles circle (drag_path.h) with a target change every 16 ms (the mouse's rate)
+// for `seconds`. Certified maps per second (distinct maps the engine published, each certified), Newton steps
+// per second and each step's stage means. What the studio would show on top is the renderer's cost
+// (bench_studio).
+struct DragRate {
+  double seconds = 0;
+  long maps = 0;
+  std::vector<IterationRecord> steps;
+  bool all_certified = true;
+  std::string error;
+};
+
+DragRate drag_engine(const Scenario& sc, BackendKind kind, const std::string& cache_dir, double seconds) {
+  DragRate r;
+  std::atomic<long> maps{0}, last_version{-1};
+  std::atomic<bool> uncertified{false};
+  InteractiveSession s(
+      [&](std::shared_ptr<const SessionFrame> f) {
+        if (f->state != SessionState::kIterating && f->state != SessionState::kResting) return;
+        if (f->map_version == last_version.exchange(f->map_version)) return;
+        ++maps;
+        if (!f->certified) uncertified = true;
+      },
+      [&](const std::string& e) { r.error = e; }, opencl_backend_factory(cache_dir));
+  s.set_cache(cache_dir);
+  DeformParams p = sc.params;
+  p.backend = kind;
+  p.opencl_device = opencl_device_filter_from_env();
+  s.open_model(sc.model_dir, p);
+  s.set_handles(sc.sources, sc.targets);
+  if (!s.wait_until_resting(600) || s.state() != SessionState::kResting) {
+    if (r.error.empty()) r.error = "did not come to rest: " + s.latest_frame()->status;
+    return r;
+  }
+  const auto m = s.model();
+  const double amp = 0.05 * (m->cage.bbox_max - m->cage.bbox_min).norm();
+  const size_t it0 = s.latest_frame()->history.size();
+  maps = 0;
+  uncertified = false;
+  const auto t0 = Clock::now();
+  while (seconds_since(t0) < seconds) {
+    s.set_targets(bench::drag_targets(sc.sources, sc.targets, seconds_since(t0), amp));
+    std::this_thread::sleep_for(std::chrono::milliseconds(16));
+  }
+  r.seconds = seconds_since(t0);
+  r.maps = maps;
+  r.all_certified = !uncertified;
+  s.stop();
+  s.wait_until_resting(60);
+  const auto f = s.latest_frame();
+  r.steps.assign(f->history.begin() + std::min(it0, f->history.size()), f->history.end());
+  return r;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -106,6 +168,8 @@ int main(int argc, char** argv) {
   std::string data_dir = bench::default_data_dir(LIDEF_SHARED_DATA_DIR), only,
               cache_dir = "/tmp/lidef-bench-cache";
   int iterations = 0, cap = 8, reps = 5, threads = 0;
+  double drag_seconds = 0;
+  std::string drag_only;
   CLI::App app{
       "bench_opencl: the OpenCL backend against the CPU backend in one process: whole solves with "
       "their parity, and each stage alone; a markdown report on stdout"};
@@ -117,6 +181,11 @@ int main(int argc, char** argv) {
   app.add_option("--cap", cap, "max_iterations of bar_twist180 on both backends")->check(CLI::PositiveNumber);
   app.add_option("--reps", reps, "timed repetitions of each stage alone (median reported)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--drag", drag_seconds,
+                 "seconds of the studio's drag on the engine alone per scenario and backend (0: none)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--drag-only", drag_only,
+                 "comma-separated scenarios of the drag rows (default: every one run)");
   if (const int rc = bench::parse_command_line(app, argc, argv); rc >= 0) return rc;
   if (threads > 0) omp_set_num_threads(threads);
   std::vector<Scenario> scenarios;
@@ -251,6 +320,33 @@ int main(int argc, char** argv) {
   std::cout << "### Solves (same process, same parameters; stage columns are ms per iteration)\n\n"
             << solve_table.str() << "\n### Stages alone (median of " << reps << ")\n\n"
             << stage_table.str() << "\n";
+  if (drag_seconds > 0) {
+    std::cout << "### Dragging, the engine alone (no window; " << bench::fixed(drag_seconds, 0)
+              << " s per row, targets moved every 16 ms)\n\n"
+              << "| scenario | backend | certified maps/s | Newton steps/s | ms/step | gradient | Hessian | "
+                 "Cholesky "
+                 "| line search (energy) | certificate | all certified |\n"
+              << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for (const Scenario& sc : scenarios)
+      for (const BackendKind kind : {BackendKind::kCpu, BackendKind::kOpenCL}) {
+        if (!drag_only.empty() && ("," + drag_only + ",").find("," + sc.name + ",") == std::string::npos)
+          continue;
+        const char* name = kind == BackendKind::kCpu ? "cpu" : "opencl";
+        std::cerr << "bench_opencl: drag " << sc.name << " " << name << "\n";
+        const DragRate d = drag_engine(sc, kind, cache_dir, drag_seconds);
+        if (!d.error.empty()) {
+          std::cout << "| " << sc.name << " | " << name << " | failed: " << d.error << " |||||||||\n";
+          continue;
+        }
+        const StageMeans m = means(d.steps);
+        std::cout << "| " << sc.name << " | " << name << " | " << bench::fixed(d.maps / d.seconds, 1) << " | "
+                  << bench::fixed(d.steps.size() / d.seconds, 1) << " | " << bench::fixed(m.total, 1) << " | "
+                  << bench::fixed(m.grad, 1) << " | " << bench::fixed(m.hess, 1) << " | "
+                  << bench::fixed(m.solve, 1) << " | " << bench::fixed(m.ls, 1) << " | "
+                  << bench::fixed(m.cert, 1) << " | " << (d.all_certified ? "yes" : "**no**") << " |\n";
+      }
+    std::cout << "\n";
+  }
   if (disagree) {
     std::cout << "**The backends disagreed on a certificate verdict.**\n";
     return 3;

@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "drag_path.h"
 #include "lidef/internal/stopwatch.h"
 #include "omp_wait.h"
 #include "studio_window.h"
@@ -81,18 +82,6 @@ struct Result {
   double final_error = 0;
 };
 
-// The drag path: the pushed handles (target != source) circle around their bar_bend targets.
-MatX3d drag_targets(const MatX3d& S, const MatX3d& T0, double t, double amp) {
-  MatX3d T = T0;
-  const double w = 2 * M_PI * t / 4.0;
-  for (Eigen::Index i = 0; i < T.rows(); ++i)
-    if ((T0.row(i) - S.row(i)).norm() > 1e-9) {
-      T(i, 0) += amp * std::sin(w);
-      T(i, 2) += amp * (1 - std::cos(w));
-    }
-  return T;
-}
-
 Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
   Result r;
   const Scenario sc = s.scenario();
@@ -117,7 +106,7 @@ Result drag(InteractiveSession& s, StudioWindow* w, double seconds) {
   const auto t0 = Clock::now();
   long engine_maps = 0;
   while (seconds_since(t0) < seconds) {
-    s.set_targets(drag_targets(sc.sources, sc.targets, seconds_since(t0), amp));
+    s.set_targets(bench::drag_targets(sc.sources, sc.targets, seconds_since(t0), amp));
     const auto tick = Clock::now();
     while (seconds_since(tick) < 0.016) {  // ~60 Hz mouse events
       if (w)
@@ -203,7 +192,7 @@ StepResult drag_steps(StudioWindow& w, int steps) {
   StepResult r;
   for (int k = 1; k <= steps; ++k) {
     const auto t0 = Clock::now();
-    s.set_targets(drag_targets(sc.sources, sc.targets, 4.0 * k / steps, amp));
+    s.set_targets(bench::drag_targets(sc.sources, sc.targets, 4.0 * k / steps, amp));
     bool done = false;
     while (!done && seconds_since(t0) < 600) {
       QApplication::processEvents(QEventLoop::AllEvents, 5);

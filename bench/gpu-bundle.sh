@@ -6,12 +6,12 @@
 # Usage:
 #   bench/gpu-bundle.sh pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz   # here: BUILD_DIR is a Release build with benchmarks
 #   bench/gpu-bundle.sh run ARCHIVE.tar.xz RESULT_DIR            # there: unpacks to /tmp/lidef-bundle, runs gpu.sh
-# `run` passes REPS, SCENARIOS, DEVICE, QUICK on to gpu.sh. Without an OpenCL ICD registered on the host it registers
+# `run` passes REPS, SCENARIOS, DEVICE, DRAG, DRAG_SCENARIOS, CACHE, TESTS, QUICK on to gpu.sh. Without an OpenCL ICD registered on the host it registers
 # the NVIDIA driver's libnvidia-opencl.so.1 where it finds one (OCL_ICD_VENDORS). The programs are built for the
 # packing machine's CPU (LIDEF_NATIVE): pack on a machine whose instruction set the host has.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-programs=(app/lidef bench/bench_opencl tests/lidef_opencl_tests)
+programs=(app/lidef bench/bench_opencl bench/bench_cholesky tests/lidef_opencl_tests)
 
 pack() {
   local build=$1 data=$2 archive=$3

@@ -2,7 +2,8 @@
 # The GPU measurements in one go, for a lent GPU host whose minutes should go to measuring, not to setting up:
 # builds what the OpenCL measurements need (no studio, no Python), checks the device (it must list an OpenCL
 # device with fp64, and the OpenCL parity tests must pass on it), then runs `lidef deform` on each scenario with both
-# backends and bench_opencl (CPU vs OpenCL, whole solves and each stage alone), and prints one markdown
+# backends, bench_opencl (CPU vs OpenCL, whole solves, each stage alone, and the studio's drag on the engine alone)
+# and bench_cholesky (the Newton system's factor on the host's cores), and prints one markdown
 # table: iterations, solve time and mean ms per Newton iteration per backend, and whether both wrote the same
 # verdicts. docs/benchmarks.md, "OpenCL backend", records what it printed, with the device.
 #
@@ -11,7 +12,10 @@
 #   OUT_DIR    where results go (default /tmp/lidef-gpu); the table is also written to OUT_DIR/gpu.md
 # Environment: BUILD (build folder, default build-gpu; an existing build is reused), DEVICE (a substring of the
 # OpenCL device's name, as --opencl-device), SCENARIOS (space-separated names, default the five easy shared
-# scenarios and bar_twist180), REPS (timed repetitions of each stage alone, default 5), QUICK=1 (one scenario and one repetition: a check of this script).
+# scenarios and bar_twist180), REPS (timed repetitions of each stage alone, default 5), DRAG (seconds of the
+# drag per backend, default 5; 0: none), DRAG_SCENARIOS (default animal_tail_lift bar_bend), CACHE (the subspace
+# cache, default OUT_DIR/cache: two runs may share one), TESTS=0 (skip the OpenCL tests: a second run of other
+# programs on a device the first run checked), QUICK=1 (one scenario and one repetition: a check of this script).
 # The studio's drag rate needs Qt, VTK and an X server and is not measured here (bench_studio).
 set -euo pipefail
 if [ $# -lt 1 ]; then
@@ -24,12 +28,16 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD=${BUILD:-$ROOT/build-gpu}
 SCENARIOS=${SCENARIOS:-bar_bend bar_twist90 spot_head_turn horse_leg_lift animal_tail_lift bar_twist180}
 REPS=${REPS:-5}
+DRAG=${DRAG:-5}
+DRAG_SCENARIOS=${DRAG_SCENARIOS:-animal_tail_lift bar_bend}
 if [ "${QUICK:-0}" = 1 ]; then
   SCENARIOS=${SCENARIOS%% *}
   REPS=1
+  DRAG_SCENARIOS=$SCENARIOS
 fi
 THREADS=$(nproc)
 mkdir -p "$OUT"
+CACHE=${CACHE:-$OUT/cache}
 log() { echo "[gpu.sh $(date -u +%H:%M:%S)] $*" >&2; }
 
 # --- Build (only what is measured). A folder with the three programs and no CMakeCache.txt is a bundle built
@@ -45,7 +53,7 @@ elif [ ! -x "$BUILD/app/lidef" ] || [ ! -x "$BUILD/bench/bench_opencl" ]; then
 fi
 if [ -f "$BUILD/CMakeCache.txt" ]; then
   log "building"
-  cmake --build "$BUILD" -j "$THREADS" --target lidef bench_opencl lidef_opencl_tests > "$OUT/build.log"
+  cmake --build "$BUILD" -j "$THREADS" --target lidef bench_opencl bench_cholesky lidef_opencl_tests > "$OUT/build.log"
 fi
 
 # --- The device: listed with fp64, and the backend's parity tests pass on it
@@ -53,7 +61,9 @@ fi
 device_args=()
 [ -n "${DEVICE:-}" ] && device_args=(--opencl-device "$DEVICE")
 log "OpenCL parity tests"
-if ! LIDEF_OPENCL_DEVICE=${DEVICE:-} LIDEF_SHARED_DATA=$DATA "$BUILD/tests/lidef_opencl_tests" \
+if [ "${TESTS:-1}" = 0 ]; then
+  log "skipped (TESTS=0)"
+elif ! LIDEF_OPENCL_DEVICE=${DEVICE:-} LIDEF_SHARED_DATA=$DATA "$BUILD/tests/lidef_opencl_tests" \
   --gtest_brief=1 > "$OUT/opencl_tests.log" 2>&1; then
   tail -30 "$OUT/opencl_tests.log" >&2
   echo "gpu.sh: the OpenCL tests fail on this device; no measurement is made" >&2
@@ -77,7 +87,7 @@ for s in $SCENARIOS; do
     log "deform $s --backend $b"
     rc=0
     "$BUILD/app/lidef" deform "$DATA/scenarios/$s.json" --models "$DATA/models" --out "$dir" --backend "$b" \
-      "${device_args[@]}" --threads "$THREADS" --cache-dir "$OUT/cache" --quiet > "$dir.log" 2>&1 || rc=$?
+      "${device_args[@]}" --threads "$THREADS" --cache-dir "$CACHE" --quiet > "$dir.log" 2>&1 || rc=$?
     if [ "$rc" -gt 1 ]; then
       echo "| $s | $b | failed (exit $rc, $dir.log) | | | | |" >> "$table"
       continue
@@ -97,11 +107,16 @@ done
 log "bench_opencl"
 only=$(echo $SCENARIOS | tr ' ' ',')
 LIDEF_OPENCL_DEVICE=${DEVICE:-} "$BUILD/bench/bench_opencl" "$DATA" --only "$only" --reps "$REPS" \
-  --threads "$THREADS" --cache-dir "$OUT/cache" > "$OUT/bench_opencl.md"
+  --threads "$THREADS" --cache-dir "$CACHE" --drag "$DRAG" --drag-only "$(echo $DRAG_SCENARIOS | tr ' ' ',')" \
+  > "$OUT/bench_opencl.md"
+log "bench_cholesky"
+"$BUILD/bench/bench_cholesky" --threads "$THREADS" --reps "$((REPS * 4))" > "$OUT/bench_cholesky.md"
 
 echo
 echo "# lidef on $(sed -n 's/^--backend auto -> \([^;]*\).*/\1/p' "$OUT/devices.txt" | head -1) ($(date -u +%Y-%m-%dT%H:%M:%SZ), $THREADS CPU threads)"
 echo
 cat "$table"
 echo
+sed -n '/^### Dragging/,$p' "$OUT/bench_opencl.md"
+cat "$OUT/bench_cholesky.md"
 echo "bench_opencl: $OUT/bench_opencl.md"

@@ -13,40 +13,16 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
+#include "lidef/internal/cholesky.h"
 #include "lidef/internal/distortion_screen.h"
 #include "lidef/internal/enum_names.h"
 #include "lidef/internal/newton_cg.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 
-// LAPACK Cholesky from OpenBLAS (blocked and threaded; several times faster than Eigen::LLT at 900 x 900).
-extern "C" {
-void dpotrf_(const char* uplo, const int* n, double* a, const int* lda, int* info);
-void dpotrs_(const char* uplo, const int* n, const int* nrhs, const double* a, const int* lda, double* b,
-             const int* ldb, int* info);
-}
-
 namespace lidef {
 
 namespace {
-
-// b <- L⁻ᵀ L⁻¹ b for dpotrf's lower factor L (n by n).
-bool cholesky_solve_factored(const MatXd& L, VecXd& b) {
-  const int n = static_cast<int>(L.rows()), one = 1;
-  int info = 0;
-  dpotrs_("L", &n, &one, L.data(), &n, b.data(), &n, &info);
-  return info == 0;
-}
-
-// Solves H x = b for symmetric positive definite H (overwritten by its factor). false if H is not SPD.
-bool cholesky_solve(MatXd& H, VecXd& b) {
-  const int n = static_cast<int>(H.rows());
-  int info = 0;
-  use_blas_in_calling_thread();  // 5-8 ms for the 900x900 factor; a threaded one stalls beside the studio
-  dpotrf_("L", &n, H.data(), &n, &info);
-  if (info != 0) return false;
-  return cholesky_solve_factored(H, b);
-}
 
 bool stop_requested(const std::atomic<bool>* stop) {
   return stop && stop->load(std::memory_order_relaxed);
@@ -648,19 +624,27 @@ DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reus
     ++factor_.reuses;
     rec.ms_solve += ms_since(t0);
   } else {
+    // The reduced Hessian is factored in place (no 3s x 3s copy per iteration) and rebuilt from the kept
+    // blocks only when its factorization fails.
+    std::vector<double> shifts;  // diagonal shifts added after a failed factorization, in order
+    const auto shifted_hessian = [&] {
+      MatXd H = energy_->hessian_from(distortion_hessian_blocks(), weights_);
+      H.diagonal().array() += params_.diagonal_shift;
+      for (const double add : shifts) H.diagonal().array() += add;
+      return H;
+    };
     t0 = Clock::now();
-    MatXd H = energy_->hessian_from(distortion_hessian_blocks(), weights_);
-    H.diagonal().array() += params_.diagonal_shift;
+    F = shifted_hessian();
     rec.ms_hessian += ms_since(t0);
 
     t0 = Clock::now();
-    F = H;
     bool ok = cholesky_solve(F, dvec);
     for (double extra = 1e-6; !ok && extra < 1e6; extra *= 100) {
       // PSD blocks plus a positive shift are positive definite in exact arithmetic; single-precision
       // rounding can still break that, in which case the shift grows.
-      H.diagonal().array() += extra * (1.0 + H.diagonal().cwiseAbs().maxCoeff());
-      F = H;
+      F = shifted_hessian();
+      shifts.push_back(extra * (1.0 + F.diagonal().cwiseAbs().maxCoeff()));
+      F.diagonal().array() += shifts.back();
       dvec = -d.gvec;
       ok = cholesky_solve(F, dvec);
     }
