@@ -290,6 +290,33 @@ TEST(DeformationEnergy, ProjectedSinglePrecisionHessianEqualsBruteForceAssembly)
   EXPECT_LT((Hs - Hsb).cwiseAbs().maxCoeff(), 1e-5 * Hsb.cwiseAbs().maxCoeff());
 }
 
+TEST(DeformationEnergy, HessianFromPairBlocksIsTheSymmetrizedBlockMatrix) {
+  // hessian_from writes ½(H₀ + H₀ᵀ) in one pass, H₀ the 3 x 3 block matrix of the six pair blocks (columns
+  // q·s.. of `blocks`, q over (0,0) (0,1) (0,2) (1,1) (1,2) (2,2)) with their transposes below the diagonal:
+  // bit for bit the formula written out with Eigen, for any thread count. Random, non-symmetric blocks, zero
+  // weights (the quadratic terms then add exact zeros).
+  const DeformationEnergy E = make_energy();
+  const int s = E.reduced_size();
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-1, 1);
+  MatXd blocks(s, 6 * s);
+  for (Eigen::Index k = 0; k < blocks.size(); ++k) blocks.data()[k] = U(rng);
+  constexpr int kPairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  MatXd H0(3 * s, 3 * s);
+  for (int q = 0; q < 6; ++q) {
+    const int a = kPairs[q][0], a2 = kPairs[q][1];
+    H0.block(a * s, a2 * s, s, s) = blocks.middleCols(q * s, s);
+    if (a2 != a) H0.block(a2 * s, a * s, s, s) = blocks.middleCols(q * s, s).transpose();
+  }
+  const MatXd expected = 0.5 * (H0 + H0.transpose());
+  const int saved = omp_get_max_threads();
+  for (const int threads : {1, 2, 3}) {
+    omp_set_num_threads(threads);
+    EXPECT_EQ(E.hessian_from(blocks, EnergyWeights{0, 0}), expected) << threads << " threads";
+  }
+  omp_set_num_threads(saved);
+}
+
 TEST(DeformationEnergy, SmoothnessTermEqualsSparseKOfTheFullCoefficients) {
   // E_smooth = Σ_j μ_j ‖ỹ_j‖² / |E| must equal ‖K Ξ ỹ‖² / |E| with K from smoothness.h. Ξ's columns are
   // eigenvectors of KᵀK only to the eigen-solver's precision (~1e-15 ‖KᵀK‖ per entry), which enters through

@@ -407,15 +407,30 @@ namespace {
 // 3s by 3s from the six pair blocks (s by 6s), exactly symmetric.
 MatXd assemble_pairs(const MatXd& Ball) {
   const int s = static_cast<int>(Ball.rows());
-  constexpr int kPairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  // Column q*s + j of Ball is column j of the pair block q = (a, a2), a <= a2.
+  constexpr int kPair[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
   MatXd H(3 * s, 3 * s);
-  for (int q = 0; q < 6; ++q) {
-    const int a = kPairs[q][0], a2 = kPairs[q][1];
-    H.block(a * s, a2 * s, s, s) = Ball.middleCols(q * s, s);
-    if (a2 != a) H.block(a2 * s, a * s, s, s) = Ball.middleCols(q * s, s).transpose();
+  // Exactly symmetric in one pass: H = ½(H₀ + H₀ᵀ) of the block matrix H₀ (pair blocks above and on the
+  // diagonal, their transposes below), written element by element. Off the diagonal blocks that is the pair
+  // block itself (½(x + x) = x exactly); on them ½(B(i, j) + B(j, i)) (float products of GHᵀ W are symmetric
+  // only up to rounding). No temporary 3s x 3s matrix; columns are independent, so the threads do not change
+  // a bit.
+#pragma omp parallel for schedule(static)
+  for (int col = 0; col < 3 * s; ++col) {
+    const int a2 = col / s, j = col % s;
+    for (int a = 0; a < 3; ++a) {
+      const int q = kPair[a][a2];
+      double* out = H.data() + static_cast<Eigen::Index>(col) * 3 * s + a * s;
+      const double* column = Ball.data() + (static_cast<Eigen::Index>(q) * s + j) * s;
+      if (a < a2) {
+        std::memcpy(out, column, sizeof(double) * s);
+      } else if (a > a2) {
+        for (int i = 0; i < s; ++i) out[i] = Ball(j, q * s + i);
+      } else {
+        for (int i = 0; i < s; ++i) out[i] = 0.5 * (column[i] + Ball(j, q * s + i));
+      }
+    }
   }
-  // Exact symmetry of the diagonal blocks (float products of GHᵀ W are symmetric only up to rounding).
-  H = 0.5 * (H + H.transpose()).eval();
   return H;
 }
 }  // namespace
