@@ -33,6 +33,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -123,6 +124,7 @@ DragRate drag_engine(const Scenario& sc, BackendKind kind, const std::string& ca
   DragRate r;
   std::atomic<long> maps{0}, last_version{-1};
   std::atomic<bool> uncertified{false};
+  std::mutex error_mutex;
   InteractiveSession s(
       [&](std::shared_ptr<const SessionFrame> f) {
         if (f->state != SessionState::kIterating && f->state != SessionState::kResting) return;
@@ -130,7 +132,11 @@ DragRate drag_engine(const Scenario& sc, BackendKind kind, const std::string& ca
         ++maps;
         if (!f->certified) uncertified = true;
       },
-      [&](const std::string& e) { r.error = e; }, opencl_backend_factory(cache_dir));
+      [&](const std::string& e) {  // on the engine thread
+        std::lock_guard<std::mutex> lock(error_mutex);
+        r.error = e;
+      },
+      opencl_backend_factory(cache_dir));
   s.set_cache(cache_dir);
   DeformParams p = sc.params;
   p.backend = kind;
@@ -138,6 +144,7 @@ DragRate drag_engine(const Scenario& sc, BackendKind kind, const std::string& ca
   s.open_model(sc.model_dir, p);
   s.set_handles(sc.sources, sc.targets);
   if (!s.wait_until_resting(600) || s.state() != SessionState::kResting) {
+    std::lock_guard<std::mutex> lock(error_mutex);
     if (r.error.empty()) r.error = "did not come to rest: " + s.latest_frame()->status;
     return r;
   }
