@@ -21,7 +21,7 @@ namespace {
 // Panel width and tile size. A panel's diagonal block is factored by one thread while the others wait, so it
 // stays narrow; the trailing update's tiles are the parallel work (at n = 900: 45 tiles after the first
 // panel). Chosen on the 2-core machine (docs/benchmarks.md, "Cholesky factor"): panels of 64-192 and tiles of
-// 96-192 were within 25%.
+// 96-192 were within 30%.
 constexpr int kPanel = 64;
 constexpr int kTile = 96;
 
