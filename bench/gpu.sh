@@ -16,7 +16,8 @@
 # drag per backend, default 5; 0: none), DRAG_SCENARIOS (default animal_tail_lift bar_bend), CACHE (the subspace
 # cache, default OUT_DIR/cache: two runs may share one), TESTS=0 (skip the OpenCL tests: a second run of other
 # programs on a device the first run checked), QUICK=1 (one scenario and one repetition: a check of this script).
-# The studio's drag rate needs Qt, VTK and an X server and is not measured here (bench_studio).
+# The studio's window needs Qt, VTK and an X server and is not measured here (bench_studio); the drag on the
+# engine alone is (bench_opencl --drag).
 set -euo pipefail
 if [ $# -lt 1 ]; then
   echo "usage: $0 DATA_DIR [OUT_DIR]" >&2
