@@ -357,6 +357,105 @@ TEST(GlobalInjectivity, TwoBoxesAreInjectiveApartAndOverlapWhenOneIsMovedIntoOrI
   }
 }
 
+// Step G6: a checker keeps the margins of the last map it proved injective and clears pairs of later maps by
+// the motion since then. Two boxes with triangles fine enough that none is split (their balls are clear of
+// the cage); a checker that keeps margins and audits every reused one against the map itself
+// (GlobalInjectivityParams::audit_violations), beside checks of their own.
+struct FineTwoBoxes : TwoBoxes {
+  FineTwoBoxes() {
+    a = box_surface(Vec3(-1, -0.5, -0.5), Vec3(0.1, 0.5, 0.5), Eigen::Vector3i(16, 12, 12));
+    b = box_surface(Vec3(0.5, -0.2, -0.2), Vec3(0.9, 0.2, 0.2), Eigen::Vector3i(6, 6, 6));
+    mesh = join(a, b);
+  }
+};
+
+struct KeptAndOwn {
+  const Cage& cage;
+  const TriMesh& mesh;
+  GlobalInjectivityChecker kept{cage, mesh};
+  std::atomic<long> violations{0};
+  long replayed = 0;
+  // The kept checker's verdict on y, with the same verdict, place and triangles as a check of its own where
+  // that one proves an overlap (a pair with a crossing is never cleared by a margin, so the first crossing
+  // in pair order is the same pair), and no image point covered twice where it says injective.
+  GlobalInjectivity check(const MatX3d& y, const std::string& what) {
+    GlobalInjectivityParams audited, own;
+    audited.audit_violations = &violations;
+    own.reuse_margins = false;
+    const GlobalInjectivity g = kept.check(y, audited);
+    const GlobalInjectivity h = GlobalInjectivityChecker(cage, mesh).check(y, own);
+    EXPECT_EQ(h.replayed_pairs, 0) << what;
+    replayed += g.replayed_pairs;
+    if (g.verdict == Verdict::kInjective) {
+      EXPECT_LT(max_image_winding(cage, mesh, y, 0.05, 0.02), 1.5) << what;
+    }
+    if (h.verdict == Verdict::kOverlap) {
+      EXPECT_EQ(g.verdict, Verdict::kOverlap) << what << ": " << g.reason;
+      EXPECT_EQ(g.overlap_face_a, h.overlap_face_a) << what;
+      EXPECT_EQ(g.overlap_face_b, h.overlap_face_b) << what;
+      EXPECT_EQ(g.overlap_point, h.overlap_point) << what;
+    }
+    return g;
+  }
+};
+
+// Box A turned 45° about z, box B (its cage component moved rigidly: reproduced exactly) pushed along x in
+// steps of 0.01 past A's edge until they cross: pairs between A and B become candidates while apart, keep
+// their separation margins, and must give them up when B crosses A.
+TEST(GlobalInjectivity, KeptMarginsClearOnlyPairsTheMotionCannotHaveBroughtTogether) {
+  const FineTwoBoxes tb;
+  const int split_v = static_cast<int>(tb.cage.V.rows()) / 2,
+            split_f = static_cast<int>(tb.cage.F.rows()) / 2;
+  const Mat3 M = Eigen::AngleAxisd(std::acos(-1.0) / 4, Vec3::UnitZ()).toRotationMatrix();
+  const Vec3 ca(-0.45, 0, 0);
+  KeptAndOwn k{tb.cage, tb.mesh};
+  int first_overlap = -1;
+  for (const int i : {0, 2, 4, 6, 7, 8, 10}) {
+    MatX3d y = tb.cage.identity_coefficients();
+    for (int v = 0; v < split_v; ++v) y.row(v) = (M * (Vec3(tb.cage.V.row(v)) - ca) + ca).transpose();
+    for (int t = 0; t < split_f; ++t)
+      y.row(tb.cage.num_vertices() + t) = (M * Vec3(tb.cage.N.row(t))).transpose();
+    for (int v = split_v; v < tb.cage.V.rows(); ++v) y(v, 0) += -0.2 - 0.01 * i, y(v, 1) += 0.3;
+    if (k.check(y, "step " + std::to_string(i)).verdict == Verdict::kOverlap && first_overlap < 0)
+      first_overlap = i;
+  }
+  EXPECT_EQ(k.violations.load(), 0);
+  EXPECT_GT(k.replayed, 0);
+  EXPECT_GT(first_overlap, 1) << "B must start apart from A and reach it";
+}
+
+// J changing: the cage vertex at the center of B's far face pushed into B until B's surface crosses itself;
+// the injectivity balls' margins must absorb the change of J (the audit evaluates each reused ball anew).
+TEST(GlobalInjectivity, KeptMarginsFollowTheChangeOfJAsACageVertexIsPushedThroughTheSurface) {
+  const FineTwoBoxes tb;
+  Eigen::Index pushed = 0;
+  (tb.cage.V.rowwise() - Eigen::RowVector3d(1.0, 0, 0)).rowwise().norm().minCoeff(&pushed);
+  KeptAndOwn k{tb.cage, tb.mesh};
+  bool overlap = false;
+  for (const int i : {0, 1, 2, 20, 21}) {
+    MatX3d y = tb.cage.identity_coefficients();
+    y(pushed, 0) -= 0.1 * i;
+    y(pushed, 1) += 0.03 * i;
+    overlap = overlap || k.check(y, "push " + std::to_string(i)).verdict == Verdict::kOverlap;
+  }
+  EXPECT_EQ(k.violations.load(), 0);
+  EXPECT_GT(k.replayed, 0);
+  EXPECT_TRUE(overlap);
+}
+
+// A small motion of spot's bend is cleared mostly by the kept margins, with the verdict of a check of its
+// own.
+TEST(GlobalInjectivity, KeptMarginsOfSpotClearMostPairsOfASmallMotion) {
+  LIDEF_REQUIRE_SHARED();
+  const Model m = load_model(test::shared_model("spot"));
+  KeptAndOwn k{m.cage, m.mesh};
+  ASSERT_EQ(k.check(bend_coefficients(m.cage, 0.8), "bend 0.8").verdict, Verdict::kInjective);
+  const GlobalInjectivity g = k.check(bend_coefficients(m.cage, 0.801), "bend 0.801");
+  EXPECT_EQ(g.verdict, Verdict::kInjective) << g.reason;
+  EXPECT_GT(2 * g.replayed_pairs, g.candidate_pairs - g.replayed_pairs);
+  EXPECT_EQ(k.violations.load(), 0);
+}
+
 // Two tetrahedra touching at one shared vertex (a bow tie): every edge is used once in each direction, yet
 // the surface is not a manifold at that vertex, where Jordan–Brouwer (Step G1) fails: surfaces touching at a
 // point may be nested without any two triangles' images crossing. Nothing is decided, not even the identity;

@@ -314,6 +314,7 @@ std::string certificate_json(const CertificateReport& r) {
           : ojson();
   j["global_check"] = {{"candidate_pairs", g.candidate_pairs},
                        {"pair_tests", g.pair_tests},
+                       {"replayed_pairs", g.replayed_pairs},
                        {"max_depth_used", g.max_depth_used},
                        {"max_tube_radius", num(g.max_tube_radius)}};
   j["model"] = r.model;

@@ -4,7 +4,8 @@
 //   3. candidate pairs: triangles whose tube boxes overlap (a sorted cell list, deterministic);
 //   4. per pair: separate, cover by an injectivity ball, prove a crossing, or split (bounded);
 //   5. the verdict (the first overlap in pair order, else the first undecided pair, else — for a surface of
-//      several components — the nesting of their images, else injective).
+//      several components — the nesting of their images, else injective);
+//   6. for a map proven injective, the margins a later check reuses (Step G6).
 #include "lidef/global_injectivity.h"
 
 #include <omp.h>
@@ -14,7 +15,10 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <memory>
+#include <mutex>
 #include <numeric>
 
 #include "lidef/errors.h"
@@ -59,9 +63,76 @@ struct Piece {
   double jb = kInf;  // depth > 0: an upper bound of ‖J‖₂ on a ball containing the piece (its ancestor's)
   int face = -1, depth = 0;
   int top = -1;  // the top piece it was split from (index into the check's top pieces; -1 before)
+  // Which piece of its mesh triangle it is, the same in every check (Step G6): the face, the depth and the
+  // path of child indices (2 bits per level); kNoPiece below kMaxIdDepth levels.
+  std::uint64_t id = 0;
 };
+constexpr std::uint64_t kNoPiece = ~std::uint64_t{0};
+constexpr int kMaxIdDepth = 13;
+std::uint64_t face_piece_id(long face) {
+  return static_cast<std::uint64_t>(face) << 32;
+}
+std::uint64_t child_piece_id(std::uint64_t parent, int child) {
+  if (parent == kNoPiece) return kNoPiece;
+  const std::uint64_t depth = ((parent >> 26) & 63) + 1, path = parent & ((std::uint64_t{1} << 26) - 1);
+  if (depth > kMaxIdDepth) return kNoPiece;
+  return (parent >> 32 << 32) | (depth << 26) | (path * 4 + static_cast<std::uint64_t>(child));
+}
 
 double separation_lower_bound(const std::array<Vec3, 3>& a, const std::array<Vec3, 3>& b, double slack);
+
+// An injectivity ball of a proven map (Step G2) as a later check reuses it (Step G6): μ ≤ σ3(J(c)) − R L̂
+// for an upper bound L̂ of ‖∇J‖ on the ball, and its radius. Its factors Γ_e are kept summed per group of
+// nearby cage edges (ProvenMargins::group_sums): Σ_e ‖Δδ_e‖ Γ_e ≤ Σ_g (Σ_{e∈g} Γ_e) max_{e∈g} ‖Δδ_e‖ bounds
+// the motion's L1 on the ball.
+struct MarginBall {
+  double mu, R;
+  Vec3 c;
+};
+// Cage edges in groups of nearby edges (contiguous in Morton order of their midpoints): the motion of a later
+// map is concentrated on a few groups, where one sum over all edges would spread it over the whole cage.
+constexpr int kEdgeGroups = 64;
+
+// What a map proven injective leaves for later checks (Step G6), in the normalized frame.
+struct ProvenMargins {
+  MatX3d y;   // its coefficients
+  MatX3d fV;  // its computed mesh vertices' images, each within eps of the exact one
+  double eps = 0;
+  std::vector<double> A_abs;  // the rounding scales of its face matrices (per cage face)
+  std::vector<Mat3> Jv;       // its computed J at the mesh vertices, ‖J̃ − J‖₂ ≤ 1e-9 sJv
+  std::vector<double> sJv;
+  // Per pair of top pieces (by Piece::id, a before b) whose piece pairs were all cleared by separation or by
+  // injectivity balls: the smallest separation margin (+∞: none) and its balls [ball_begin, ball_end).
+  struct Pair {
+    std::uint64_t a, b;
+    double sep;
+    long ball_begin, ball_end;
+    bool operator<(const Pair& o) const { return a != o.a ? a < o.a : b < o.b; }
+  };
+  std::vector<Pair> pairs;  // sorted
+  std::vector<MarginBall> balls;
+  std::vector<float> group_sums;  // per ball kEdgeGroups sums Σ_{e∈g} Γ_e, rounded up
+  // Per top piece split from its mesh triangle (depth > 0): its corners' computed images, its bound of ‖J‖,
+  // and J̃ at its ball's center with the rounding scale.
+  struct Top {
+    std::uint64_t id;
+    std::array<Vec3, 3> q;
+    double jb, sJ;
+    Mat3 J;
+    bool operator<(const Top& o) const { return id < o.id; }
+  };
+  std::vector<Top> tops;  // sorted by id
+  const Pair* find(std::uint64_t a, std::uint64_t b) const {
+    const Pair k{a, b, 0, 0, 0};
+    auto it = std::lower_bound(pairs.begin(), pairs.end(), k);
+    return it != pairs.end() && it->a == a && it->b == b ? &*it : nullptr;
+  }
+  const Top* find_top(std::uint64_t id) const {
+    const Top k{id, {}, 0, 0, Mat3::Zero()};
+    auto it = std::lower_bound(tops.begin(), tops.end(), k);
+    return it != tops.end() && it->id == id ? &*it : nullptr;
+  }
+};
 
 double tri_diameter(const std::array<Vec3, 3>& p) {
   return std::max({(p[0] - p[1]).norm(), (p[1] - p[2]).norm(), (p[2] - p[0]).norm()});
@@ -103,7 +174,31 @@ struct GlobalInjectivityChecker::Impl {
   // The surface's connected components (numbered in the order of their first triangle) and their faces.
   std::vector<std::vector<int>> component_faces;
   double cage_diameter = 0;
-  double corner_unit = 0;  // kCornerRel · the largest coordinate magnitude of the mesh (Step G3)
+  double corner_unit = 0;       // kCornerRel · the largest coordinate magnitude of the mesh (Step G3)
+  std::vector<int> edge_group;  // per cage edge its group (Step G6), in [0, kEdgeGroups)
+  void group_edges() {
+    const int ne = cage.num_edges();
+    std::vector<std::pair<std::uint64_t, int>> order(ne);
+    const Vec3 lo = cage.bbox_min, ext = (cage.bbox_max - cage.bbox_min).cwiseMax(1e-300);
+    for (int e = 0; e < ne; ++e) {
+      const Vec3 m = 0.5 * (Vec3(cage.V.row(cage.edges[e].v0)) + Vec3(cage.V.row(cage.edges[e].v1)));
+      std::uint64_t code = 0;
+      for (int bit = 20; bit >= 0; --bit)
+        for (int k = 0; k < 3; ++k) {
+          const auto q =
+              static_cast<std::uint64_t>(std::clamp((m(k) - lo(k)) / ext(k), 0.0, 1.0) * 2097151.0);
+          code = (code << 1) | ((q >> bit) & 1);
+        }
+      order[e] = {code, e};
+    }
+    std::sort(order.begin(), order.end());
+    edge_group.assign(ne, 0);
+    for (int i = 0; i < ne; ++i)
+      edge_group[order[i].second] = static_cast<int>(static_cast<long>(i) * kEdgeGroups / std::max(ne, 1));
+  }
+  // The margins of the last map proven injective (Step G6); replaced by each check that proves one.
+  mutable std::mutex margins_mutex;
+  mutable std::shared_ptr<const ProvenMargins> margins;
 
   static TriMesh normalized(const MatX3d& V, const MatX3i& F, const Vec3& center, double scale) {
     TriMesh t;
@@ -127,6 +222,7 @@ struct GlobalInjectivityChecker::Impl {
     for (int f = 0; f < mesh.F.rows(); ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
     structure_problem = check_structure();
+    group_edges();
     // Exact predicates on the model's own coordinates (normalizing them would round).
     if (structure_problem.empty()) {
       rest_intersections = find_self_intersections(m.V, m.F);
@@ -392,11 +488,19 @@ struct GlobalInjectivityChecker::Impl {
     if (!std::isfinite(L)) return false;
     double sJ = 0;
     const MapJet jet = basis.differential_jet(fm, c, 1, &sJ);
+    return injective_ball(jet.J, sJ, R, L);
+  }
+  // The same for the computed J̃(c) and its rounding scale; *mu (where given and the ball is one): a lower
+  // bound of σ3(J(c)) − R L1, rounded down (Step G6).
+  static bool injective_ball(const Mat3& J, double sJ, double R, double L, double* mu = nullptr) {
+    if (!std::isfinite(L)) return false;
     bool resolved = false;
-    const double s3 = signed_singular_values(jet.J, &resolved)(2);
+    const double s3 = signed_singular_values(J, &resolved)(2);
     if (!resolved || !(s3 > 0)) return false;
     const double tau = kRoundingRel * (sJ + s3 + R * L);
-    return s3 - tau > R * L;
+    if (!(s3 - tau > R * L)) return false;
+    if (mu) *mu = (s3 - tau - R * L) - 1e-12 * (s3 + tau + R * L);
+    return true;
   }
 };
 
@@ -619,6 +723,13 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     Vec3 where = Vec3::Zero();
     long tests = 0;
     int depth = 0;
+    // Step G6: a pair of two whole mesh triangles all of whose piece pairs were cleared by separation or
+    // by an injectivity ball is recordable: the smallest separation margin and the balls, for later checks.
+    bool recordable = false, replayed = false;
+    std::uint64_t a = kNoPiece, b = kNoPiece;  // the top pieces' ids
+    double sep = kInf;
+    std::vector<MarginBall> balls;
+    std::vector<float> sums;  // kEdgeGroups per ball
   };
   // A piece pair to clear, or (self) one piece whose own points must be shown to have distinct images;
   // touching: the pieces may share points in the rest state (no crossing is reported for them).
@@ -642,6 +753,16 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   VecXd delta;  // per cage edge ‖δ_e‖ with its rounding
   MatX3d fV;    // the mapped mesh vertices
   double eps = 0, slack = 0;
+  // Step G6: the margins of the last map proven injective (null: none), the motion Δ since then (per cage
+  // edge ‖δ_e(Δ)‖ with its rounding, and its 1, 2 and max norms), per mesh triangle sup |f − f_ref| (move)
+  // and sup ‖J − J_ref‖₂ (jmove) on it (+∞: unknown); J̃ at the mesh vertices with their rounding scales.
+  std::shared_ptr<const ProvenMargins> base;
+  VecXd ddelta;
+  std::array<double, kEdgeGroups> dgroup{};  // per edge group the largest ‖δ_e(Δ)‖
+  std::vector<double> move, jmove;           // per mesh triangle
+  std::vector<double> move_top, jmove_top;   // per top piece
+  std::vector<Mat3> Jv, Jtop;                // J̃ at the mesh vertices and at split top pieces' centers
+  std::vector<double> sJv, sJtop;
   // Rounded corners (docs/certificate.md, Step G3): a piece of depth d has its corners within corner_error(d)
   // of the exact points; every ball is widened by `reach`, which covers the exact points of the piece and of
   // its descendants, and the tube of a piece of depth d by jb · corner_error(d), the motion of f between the
@@ -667,8 +788,14 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   }
 
   // --- 1. Map constants.
-  MapCheck(const Impl& impl, const MatX3d& y_model, const GlobalInjectivityParams& p)
-      : im(impl), params(p), mesh(impl.mesh), nv(impl.mesh.V.rows()), nf(impl.mesh.F.rows()) {
+  MapCheck(const Impl& impl, const MatX3d& y_model, const GlobalInjectivityParams& p,
+           std::shared_ptr<const ProvenMargins> reference)
+      : im(impl),
+        params(p),
+        mesh(impl.mesh),
+        nv(impl.mesh.V.rows()),
+        nf(impl.mesh.F.rows()),
+        base(std::move(reference)) {
     // The map in the normalized frame: f'(p') = (f(center + scale p') − center) / scale, so y_v' = (y_v −
     // center) / scale and y_t' = y_t (the face rows are linear parts, unchanged).
     y = y_model;
@@ -690,6 +817,29 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     slack = kGeomRel * (fV.cwiseAbs().maxCoeff() + eps);
     corner_unit = im.corner_unit;
     reach = im.reach;
+    if (base) motion_since_base();
+  }
+  // Step G6: ‖δ_e‖ of the motion Δ = y − y_ref. Δ is formed in floating point: its error (relative 2⁻⁵³ of
+  // the coefficients) is covered by 1e-9 of both maps' face-matrix magnitudes.
+  void motion_since_base() {
+    const MatX3d dy = y - base->y;
+    const HarmonicBasis::FaceMatrices fd = im.basis.face_matrices(dy);
+    ddelta.resize(im.cage.num_edges());
+    for (int e = 0; e < im.cage.num_edges(); ++e) {
+      const CageEdge& ce = im.cage.edges[e];
+      const double mag = fd.A_abs[ce.f0] + fd.A_abs[ce.f1] + fm.A_abs[ce.f0] + fm.A_abs[ce.f1] +
+                         base->A_abs[ce.f0] + base->A_abs[ce.f1];
+      ddelta(e) = ((fd.A[ce.f0] - fd.A[ce.f1]).norm() + kRoundingRel * mag) * (1 + kRoundingRel);
+    }
+    dgroup.fill(0.0);
+    for (int e = 0; e < im.cage.num_edges(); ++e)
+      dgroup[im.edge_group[e]] = std::max(dgroup[im.edge_group[e]], ddelta(e));
+  }
+  // An upper bound of Σ_e ‖δ_e(Δ)‖ Γ_e(B) (the motion's L1 on a ball) from its factors' group sums.
+  double motion_lipschitz(const float* sums) const {
+    double L = 0;
+    for (int g = 0; g < kEdgeGroups; ++g) L += static_cast<double>(sums[g]) * dgroup[g];
+    return L * (1 + 1e-9);
   }
 
   bool cancelled() const { return params.cancel && params.cancel->load(std::memory_order_relaxed); }
@@ -751,7 +901,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     (*ch)[1] = make_piece({mp[0], P.p[1], mp[1]}, {mq[0], P.q[1], mq[1]}, f, d, jb, s.row);
     (*ch)[2] = make_piece({mp[2], mp[1], P.p[2]}, {mq[2], mq[1], P.q[2]}, f, d, jb, s.row);
     (*ch)[3] = make_piece({mp[0], mp[1], mp[2]}, {mq[0], mq[1], mq[2]}, f, d, jb, s.row);
-    for (Piece& c : *ch) c.top = P.top;
+    for (int i = 0; i < 4; ++i) (*ch)[i].top = P.top, (*ch)[i].id = child_piece_id(P.id, i);
   }
 
   // --- 2. One piece per mesh triangle and per mesh vertex its star ball; which triangles lie in one
@@ -759,6 +909,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   void pieces_and_star_balls() {
     pieces.resize(nf);
     star_ok.assign(nv, 0);
+    Jv.assign(nv, Mat3::Zero()), sJv.assign(nv, 0.0);
+    std::vector<double> motion_L1(base ? nf : 0, kInf);  // per mesh triangle: the motion's L1 on its ball
 #pragma omp parallel
     {
       std::vector<float> row;
@@ -767,20 +919,28 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
         if (cancelled()) continue;  // the result is dropped by the caller
         std::array<Vec3, 3> q;
         for (int k = 0; k < 3; ++k) q[k] = fV.row(mesh.F(f, k));
-        pieces[f] = make_piece(im.triangle(f), q, static_cast<int>(f), 0, kInf, row,
-                               im.cached_lipschitz(delta, false, f));
+        const double cached = im.cached_lipschitz(delta, false, f);
+        pieces[f] = make_piece(im.triangle(f), q, static_cast<int>(f), 0, kInf, row, cached);
+        pieces[f].id = face_piece_id(f);
+        if (base && std::isfinite(pieces[f].L1))  // make_piece left the ball's factors in `row` if not cached
+          motion_L1[f] = std::isnan(cached) ? im.lipschitz_from(ddelta, row.data())
+                                            : im.cached_lipschitz(ddelta, false, f);
       }
+      // J at every vertex (the star ball's center), kept for Step G6 also where the star ball is not used.
 #pragma omp for schedule(dynamic, 256)
       for (long v = 0; v < nv; ++v) {
         if (cancelled()) continue;
         Vec3 c;
         double R;
         im.star_ball(v, &c, &R);
-        const double L = im.cached_lipschitz(delta, true, v);
-        star_ok[v] = std::isnan(L) ? im.injective_ball(fm, delta, c, R, row) : im.injective_ball(fm, c, R, L);
+        double L = im.cached_lipschitz(delta, true, v);
+        if (std::isnan(L)) L = im.lipschitz(delta, c, R, row);
+        Jv[v] = im.basis.differential_jet(fm, c, 1, &sJv[v]).J;
+        star_ok[v] = Impl::injective_ball(Jv[v], sJv[v], R, L);
       }
     }
     if (cancelled()) return;
+    if (base) motion_per_triangle(motion_L1);
     face_ok.assign(nf, 0);
 #pragma omp parallel for schedule(dynamic, 256)
     for (long f = 0; f < nf; ++f)  // the triangle's own ball: the piece's, whose L1 is known
@@ -790,6 +950,28 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     for (const Piece& P : pieces)
       if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
     out.max_tube_radius = max_rho * im.scale;
+  }
+
+  // Step G6, per mesh triangle T with the motion's L1 on its ball (L^Δ): sup_T |f − f_ref| ≤ max over the
+  // corners |Δf(v)| + ½ L^Δ r² (Step G3 applied to Δf) with the corners' evaluation errors of both maps, and
+  // sup_T ‖J − J_ref‖₂ ≤ min over the corners ‖ΔJ(v)‖ + diam(T) L^Δ (mean value inside the ball).
+  void motion_per_triangle(const std::vector<double>& motion_L1) {
+    move.assign(nf, kInf), jmove.assign(nf, kInf);
+#pragma omp parallel for schedule(static)
+    for (long f = 0; f < nf; ++f) {
+      const double Ld = motion_L1[f];
+      if (!std::isfinite(Ld)) continue;
+      double dmax = 0, jmin = kInf;
+      for (int k = 0; k < 3; ++k) {
+        const int v = mesh.F(f, k);
+        dmax = std::max(dmax, (fV.row(v) - base->fV.row(v)).norm());
+        jmin = std::min(jmin,
+                        (Jv[v] - base->Jv[v]).norm() * (1 + 1e-12) + kRoundingRel * (sJv[v] + base->sJv[v]));
+      }
+      const Piece& P = pieces[f];
+      move[f] = (dmax + eps + base->eps + 0.5 * Ld * P.r_enc * P.r_enc) * (1 + 1e-9);
+      jmove[f] = (jmin + P.diam * Ld) * (1 + 1e-9);
+    }
   }
 
   // --- 2b. The top pieces: the triangles, a triangle whose ball is not clear of the cage (no finite tube)
@@ -830,6 +1012,44 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       top_children[i].store(nullptr, std::memory_order_relaxed);
     }
     return "";
+  }
+
+  // --- 2c. Step G6 per top piece: J̃ at the center of each split top piece (kept for later checks), and
+  // where margins are reused, sup |f − f_ref| (move_top) and sup ‖J − J_ref‖₂ (jmove_top) on it: a whole
+  // triangle's from motion_per_triangle; a split piece P of depth d (its ball B, L^Δ the motion's L1 on B,
+  // κ = corner_error(d)) by Step G3 on Δf over the exact piece: max over the computed corners |Δq| + ε +
+  // ε_ref
+  // + (jb + jb_ref) κ (the exact corners lie within κ) + ½ L^Δ (r + κ)², and ‖ΔJ(c)‖ + R L^Δ.
+  void top_motion() {
+    const long nt = static_cast<long>(top.size());
+    if (!params.reuse_margins) return;  // nothing is kept, nothing reused
+    Jtop.assign(nt, Mat3::Zero()), sJtop.assign(nt, 0.0);
+    if (base) move_top.assign(nt, kInf), jmove_top.assign(nt, kInf);
+#pragma omp parallel
+    {
+      std::vector<float> row;
+#pragma omp for schedule(dynamic, 64)
+      for (long i = 0; i < nt; ++i) {
+        const Piece& P = top[i];
+        if (P.depth == 0) {
+          if (base) move_top[i] = move[P.face], jmove_top[i] = jmove[P.face];
+          continue;
+        }
+        Jtop[i] = im.basis.differential_jet(fm, P.c, 1, &sJtop[i]).J;
+        const ProvenMargins::Top* ref = base ? base->find_top(P.id) : nullptr;
+        if (!ref) continue;
+        const double Ld = im.lipschitz(ddelta, P.c, P.R, row);
+        if (!std::isfinite(Ld) || !std::isfinite(P.jb) || !std::isfinite(ref->jb)) continue;
+        const double kappa = corner_error(P.depth);
+        double dmax = 0;
+        for (int k = 0; k < 3; ++k) dmax = std::max(dmax, (P.q[k] - ref->q[k]).norm());
+        const double r = P.r_enc + kappa;
+        move_top[i] = (dmax + (P.jb + ref->jb) * kappa + 0.5 * Ld * r * r) * (1 + 1e-9) + eps + base->eps;
+        jmove_top[i] =
+            ((Jtop[i] - ref->J).norm() * (1 + 1e-12) + kRoundingRel * (sJtop[i] + ref->sJ) + P.R * Ld) *
+            (1 + 1e-9);
+      }
+    }
   }
 
   // --- 3. Candidate pairs: boxes of the top pieces' tubes. A sorted list of (cell, piece) entries groups the
@@ -914,6 +1134,95 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       }
     }
   }
+  // Is f injective on B(c, R) (Step G2)? Where it is and the pair is recordable, the ball's margin and its
+  // factors' norms are kept for Step G6.
+  bool ball_clears(const Vec3& c, double R, Scratch& s, PairResult& res) const {
+    const double L = im.lipschitz(delta, c, R, s.row);
+    if (!std::isfinite(L)) return false;
+    double sJ = 0, mu = 0;
+    const MapJet jet = im.basis.differential_jet(fm, c, 1, &sJ);
+    if (!Impl::injective_ball(jet.J, sJ, R, L, &mu)) return false;
+    if (res.recordable) {
+      if (mu > 0) {
+        std::array<double, kEdgeGroups> sums{};
+        for (size_t e = 0; e < s.row.size(); ++e) sums[im.edge_group[e]] += s.row[e];
+        res.balls.push_back({mu, R, c});
+        for (const double x : sums) {  // rounded up to a float (the sum's own rounding: a relative 1e-12)
+          const double up = x * (1 + 1e-12);
+          float f = static_cast<float>(up);
+          if (f < up) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+          res.sums.push_back(f);
+        }
+      } else {
+        res.recordable = false;
+      }
+    }
+    return true;
+  }
+  // Step G6: are all piece pairs of top pieces a ≤ b (indices; res.a, res.b their ids) still cleared by the
+  // margins of the last proven map? Separated pairs: dist(f(P), f(Q)) ≥ m − move_a − move_b. Balls: with
+  // L̂' = L̂ + L^Δ on B and ‖ΔJ(c)‖ ≤ jmove_a + R L^Δ (a point of piece P ⊆ top piece a lies in B),
+  // σ3(J(c)) − R L̂' ≥ μ − jmove_a − 2 R L^Δ. On success the pair keeps the reduced margins for the next
+  // check.
+  bool replay(int a, int b, PairResult& res) const {
+    const ProvenMargins::Pair* e = base->find(res.a, res.b);
+    if (!e) return false;
+    double sep = kInf;
+    if (std::isfinite(e->sep)) {
+      const double used = move_top[a] + move_top[b];
+      sep = (e->sep - used) - 1e-12 * (e->sep + used);
+      if (!(sep > 0)) return false;
+    }
+    std::vector<MarginBall> balls;
+    balls.reserve(e->ball_end - e->ball_begin);
+    for (long i = e->ball_begin; i < e->ball_end; ++i) {
+      MarginBall m = base->balls[i];
+      const double used = jmove_top[a] + 2 * m.R * motion_lipschitz(&base->group_sums[i * kEdgeGroups]);
+      m.mu = (m.mu - used) - 1e-12 * (m.mu + used);
+      if (!(m.mu > 0)) return false;
+      balls.push_back(m);
+    }
+    if (params.audit_violations) audit(a, b, sep, balls);
+    res.replayed = true, res.sep = sep, res.balls = std::move(balls);
+    res.sums.assign(base->group_sums.begin() + e->ball_begin * kEdgeGroups,
+                    base->group_sums.begin() + e->ball_end * kEdgeGroups);
+    return true;
+  }
+  // For tests (GlobalInjectivityParams::audit_violations): each reused claim against the map itself — a
+  // ball's μ' against σ3(J(c)) − R L1 evaluated now (L̂' ≥ Σ_e ‖δ_e‖ Γ_e by the triangle inequality, so μ' may
+  // not exceed it), and where every piece pair was separated (no ball), the separation margin against the
+  // smallest distance of the images of points spread over both top pieces (a sampled distance is at least
+  // the true one).
+  void audit(int a, int b, double sep, const std::vector<MarginBall>& balls) const {
+    long bad = 0;
+    std::vector<float> row;
+    for (const MarginBall& m : balls) {
+      double sJ = 0, mu = -kInf;
+      const double L = im.lipschitz(delta, m.c, m.R, row);
+      const MapJet jet = im.basis.differential_jet(fm, m.c, 1, &sJ);
+      Impl::injective_ball(jet.J, sJ, m.R, L, &mu);
+      bad += !(m.mu <= mu + 1e-9 * (1 + std::abs(mu)));
+    }
+    if (std::isfinite(sep) && balls.empty()) {
+      std::vector<double> buf;
+      auto samples = [&](const Piece& P) {
+        std::vector<Vec3> out;
+        constexpr int n = 12;
+        for (int i = 0; i <= n; ++i)
+          for (int j = 0; i + j <= n; ++j) {
+            const double u = double(i) / n, v = double(j) / n;
+            out.push_back(im.eval_f(y, (1 - u - v) * P.p[0] + u * P.p[1] + v * P.p[2], buf));
+          }
+        return out;
+      };
+      const std::vector<Vec3> pa = samples(top[a]), pb = samples(top[b]);
+      double d = kInf;
+      for (const Vec3& x : pa)
+        for (const Vec3& z : pb) d = std::min(d, (x - z).norm());
+      bad += !(sep <= d + 2 * eps);
+    }
+    if (bad) params.audit_violations->fetch_add(bad);
+  }
   int shared_vertices(int fa, int fb, std::array<int, 3>* sv) const {
     int n = 0;
     for (int i = 0; i < 3; ++i)
@@ -936,6 +1245,9 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       for (int i = 0; i < nshared; ++i) star = star || star_ok[sv[i]];
       if (star) return;  // both triangles lie in the star ball of a shared vertex, where f is injective
     }
+    res.a = top[fa].id, res.b = top[fb].id;
+    res.recordable = params.reuse_margins && res.a != kNoPiece && res.b != kNoPiece;
+    if (res.recordable && base && replay(fa, fb, res)) return;
     std::vector<Task>& stack = s.stack;
     stack.clear();
     stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
@@ -949,7 +1261,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       res.depth = std::max({res.depth, P.depth, Q.depth});
       std::array<Piece, 4> ch;
       if (task.self) {  // the piece's own points: one injectivity ball, or split
-        if (im.injective_ball(fm, delta, P.c, P.R, s.row)) continue;
+        if (ball_clears(P.c, P.R, s, res)) continue;
         if (P.depth >= params.max_depth || res.tests >= params.max_tests_per_pair) {
           res.outcome = kOpen;
           res.where = (P.q[0] + P.q[1] + P.q[2]) / 3.0;
@@ -962,13 +1274,18 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
         continue;
       }
       const bool tubes = std::isfinite(P.rho) && std::isfinite(Q.rho);
-      if (tubes && separation_lower_bound(P.q, Q.q, slack) > P.rho + Q.rho) continue;
+      if (tubes) {
+        const double gap = separation_lower_bound(P.q, Q.q, slack);
+        if (gap > P.rho + Q.rho) {  // Step G6 keeps dist(f(P), f(Q)) ≥ gap − ρ_P − ρ_Q, rounded down
+          res.sep = std::min(res.sep, (gap - P.rho - Q.rho) - 1e-12 * (gap + P.rho + Q.rho));
+          continue;
+        }
+      }
       // One ball around both pieces.
       const Vec3 c = 0.5 * (P.c + Q.c);
       double R = 0;
       for (int i = 0; i < 3; ++i) R = std::max({R, (P.p[i] - c).norm(), (Q.p[i] - c).norm()});
-      if (im.injective_ball(fm, delta, c, (R + reach) * (1 + 1e-12) + 1e-15 * c.cwiseAbs().maxCoeff(), s.row))
-        continue;
+      if (ball_clears(c, (R + reach) * (1 + 1e-12) + 1e-15 * c.cwiseAbs().maxCoeff(), s, res)) continue;
       if (tubes && !task.touching) {
         const double m = P.rho + Q.rho;
         Vec3 x;
@@ -1011,6 +1328,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     // the thread schedule, so these counts are deterministic.
     for (size_t k = 0; k < results.size() && static_cast<long>(k) <= first_crossing.load(); ++k) {
       out.pair_tests += results[k].tests;
+      out.replayed_pairs += results[k].replayed;
       out.max_depth_used = std::max(out.max_depth_used, results[k].depth);
     }
     for (auto& pr : pairs) pr = {top[pr.first].face, top[pr.second].face};
@@ -1049,6 +1367,27 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     if (im.component_faces.size() > 1) return nesting_verdict();
     out.verdict = GlobalInjectivity::Verdict::kInjective;
     return out;
+  }
+
+  // --- 6. The margins of a map proven injective (Step G6): per recordable pair (the pairs hold mesh
+  // triangles after stage 5) its separation margin and balls; J and f at the vertices.
+  std::shared_ptr<const ProvenMargins> margins() const {
+    auto m = std::make_shared<ProvenMargins>();
+    m->y = y, m->fV = fV, m->eps = eps, m->A_abs = fm.A_abs, m->Jv = Jv, m->sJv = sJv;
+    for (size_t k = 0; k < results.size(); ++k) {
+      const PairResult& r = results[k];
+      if (!r.recordable || r.outcome != kCleared) continue;
+      const long b0 = static_cast<long>(m->balls.size());
+      m->balls.insert(m->balls.end(), r.balls.begin(), r.balls.end());
+      m->group_sums.insert(m->group_sums.end(), r.sums.begin(), r.sums.end());
+      m->pairs.push_back({r.a, r.b, r.sep, b0, static_cast<long>(m->balls.size())});
+    }
+    std::sort(m->pairs.begin(), m->pairs.end());
+    for (size_t i = 0; i < top.size(); ++i)
+      if (top[i].depth > 0 && top[i].id != kNoPiece)
+        m->tops.push_back({top[i].id, top[i].q, top[i].jb, sJtop[i], Jtop[i]});
+    std::sort(m->tops.begin(), m->tops.end());
+    return m;
   }
 
   // --- 5b. f|S is injective and S has several components: the nesting of their images decides (Step G5).
@@ -1127,20 +1466,34 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
     throw InputError("", "global injectivity: max_depth " + std::to_string(params.max_depth) +
                              " is outside [0, " + std::to_string(kDepthCap - 2) + "]");
   if (!im.structure_problem.empty()) return finish(global_injectivity_not_decided(im.structure_problem));
-  Impl::MapCheck m(im, y_model, params);
+  std::shared_ptr<const ProvenMargins> base;
+  if (params.reuse_margins) {
+    std::lock_guard<std::mutex> lock(im.margins_mutex);
+    base = im.margins;
+  }
+  Impl::MapCheck m(im, y_model, params, base);
   m.pieces_and_star_balls();
   if (m.cancelled()) return finish(global_injectivity_not_decided("cancelled"));
   const std::string too_close = m.top_pieces();
   if (!too_close.empty()) return finish(global_injectivity_not_decided(too_close));
+  m.top_motion();
   m.candidate_pairs();
   m.examine_pairs();
   if (m.cancelled()) return finish(global_injectivity_not_decided("cancelled"));
-  return finish(m.verdict());
+  GlobalInjectivity g = m.verdict();
+  if (params.reuse_margins && g.verdict == GlobalInjectivity::Verdict::kInjective) {
+    std::shared_ptr<const ProvenMargins> kept = m.margins();
+    std::lock_guard<std::mutex> lock(im.margins_mutex);
+    im.margins = std::move(kept);
+  }
+  return finish(g);
 }
 
 GlobalInjectivity check_global_injectivity(const Cage& cage, const TriMesh& mesh, const MatX3d& y,
                                            const GlobalInjectivityParams& params) {
-  return GlobalInjectivityChecker(cage, mesh).check(y, params);
+  GlobalInjectivityParams once = params;
+  once.reuse_margins = false;  // the checker checks this one map: nothing to keep margins for
+  return GlobalInjectivityChecker(cage, mesh).check(y, once);
 }
 
 }  // namespace lidef

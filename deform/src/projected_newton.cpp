@@ -335,8 +335,12 @@ std::string DeformationSolver::global_problem() const {
 
 GlobalInjectivity DeformationSolver::check_global(const MatS3& y) const {
   if (!global_checker_) global_checker_ = std::make_unique<GlobalInjectivityChecker>(cage_, mesh_);
+  // Global mode checks a sequence of nearby maps: the checker keeps each proven map's margins for the next
+  // (docs/certificate.md, Step G6). Local mode checks one map, the result, where keeping them is only cost.
+  GlobalInjectivityParams gp;
+  gp.reuse_margins = params_.injectivity == InjectivityMode::kGlobal;
   return global_checker_->check(
-      frame_.coefficients_from_normalized(subspace_.basis * y, cage_.num_vertices()));
+      frame_.coefficients_from_normalized(subspace_.basis * y, cage_.num_vertices()), gp);
 }
 
 GlobalInjectivity DeformationSolver::global_injectivity() const {

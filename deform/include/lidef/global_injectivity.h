@@ -29,6 +29,14 @@ struct GlobalInjectivityParams {
   // Set (by another thread) to stop a check early: it then returns kNotDecided with reason "cancelled" (an
   // interactive caller drops that result: its map has changed).
   const std::atomic<bool>* cancel = nullptr;
+  // Clear pairs of mesh triangles by the margins the checker kept from the last map it proved injective,
+  // where the map has moved less than they allow (docs/certificate.md, Step G6); every other pair is
+  // examined as without them. false: a check of its own, which neither uses nor keeps margins.
+  bool reuse_margins = true;
+  // For tests: where set, every reused margin is also checked against the map itself (a ball's margin
+  // against its test evaluated anew, a separation against sampled distances) and each claim found wrong
+  // is counted here. Slow.
+  std::atomic<long>* audit_violations = nullptr;
 };
 
 struct GlobalInjectivity {
@@ -41,6 +49,7 @@ struct GlobalInjectivity {
   int overlap_face_a = -1, overlap_face_b = -1;
   long candidate_pairs = 0;  // pairs of surface triangles whose tubes' boxes overlap
   long pair_tests = 0;       // piece pairs examined in all (subdivisions included)
+  long replayed_pairs = 0;   // pairs cleared by the margins of the last map proven injective (Step G6)
   int max_depth_used = 0;
   double max_tube_radius = 0;  // over the unsplit surface triangles
   double ms = 0;               // wall-clock time of the check (not part of any deterministic report)
@@ -54,7 +63,9 @@ GlobalInjectivity global_injectivity_not_decided(const std::string& reason);
 
 // Precomputes what depends only on the cage and the mesh (basis, cage clearance queries, the mesh's
 // adjacency and closedness), so that check() does only map-dependent work (the solver's line search and the
-// studio call it per map).
+// studio call it per map). It keeps the margins of the last map it proved injective: a later check clears
+// the pairs the motion since then cannot have brought together without examining them (reuse_margins).
+// check() may be called from several threads.
 class GlobalInjectivityChecker {
  public:
   // mesh: the rest-state surface (#V by 3, #F by 3, closed and embedded; inside the cage).
@@ -69,7 +80,7 @@ class GlobalInjectivityChecker {
   std::unique_ptr<Impl> impl_;
 };
 
-// One-shot convenience: precompute and check once.
+// One-shot convenience: precompute and check once (a check of its own: no margins kept or reused).
 GlobalInjectivity check_global_injectivity(const Cage& cage, const TriMesh& mesh, const MatX3d& y,
                                            const GlobalInjectivityParams& params = {});
 
