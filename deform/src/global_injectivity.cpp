@@ -723,8 +723,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     Vec3 where = Vec3::Zero();
     long tests = 0;
     int depth = 0;
-    // Step G6: a pair of two whole mesh triangles all of whose piece pairs were cleared by separation or
-    // by an injectivity ball is recordable: the smallest separation margin and the balls, for later checks.
+    // Step G6: a pair of top pieces all of whose piece pairs were cleared by separation or by an injectivity
+    // ball is recordable: the smallest separation margin and the balls, for later checks.
     bool recordable = false, replayed = false;
     std::uint64_t a = kNoPiece, b = kNoPiece;  // the top pieces' ids
     double sep = kInf;
@@ -754,8 +754,9 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   MatX3d fV;    // the mapped mesh vertices
   double eps = 0, slack = 0;
   // Step G6: the margins of the last map proven injective (null: none), the motion Δ since then (per cage
-  // edge ‖δ_e(Δ)‖ with its rounding, and its 1, 2 and max norms), per mesh triangle sup |f − f_ref| (move)
-  // and sup ‖J − J_ref‖₂ (jmove) on it (+∞: unknown); J̃ at the mesh vertices with their rounding scales.
+  // edge ‖δ_e(Δ)‖ with its rounding, and per edge group the largest), per mesh triangle and per top piece
+  // sup |f − f_ref| (move) and sup ‖J − J_ref‖₂ (jmove) on it (+∞: unknown); J̃ at the mesh vertices and at
+  // the split top pieces' centers with their rounding scales.
   std::shared_ptr<const ProvenMargins> base;
   VecXd ddelta;
   std::array<double, kEdgeGroups> dgroup{};  // per edge group the largest ‖δ_e(Δ)‖
@@ -1017,9 +1018,9 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   // --- 2c. Step G6 per top piece: J̃ at the center of each split top piece (kept for later checks), and
   // where margins are reused, sup |f − f_ref| (move_top) and sup ‖J − J_ref‖₂ (jmove_top) on it: a whole
   // triangle's from motion_per_triangle; a split piece P of depth d (its ball B, L^Δ the motion's L1 on B,
-  // κ = corner_error(d)) by Step G3 on Δf over the exact piece: max over the computed corners |Δq| + ε +
-  // ε_ref
-  // + (jb + jb_ref) κ (the exact corners lie within κ) + ½ L^Δ (r + κ)², and ‖ΔJ(c)‖ + R L^Δ.
+  // κ = corner_error(d)) by Step G3 on Δf over the exact piece: max over the computed corners |Δq|, plus
+  // ε + ε_ref, plus (jb + jb_ref) κ (the exact corners lie within κ), plus ½ L^Δ (r + κ)²; and
+  // ‖ΔJ(c)‖ + R L^Δ.
   void top_motion() {
     const long nt = static_cast<long>(top.size());
     if (!params.reuse_margins) return;  // nothing is kept, nothing reused
@@ -1135,7 +1136,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     }
   }
   // Is f injective on B(c, R) (Step G2)? Where it is and the pair is recordable, the ball's margin and its
-  // factors' norms are kept for Step G6.
+  // factors summed per edge group are kept for Step G6.
   bool ball_clears(const Vec3& c, double R, Scratch& s, PairResult& res) const {
     const double L = im.lipschitz(delta, c, R, s.row);
     if (!std::isfinite(L)) return false;
