@@ -478,17 +478,19 @@ struct GlobalInjectivityChecker::Impl {
     return lipschitz_from(delta, &rows[i * edges.size()]);
   }
 
-  // Is f injective on B(c, R)? ‖J(z) − J(c)‖₂ ≤ R L1 < σ3(J(c)) − rounding (docs/certificate.md).
+  // Is f injective on B(c, R)? ‖J(z) − J(c)‖₂ ≤ R L1 < σ3(J(c)) − rounding (docs/certificate.md). `row`
+  // keeps the ball's factors; *mu as below.
   bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const VecXd& delta, const Vec3& c, double R,
-                      std::vector<float>& row) const {
-    return injective_ball(fm, c, R, lipschitz(delta, c, R, row));
+                      std::vector<float>& row, double* mu = nullptr) const {
+    return injective_ball(fm, c, R, lipschitz(delta, c, R, row), mu);
   }
   // The same for a ball whose L1 is known (+∞: not clear of the cage).
-  bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const Vec3& c, double R, double L) const {
+  bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const Vec3& c, double R, double L,
+                      double* mu = nullptr) const {
     if (!std::isfinite(L)) return false;
     double sJ = 0;
     const MapJet jet = basis.differential_jet(fm, c, 1, &sJ);
-    return injective_ball(jet.J, sJ, R, L);
+    return injective_ball(jet.J, sJ, R, L, mu);
   }
   // The same for the computed J̃(c) and its rounding scale; *mu (where given and the ball is one): a lower
   // bound of σ3(J(c)) − R L1, rounded down (Step G6).
@@ -1138,11 +1140,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   // Is f injective on B(c, R) (Step G2)? Where it is and the pair is recordable, the ball's margin and its
   // factors summed per edge group are kept for Step G6.
   bool ball_clears(const Vec3& c, double R, Scratch& s, PairResult& res) const {
-    const double L = im.lipschitz(delta, c, R, s.row);
-    if (!std::isfinite(L)) return false;
-    double sJ = 0, mu = 0;
-    const MapJet jet = im.basis.differential_jet(fm, c, 1, &sJ);
-    if (!Impl::injective_ball(jet.J, sJ, R, L, &mu)) return false;
+    double mu = 0;
+    if (!im.injective_ball(fm, delta, c, R, s.row, &mu)) return false;
     if (res.recordable) {
       if (mu > 0) {
         std::array<double, kEdgeGroups> sums{};
@@ -1198,10 +1197,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     long bad = 0;
     std::vector<float> row;
     for (const MarginBall& m : balls) {
-      double sJ = 0, mu = -kInf;
-      const double L = im.lipschitz(delta, m.c, m.R, row);
-      const MapJet jet = im.basis.differential_jet(fm, m.c, 1, &sJ);
-      Impl::injective_ball(jet.J, sJ, m.R, L, &mu);
+      double mu = -kInf;
+      im.injective_ball(fm, delta, m.c, m.R, row, &mu);
       bad += !(m.mu <= mu + 1e-9 * (1 + std::abs(mu)));
     }
     if (std::isfinite(sep) && balls.empty()) {

@@ -29,7 +29,7 @@ struct GlobalInjectivityParams {
   // Set (by another thread) to stop a check early: it then returns kNotDecided with reason "cancelled" (an
   // interactive caller drops that result: its map has changed).
   const std::atomic<bool>* cancel = nullptr;
-  // Clear pairs of mesh triangles by the margins the checker kept from the last map it proved injective,
+  // Clear pairs of surface pieces by the margins the checker kept from the last map it proved injective,
   // where the map has moved less than they allow (docs/certificate.md, Step G6); every other pair is
   // examined as without them. false: a check of its own, which neither uses nor keeps margins.
   bool reuse_margins = true;
