@@ -25,6 +25,7 @@
 #include "lidef/exact_winding.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/float_rows.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/lipschitz_bound.h"
@@ -52,6 +53,22 @@ constexpr int kDepthCap = 32;
 // Relative slack of the geometric predicates on the affine image triangles (dot products, distances of
 // points of magnitude M carry errors of a few 1e-16 M; 1e-12 M is far above them).
 constexpr double kGeomRel = 1e-12;
+
+// Sorts v (elements distinct, so the order is unique) in one chunk per thread, then merges the chunks.
+template <class T>
+void sort_in_parallel(std::vector<T>& v) {
+  const long n = static_cast<long>(v.size());
+  const int chunks = std::max(1, std::min<int>(omp_get_max_threads(), static_cast<int>(n / 4096)));
+  std::vector<long> at(chunks + 1);
+  for (int c = 0; c <= chunks; ++c) at[c] = n * c / chunks;
+#pragma omp parallel for schedule(static, 1)
+  for (int c = 0; c < chunks; ++c) std::sort(v.begin() + at[c], v.begin() + at[c + 1]);
+  for (int width = 1; width < chunks; width *= 2)
+#pragma omp parallel for schedule(static, 1)
+    for (int c = 0; c < chunks - width; c += 2 * width)
+      std::inplace_merge(v.begin() + at[c], v.begin() + at[c + width],
+                         v.begin() + at[std::min(c + 2 * width, chunks)]);
+}
 
 // A triangle piece of the rest surface: corners p, their computed images q, the ball (c, R) ⊇ piece, the
 // Lipschitz constant L1 of J on that ball, and the tube radius rho.
@@ -433,17 +450,22 @@ struct GlobalInjectivityChecker::Impl {
   }
 
   // What every check needs and no map changes, kept where it fits: the basis values at the mesh vertices
-  // (at most kMaxCachedEntries doubles; f at the vertices is then one product per check), and the factor rows
-  // of the mesh triangles' balls and of the star balls (at most 2 kMaxCachedEntries floats together; L1 is
-  // then one dot product with the map's ‖δ_e‖): 64 MB each at most.
+  // (at most kMaxCachedEntries doubles; f at the vertices is then one product per check), the basis
+  // gradients there (at most 4 kMaxCachedEntries floats: J at the vertices is then one product per check
+  // instead of a pass over the cage faces per vertex), and the factor rows of the mesh triangles' balls and
+  // of the star balls (at most 2 kMaxCachedEntries floats together; L1 is then one dot product with the map's
+  // ‖δ_e‖): 64, 128 and 64 MB at most.
   static constexpr double kMaxCachedEntries = 8e6;
   MatXdR vertex_values;                        // #V by #V+#F of the cage, or empty
+  std::vector<float> vertex_gradients;         // #V blocks of 3 rows (∂x, ∂y, ∂z) by #V+#F, or empty
+  std::vector<double> vertex_gradient_abs;     // per vertex Σ|G̃| over its block
   std::vector<float> face_rows, star_rows;     // #F by #E and #V by #E (cage edges), or empty
   std::vector<char> face_row_ok, star_row_ok;  // the ball is clear of the cage
   void cache_map_independent_parts() {
     const long nv = mesh.V.rows(), nf = mesh.F.rows(), ne = edges.size();
     if (static_cast<double>(nv) * basis.size() <= kMaxCachedEntries)
       basis.evaluate_rows(mesh.V, true, false, false, vertex_values);
+    if (3.0 * static_cast<double>(nv) * basis.size() <= 4 * kMaxCachedEntries) cache_vertex_gradients();
     if (static_cast<double>(nv + nf) * static_cast<double>(ne) > 2 * kMaxCachedEntries) return;
     face_rows.resize(nf * ne), star_rows.resize(nv * ne);
     face_row_ok.assign(nf, 0), star_row_ok.assign(nv, 0);
@@ -461,6 +483,45 @@ struct GlobalInjectivityChecker::Impl {
       star_ball(v, &c, &R);
       star_row_ok[v] = ball_factors(c, R, &star_rows[v * ne]);
     }
+  }
+  // The basis gradients at the mesh vertices as floats (docs/certificate.md, Step G2: stored like the
+  // certificate's derivatives), evaluated a block of vertices at a time so that the doubles stay small.
+  void cache_vertex_gradients() {
+    const long nv = mesh.V.rows(), nb = basis.size(), block = 1024;
+    vertex_gradients.resize(static_cast<size_t>(nv) * 3 * nb);
+    vertex_gradient_abs.assign(nv, 0.0);
+    MatXdR G;
+    for (long v0 = 0; v0 < nv; v0 += block) {
+      const long n = std::min(block, nv - v0);
+      basis.evaluate_rows(mesh.V.middleRows(v0, n), false, true, false, G);
+#pragma omp parallel for schedule(static)
+      for (long i = 0; i < n; ++i) {
+        float* dst = &vertex_gradients[static_cast<size_t>(v0 + i) * 3 * nb];
+        double sum = 0;
+        for (long k = 0; k < 3 * nb; ++k) {
+          dst[k] = static_cast<float>(G.data()[i * 3 * nb + k]);
+          sum += std::abs(static_cast<double>(dst[k]));
+        }
+        vertex_gradient_abs[v0 + i] = sum * (1 + 1e-12);
+      }
+    }
+  }
+  // J̃ at mesh vertex v for coefficients ycols (#V+#F by 3 as 3 contiguous columns, largest magnitude cmax)
+  // from the kept gradients, and
+  // sJ with ‖J̃ − J‖₂ ≤ kRoundingRel sJ: the product's rounding (kRoundingRel of its summed magnitudes
+  // Σ_ab Σ_k |y_ka||g̃_kb| ≤ 3 cmax Σ|G̃|) and the float storage (each g̃ within 2⁻²⁴ of the double value:
+  // Σ_ab |ΔJ_ab| ≤ 2⁻²³ · 3 cmax Σ|G̃|). False where no gradients are kept.
+  bool vertex_jacobian(const std::vector<double>& ycols, double cmax, long v, Mat3* J, double* sJ) const {
+    if (vertex_gradients.empty()) return false;
+    const long nb = basis.size();
+    const float* blk = &vertex_gradients[static_cast<size_t>(v) * 3 * nb];
+    for (int b = 0; b < 3; ++b) {
+      double col[3];
+      float_row_times_columns(blk + b * nb, ycols.data(), nb, col);
+      for (int a = 0; a < 3; ++a) (*J)(a, b) = col[a];
+    }
+    *sJ = 3 * cmax * vertex_gradient_abs[v] * (1 + 0x1p-23 / kRoundingRel) * (1 + 1e-12);
+    return true;
   }
   // f at the mesh vertices (#V by 3) for coefficients y: from the kept basis values where there are.
   MatX3d mapped_vertices(const MatX3d& y) const {
@@ -755,6 +816,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   VecXd delta;  // per cage edge ‖δ_e‖ with its rounding
   MatX3d fV;    // the mapped mesh vertices
   double eps = 0, slack = 0;
+  std::vector<double> ycols;  // y as 3 contiguous columns, and its largest magnitude (J from kept gradients)
+  double ymax = 0;
   // Step G6: the margins of the last map proven injective (null: none), the motion Δ since then (per cage
   // edge ‖δ_e(Δ)‖ with its rounding, and per edge group the largest), per mesh triangle and per top piece
   // sup |f − f_ref| (move) and sup ‖J − J_ref‖₂ (jmove) on it (+∞: unknown); J̃ at the mesh vertices and at
@@ -814,6 +877,10 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     fV = im.mapped_vertices(y);
     const double yv = y.topRows(ncv).cwiseAbs().maxCoeff();
     const double yt = y.bottomRows(y.rows() - ncv).cwiseAbs().maxCoeff();
+    ymax = std::max(yv, yt);
+    ycols.resize(3 * y.rows());
+    for (long k = 0; k < y.rows(); ++k)
+      for (int a = 0; a < 3; ++a) ycols[a * y.rows() + k] = y(k, a);
     // ε: the evaluation error of a mapped point, relative to the coefficients' contributions (y_v φ_v with
     // Σ|φ_v| of order one, y_t ψ_t with ψ_t at most of the order of the cage's size).
     eps = kValueRel * (yv + yt * im.cage_diameter) * 8;
@@ -938,7 +1005,10 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
         im.star_ball(v, &c, &R);
         double L = im.cached_lipschitz(delta, true, v);
         if (std::isnan(L)) L = im.lipschitz(delta, c, R, row);
-        Jv[v] = im.basis.differential_jet(fm, c, 1, &sJv[v]).J;
+        if (!im.vertex_jacobian(ycols, ymax, v, &Jv[v], &sJv[v]))
+          Jv[v] = im.basis.differential_jet(fm, c, 1, &sJv[v]).J;
+        else if (params.audit_violations)
+          audit_vertex_jacobian(v, c);
         star_ok[v] = Impl::injective_ball(Jv[v], sJv[v], R, L);
       }
     }
@@ -955,6 +1025,15 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     out.max_tube_radius = max_rho * im.scale;
   }
 
+  // For tests (GlobalInjectivityParams::audit_violations): J̃ from the kept gradients against the per-face
+  // evaluation at the same point; both claim to be within kRoundingRel of their scale of the exact J, so a
+  // difference beyond the sum proves one claim wrong.
+  void audit_vertex_jacobian(long v, const Vec3& c) const {
+    double s = 0;
+    const Mat3 J = im.basis.differential_jet(fm, c, 1, &s).J;
+    const double diff = Eigen::JacobiSVD<Mat3>(Jv[v] - J).singularValues()(0);  // ‖·‖₂, as the claims
+    if (!(diff <= kRoundingRel * (sJv[v] + s))) params.audit_violations->fetch_add(1);
+  }
   // Step G6, per mesh triangle T with the motion's L1 on its ball (L^Δ): sup_T |f − f_ref| ≤ max over the
   // corners |Δf(v)| + ½ L^Δ r² (Step G3 applied to Δf) with the corners' evaluation errors of both maps, and
   // sup_T ‖J − J_ref‖₂ ≤ min over the corners ‖ΔJ(v)‖ + diam(T) L^Δ (mean value inside the ball).
@@ -1078,16 +1157,36 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       return static_cast<long>(
           std::floor((std::min(std::max(x, lo(k) - cell), hi(k) + cell) - lo(k)) / cell));
     };
-    auto key = [](long i, long j, long k) { return ((i + 2) * 1048576L + (j + 2)) * 1048576L + (k + 2); };
-    std::vector<std::pair<long, int>> entries;
+    // A cell's key: its three indices + 1, each in [0, 259] (a clamped coordinate's cell is in [−1, 258]), 10
+    // bits each; an entry is key · 2³² + piece, so that sorting the entries groups the pieces by cell.
+    auto key = [](long i, long j, long k) {
+      return static_cast<std::uint64_t>(((i + 1) << 20) | ((j + 1) << 10) | (k + 1));
+    };
+    auto entry_key = [](std::uint64_t e) { return e >> 32; };
+    auto entry_piece = [](std::uint64_t e) { return static_cast<int>(e & 0xffffffffu); };
+    // The (cell, piece) entries, counted first so that the threads write their own ranges.
+    std::vector<std::array<long, 6>> range(nt);
+    std::vector<size_t> first(nt + 1, 0);
+#pragma omp parallel for schedule(static)
+    for (long f = 0; f < nt; ++f)
+      for (int k = 0; k < 3; ++k)
+        range[f][k] = cell_of(blo[f](k), k), range[f][3 + k] = cell_of(bhi[f](k), k);
     for (long f = 0; f < nt; ++f) {
-      std::array<long, 3> a, b;
-      for (int k = 0; k < 3; ++k) a[k] = cell_of(blo[f](k), k), b[k] = cell_of(bhi[f](k), k);
-      for (long i = a[0]; i <= b[0]; ++i)
-        for (long j = a[1]; j <= b[1]; ++j)
-          for (long k = a[2]; k <= b[2]; ++k) entries.emplace_back(key(i, j, k), static_cast<int>(f));
+      const auto& r = range[f];
+      first[f + 1] =
+          first[f] + static_cast<size_t>((r[3] - r[0] + 1) * (r[4] - r[1] + 1) * (r[5] - r[2] + 1));
     }
-    std::sort(entries.begin(), entries.end());
+    std::vector<std::uint64_t> entries(first[nt]);
+#pragma omp parallel for schedule(static)
+    for (long f = 0; f < nt; ++f) {
+      const auto& r = range[f];
+      size_t at = first[f];
+      for (long i = r[0]; i <= r[3]; ++i)
+        for (long j = r[1]; j <= r[4]; ++j)
+          for (long k = r[2]; k <= r[5]; ++k)
+            entries[at++] = key(i, j, k) << 32 | static_cast<std::uint64_t>(f);
+    }
+    sort_in_parallel(entries);
     // Pairs of two triangles in the star ball of a common vertex where f is injective are cleared (step 4's
     // first test); they are counted and not kept: the verdict and the counts are those of examining them,
     // without the memory of millions of cleared pairs (a tight cage's wide tubes).
@@ -1100,22 +1199,34 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       return false;
     };
     // Two overlapping boxes share the cells of the corner max(lo_a, lo_b) of their intersection: the pair is
-    // taken there only, once.
+    // taken there only, once. The cells are scanned in parallel; the pairs are sorted afterwards, so the
+    // result does not depend on the threads.
+    std::vector<size_t> cells;
+    for (size_t i = 0; i < entries.size(); ++i)
+      if (i == 0 || entry_key(entries[i]) != entry_key(entries[i - 1])) cells.push_back(i);
+    cells.push_back(entries.size());
     long candidates = 0;
-    for (size_t i = 0; i < entries.size();) {
-      size_t j = i;
-      while (j < entries.size() && entries[j].first == entries[i].first) ++j;
-      for (size_t a = i; a < j; ++a)
-        for (size_t b = a + 1; b < j; ++b) {
-          const int fa = entries[a].second, fb = entries[b].second;
-          if (!((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all()) continue;
-          const Vec3 corner = blo[fa].cwiseMax(blo[fb]);
-          if (key(cell_of(corner(0), 0), cell_of(corner(1), 1), cell_of(corner(2), 2)) != entries[i].first)
-            continue;
-          ++candidates;
-          if (!in_common_star(fa, fb)) pairs.emplace_back(std::min(fa, fb), std::max(fa, fb));
-        }
-      i = j;
+#pragma omp parallel reduction(+ : candidates)
+    {
+      std::vector<std::pair<int, int>> mine;
+#pragma omp for schedule(dynamic, 256) nowait
+      for (long c = 0; c < static_cast<long>(cells.size()) - 1; ++c) {
+        const size_t i = cells[c], j = cells[c + 1];
+        for (size_t a = i; a < j; ++a)
+          for (size_t b = a + 1; b < j; ++b) {
+            const int fa = entry_piece(entries[a]), fb = entry_piece(entries[b]);
+            if (!((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all())
+              continue;
+            const Vec3 corner = blo[fa].cwiseMax(blo[fb]);
+            if (key(cell_of(corner(0), 0), cell_of(corner(1), 1), cell_of(corner(2), 2)) !=
+                entry_key(entries[i]))
+              continue;
+            ++candidates;
+            if (!in_common_star(fa, fb)) mine.emplace_back(std::min(fa, fb), std::max(fa, fb));
+          }
+      }
+#pragma omp critical(global_injectivity_pairs)
+      pairs.insert(pairs.end(), mine.begin(), mine.end());
     }
     std::sort(pairs.begin(), pairs.end());
     out.candidate_pairs = candidates;

@@ -12,6 +12,7 @@
 #include "lidef/errors.h"
 #include "lidef/internal/edge_jet.h"
 #include "lidef/internal/enum_names.h"
+#include "lidef/internal/float_rows.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/lipschitz_bound.h"
@@ -662,28 +663,12 @@ struct OctreeCertifier::Run {
   // J and ‖H‖ at every base center: the 9 stored rows of each voxel times the coefficient columns.
   void stored_derivatives(const std::vector<double>& Ycols) {
     const long m = im.m;
-    const double* y0 = Ycols.data();
-    const double* y1 = y0 + m;
-    const double* y2 = y1 + m;
 #pragma omp parallel for schedule(static)
     for (long i = 0; i < N; ++i) {
       if (!evaluated(i)) continue;
       const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
       double out[9][3];
-      for (int row = 0; row < 9; ++row) {
-        const float* g = blk + row * m;
-        double a0 = 0, a1 = 0, a2 = 0;
-#pragma omp simd reduction(+ : a0, a1, a2)
-        for (long k = 0; k < m; ++k) {
-          const double gk = g[k];
-          a0 += gk * y0[k];
-          a1 += gk * y1[k];
-          a2 += gk * y2[k];
-        }
-        out[row][0] = a0;
-        out[row][1] = a1;
-        out[row][2] = a2;
-      }
+      for (int row = 0; row < 9; ++row) float_row_times_columns(blk + row * m, Ycols.data(), m, out[row]);
       Mat3& J = Jc[i];
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];

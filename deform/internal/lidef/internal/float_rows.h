@@ -1,0 +1,26 @@
+// Stored float rows of basis derivatives times the map's coefficients (the local certificate's base centers,
+// the global check's mesh vertices): docs/certificate.md, Step 5, bounds the float storage's error.
+#pragma once
+
+namespace lidef {
+
+// out[a] = Σ_k g[k] · cols[a · m + k] for the 3 contiguous coefficient columns `cols` (m entries each), the
+// float row g widened to double; one pass over g for all three columns.
+inline void float_row_times_columns(const float* g, const double* cols, long m, double out[3]) {
+  const double* y0 = cols;
+  const double* y1 = y0 + m;
+  const double* y2 = y1 + m;
+  double a0 = 0, a1 = 0, a2 = 0;
+#pragma omp simd reduction(+ : a0, a1, a2)
+  for (long k = 0; k < m; ++k) {
+    const double gk = g[k];
+    a0 += gk * y0[k];
+    a1 += gk * y1[k];
+    a2 += gk * y2[k];
+  }
+  out[0] = a0;
+  out[1] = a1;
+  out[2] = a2;
+}
+
+}  // namespace lidef
