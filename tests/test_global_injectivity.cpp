@@ -1,6 +1,7 @@
 // Global injectivity (global_injectivity.h): the verdict against sampled truth — the winding number of the
 // deformed surface at the images of interior points counts their preimages — and its invariance.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -454,6 +455,44 @@ TEST(GlobalInjectivity, KeptMarginsOfSpotClearMostPairsOfASmallMotion) {
   EXPECT_EQ(g.verdict, Verdict::kInjective) << g.reason;
   EXPECT_GT(2 * g.replayed_pairs, g.candidate_pairs - g.replayed_pairs);
   EXPECT_EQ(k.violations.load(), 0);
+}
+
+// The check's result does not depend on the number of threads (the candidate pairs' cells are built, sorted
+// and scanned over the threads, the pairs examined in parallel): spot bent (32,000 cell entries, sorted in up
+// to 3 chunks and merged) and the two boxes crossing, with 1, 2 and 3 threads.
+TEST(GlobalInjectivity, ResultIsTheSameForAnyNumberOfThreads) {
+  LIDEF_REQUIRE_SHARED();
+  const Model spot = load_model(test::shared_model("spot"));
+  const FineTwoBoxes tb;
+  MatX3d crossing = tb.cage.identity_coefficients();
+  for (int v = static_cast<int>(tb.cage.V.rows()) / 2; v < tb.cage.V.rows(); ++v) crossing(v, 0) -= 0.7;
+  const int saved = omp_get_max_threads();
+  auto check_with = [&](int threads, const Cage& cage, const TriMesh& mesh, const MatX3d& y) {
+    omp_set_num_threads(threads);
+    GlobalInjectivityParams own;
+    own.reuse_margins = false;
+    return GlobalInjectivityChecker(cage, mesh).check(y, own);
+  };
+  for (const bool boxes : {false, true}) {
+    const Cage& cage = boxes ? tb.cage : spot.cage;
+    const TriMesh& mesh = boxes ? tb.mesh : spot.mesh;
+    const MatX3d y = boxes ? crossing : bend_coefficients(spot.cage, 0.8);
+    const GlobalInjectivity one = check_with(1, cage, mesh, y);
+    EXPECT_EQ(one.verdict, boxes ? Verdict::kOverlap : Verdict::kInjective) << one.reason;
+    for (const int threads : {2, 3}) {
+      const GlobalInjectivity g = check_with(threads, cage, mesh, y);
+      EXPECT_EQ(g.verdict, one.verdict) << threads;
+      EXPECT_EQ(g.reason, one.reason) << threads;
+      EXPECT_EQ(g.overlap_point, one.overlap_point) << threads;
+      EXPECT_EQ(g.overlap_face_a, one.overlap_face_a) << threads;
+      EXPECT_EQ(g.overlap_face_b, one.overlap_face_b) << threads;
+      EXPECT_EQ(g.candidate_pairs, one.candidate_pairs) << threads;
+      EXPECT_EQ(g.pair_tests, one.pair_tests) << threads;
+      EXPECT_EQ(g.max_depth_used, one.max_depth_used) << threads;
+      EXPECT_EQ(g.max_tube_radius, one.max_tube_radius) << threads;
+    }
+  }
+  omp_set_num_threads(saved);
 }
 
 // Two tetrahedra touching at one shared vertex (a bow tie): every edge is used once in each direction, yet
