@@ -507,10 +507,9 @@ struct GlobalInjectivityChecker::Impl {
     }
   }
   // J̃ at mesh vertex v for coefficients ycols (#V+#F by 3 as 3 contiguous columns, largest magnitude cmax)
-  // from the kept gradients, and
-  // sJ with ‖J̃ − J‖₂ ≤ kRoundingRel sJ: the product's rounding (kRoundingRel of its summed magnitudes
-  // Σ_ab Σ_k |y_ka||g̃_kb| ≤ 3 cmax Σ|G̃|) and the float storage (each g̃ within 2⁻²⁴ of the double value:
-  // Σ_ab |ΔJ_ab| ≤ 2⁻²³ · 3 cmax Σ|G̃|). False where no gradients are kept.
+  // from the kept gradients, and sJ with ‖J̃ − J‖₂ ≤ kRoundingRel sJ: the product's rounding (kRoundingRel
+  // of its summed magnitudes Σ_ab Σ_k |y_ka||g̃_kb| ≤ 3 cmax Σ|G̃|) and the float storage (each g̃ within
+  // 2⁻²⁴ of the double value: Σ_ab |ΔJ_ab| ≤ 2⁻²³ · 3 cmax Σ|G̃|). False where no gradients are kept.
   bool vertex_jacobian(const std::vector<double>& ycols, double cmax, long v, Mat3* J, double* sJ) const {
     if (vertex_gradients.empty()) return false;
     const long nb = basis.size();
