@@ -457,42 +457,82 @@ TEST(GlobalInjectivity, KeptMarginsOfSpotClearMostPairsOfASmallMotion) {
   EXPECT_EQ(k.violations.load(), 0);
 }
 
-// The check's result does not depend on the number of threads (the candidate pairs' cells are built, sorted
-// and scanned over the threads, the pairs examined in parallel): spot bent (32,000 cell entries, sorted in up
-// to 3 chunks and merged) and the two boxes crossing, with 1, 2 and 3 threads.
-TEST(GlobalInjectivity, ResultIsTheSameForAnyNumberOfThreads) {
-  LIDEF_REQUIRE_SHARED();
+// Two cases checked under several settings that must not change the result: spot bent (injective; 32,000
+// cell entries) and the two boxes crossing (an overlap). Each: the cage, the mesh, the map, the verdict.
+struct SpotAndCrossingBoxes {
   const Model spot = load_model(test::shared_model("spot"));
   const FineTwoBoxes tb;
-  MatX3d crossing = tb.cage.identity_coefficients();
-  for (int v = static_cast<int>(tb.cage.V.rows()) / 2; v < tb.cage.V.rows(); ++v) crossing(v, 0) -= 0.7;
-  const int saved = omp_get_max_threads();
-  auto check_with = [&](int threads, const Cage& cage, const TriMesh& mesh, const MatX3d& y) {
-    omp_set_num_threads(threads);
-    GlobalInjectivityParams own;
-    own.reuse_margins = false;
-    return GlobalInjectivityChecker(cage, mesh).check(y, own);
+  struct Case {
+    const Cage& cage;
+    const TriMesh& mesh;
+    MatX3d y;
+    Verdict verdict;
   };
-  for (const bool boxes : {false, true}) {
-    const Cage& cage = boxes ? tb.cage : spot.cage;
-    const TriMesh& mesh = boxes ? tb.mesh : spot.mesh;
-    const MatX3d y = boxes ? crossing : bend_coefficients(spot.cage, 0.8);
-    const GlobalInjectivity one = check_with(1, cage, mesh, y);
-    EXPECT_EQ(one.verdict, boxes ? Verdict::kOverlap : Verdict::kInjective) << one.reason;
+  std::vector<Case> cases() const {
+    MatX3d crossing = tb.cage.identity_coefficients();
+    for (int v = static_cast<int>(tb.cage.V.rows()) / 2; v < tb.cage.V.rows(); ++v) crossing(v, 0) -= 0.7;
+    return {{spot.cage, spot.mesh, bend_coefficients(spot.cage, 0.8), Verdict::kInjective},
+            {tb.cage, tb.mesh, crossing, Verdict::kOverlap}};
+  }
+};
+
+// A check of its own (no margins kept or used).
+GlobalInjectivity check_alone(const GlobalInjectivityChecker& checker, const MatX3d& y) {
+  GlobalInjectivityParams own;
+  own.reuse_margins = false;
+  return checker.check(y, own);
+}
+
+// g has ref's verdict, reason, place, triangles, candidate pairs and tube radius.
+void expect_same_result(const GlobalInjectivity& g, const GlobalInjectivity& ref, const std::string& what) {
+  EXPECT_EQ(g.verdict, ref.verdict) << what;
+  EXPECT_EQ(g.reason, ref.reason) << what;
+  EXPECT_EQ(g.overlap_point, ref.overlap_point) << what;
+  EXPECT_EQ(g.overlap_face_a, ref.overlap_face_a) << what;
+  EXPECT_EQ(g.overlap_face_b, ref.overlap_face_b) << what;
+  EXPECT_EQ(g.candidate_pairs, ref.candidate_pairs) << what;
+  EXPECT_EQ(g.max_tube_radius, ref.max_tube_radius) << what;
+}
+
+// The check's result does not depend on the number of threads (the candidate pairs' cells are built, sorted
+// in up to 3 chunks and merged, and scanned over the threads; the pairs are examined in parallel): 1, 2
+// and 3.
+TEST(GlobalInjectivity, ResultIsTheSameForAnyNumberOfThreads) {
+  LIDEF_REQUIRE_SHARED();
+  const SpotAndCrossingBoxes sc;
+  const int saved = omp_get_max_threads();
+  for (const auto& c : sc.cases()) {
+    omp_set_num_threads(1);
+    const GlobalInjectivity one = check_alone(GlobalInjectivityChecker(c.cage, c.mesh), c.y);
+    EXPECT_EQ(one.verdict, c.verdict) << one.reason;
     for (const int threads : {2, 3}) {
-      const GlobalInjectivity g = check_with(threads, cage, mesh, y);
-      EXPECT_EQ(g.verdict, one.verdict) << threads;
-      EXPECT_EQ(g.reason, one.reason) << threads;
-      EXPECT_EQ(g.overlap_point, one.overlap_point) << threads;
-      EXPECT_EQ(g.overlap_face_a, one.overlap_face_a) << threads;
-      EXPECT_EQ(g.overlap_face_b, one.overlap_face_b) << threads;
-      EXPECT_EQ(g.candidate_pairs, one.candidate_pairs) << threads;
+      omp_set_num_threads(threads);
+      const GlobalInjectivity g = check_alone(GlobalInjectivityChecker(c.cage, c.mesh), c.y);
+      expect_same_result(g, one, std::to_string(threads) + " threads");
       EXPECT_EQ(g.pair_tests, one.pair_tests) << threads;
       EXPECT_EQ(g.max_depth_used, one.max_depth_used) << threads;
-      EXPECT_EQ(g.max_tube_radius, one.max_tube_radius) << threads;
     }
   }
   omp_set_num_threads(saved);
+}
+
+// What a checker keeps for every check (the vertices' basis values and gradients, the balls' factor rows)
+// changes no verdict, place or candidate pair: nothing kept, the values only, and the default (256 MB: all of
+// it for these models).
+TEST(GlobalInjectivity, CacheBudgetChangesNoVerdict) {
+  LIDEF_REQUIRE_SHARED();
+  const SpotAndCrossingBoxes sc;
+  for (const auto& c : sc.cases()) {
+    const GlobalInjectivity all = check_alone(GlobalInjectivityChecker(c.cage, c.mesh), c.y);
+    EXPECT_EQ(all.verdict, c.verdict) << all.reason;
+    // The vertices' basis values only: #V by #V+#F doubles, less than the gradients' 3 #V by #V+#F floats.
+    const double values_mb =
+        1.01 * static_cast<double>(c.mesh.V.rows()) * (c.cage.V.rows() + c.cage.F.rows()) * 8 / 1048576.0;
+    for (const double mb : {0.0, values_mb}) {
+      expect_same_result(check_alone(GlobalInjectivityChecker(c.cage, c.mesh, mb), c.y), all,
+                         std::to_string(mb) + " MB");
+    }
+  }
 }
 
 // Two tetrahedra touching at one shared vertex (a bow tie): every edge is used once in each direction, yet

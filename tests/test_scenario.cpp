@@ -80,7 +80,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "line_search_max_refined",
                                              "bound_tolerance",
                                              "max_distortion",
-                                             "injectivity",  // certificate
+                                             "injectivity",
+                                             "global_cache_mb",  // certificate
                                              "dynamic_weighting",
                                              "e0",
                                              "kappa1",

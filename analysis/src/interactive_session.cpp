@@ -81,6 +81,7 @@ struct InteractiveSession::Engine {
   // Global injectivity: the checker of the model of model_version checker_model (built at its first check).
   std::unique_ptr<GlobalInjectivityChecker> checker;
   long checker_model = -1;
+  double checker_cache_mb = 0;  // the cache budget it was built with (DeformParams::global_cache_mb)
   std::shared_ptr<const GlobalInjectivity> global;
   long global_version = -1;
   Clock::time_point last_extras = Clock::now() - std::chrono::hours(1);
@@ -893,10 +894,11 @@ bool InteractiveSession::Engine::compute_global() {
                                  [this] { return !session.queue_.empty() || session.quit_; }))
         return false;
     }
-    if (!checker || checker_model != model_version) {
+    if (!checker || checker_model != model_version || checker_cache_mb != params.global_cache_mb) {
       checker.reset();  // the old model's checker is freed before the new one is built
-      checker = std::make_unique<GlobalInjectivityChecker>(model->cage, model->mesh);
+      checker = std::make_unique<GlobalInjectivityChecker>(model->cage, model->mesh, params.global_cache_mb);
       checker_model = model_version;
+      checker_cache_mb = params.global_cache_mb;
     }
     GlobalInjectivityParams gp;
     gp.cancel = &session.posted_;

@@ -99,6 +99,11 @@ std::vector<ParamInfo> make_table() {
        "(also that the shape does not pass through itself: a step that would is shortened, the solve stops "
        "'blocked'; needs the mesh domain and a surface that does not intersect itself at rest; costs a "
        "check per accepted step; docs/solver.md)"},
+      {"global_cache_mb", "certificate", &D::global_cache_mb, 0, 1e6,
+       "memory (MB) the global injectivity check of the solve and of the studio keeps for what no map "
+       "changes: the basis values and gradients at the mesh vertices, then the factor rows of the surface's "
+       "balls, each kept while it fits, otherwise evaluated in every check (every verdict is proven either "
+       "way; docs/parameters.md)"},
       // --- Dynamic weighting
       {"dynamic_weighting", "weighting", &D::dynamic_weighting, 0, 0,
        "adapt lambda1 and lambda2 during the solve (Sec. 7.3; kappa1, kappa2 below)"},

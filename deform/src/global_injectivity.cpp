@@ -178,6 +178,7 @@ struct GlobalInjectivityChecker::Impl {
   // Everything is computed in the cage's normalized frame (bounding-box center at the origin, diagonal 1), so
   // that the rounding allowances, relative to the coefficients' magnitudes, do not grow when the model is
   // moved away from the origin; points are reported in model units (center + scale · p).
+  double cache_bytes;  // the budget of what no map changes (cache_map_independent_parts)
   Vec3 center;
   double scale;
   Cage cage;
@@ -223,8 +224,9 @@ struct GlobalInjectivityChecker::Impl {
     t.F = F;
     return t;
   }
-  Impl(const Cage& c, const TriMesh& m)
-      : center(0.5 * (c.bbox_min + c.bbox_max)),
+  Impl(const Cage& c, const TriMesh& m, double cache_mb)
+      : cache_bytes(std::max(0.0, cache_mb) * 1048576.0),
+        center(0.5 * (c.bbox_min + c.bbox_max)),
         scale(std::max((c.bbox_max - c.bbox_min).norm(), 1e-300)),
         cage(normalized(c.V, c.F, center, scale)),
         mesh(normalized(m.V, m.F, center, scale)),
@@ -249,7 +251,7 @@ struct GlobalInjectivityChecker::Impl {
                        " and " + std::to_string(rest_intersections[0].second) + ")";
       else if (component_faces.size() > 1)
         rest_nesting_problem = check_rest_nesting(m.V);
-      cache_map_independent_parts();
+      cache_map_independent_parts(cache_bytes);
     }
   }
 
@@ -449,24 +451,27 @@ struct GlobalInjectivityChecker::Impl {
     *R = (*R + reach) * (1 + 1e-12);
   }
 
-  // What every check needs and no map changes, kept where it fits: the basis values at the mesh vertices
-  // (at most kMaxCachedEntries doubles; f at the vertices is then one product per check), the basis
-  // gradients there (at most 4 kMaxCachedEntries floats: J at the vertices is then one product per check
-  // instead of a pass over the cage faces per vertex), and the factor rows of the mesh triangles' balls and
-  // of the star balls (at most 2 kMaxCachedEntries floats together; L1 is then one dot product with the map's
-  // ‖δ_e‖): 64, 128 and 64 MB at most.
-  static constexpr double kMaxCachedEntries = 8e6;
+  // What every check needs and no map changes, kept in this order while it fits in the budget: the basis
+  // values at the mesh vertices (doubles; f at the vertices is then one product per check), the basis
+  // gradients there (floats; J at the vertices is then one product per check instead of a pass over the cage
+  // faces per vertex), and the factor rows of the mesh triangles' balls and of the star balls (floats; L1 is
+  // then one dot product with the map's ‖δ_e‖). A part that does not fit is evaluated in every check.
   MatXdR vertex_values;                        // #V by #V+#F of the cage, or empty
   std::vector<float> vertex_gradients;         // #V blocks of 3 rows (∂x, ∂y, ∂z) by #V+#F, or empty
   std::vector<double> vertex_gradient_abs;     // per vertex Σ|G̃| over its block
   std::vector<float> face_rows, star_rows;     // #F by #E and #V by #E (cage edges), or empty
   std::vector<char> face_row_ok, star_row_ok;  // the ball is clear of the cage
-  void cache_map_independent_parts() {
+  void cache_map_independent_parts(double budget) {
     const long nv = mesh.V.rows(), nf = mesh.F.rows(), ne = edges.size();
-    if (static_cast<double>(nv) * basis.size() <= kMaxCachedEntries)
-      basis.evaluate_rows(mesh.V, true, false, false, vertex_values);
-    if (3.0 * static_cast<double>(nv) * basis.size() <= 4 * kMaxCachedEntries) cache_vertex_gradients();
-    if (static_cast<double>(nv + nf) * static_cast<double>(ne) > 2 * kMaxCachedEntries) return;
+    // Takes count · size bytes from the budget where they fit.
+    auto fits = [&budget](double count, size_t size) {
+      const double bytes = count * static_cast<double>(size);
+      return bytes <= budget ? (budget -= bytes, true) : false;
+    };
+    const double nb = static_cast<double>(basis.size());
+    if (fits(nv * nb, sizeof(double))) basis.evaluate_rows(mesh.V, true, false, false, vertex_values);
+    if (fits(3 * nv * nb, sizeof(float))) cache_vertex_gradients();
+    if (!fits(static_cast<double>(nv + nf) * static_cast<double>(ne), sizeof(float))) return;
     face_rows.resize(nf * ne), star_rows.resize(nv * ne);
     face_row_ok.assign(nf, 0), star_row_ok.assign(nv, 0);
 #pragma omp parallel for schedule(dynamic, 256)
@@ -566,8 +571,8 @@ struct GlobalInjectivityChecker::Impl {
   }
 };
 
-GlobalInjectivityChecker::GlobalInjectivityChecker(const Cage& cage, const TriMesh& mesh)
-    : impl_(std::make_unique<Impl>(cage, mesh)) {}
+GlobalInjectivityChecker::GlobalInjectivityChecker(const Cage& cage, const TriMesh& mesh, double cache_mb)
+    : impl_(std::make_unique<Impl>(cage, mesh, cache_mb)) {}
 GlobalInjectivityChecker::~GlobalInjectivityChecker() = default;
 
 namespace {

@@ -334,11 +334,15 @@ std::string DeformationSolver::global_problem() const {
 }
 
 GlobalInjectivity DeformationSolver::check_global(const MatS3& y) const {
-  if (!global_checker_) global_checker_ = std::make_unique<GlobalInjectivityChecker>(cage_, mesh_);
-  // Global mode checks a sequence of nearby maps: the checker keeps each proven map's margins for the next
-  // (docs/certificate.md, Step G6). Local mode checks one map, the result, where keeping them is only cost.
+  // Global mode checks a sequence of nearby maps: the checker keeps what no map changes within
+  // global_cache_mb and each proven map's margins for the next (docs/certificate.md, Step G6). Local mode
+  // checks one map, the result, where keeping either is only cost.
+  const bool global = params_.injectivity == InjectivityMode::kGlobal;
+  if (!global_checker_)
+    global_checker_ = std::make_unique<GlobalInjectivityChecker>(
+        cage_, mesh_, global ? params_.global_cache_mb : GlobalInjectivityChecker::kDefaultCacheMB);
   GlobalInjectivityParams gp;
-  gp.reuse_margins = params_.injectivity == InjectivityMode::kGlobal;
+  gp.reuse_margins = global;
   return global_checker_->check(
       frame_.coefficients_from_normalized(subspace_.basis * y, cage_.num_vertices()), gp);
 }

@@ -77,6 +77,9 @@ struct DeformParams {
   // where it would pass through itself). local by default: the check costs far more than a Newton step
   // (docs/solver.md, "Global injectivity mode").
   InjectivityMode injectivity = InjectivityMode::kLocal;
+  // Memory (MB) the global mode's and the studio's checker keeps for what no map changes
+  // (GlobalInjectivityChecker's cache_mb): the more of it fits, the less each check evaluates.
+  double global_cache_mb = 1024;
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
   bool dynamic_weighting = true;
   double e0 = 1e-4;                // E_P2P threshold, relative to the squared cage bounding-box diagonal

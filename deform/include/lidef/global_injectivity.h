@@ -68,8 +68,12 @@ GlobalInjectivity global_injectivity_not_decided(const std::string& reason);
 // check() may be called from several threads.
 class GlobalInjectivityChecker {
  public:
-  // mesh: the rest-state surface (#V by 3, #F by 3, closed and embedded; inside the cage).
-  GlobalInjectivityChecker(const Cage& cage, const TriMesh& mesh);
+  // mesh: the rest-state surface (#V by 3, #F by 3, closed and embedded; inside the cage). cache_mb: memory
+  // for what no map changes (the basis values and gradients at the mesh vertices, then the factor rows of the
+  // triangles' and vertices' balls), each kept while it fits and otherwise evaluated in every check; the
+  // default suits a check of one map, a solve or the studio passes DeformParams::global_cache_mb.
+  static constexpr double kDefaultCacheMB = 256;
+  explicit GlobalInjectivityChecker(const Cage& cage, const TriMesh& mesh, double cache_mb = kDefaultCacheMB);
   ~GlobalInjectivityChecker();
   // y: coefficients (#V+#F of the cage by 3). The verdict is about the boundary surface; a caller reports
   // kInjective as "globally injective on D" only where the local certificate covers D.
