@@ -129,6 +129,13 @@ TEST(PointCloudPly, BadInputsAreRefusedNamingTheFile) {
   EXPECT_NE(msg("noz.ply", head + "end_header\n0 0\n").find("no property 'z'"), std::string::npos);
   EXPECT_NE(msg("short.ply", head + "property float z\nend_header\n0 0\n").find("file ends early"),
             std::string::npos);
+  // The header's last line at the very end of the file, without '\n': no body at all, in both formats.
+  EXPECT_NE(msg("nobody.ply", head + "property float z\nend_header").find("nobody.ply: file ends early"),
+            std::string::npos);
+  const std::string bin =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n"
+      "property float y\nproperty float z\nend_header";
+  EXPECT_NE(msg("nobody_bin.ply", bin).find("nobody_bin.ply: binary body is truncated"), std::string::npos);
   // A binary body cut short.
   PlyCloud c = random_splats(10, 2);
   std::ostringstream full;

@@ -80,7 +80,8 @@ Header parse_header(const std::string& path, const std::string& bytes) {
     if (end == std::string::npos) end = bytes.size();
     *line = bytes.substr(pos, end - pos);
     if (!line->empty() && line->back() == '\r') line->pop_back();
-    pos = end + 1;
+    // A last line without '\n' ends at the file's end: the body offset must not pass it.
+    pos = end < bytes.size() ? end + 1 : end;
     ++line_no;
     return true;
   };
@@ -322,12 +323,18 @@ PlyCloud read_ply_cloud(const std::string& path) {
       throw InputError(path, "binary body is truncated: " + std::to_string(vertex->count) + " vertices of " +
                                  std::to_string(row) + " bytes need more than the file's " +
                                  std::to_string(bytes.size() - h.body) + " bytes after the header");
-  } else if (static_cast<double>(vertex->count) > static_cast<double>(bytes.size())) {
-    throw InputError(path, "file ends early: " + std::to_string(vertex->count) + " vertices declared");
+  } else if (static_cast<double>(vertex->count) * static_cast<double>(vertex->props.size()) >
+             static_cast<double>(bytes.size() - h.body)) {
+    // Each ASCII value takes at least one byte.
+    throw InputError(path, "file ends early: " + std::to_string(vertex->count) + " vertices of " +
+                               std::to_string(vertex->props.size()) + " values declared, " +
+                               std::to_string(bytes.size() - h.body) + " bytes after the header");
   }
   BodyReader rd(path, bytes, h);
   std::vector<std::array<int, 3>> tris;
   for (const PlyElement& e : h.elements) {
+    // Entries without properties hold no bytes: nothing to read, however many are declared.
+    if (e.props.empty()) continue;
     const bool is_vertex = &e == vertex, is_face = e.name == "face";
     if (is_vertex) cloud.values.resize(e.count, static_cast<Eigen::Index>(e.props.size()));
     for (long i = 0; i < e.count; ++i)
@@ -342,13 +349,17 @@ PlyCloud read_ply_cloud(const std::string& path) {
         const double n = rd.value(p.count_type, what + " count");
         if (!(n >= 0 && n <= 1e6))
           throw InputError(path, what + ": list length " + format_g(n) + " is invalid");
-        std::vector<int> idx(static_cast<std::size_t>(n));
-        for (int& v : idx) v = static_cast<int>(rd.value(p.type, what));
+        // Kept as read: a list of another element may hold anything (floats, a uint beyond int's range).
+        std::vector<double> items(static_cast<std::size_t>(n));
+        for (double& v : items) v = rd.value(p.type, what);
         if (!is_face || (p.name != "vertex_indices" && p.name != "vertex_index")) continue;
-        for (int v : idx)
-          if (v < 0 || v >= vertex->count)
-            throw InputError(path, "face " + std::to_string(i + 1) + ": vertex index " + std::to_string(v) +
+        std::vector<int> idx;
+        for (const double v : items) {
+          if (!(v >= 0 && v < static_cast<double>(vertex->count)))  // also before the conversion to int
+            throw InputError(path, "face " + std::to_string(i + 1) + ": vertex index " + format_g(v) +
                                        " is out of range (" + std::to_string(vertex->count) + " vertices)");
+          idx.push_back(static_cast<int>(v));
+        }
         for (std::size_t c = 1; c + 1 < idx.size(); ++c) tris.push_back({idx[0], idx[c], idx[c + 1]});
       }
   }
