@@ -25,6 +25,7 @@
 #include "lidef/exact_winding.h"
 #include "lidef/geometry.h"
 #include "lidef/green_coordinates.h"
+#include "lidef/internal/edge_jet.h"
 #include "lidef/internal/float_rows.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/internal/stopwatch.h"
@@ -184,6 +185,7 @@ struct GlobalInjectivityChecker::Impl {
   Cage cage;
   TriMesh mesh;
   HarmonicBasis basis;
+  EdgeJet edge_jet;  // J at a point per cage edge (docs/certificate.md, Step 4b): the balls' centers
   EdgeArrays edges;
   TriangleGrid cage_grid;
   WindingNumber cage_winding;
@@ -231,6 +233,7 @@ struct GlobalInjectivityChecker::Impl {
         cage(normalized(c.V, c.F, center, scale)),
         mesh(normalized(m.V, m.F, center, scale)),
         basis(cage),
+        edge_jet(cage),
         edges(edge_endpoints(cage, true), edge_endpoints(cage, false)),
         cage_grid(cage.V, cage.F, (cage.bbox_max - cage.bbox_min).norm() / 64.0),
         cage_winding(cage.V, cage.F) {
@@ -543,21 +546,8 @@ struct GlobalInjectivityChecker::Impl {
     return lipschitz_from(delta, &rows[i * edges.size()]);
   }
 
-  // Is f injective on B(c, R)? ‖J(z) − J(c)‖₂ ≤ R L1 < σ3(J(c)) − rounding (docs/certificate.md). `row`
-  // keeps the ball's factors; *mu as below.
-  bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const VecXd& delta, const Vec3& c, double R,
-                      std::vector<float>& row, double* mu = nullptr) const {
-    return injective_ball(fm, c, R, lipschitz(delta, c, R, row), mu);
-  }
-  // The same for a ball whose L1 is known (+∞: not clear of the cage).
-  bool injective_ball(const HarmonicBasis::FaceMatrices& fm, const Vec3& c, double R, double L,
-                      double* mu = nullptr) const {
-    if (!std::isfinite(L)) return false;
-    double sJ = 0;
-    const MapJet jet = basis.differential_jet(fm, c, 1, &sJ);
-    return injective_ball(jet.J, sJ, R, L, mu);
-  }
-  // The same for the computed J̃(c) and its rounding scale; *mu (where given and the ball is one): a lower
+  // Is f injective on B(c, R)? ‖J(z) − J(c)‖₂ ≤ R L1 < σ3(J(c)) − rounding (docs/certificate.md), for
+  // the computed J̃(c) and its rounding scale; *mu (where given and the ball is one): a lower
   // bound of σ3(J(c)) − R L1, rounded down (Step G6).
   static bool injective_ball(const Mat3& J, double sJ, double R, double L, double* mu = nullptr) {
     if (!std::isfinite(L)) return false;
@@ -817,8 +807,9 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   const long nv, nf;
   MatX3d y;  // the coefficients in the normalized frame
   HarmonicBasis::FaceMatrices fm;
-  VecXd delta;  // per cage edge ‖δ_e‖ with its rounding
-  MatX3d fV;    // the mapped mesh vertices
+  EdgeJet::MapData ej;  // fm per cage edge: J at the balls' centers and the pieces' (Step 4b)
+  VecXd delta;          // per cage edge ‖δ_e‖ with its rounding
+  MatX3d fV;            // the mapped mesh vertices
   double eps = 0, slack = 0;
   std::vector<double> ycols;  // y as 3 contiguous columns, and its largest magnitude (J from kept gradients)
   double ymax = 0;
@@ -872,6 +863,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     const int ncv = im.cage.num_vertices();
     y.topRows(ncv) = (y_model.topRows(ncv).rowwise() - im.center.transpose()) / im.scale;
     fm = im.basis.face_matrices(y);
+    ej = im.edge_jet.prepare(fm);
     delta.resize(im.cage.num_edges());
     for (int e = 0; e < im.cage.num_edges(); ++e) {
       const CageEdge& ce = im.cage.edges[e];
@@ -922,12 +914,28 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     return "(" + format_g(p.x()) + ", " + format_g(p.y()) + ", " + format_g(p.z()) + ")";
   }
   double corner_error(int depth) const { return depth * corner_unit; }
+  // J̃(c) and its rounding scale by the per-edge evaluation (Step 4b: #V distances, #F solid angles and #E
+  // logarithms instead of 3#F per-face terms), the same claim as the per-face differential_jet's (within
+  // kRoundingRel of the scale of the exact J); with audit_violations also checked against that one.
+  Mat3 jacobian(const Vec3& c, double* sJ) const {
+    EdgeJet::Values v;
+    im.edge_jet.evaluate(ej, c, 0, false, false, false, v);
+    *sJ = v.scale_J;
+    if (params.audit_violations) audit_jacobian(v.J, v.scale_J, c);
+    return v.J;
+  }
+  bool injective_ball(const Vec3& c, double R, double L, double* mu = nullptr) const {
+    if (!std::isfinite(L)) return false;
+    double sJ = 0;
+    const Mat3 J = jacobian(c, &sJ);
+    return Impl::injective_ball(J, sJ, R, L, mu);
+  }
   // An upper bound of ‖J‖₂ on B(c, R): ‖J̃(c)‖_F, its rounding, and R L1 (mean value); +∞ where L1 is.
   double jacobian_bound(const Vec3& c, double R, double L1) const {
     if (!std::isfinite(L1)) return kInf;
     double sJ = 0;
-    const MapJet jet = im.basis.differential_jet(fm, c, 1, &sJ);
-    return (jet.J.norm() + kRoundingRel * sJ + R * L1) * (1 + 1e-9);
+    const Mat3 J = jacobian(c, &sJ);
+    return (J.norm() + kRoundingRel * sJ + R * L1) * (1 + 1e-9);
   }
   // jb: for depth > 0 a bound of ‖J‖ on a ball containing the piece (its parent's), else +∞ (then the
   // piece's own ball gives one).
@@ -1010,9 +1018,9 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
         double L = im.cached_lipschitz(delta, true, v);
         if (std::isnan(L)) L = im.lipschitz(delta, c, R, row);
         if (!im.vertex_jacobian(ycols, ymax, v, &Jv[v], &sJv[v]))
-          Jv[v] = im.basis.differential_jet(fm, c, 1, &sJv[v]).J;
+          Jv[v] = jacobian(c, &sJv[v]);
         else if (params.audit_violations)
-          audit_vertex_jacobian(v, c);
+          audit_jacobian(Jv[v], sJv[v], c);
         star_ok[v] = Impl::injective_ball(Jv[v], sJv[v], R, L);
       }
     }
@@ -1022,21 +1030,21 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
 #pragma omp parallel for schedule(dynamic, 256)
     for (long f = 0; f < nf; ++f)  // the triangle's own ball: the piece's, whose L1 is known
       face_ok[f] = star_ok[mesh.F(f, 0)] || star_ok[mesh.F(f, 1)] || star_ok[mesh.F(f, 2)] ||
-                   im.injective_ball(fm, pieces[f].c, pieces[f].R, pieces[f].L1);
+                   injective_ball(pieces[f].c, pieces[f].R, pieces[f].L1);
     double max_rho = 0;
     for (const Piece& P : pieces)
       if (std::isfinite(P.rho)) max_rho = std::max(max_rho, P.rho);
     out.max_tube_radius = max_rho * im.scale;
   }
 
-  // For tests (GlobalInjectivityParams::audit_violations): J̃ from the kept gradients against the per-face
-  // evaluation at the same point; both claim to be within kRoundingRel of their scale of the exact J, so a
-  // difference beyond the sum proves one claim wrong.
-  void audit_vertex_jacobian(long v, const Vec3& c) const {
+  // For tests (GlobalInjectivityParams::audit_violations): a J̃(c) with its scale sJ (from the kept
+  // gradients, or per edge) against the per-face evaluation at the same point; both claim to be within
+  // kRoundingRel of their scale of the exact J, so a difference beyond the sum proves one claim wrong.
+  void audit_jacobian(const Mat3& Jc, double sJ, const Vec3& c) const {
     double s = 0;
     const Mat3 J = im.basis.differential_jet(fm, c, 1, &s).J;
-    const double diff = Eigen::JacobiSVD<Mat3>(Jv[v] - J).singularValues()(0);  // ‖·‖₂, as the claims
-    if (!(diff <= kRoundingRel * (sJv[v] + s))) params.audit_violations->fetch_add(1);
+    const double diff = Eigen::JacobiSVD<Mat3>(Jc - J).singularValues()(0);  // ‖·‖₂, as the claims
+    if (!(diff <= kRoundingRel * (sJ + s))) params.audit_violations->fetch_add(1);
   }
   // Step G6, per mesh triangle T with the motion's L1 on its ball (L^Δ): sup_T |f − f_ref| ≤ max over the
   // corners |Δf(v)| + ½ L^Δ r² (Step G3 applied to Δf) with the corners' evaluation errors of both maps, and
@@ -1121,7 +1129,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
           if (base) move_top[i] = move[P.face], jmove_top[i] = jmove[P.face];
           continue;
         }
-        Jtop[i] = im.basis.differential_jet(fm, P.c, 1, &sJtop[i]).J;
+        Jtop[i] = jacobian(P.c, &sJtop[i]);
         const ProvenMargins::Top* ref = base ? base->find_top(P.id) : nullptr;
         if (!ref) continue;
         const double Ld = im.lipschitz(ddelta, P.c, P.R, row);
@@ -1256,7 +1264,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   // factors summed per edge group are kept for Step G6.
   bool ball_clears(const Vec3& c, double R, Scratch& s, PairResult& res) const {
     double mu = 0;
-    if (!im.injective_ball(fm, delta, c, R, s.row, &mu)) return false;
+    if (!injective_ball(c, R, im.lipschitz(delta, c, R, s.row), &mu)) return false;
     if (res.recordable) {
       if (mu > 0) {
         std::array<double, kEdgeGroups> sums{};
@@ -1312,8 +1320,9 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     long bad = 0;
     std::vector<float> row;
     for (const MarginBall& m : balls) {
-      double mu = -kInf;
-      im.injective_ball(fm, delta, m.c, m.R, row, &mu);
+      double mu = -kInf, sJ = 0;  // J by the per-face code: independent of the per-edge one that made m
+      const Mat3 J = im.basis.differential_jet(fm, m.c, 1, &sJ).J;
+      Impl::injective_ball(J, sJ, m.R, im.lipschitz(delta, m.c, m.R, row), &mu);
       bad += !(m.mu <= mu + 1e-9 * (1 + std::abs(mu)));
     }
     if (std::isfinite(sep) && balls.empty()) {
