@@ -412,6 +412,14 @@ struct GlobalInjectivityChecker::Impl {
     for (int k = 0; k < basis.size(); ++k) out += buf[k] * y.row(k).transpose();
     return out;
   }
+  // f at the three points P (3 by 3) in one pass of the SIMD kernel (HarmonicBasis::evaluate_rows: the
+  // same arithmetic per point as eval_f's, to the contraction of multiply-adds, within the same ε).
+  std::array<Vec3, 3> eval_f3(const MatX3d& y, const MatX3d& P, MatXdR& rows) const {
+    basis.evaluate_rows(P, true, false, false, rows);
+    std::array<Vec3, 3> out;
+    for (int k = 0; k < 3; ++k) out[k] = (rows.row(k) * y).transpose();
+    return out;
+  }
 
   // The factors Γ_e(B) of every cage edge for the ball B(c, R) (factor_row, first order), or false when the
   // ball is not clear of the cage (then no L1). They depend on the ball only, not on the map.
@@ -798,6 +806,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   struct Scratch {
     std::vector<float> row;
     std::vector<double> buf;
+    MatXdR basis_rows;  // eval_f3's
     std::vector<Task> stack;
   };
 
@@ -972,11 +981,13 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     if (!slot.compare_exchange_strong(expected, made, std::memory_order_acq_rel)) delete made;
   }
   void split_now(const Piece& P, std::array<Piece, 4>* ch, Scratch& s) const {
-    std::array<Vec3, 3> mp, mq;
+    std::array<Vec3, 3> mp;
+    MatX3d M(3, 3);
     for (int k = 0; k < 3; ++k) {
       mp[k] = 0.5 * (P.p[k] + P.p[(k + 1) % 3]);
-      mq[k] = im.eval_f(y, mp[k], s.buf);
+      M.row(k) = mp[k].transpose();
     }
+    const std::array<Vec3, 3> mq = im.eval_f3(y, M, s.basis_rows);
     const double jb = P.depth == 0 ? jacobian_bound(P.c, P.R, P.L1) : P.jb;
     const int f = P.face, d = P.depth + 1;
     (*ch)[0] = make_piece({P.p[0], mp[0], mp[2]}, {P.q[0], mq[0], mq[2]}, f, d, jb, s.row);
