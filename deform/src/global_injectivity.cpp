@@ -412,8 +412,8 @@ struct GlobalInjectivityChecker::Impl {
     for (int k = 0; k < basis.size(); ++k) out += buf[k] * y.row(k).transpose();
     return out;
   }
-  // f at the three points P (3 by 3) in one pass of the SIMD kernel (HarmonicBasis::evaluate_rows: the
-  // same arithmetic per point as eval_f's, to the contraction of multiply-adds, within the same ε).
+  // f at the three points P (3 by 3) in one pass of the SIMD kernel (HarmonicBasis::evaluate_rows); the
+  // basis values as eval_f's up to the contraction of multiply-adds, summed in another order: the same ε.
   std::array<Vec3, 3> eval_f3(const MatX3d& y, const MatX3d& P, MatXdR& rows) const {
     basis.evaluate_rows(P, true, false, false, rows);
     std::array<Vec3, 3> out;
