@@ -802,12 +802,24 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     Piece P, Q;
     bool self, touching;
   };
-  // Per thread: the factor row and basis buffers, the pair stage's stack of tasks.
+  // Per thread: the factor row and basis buffers.
   struct Scratch {
     std::vector<float> row;
     std::vector<double> buf;
     MatXdR basis_rows;  // eval_f3's
-    std::vector<Task> stack;
+  };
+  // One pair's examination (stage 4), run until the current task needs J at the center of an injectivity
+  // ball (Step G2) or the pair is done. The pair stage evaluates the balls of EdgeJet::kLanes such runs in
+  // one pass over the cage (Step 4c) and resumes each where it stopped, so that every run's steps and
+  // results are those of examining its pair alone.
+  struct PairRun {
+    long k = -1;              // the pair
+    std::vector<Task> stack;  // its tasks still to examine
+    bool waiting = false;     // for the ball (c, R) of `task`, with L1 (finite) and the factors `row`
+    Task task;
+    Vec3 c = Vec3::Zero();
+    double R = 0, L1 = kInf;
+    std::vector<float> row;
   };
 
   const Impl& im;
@@ -1258,29 +1270,56 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       if (!face_ok[top[i].face]) pairs.emplace_back(static_cast<int>(i), static_cast<int>(i));
   }
 
-  // --- 4. Per pair: separate, cover by an injectivity ball, prove a crossing, or split (bounded).
+  // --- 4. Per pair: separate, cover by an injectivity ball, prove a crossing, or split (bounded). Each
+  // thread keeps EdgeJet::kLanes pairs under way (PairRun) and takes the next pair in turn where one ends.
   void examine_pairs() {
     results.assign(pairs.size(), PairResult{});
+    const long n = static_cast<long>(pairs.size());
+    std::atomic<long> next{0};
+    constexpr int kLanes = EdgeJet::kLanes;
 #pragma omp parallel
     {
       Scratch s;
-#pragma omp for schedule(dynamic, 64)
-      for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
-        if (k > first_crossing.load(std::memory_order_relaxed) || cancelled()) continue;
-        examine_pair(k, s);
+      std::array<PairRun, kLanes> runs;
+      std::array<bool, kLanes> live{};
+      // Starts pairs in `run` until one waits for a ball; false when no pair is left.
+      auto take = [&](PairRun& run) {
+        for (long k = next.fetch_add(1); k < n; k = next.fetch_add(1)) {
+          if (k > first_crossing.load(std::memory_order_relaxed) || cancelled()) continue;
+          if (start_pair(k, run) && advance(run, s)) return true;
+        }
+        return false;
+      };
+      for (int i = 0; i < kLanes; ++i) live[i] = take(runs[i]);
+      std::array<Vec3, kLanes> centers;
+      std::array<double, kLanes> radii{};
+      std::array<EdgeJet::Values, kLanes> values;
+      std::array<int, kLanes> slot;
+      for (;;) {
+        int m = 0;
+        for (int i = 0; i < kLanes; ++i)
+          if (live[i]) slot[m] = i, centers[m] = runs[i].c, ++m;
+        if (m == 0) break;
+        im.edge_jet.evaluate_lanes(ej, centers.data(), radii.data(), m, false, false, false, values.data());
+        for (int j = 0; j < m; ++j) {
+          PairRun& run = runs[slot[j]];
+          if (params.audit_violations) audit_jacobian(values[j].J, values[j].scale_J, run.c);
+          live[slot[j]] = advance(run, s, &values[j]) || take(run);
+        }
       }
     }
   }
-  // Is f injective on B(c, R) (Step G2)? Where it is and the pair is recordable, the ball's margin and its
-  // factors summed per edge group are kept for Step G6.
-  bool ball_clears(const Vec3& c, double R, Scratch& s, PairResult& res) const {
+  // The ball of the run's current task with J̃ at its center (`at`): is f injective on it (Step G2)? Where
+  // it is and the pair is recordable, the ball's margin and its factors summed per edge group are kept for
+  // Step G6.
+  bool ball_clears(const PairRun& run, const EdgeJet::Values& at, PairResult& res) const {
     double mu = 0;
-    if (!injective_ball(c, R, im.lipschitz(delta, c, R, s.row), &mu)) return false;
+    if (!Impl::injective_ball(at.J, at.scale_J, run.R, run.L1, &mu)) return false;
     if (res.recordable) {
       if (mu > 0) {
         std::array<double, kEdgeGroups> sums{};
-        for (size_t e = 0; e < s.row.size(); ++e) sums[im.edge_group[e]] += s.row[e];
-        res.balls.push_back({mu, R, c});
+        for (size_t e = 0; e < run.row.size(); ++e) sums[im.edge_group[e]] += run.row[e];
+        res.balls.push_back({mu, run.R, run.c});
         for (const double x : sums) {  // rounded up to a float (the sum's own rounding: a relative 1e-12)
           const double up = x * (1 + 1e-12);
           float f = static_cast<float>(up);
@@ -1363,7 +1402,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
         if (mesh.F(fa, i) == mesh.F(fb, j)) (*sv)[n++] = mesh.F(fa, i);
     return n;
   }
-  void examine_pair(long k, Scratch& s) {
+  // The pair's first steps (a common star ball, the kept margins); true when its tasks remain to examine.
+  bool start_pair(long k, PairRun& run) {
     const int fa = pairs[k].first, fb = pairs[k].second;
     PairResult& res = results[k];
     std::array<int, 3> sv;
@@ -1376,38 +1416,101 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
     if (fa != fb) {
       bool star = false;
       for (int i = 0; i < nshared; ++i) star = star || star_ok[sv[i]];
-      if (star) return;  // both triangles lie in the star ball of a shared vertex, where f is injective
+      if (star) return false;  // both triangles lie in the star ball of a shared vertex, where f is injective
     }
     res.a = top[fa].id, res.b = top[fb].id;
     res.recordable = params.reuse_margins && res.a != kNoPiece && res.b != kNoPiece;
-    if (res.recordable && base && replay(fa, fb, res)) return;
-    std::vector<Task>& stack = s.stack;
-    stack.clear();
-    stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
+    if (res.recordable && base && replay(fa, fb, res)) return false;
+    run.k = k;
+    run.waiting = false;
+    run.stack.clear();
+    run.stack.push_back({top[fa], top[fb], fa == fb, nshared > 0 || im.intersect_at_rest(ffa, ffb)});
+    return true;
+  }
+  // Asks for the ball B(c, R) of `task`: true when the run now waits for J̃(c); false when the ball is not
+  // clear of the cage (no L1: it clears nothing, and no J is needed).
+  bool wait_for_ball(PairRun& run, const Task& task, const Vec3& c, double R) const {
+    run.L1 = im.lipschitz(delta, c, R, run.row);
+    if (!std::isfinite(run.L1)) return false;
+    run.waiting = true, run.task = task, run.c = c, run.R = R;
+    return true;
+  }
+  // After the task's ball did not clear it: split (a piece's own points), or prove a crossing, give up at
+  // the limits, or split the larger piece (a pair). True when the pair is done.
+  bool after_failed_ball(long k, const Task& task, Scratch& s, std::vector<Task>& stack, PairResult& res) {
+    const Piece &P = task.P, &Q = task.Q;
+    std::array<Piece, 4> ch;
+    if (task.self) {
+      if (P.depth >= params.max_depth || res.tests >= params.max_tests_per_pair) {
+        res.outcome = kOpen;
+        res.where = (P.q[0] + P.q[1] + P.q[2]) / 3.0;
+        return true;
+      }
+      split(P, &ch, s);
+      for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j) stack.push_back({ch[i], ch[j], false, true});
+      for (int i = 0; i < 4; ++i) stack.push_back({ch[i], ch[i], true, true});
+      return false;
+    }
+    const bool tubes = std::isfinite(P.rho) && std::isfinite(Q.rho);
+    if (tubes && !task.touching) {
+      const double m = P.rho + Q.rho;
+      Vec3 x;
+      bool found = false;
+      for (int e = 0; e < 3 && !found; ++e) {
+        found = robust_pierce(P.q[e], P.q[(e + 1) % 3], Q.q, m, slack, &x) ||
+                robust_pierce(Q.q[e], Q.q[(e + 1) % 3], P.q, m, slack, &x);
+      }
+      if (found) {
+        res.outcome = kCrossing;
+        res.where = x;
+        long cur = first_crossing.load();
+        while (k < cur && !first_crossing.compare_exchange_weak(cur, k)) {
+        }
+        return true;
+      }
+    }
+    const bool can_split = P.depth < params.max_depth || Q.depth < params.max_depth;
+    if (!can_split || res.tests >= params.max_tests_per_pair) {
+      res.outcome = kOpen;
+      res.where = 0.5 * (P.q[0] + Q.q[0]);
+      return true;
+    }
+    // Split the larger piece (one that may still be split).
+    const bool split_p = Q.depth >= params.max_depth || (P.depth < params.max_depth && P.diam >= Q.diam);
+    if (split_p) {
+      split(P, &ch, s);
+      for (int i = 3; i >= 0; --i) stack.push_back({ch[i], Q, false, task.touching});
+    } else {
+      split(Q, &ch, s);
+      for (int i = 3; i >= 0; --i) stack.push_back({P, ch[i], false, task.touching});
+    }
+    return false;
+  }
+  // Examines the run's tasks in order (depth first), `at` answering the ball it waits for; true when it
+  // waits for the next ball, false when the pair is done.
+  bool advance(PairRun& run, Scratch& s, const EdgeJet::Values* at = nullptr) {
+    const long k = run.k;
+    PairResult& res = results[k];
+    std::vector<Task>& stack = run.stack;
+    if (run.waiting) {
+      run.waiting = false;
+      if (!ball_clears(run, *at, res) && after_failed_ball(k, run.task, s, stack, res)) return false;
+    }
     while (!stack.empty()) {
       if ((res.tests & 63) == 63 && (k > first_crossing.load(std::memory_order_relaxed) || cancelled()))
-        break;
+        return false;
       const Task task = stack.back();
       stack.pop_back();
       const Piece &P = task.P, &Q = task.Q;
       ++res.tests;
       res.depth = std::max({res.depth, P.depth, Q.depth});
-      std::array<Piece, 4> ch;
       if (task.self) {  // the piece's own points: one injectivity ball, or split
-        if (ball_clears(P.c, P.R, s, res)) continue;
-        if (P.depth >= params.max_depth || res.tests >= params.max_tests_per_pair) {
-          res.outcome = kOpen;
-          res.where = (P.q[0] + P.q[1] + P.q[2]) / 3.0;
-          break;
-        }
-        split(P, &ch, s);
-        for (int i = 0; i < 4; ++i)
-          for (int j = i + 1; j < 4; ++j) stack.push_back({ch[i], ch[j], false, true});
-        for (int i = 0; i < 4; ++i) stack.push_back({ch[i], ch[i], true, true});
+        if (wait_for_ball(run, task, P.c, P.R)) return true;
+        if (after_failed_ball(k, task, s, stack, res)) return false;
         continue;
       }
-      const bool tubes = std::isfinite(P.rho) && std::isfinite(Q.rho);
-      if (tubes) {
+      if (std::isfinite(P.rho) && std::isfinite(Q.rho)) {
         const double gap = separation_lower_bound(P.q, Q.q, slack);
         if (gap > P.rho + Q.rho) {  // Step G6 keeps dist(f(P), f(Q)) ≥ gap − ρ_P − ρ_Q, rounded down
           res.sep = std::min(res.sep, (gap - P.rho - Q.rho) - 1e-12 * (gap + P.rho + Q.rho));
@@ -1418,40 +1521,11 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       const Vec3 c = 0.5 * (P.c + Q.c);
       double R = 0;
       for (int i = 0; i < 3; ++i) R = std::max({R, (P.p[i] - c).norm(), (Q.p[i] - c).norm()});
-      if (ball_clears(c, (R + reach) * (1 + 1e-12) + 1e-15 * c.cwiseAbs().maxCoeff(), s, res)) continue;
-      if (tubes && !task.touching) {
-        const double m = P.rho + Q.rho;
-        Vec3 x;
-        bool found = false;
-        for (int e = 0; e < 3 && !found; ++e) {
-          found = robust_pierce(P.q[e], P.q[(e + 1) % 3], Q.q, m, slack, &x) ||
-                  robust_pierce(Q.q[e], Q.q[(e + 1) % 3], P.q, m, slack, &x);
-        }
-        if (found) {
-          res.outcome = kCrossing;
-          res.where = x;
-          long cur = first_crossing.load();
-          while (k < cur && !first_crossing.compare_exchange_weak(cur, k)) {
-          }
-          break;
-        }
-      }
-      const bool can_split = P.depth < params.max_depth || Q.depth < params.max_depth;
-      if (!can_split || res.tests >= params.max_tests_per_pair) {
-        res.outcome = kOpen;
-        res.where = 0.5 * (P.q[0] + Q.q[0]);
-        break;
-      }
-      // Split the larger piece (one that may still be split).
-      const bool split_p = Q.depth >= params.max_depth || (P.depth < params.max_depth && P.diam >= Q.diam);
-      if (split_p) {
-        split(P, &ch, s);
-        for (int i = 3; i >= 0; --i) stack.push_back({ch[i], Q, false, task.touching});
-      } else {
-        split(Q, &ch, s);
-        for (int i = 3; i >= 0; --i) stack.push_back({P, ch[i], false, task.touching});
-      }
+      if (wait_for_ball(run, task, c, (R + reach) * (1 + 1e-12) + 1e-15 * c.cwiseAbs().maxCoeff()))
+        return true;
+      if (after_failed_ball(k, task, s, stack, res)) return false;
     }
+    return false;
   }
 
   // --- 5. The verdict: the first overlap in pair order, else the first undecided pair, else — for a surface
