@@ -79,7 +79,7 @@ struct DeformParams {
   InjectivityMode injectivity = InjectivityMode::kLocal;
   // Memory (MB) the global mode's and the studio's checker keeps for what no map changes
   // (GlobalInjectivityChecker's cache_mb): the more of it fits, the less each check evaluates.
-  double global_cache_mb = 1024;
+  double global_cache_mb = 2048;
   // --- Dynamic weighting (Sec. 7.3; docs/solver.md)
   bool dynamic_weighting = true;
   double e0 = 1e-4;                // E_P2P threshold, relative to the squared cage bounding-box diagonal
