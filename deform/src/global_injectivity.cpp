@@ -468,9 +468,9 @@ struct GlobalInjectivityChecker::Impl {
   // faces per vertex), and the factor rows of the mesh triangles' balls and of the star balls (floats; L1 is
   // then one dot product with the map's ‖δ_e‖). A part that does not fit is evaluated in every check.
   MatXdR vertex_values;                        // #V by #V+#F of the cage, or empty
-  std::vector<float> vertex_gradients;         // #V blocks of 3 rows (∂x, ∂y, ∂z) by #V+#F, or empty
+  FloatRows vertex_gradients;                  // #V blocks of 3 rows (∂x, ∂y, ∂z) by #V+#F, or empty
   std::vector<double> vertex_gradient_abs;     // per vertex Σ|G̃| over its block
-  std::vector<float> face_rows, star_rows;     // #F by #E and #V by #E (cage edges), or empty
+  FloatRows face_rows, star_rows;              // #F by #E and #V by #E (cage edges), or empty
   std::vector<char> face_row_ok, star_row_ok;  // the ball is clear of the cage
   void cache_map_independent_parts(double budget) {
     const long nv = mesh.V.rows(), nf = mesh.F.rows(), ne = edges.size();
@@ -548,7 +548,7 @@ struct GlobalInjectivityChecker::Impl {
   }
   // L1 of mesh triangle i's ball (star: of vertex i's star ball) from the cache; NaN where not cached.
   double cached_lipschitz(const VecXd& delta, bool star, long i) const {
-    const std::vector<float>& rows = star ? star_rows : face_rows;
+    const FloatRows& rows = star ? star_rows : face_rows;
     if (rows.empty()) return std::numeric_limits<double>::quiet_NaN();
     if (!(star ? star_row_ok : face_row_ok)[i]) return kInf;
     return lipschitz_from(delta, &rows[i * edges.size()]);

@@ -2,7 +2,34 @@
 // the global check's mesh vertices): docs/certificate.md, Step 5, bounds the float storage's error.
 #pragma once
 
+#include <memory>
+#include <new>
+#include <utility>
+#include <vector>
+
 namespace lidef {
+
+// An allocator whose resize leaves new elements uninitialized (default-initialized), so that a large buffer
+// filled right after by a parallel loop is written once, its pages first touched by the threads that fill
+// them, instead of being zeroed first by one thread.
+template <class T, class Base = std::allocator<T>>
+struct DefaultInitAllocator : Base {
+  template <class U>
+  struct rebind {
+    using other = DefaultInitAllocator<U, typename std::allocator_traits<Base>::template rebind_alloc<U>>;
+  };
+  using Base::Base;
+  template <class U>
+  void construct(U* p) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    std::allocator_traits<Base>::construct(static_cast<Base&>(*this), p, std::forward<Args>(args)...);
+  }
+};
+// Float rows kept for later checks, filled after each resize.
+using FloatRows = std::vector<float, DefaultInitAllocator<float>>;
 
 // out[a] = Σ_k g[k] · cols[a · m + k] for the 3 contiguous coefficient columns `cols` (m entries each), the
 // float row g widened to double; one pass over g for all three columns.
