@@ -539,11 +539,27 @@ struct GlobalInjectivityChecker::Impl {
     return true;
   }
   // f at the mesh vertices (#V by 3) for coefficients y: from the kept basis values where there are.
+  // Without kept values, the same SIMD kernel evaluates them a small block of vertices at a time, and each
+  // vertex's image is the same product of its row with y as from kept values.
   MatX3d mapped_vertices(const MatX3d& y) const {
-    if (vertex_values.rows() != mesh.V.rows()) return basis.map_values(y, mesh.V);
-    MatX3d out(mesh.V.rows(), 3);
+    const long nv = mesh.V.rows();
+    MatX3d out(nv, 3);
+    if (vertex_values.rows() == nv) {
 #pragma omp parallel for schedule(static)
-    for (long i = 0; i < out.rows(); ++i) out.row(i) = vertex_values.row(i) * y;
+      for (long i = 0; i < nv; ++i) out.row(i) = vertex_values.row(i) * y;
+      return out;
+    }
+    constexpr long kBlock = 64;
+#pragma omp parallel
+    {
+      MatXdR rows;
+#pragma omp for schedule(dynamic, 4)
+      for (long b = 0; b < (nv + kBlock - 1) / kBlock; ++b) {
+        const long v0 = b * kBlock, n = std::min(kBlock, nv - v0);
+        basis.evaluate_rows(mesh.V.middleRows(v0, n), true, false, false, rows);
+        for (long i = 0; i < n; ++i) out.row(v0 + i) = rows.row(i) * y;
+      }
+    }
     return out;
   }
   // L1 of mesh triangle i's ball (star: of vertex i's star ball) from the cache; NaN where not cached.
@@ -1031,20 +1047,33 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
           motion_L1[f] = std::isnan(cached) ? im.lipschitz_from(ddelta, row.data())
                                             : im.cached_lipschitz(ddelta, false, f);
       }
-      // J at every vertex (the star ball's center), kept for Step G6 also where the star ball is not used.
-#pragma omp for schedule(dynamic, 256)
-      for (long v = 0; v < nv; ++v) {
+      // J at every vertex (the star ball's center), kept for Step G6 also where the star ball is not used:
+      // from the kept gradients, else per cage edge for EdgeJet::kLanes vertices at once (Step 4c).
+      constexpr int kLanes = EdgeJet::kLanes;
+      std::array<Vec3, kLanes> c;
+      std::array<double, kLanes> R, zero{};
+      std::array<EdgeJet::Values, kLanes> at;
+#pragma omp for schedule(dynamic, 32)
+      for (long g = 0; g < (nv + kLanes - 1) / kLanes; ++g) {
         if (cancelled()) continue;
-        Vec3 c;
-        double R;
-        im.star_ball(v, &c, &R);
-        double L = im.cached_lipschitz(delta, true, v);
-        if (std::isnan(L)) L = im.lipschitz(delta, c, R, row);
-        if (!im.vertex_jacobian(ycols, ymax, v, &Jv[v], &sJv[v]))
-          Jv[v] = jacobian(c, &sJv[v]);
-        else if (params.audit_violations)
-          audit_jacobian(Jv[v], sJv[v], c);
-        star_ok[v] = Impl::injective_ball(Jv[v], sJv[v], R, L);
+        const long v0 = g * kLanes;
+        const int n = static_cast<int>(std::min<long>(kLanes, nv - v0));
+        bool kept = true;
+        for (int i = 0; i < n; ++i) {
+          im.star_ball(v0 + i, &c[i], &R[i]);
+          kept = im.vertex_jacobian(ycols, ymax, v0 + i, &Jv[v0 + i], &sJv[v0 + i]) && kept;
+        }
+        if (!kept) {
+          im.edge_jet.evaluate_lanes(ej, c.data(), zero.data(), n, false, false, false, at.data());
+          for (int i = 0; i < n; ++i) Jv[v0 + i] = at[i].J, sJv[v0 + i] = at[i].scale_J;
+        }
+        for (int i = 0; i < n; ++i) {
+          const long v = v0 + i;
+          if (params.audit_violations) audit_jacobian(Jv[v], sJv[v], c[i]);
+          double L = im.cached_lipschitz(delta, true, v);
+          if (std::isnan(L)) L = im.lipschitz(delta, c[i], R[i], row);
+          star_ok[v] = Impl::injective_ball(Jv[v], sJv[v], R[i], L);
+        }
       }
     }
     if (cancelled()) return;
