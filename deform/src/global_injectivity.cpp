@@ -538,28 +538,13 @@ struct GlobalInjectivityChecker::Impl {
     *sJ = 3 * cmax * vertex_gradient_abs[v] * (1 + 0x1p-23 / kRoundingRel) * (1 + 1e-12);
     return true;
   }
-  // f at the mesh vertices (#V by 3) for coefficients y: from the kept basis values where there are.
-  // Without kept values, the same SIMD kernel evaluates them a small block of vertices at a time, and each
-  // vertex's image is the same product of its row with y as from kept values.
+  // f at the mesh vertices (#V by 3) for coefficients y: from the kept basis values where there are, else by
+  // map_values (the same kernel and the same product per vertex).
   MatX3d mapped_vertices(const MatX3d& y) const {
-    const long nv = mesh.V.rows();
-    MatX3d out(nv, 3);
-    if (vertex_values.rows() == nv) {
+    if (vertex_values.rows() != mesh.V.rows()) return basis.map_values(y, mesh.V);
+    MatX3d out(mesh.V.rows(), 3);
 #pragma omp parallel for schedule(static)
-      for (long i = 0; i < nv; ++i) out.row(i) = vertex_values.row(i) * y;
-      return out;
-    }
-    constexpr long kBlock = 64;
-#pragma omp parallel
-    {
-      MatXdR rows;
-#pragma omp for schedule(dynamic, 4)
-      for (long b = 0; b < (nv + kBlock - 1) / kBlock; ++b) {
-        const long v0 = b * kBlock, n = std::min(kBlock, nv - v0);
-        basis.evaluate_rows(mesh.V.middleRows(v0, n), true, false, false, rows);
-        for (long i = 0; i < n; ++i) out.row(v0 + i) = rows.row(i) * y;
-      }
-    }
+    for (long i = 0; i < out.rows(); ++i) out.row(i) = vertex_values.row(i) * y;
     return out;
   }
   // L1 of mesh triangle i's ball (star: of vertex i's star ball) from the cache; NaN where not cached.
@@ -821,7 +806,6 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
   // Per thread: the factor row and basis buffers.
   struct Scratch {
     std::vector<float> row;
-    std::vector<double> buf;
     MatXdR basis_rows;  // eval_f3's
   };
   // One pair's examination (stage 4), run until the current task needs J at the center of an injectivity

@@ -304,23 +304,71 @@ void HarmonicBasis::evaluate_rows(const MatX3d& P, bool values, bool gradients, 
   }
 }
 
+namespace {
+// f = Σ_i y_i φ_i and J = Σ_i y_i ∇φ_iᵀ in the order of i, for the values val[i] and the gradients
+// (gx, gy, gz)[i · gstride] of one point: map_jet's sums, shared by map_jets.
+void contract_jet(const MatX3d& y, const double* val, const double* gx, const double* gy, const double* gz,
+                  long gstride, Vec3& f, Mat3& J) {
+  f.setZero(), J.setZero();
+  for (Eigen::Index i = 0; i < y.rows(); ++i) {
+    const Vec3 yi = y.row(i).transpose();
+    f += yi * val[i];
+    J += yi * Eigen::RowVector3d(gx[i * gstride], gy[i * gstride], gz[i * gstride]);
+  }
+}
+// The batched maps' loop: the points P in blocks of 64 (small rows, a task per block), each block's basis
+// values (and gradients) by the SIMD kernel, then each(first point, count, rows) on the block.
+template <class Each>
+void in_blocks(const HarmonicBasis& basis, const MatX3d& P, bool gradients, Each&& each) {
+  constexpr Eigen::Index kBlock = 64;
+  const Eigen::Index n = P.rows();
+#pragma omp parallel
+  {
+    MatXdR rows;
+#pragma omp for schedule(dynamic, 1)
+    for (Eigen::Index b = 0; b < (n + kBlock - 1) / kBlock; ++b) {
+      const Eigen::Index i0 = b * kBlock, m = std::min(kBlock, n - i0);
+      basis.evaluate_rows(P.middleRows(i0, m), true, gradients, false, rows);
+      each(i0, m, rows);
+    }
+  }
+}
+}  // namespace
+
 MapJet HarmonicBasis::map_jet(const MatX3d& y, const Vec3& p, int order) const {
   const int n = size();
   std::vector<double> val(n), grad(order >= 1 ? 3 * n : 0), hess(order >= 2 ? kSym * n : 0);
   evaluate(p, order, val.data(), order >= 1 ? grad.data() : nullptr, order >= 2 ? hess.data() : nullptr);
   MapJet jet;
-  for (int i = 0; i < n; ++i) {
-    const Vec3 yi = y.row(i).transpose();
-    jet.f += yi * val[i];
-    if (order >= 1) jet.J += yi * Eigen::Map<const Eigen::RowVector3d>(&grad[3 * i]);
-    if (order >= 2) {
+  if (order >= 1) {
+    contract_jet(y, val.data(), &grad[0], &grad[1], &grad[2], 3, jet.f, jet.J);
+  } else {
+    for (int i = 0; i < n; ++i) jet.f += y.row(i).transpose() * val[i];
+  }
+  if (order >= 2)
+    for (int i = 0; i < n; ++i) {
+      const Vec3 yi = y.row(i).transpose();
       const double* h = &hess[kSym * i];
       Mat3 Hb;
       Hb << h[0], h[1], h[2], h[1], h[3], h[4], h[2], h[4], h[5];
       for (int a = 0; a < 3; ++a) jet.H[a] += yi(a) * Hb;
     }
-  }
   return jet;
+}
+
+void HarmonicBasis::map_jets(const MatX3d& y, const MatX3d& P, MatX3d& f, MatXd& JT) const {
+  f.resize(P.rows(), 3);
+  JT.resize(3 * P.rows(), 3);
+  in_blocks(*this, P, true, [&](Eigen::Index i0, Eigen::Index m, const MatXdR& rows) {
+    for (Eigen::Index i = 0; i < m; ++i) {
+      Vec3 fi;
+      Mat3 J;
+      contract_jet(y, &rows(4 * i, 0), &rows(4 * i + 1, 0), &rows(4 * i + 2, 0), &rows(4 * i + 3, 0), 1, fi,
+                   J);
+      f.row(i0 + i) = fi.transpose();
+      JT.middleRows(3 * (i0 + i), 3) = J.transpose();
+    }
+  });
 }
 
 HarmonicBasis::FaceMatrices HarmonicBasis::face_matrices(const MatX3d& y) const {
@@ -394,17 +442,10 @@ MatXd HarmonicBasis::hessian_matrix(const MatX3d& P) const {
 }
 
 MatX3d HarmonicBasis::map_values(const MatX3d& y, const MatX3d& P) const {
-  const int n = size();
   MatX3d out(P.rows(), 3);
-#pragma omp parallel
-  {
-    std::vector<double> val(n);
-#pragma omp for schedule(static)
-    for (Eigen::Index i = 0; i < P.rows(); ++i) {
-      evaluate(P.row(i).transpose(), 0, val.data(), nullptr, nullptr);
-      out.row(i) = Eigen::Map<const Eigen::RowVectorXd>(val.data(), n) * y;
-    }
-  }
+  in_blocks(*this, P, false, [&](Eigen::Index i0, Eigen::Index m, const MatXdR& rows) {
+    for (Eigen::Index i = 0; i < m; ++i) out.row(i0 + i) = rows.row(i) * y;
+  });
   return out;
 }
 

@@ -73,8 +73,12 @@ class HarmonicBasis {
   MatXd gradient_matrix(const MatX3d& P) const;
   MatXd hessian_matrix(const MatX3d& P) const;
 
-  // Map values at many points: #P by 3.
+  // Map values at many points: #P by 3. By the SIMD kernel (evaluate_rows) a block of points at a time, each
+  // point's row times y.
   MatX3d map_values(const MatX3d& y, const MatX3d& P) const;
+  // f (#P by 3) and J transposed (3#P by 3: rows 3i..3i+2 are J(p_i)ᵀ) at many points: map_jet's numbers
+  // (order 1, its sums in its order) from the SIMD kernel a block of points at a time.
+  void map_jets(const MatX3d& y, const MatX3d& P, MatX3d& f, MatXd& JT) const;
 
   // --- The differential representation (paper (49) and (53) with the MATH-NOTES signs):
   //   J(p) = Σ_t ω_t A_t − Σ_t Σ_k C_k A_t [d̂_k]×,   H(p) = −Σ_t Σ_k (A_t ∘ α_k + A_t [d̂_k]× ∘ β_k),
