@@ -40,9 +40,10 @@ constexpr int kMaxGrid = 1024;
 
 // The rows of the parameter table that shape a certificate (the others belong to the solver).
 bool certify_param(const ParamInfo& p) {
-  static const std::set<std::string> names = {"samples", "voxel_side",      "safety",     "max_depth",
-                                              "domain",  "max_refined",     "bound",      "threads",
-                                              "backend", "bound_tolerance", "refinement", "max_distortion"};
+  static const std::set<std::string> names = {"samples",    "voxel_side",      "safety",     "max_depth",
+                                              "domain",     "max_refined",     "bound",      "threads",
+                                              "backend",    "bound_tolerance", "refinement", "max_distortion",
+                                              "max_sigma1", "min_sigma3"};
   return names.count(p.name) > 0;
 }
 

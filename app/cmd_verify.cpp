@@ -66,6 +66,14 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
     }
   });
   const long checked = static_cast<long>(v.results.size());
+  // A certified map meets its distortion targets on every leaf: the intervals must prove that too (σ1 ≤
+  // max_sigma1 by sigma1_hi, σ3 ≥ min_sigma3 by margin_lo, σ1/σ3 ≤ max_distortion by distortion_hi).
+  const DistortionTargets targets = rep.cert.targets();
+  long targets_not_proven = 0;
+  if (targets.any())
+    for (const IntervalLeaf& r : v.results)
+      targets_not_proven +=
+          targets.unproven(r.sigma1_hi, r.margin_lo, r.distortion_hi) != DistortionTarget::kNone;
   const double leaves_per_s = v.seconds > 0 ? checked / v.seconds : 0.0;
   write_file_atomic(out.path("interval.json"), [&](std::ostream& s) {
     auto num = [](double x) { return std::isfinite(x) ? format_double(x) : "\"" + format_double(x) + "\""; };
@@ -86,13 +94,15 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
       << "  \"distortion_not_proven\": " << v.distortion_not_proven << ",\n"
       << "  \"max_sigma1_hi\": " << num(v.max_sigma1_hi) << ",\n"
       << "  \"max_distortion_hi\": " << num(v.max_distortion_hi) << ",\n"
+      << "  \"distortion_targets\": " << nlohmann::json(targets.describe()).dump() << ",\n"
+      << "  \"distortion_targets_not_proven\": " << targets_not_proven << ",\n"
       << "  \"transcendental_ulps\": " << kTranscendentalUlps << ",\n"
       << "  \"time_s\": " << num(v.seconds) << ",\n"
       << "  \"leaves_per_s\": " << num(leaves_per_s) << "\n"
       << "}\n";
   });
   out.commit();
-  const bool leaves_ok = v.not_proven == 0 && v.distortion_not_proven == 0;
+  const bool leaves_ok = v.not_proven == 0 && v.distortion_not_proven == 0 && targets_not_proven == 0;
   const bool ok = leaves_ok && coverage.proven && rep.cert.certified;
   std::cout << "lidef verify --interval: " << (ok ? "PROVEN" : "NOT PROVEN") << ": " << v.proven << " of "
             << checked << " certified leaves proven in interval arithmetic (" << leaves.size()
@@ -104,6 +114,9 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
             << " certified leaves' sigma1 and sigma1/sigma3 bounds re-proven (max sigma1 <= "
             << format_g(v.max_sigma1_hi) << ", max sigma1/sigma3 <= " << format_g(v.max_distortion_hi)
             << ")\n";
+  if (targets.any())
+    std::cout << "  distortion targets (" << targets.describe() << "): " << checked - targets_not_proven
+              << " of " << checked << " certified leaves re-proven within them\n";
   if (!rep.cert.certified)
     std::cout << "  the certificate itself says 'not certified' (" << rep.cert.reason
               << "): only its certified leaves were re-proved, which certifies nothing about the others\n";
@@ -111,7 +124,9 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
     int listed = 0;
     for (size_t q = 0; q < v.results.size() && listed < kListedUnproven; ++q) {
       const IntervalLeaf& r = v.results[q];
-      if (r.proven && !distortion_unproven(r, leaves[v.leaf_index[q]])) continue;
+      if (r.proven && !distortion_unproven(r, leaves[v.leaf_index[q]]) &&
+          targets.unproven(r.sigma1_hi, r.margin_lo, r.distortion_hi) == DistortionTarget::kNone)
+        continue;
       ++listed;
       const CertLeaf& l = leaves[v.leaf_index[q]];
       std::cout << "  not proven: leaf " << v.leaf_index[q] << " (row " << v.leaf_index[q] + 2
@@ -297,7 +312,17 @@ void add_verify_command(CLI::App& app, Action& action) {
         certified_leaves += leaves[i].certified;
         if (std::isfinite(v.voxels[i].tightness)) max_tight = std::max(max_tight, v.voxels[i].tightness);
       }
-      const bool ok = v.violations == 0 && v.nonpositive_in_certified == 0 && v.distortion_violations == 0;
+      // The distortion targets a certificate claims to meet (max_distortion, max_sigma1, min_sigma3), against
+      // the samples of its certified leaves, beyond the SVD's rounding (relative 1e-10).
+      const DistortionTargets targets = rep.cert.targets();
+      const bool targets_claimed = targets.any() && rep.cert.distortion_met;
+      const bool targets_sampled_ok =
+          !targets_claimed ||
+          ((!(targets.max_distortion > 0) || v.max_distortion <= targets.max_distortion * (1 + 1e-10)) &&
+           (!(targets.max_sigma1 > 0) || v.max_sigma1 <= targets.max_sigma1 * (1 + 1e-10)) &&
+           (!(targets.min_sigma3 > 0) || v.min_sigma3 >= targets.min_sigma3 * (1 - 1e-10)));
+      const bool ok = v.violations == 0 && v.nonpositive_in_certified == 0 && v.distortion_violations == 0 &&
+                      targets_sampled_ok;
       std::cout << "lidef verify: " << (ok ? "OK" : "FAILED") << ": " << v.points << " points in "
                 << leaves.size() << " leaves (" << certified_leaves << " certified; certificate says "
                 << (rep.cert.certified ? "certified" : "not certified") << ")\n";
@@ -310,6 +335,13 @@ void add_verify_command(CLI::App& app, Action& action) {
                 << format_g(v.max_distortion) << " (certified bound "
                 << format_g(rep.cert.max_distortion_upper_bound) << "), samples above their leaf's bounds "
                 << v.distortion_violations << "\n";
+      if (targets.any())
+        std::cout << "  distortion targets (" << targets.describe() << "): "
+                  << (rep.cert.distortion_met ? "proven by the certificate" : "not proven by the certificate")
+                  << (targets_claimed ? (targets_sampled_ok ? "; every sample within them"
+                                                            : "; a sample beyond them: the claim is WRONG")
+                                      : "")
+                  << "\n";
       std::cout << "  wrote " << out.final_path("")
                 << "{verify.csv, violations.csv, verify_plot.gp, verify_plot.dat"
                 << (have_png ? ", verify_plot.png" : "") << "}\n";

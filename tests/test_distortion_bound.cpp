@@ -208,6 +208,98 @@ TEST(DistortionBound, TargetIsProvenByRefinementOrReportedNotCertified) {
   EXPECT_NO_THROW(validate_params(dp, "test"));
 }
 
+// The isometric targets (max_sigma1, min_sigma3): between the sampled extreme and the unconstrained bound,
+// refinement proves them (the certificate's σ1 upper bound and σ3 lower bound move to the target, sampling
+// agrees); beyond the sampled extreme the map is not certified, naming the target; together with a K target
+// the one that fails is named.
+TEST(DistortionBound, IsometricTargetsAreProvenByRefinementOrReportedNotCertified) {
+  const Sphere& s = sphere();
+  OctreeCertifier cert(s.cage, s.sampling);
+  const MatX3d y = lidef::test::smooth_map(s.cage, s.sub, 0.9, 12);
+  CertifyParams p;
+  p.max_depth = 3;
+  const Certificate c0 = cert.certify(y, p);
+  ASSERT_TRUE(c0.certified) << c0.reason;
+  const VerificationResult v0 = verify_certificate(cert.basis(), y, c0.leaves, 8, 3);
+  ASSERT_GT(c0.max_sigma1_upper_bound, v0.max_sigma1);
+  ASSERT_LT(c0.min_lower_bound, v0.min_sigma3);
+  ASSERT_GT(v0.max_sigma1, 1.05) << "the map should stretch";
+  ASSERT_LT(v0.min_sigma3, 0.95) << "the map should compress";
+
+  // σ1: a target between the sampled maximum and the bound.
+  CertifyParams q = p;
+  q.max_sigma1 = v0.max_sigma1 + 0.6 * (c0.max_sigma1_upper_bound - v0.max_sigma1);
+  const Certificate c1 = cert.certify(y, q);
+  ASSERT_TRUE(c1.certified) << c1.reason;
+  EXPECT_TRUE(c1.distortion_met);
+  EXPECT_LE(c1.max_sigma1_upper_bound, q.max_sigma1);
+  EXPECT_GT(c1.num_leaves, c0.num_leaves);
+  for (const CertLeaf& l : c1.leaves) EXPECT_LE(l.sigma1_upper, q.max_sigma1);
+  const VerificationResult v1 = verify_certificate(cert.basis(), y, c1.leaves, 8, 5);
+  EXPECT_EQ(v1.distortion_violations, 0);
+  EXPECT_LE(v1.max_sigma1, q.max_sigma1);
+
+  // σ3: a target between the unconstrained lower bound and the sampled minimum.
+  q = p;
+  q.min_sigma3 = v0.min_sigma3 - 0.4 * (v0.min_sigma3 - c0.min_lower_bound);
+  const Certificate c2 = cert.certify(y, q);
+  ASSERT_TRUE(c2.certified) << c2.reason;
+  EXPECT_TRUE(c2.distortion_met);
+  EXPECT_GE(c2.min_lower_bound, q.min_sigma3);
+  const VerificationResult v2 = verify_certificate(cert.basis(), y, c2.leaves, 8, 6);
+  EXPECT_EQ(v2.violations, 0);
+  EXPECT_GE(v2.min_sigma3, q.min_sigma3);
+
+  // Beyond the sampled extremes: never proven; the reason names the target.
+  q = p;
+  q.max_sigma1 = std::max(1.0, 0.98 * v0.max_sigma1);
+  const Certificate c3 = cert.certify(y, q);
+  EXPECT_FALSE(c3.certified);
+  EXPECT_TRUE(c3.distortion_failed);
+  EXPECT_EQ(c3.distortion_failed_on, DistortionTarget::kSigma1);
+  EXPECT_NE(c3.reason.find("distortion bound sigma1 <= "), std::string::npos) << c3.reason;
+  ASSERT_FALSE(c3.failing.empty());
+  EXPECT_GT(c3.failing.front().sigma1_upper, q.max_sigma1);
+  q = p;
+  q.min_sigma3 = std::min(1.0, 1.02 * v0.min_sigma3);
+  const Certificate c4 = cert.certify(y, q);
+  EXPECT_FALSE(c4.certified);
+  EXPECT_EQ(c4.distortion_failed_on, DistortionTarget::kSigma3);
+  EXPECT_NE(c4.reason.find("distortion bound sigma3 >= "), std::string::npos) << c4.reason;
+  // A K target that holds with a σ3 target that cannot: the σ3 target is named.
+  q.max_distortion = 2 * c0.max_distortion_upper_bound;
+  const Certificate c5 = cert.certify(y, q);
+  EXPECT_FALSE(c5.certified);
+  EXPECT_EQ(c5.distortion_failed_on, DistortionTarget::kSigma3);
+
+  // In the line search (stop_on_failure) a probe where σ1 is certainly above the target refuses at once.
+  const CertLeaf* hi = nullptr;
+  for (const CertLeaf& l : c0.leaves)
+    if (std::isfinite(l.sigma1) && (!hi || l.sigma1 > hi->sigma1)) hi = &l;
+  ASSERT_TRUE(hi);
+  q = p;
+  q.stop_on_failure = true;
+  q.max_sigma1 = std::max(1.0, 0.99 * hi->sigma1);
+  q.distortion_probes = {hi->center};
+  const Certificate quick = cert.certify(y, q);
+  EXPECT_FALSE(quick.certified);
+  EXPECT_EQ(quick.distortion_failed_on, DistortionTarget::kSigma1);
+  EXPECT_EQ(quick.reason, q.targets().reason(DistortionTarget::kSigma1, hi->center));
+  EXPECT_EQ(quick.num_leaves, 0) << "the probe refused before evaluating the voxels";
+  q.distortion_probes.clear();
+  EXPECT_FALSE(cert.certify(y, q).certified) << "the full certificate refuses it too";
+
+  // Targets the rest state cannot meet are refused as parameters.
+  DeformParams dp;
+  dp.max_sigma1 = 0.9;
+  EXPECT_THROW(validate_params(dp, "test"), InputError);
+  dp.max_sigma1 = 1.2;
+  dp.min_sigma3 = 1.1;
+  EXPECT_THROW(validate_params(dp, "test"), InputError);
+  dp.min_sigma3 = 0.8;
+  EXPECT_NO_THROW(validate_params(dp, "test"));
+}
+
 // The line search's probes: a probe where σ1/σ3 is above the target refuses the map at once, with the verdict
 // of the full certificate (which fails too); probes below the target, or outside the voxels, change nothing.
 TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
@@ -241,7 +333,8 @@ TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
   const Certificate quick = cert.certify(y, q);
   EXPECT_FALSE(quick.certified);
   EXPECT_TRUE(quick.distortion_failed);
-  EXPECT_EQ(quick.reason, distortion_reason(q.max_distortion, hi->center));
+  EXPECT_EQ(quick.distortion_failed_on, DistortionTarget::kDistortion);
+  EXPECT_EQ(quick.reason, q.targets().reason(DistortionTarget::kDistortion, hi->center));
   ASSERT_EQ(quick.failing.size(), 1u);
   EXPECT_EQ(quick.failing.front().center, hi->center);
   EXPECT_EQ(quick.num_leaves, 0) << "the probe refused before evaluating the voxels";
@@ -327,24 +420,44 @@ TEST(DistortionBound, VoxelsCsvCarriesTheBoundsAndOlderFilesAreRead) {
   EXPECT_THROW(read_voxels_csv(path), InputError);
 }
 
-// beam_bend, unconstrained and at a K below the unconstrained map's sampled maximum: the constrained map is
-// certified with max_distortion_upper_bound <= K, and `lidef verify` samples it without a violation.
-TEST(DistortionCli, ConstrainedBeamBendIsCertifiedBelowTheTargetAndSamplingAgrees) {
-  std::srand(static_cast<unsigned>(::getpid()) * 2654435761u);
+namespace {
+
+// `lidef deform` of beam_bend at the tests' small sampling (4000 voxels, 60 coefficients), `lidef verify`,
+// and the JSON files they write, in a temporary folder.
+class DistortionCli : public ::testing::Test {
+ protected:
+  // Before any fixture's TempDir draws its name: processes running side by side draw different names.
+  static void SetUpTestSuite() { std::srand(static_cast<unsigned>(::getpid()) * 2654435761u); }
+  static std::string q(const std::string& x) { return "'" + x + "'"; }
+  static int run(const std::string& args, std::string* output) {
+    output->clear();
+    return lidef::test::run_command(q(lidef::test::cli()) + " " + args, output);
+  }
+  int deform(const std::string& out, const std::string& extra, std::string* output) const {
+    return run("deform " + q(scenario) + " --out " + q(out) + " --quiet --cache-dir " + q(tmp / "cache") +
+                   " --samples 4000 --reduced-dof 60 " + extra,
+               output);
+  }
+  // `lidef verify` of the map written into `dir` (coefficients.txt, certificate.json), with `extra` options.
+  int verify(const std::string& dir, const std::string& extra, std::string* output) const {
+    return run("verify " + q(model) + " --coeffs " + q(dir + "/coefficients.txt") + " --certificate " +
+                   q(dir + "/certificate.json") + " " + extra,
+               output);
+  }
+  static nlohmann::json read_json(const std::string& path) {
+    std::ifstream in(path);
+    return nlohmann::json::parse(in);
+  }
   TempDir tmp;
   const std::string scenario = lidef::test::project_data() + "/scenarios/beam_bend.json";
   const std::string model = lidef::test::project_data() + "/models/beam";
-  auto q = [](const std::string& x) { return "'" + x + "'"; };
-  auto deform = [&](const std::string& out, const std::string& extra, std::string* output) {
-    return lidef::test::run_command(q(lidef::test::cli()) + " deform " + q(scenario) + " --out " + q(out) +
-                                        " --quiet --cache-dir " + q(tmp / "cache") +
-                                        " --samples 4000 --reduced-dof 60 " + extra,
-                                    output);
-  };
-  auto read_json = [](const std::string& path) {
-    std::ifstream in(path);
-    return nlohmann::json::parse(in);
-  };
+};
+
+}  // namespace
+
+// beam_bend, unconstrained and at a K below the unconstrained map's sampled maximum: the constrained map is
+// certified with max_distortion_upper_bound <= K, and `lidef verify` samples it without a violation.
+TEST_F(DistortionCli, ConstrainedBeamBendIsCertifiedBelowTheTargetAndSamplingAgrees) {
   std::string output;
   ASSERT_EQ(deform(tmp / "free", "", &output), 0) << output;
   const nlohmann::json free = read_json(tmp / "free/summary.json");
@@ -355,7 +468,6 @@ TEST(DistortionCli, ConstrainedBeamBendIsCertifiedBelowTheTargetAndSamplingAgree
   const std::string k_text = format_double(1 + 0.8 * (k_free - 1));  // shortest round trip: K is exact
   const double K = std::stod(k_text);
 
-  output.clear();
   // A few iterations of the direct solve suffice for the claim (every accepted map satisfies the bound): the
   // whole run, blocked after the continuation's strategies, takes minutes (docs/benchmarks.md, "Bounded
   // distortion").
@@ -374,13 +486,62 @@ TEST(DistortionCli, ConstrainedBeamBendIsCertifiedBelowTheTargetAndSamplingAgree
     EXPECT_NE(s["message"].get<std::string>().find("distortion bound"), std::string::npos) << s["message"];
   }
 
-  output.clear();
-  ASSERT_EQ(lidef::test::run_command(q(lidef::test::cli()) + " verify " + q(model) + " --coeffs " +
-                                         q(tmp / "k/coefficients.txt") + " --certificate " +
-                                         q(tmp / "k/certificate.json") + " --samples-per-voxel 8 --out " +
-                                         q(tmp / "verify"),
-                                     &output),
-            0)
-      << output;
+  ASSERT_EQ(verify(tmp / "k", "--samples-per-voxel 8 --out " + q(tmp / "verify"), &output), 0) << output;
   EXPECT_NE(output.find("samples above their leaf's bounds 0"), std::string::npos) << output;
+}
+
+// beam_bend under the isometric targets: max_sigma1 and min_sigma3 between the rest state and the
+// unconstrained map's sampled extremes. The written map is certified with σ1 ≤ S and σ3 ≥ s on every leaf,
+// the mesh vertices agree, `lidef verify` finds every sample within the targets and `--interval` re-proves
+// them on every leaf.
+TEST_F(DistortionCli, IsometricTargetsHoldOnTheWrittenMapAndVerifyAgrees) {
+  std::string output;
+  ASSERT_EQ(deform(tmp / "free", "", &output), 0) << output;
+  const nlohmann::json free = read_json(tmp / "free/summary.json");
+  const double s1_free = free["max_sigma1_vertices"].get<double>();
+  const double s3_free = free["min_sigma3_vertices"].get<double>();
+  ASSERT_GT(s1_free, 1.05) << "beam_bend should stretch the beam";
+  ASSERT_LT(s3_free, 0.95) << "beam_bend should compress the beam";
+  const std::string s1_text = format_double(1 + 0.8 * (s1_free - 1));
+  const std::string s3_text = format_double(1 - 0.8 * (1 - s3_free));
+  const double S = std::stod(s1_text), s = std::stod(s3_text);
+
+  const int rc = deform(
+      tmp / "iso",
+      "--max-sigma1 " + s1_text + " --min-sigma3 " + s3_text + " --max-iterations 3 --continuation false",
+      &output);
+  EXPECT_TRUE(rc == 0 || rc == 1) << output;
+  const nlohmann::json sum = read_json(tmp / "iso/summary.json");
+  EXPECT_EQ(sum["certified"], true) << output;
+  EXPECT_EQ(sum["max_sigma1"].get<double>(), S);
+  EXPECT_EQ(sum["min_sigma3"].get<double>(), s);
+  EXPECT_LE(sum["max_sigma1_upper_bound"].get<double>(), S);
+  EXPECT_GE(sum["min_sigma3_lower_bound"].get<double>(), s);
+  EXPECT_LE(sum["max_sigma1_vertices"].get<double>(), S);
+  EXPECT_GE(sum["min_sigma3_vertices"].get<double>(), s);
+  const nlohmann::json c = read_json(tmp / "iso/certificate.json");
+  EXPECT_EQ(c["distortion_met"], true);
+  EXPECT_EQ(c["max_sigma1"].get<double>(), S);
+  EXPECT_EQ(c["min_sigma3"].get<double>(), s);
+  EXPECT_GE(c["min_lower_bound"].get<double>(), s);
+  if (sum["stop_reason"] == "blocked_by_certificate" || sum["stop_reason"] == "no_certified_step") {
+    EXPECT_NE(sum["message"].get<std::string>().find("distortion bound"), std::string::npos)
+        << sum["message"];
+  }
+
+  ASSERT_EQ(verify(tmp / "iso", "--samples-per-voxel 8 --out " + q(tmp / "verify"), &output), 0) << output;
+  EXPECT_NE(output.find("proven by the certificate; every sample within them"), std::string::npos) << output;
+  ASSERT_EQ(verify(tmp / "iso", "--interval --out " + q(tmp / "interval"), &output), 0) << output;
+  const nlohmann::json iv = read_json(tmp / "interval/interval.json");
+  EXPECT_EQ(iv["distortion_targets_not_proven"], 0);
+  EXPECT_EQ(iv["distortion_targets"], "max_sigma1 " + format_g(S) + ", min_sigma3 " + format_g(s));
+
+  // A certificate that claims a σ1 target its map does not meet: both checks refuse it.
+  nlohmann::json tampered = c;
+  tampered["max_sigma1"] = 1.0;
+  { std::ofstream(tmp / "iso/certificate.json") << tampered.dump(2); }
+  EXPECT_EQ(verify(tmp / "iso", "--samples-per-voxel 2 --out " + q(tmp / "verify2"), &output), 1) << output;
+  EXPECT_NE(output.find("a sample beyond them: the claim is WRONG"), std::string::npos) << output;
+  EXPECT_EQ(verify(tmp / "iso", "--interval --out " + q(tmp / "interval2"), &output), 1) << output;
+  EXPECT_GT(read_json(tmp / "interval2/interval.json")["distortion_targets_not_proven"].get<long>(), 0);
 }

@@ -37,8 +37,8 @@ std::string input_error(F&& f) {
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
   // Counted by hand in deform_params.h: 6 sampling + 2 energy + 13 newton (3 of them continuation) +
-  // 9 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 47;
+  // 11 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
+  const int kFields = 49;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -80,6 +80,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "line_search_max_refined",
                                              "bound_tolerance",
                                              "max_distortion",
+                                             "max_sigma1",
+                                             "min_sigma3",
                                              "injectivity",
                                              "global_cache_mb",  // certificate
                                              "dynamic_weighting",

@@ -360,11 +360,14 @@ std::string certificate_json(const CertificateReport& r) {
   j["bound_tolerance"] = num(c.bound_tolerance);
   j["bound_tolerance_met"] = c.bound_tolerance > 0 ? ojson(c.bound_tolerance_met) : ojson();
   // Bounded distortion: over the leaves, the largest upper bound of σ1 and of σ1/σ3 ("inf" when a leaf has
-  // none), and the target asked for (max_distortion, 0: none) with whether it was proven.
+  // none), and the targets asked for (max_distortion, max_sigma1, min_sigma3; 0: off) with whether all were
+  // proven (null when none was asked for).
   j["max_sigma1_upper_bound"] = num(c.max_sigma1_upper_bound);
   j["max_distortion_upper_bound"] = num(c.max_distortion_upper_bound);
   j["max_distortion"] = num(c.max_distortion);
-  j["distortion_met"] = c.max_distortion > 0 ? ojson(c.distortion_met) : ojson();
+  j["max_sigma1"] = num(c.max_sigma1);
+  j["min_sigma3"] = num(c.min_sigma3);
+  j["distortion_met"] = c.targets().any() ? ojson(c.distortion_met) : ojson();
   j["mesh_vertices"] = r.mesh_vertices;
   j["mesh_coverage"] = num(r.mesh_coverage);
   j["mesh_vertices_uncovered"] = r.mesh_vertices_uncovered;
@@ -456,7 +459,11 @@ CertificateReport read_certificate_json(const std::string& path) {
     c.max_sigma1_upper_bound = rd.number(root, "max_sigma1_upper_bound");
     c.max_distortion_upper_bound = rd.number(root, "max_distortion_upper_bound");
     c.max_distortion = rd.number(root, "max_distortion");
-    c.distortion_met = c.max_distortion > 0 && rd.boolean(root, "distortion_met");
+    if (root.contains("max_sigma1")) {  // absent in certificates written before the isometric bounds
+      c.max_sigma1 = rd.number(root, "max_sigma1");
+      c.min_sigma3 = rd.number(root, "min_sigma3");
+    }
+    c.distortion_met = c.targets().any() && rd.boolean(root, "distortion_met");
   }
   r.mesh_vertices = rd.integer(root, "mesh_vertices");
   r.mesh_coverage = rd.number(root, "mesh_coverage");

@@ -135,14 +135,18 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   sj["min_sigma3_lower_bound"] = cert.min_lower_bound;
   sj["min_sigma3_sampled"] = cert.min_sigma3_center;
   // Bounded distortion: the certified upper bounds over the leaves, the sampled maximum over the mesh
-  // vertices, and the target (max_distortion, 0: none).
+  // vertices, and the targets (max_distortion, max_sigma1, min_sigma3; 0: off).
   sj["max_sigma1_upper_bound"] = cert.max_sigma1_upper_bound;
   sj["max_distortion_upper_bound"] = cert.max_distortion_upper_bound;
   double max_k_vertices = 0;  // NaN (σ3 ≤ 0) never occurs at a certified map's covered vertices
   for (Eigen::Index i = 0; i < r.distortion.size(); ++i)
     if (std::isfinite(r.distortion(i))) max_k_vertices = std::max(max_k_vertices, r.distortion(i));
   sj["max_distortion_vertices"] = max_k_vertices;
+  sj["max_sigma1_vertices"] = r.sigma1.size() > 0 ? r.sigma1.maxCoeff() : 0.0;
+  sj["min_sigma3_vertices"] = r.sigma3.size() > 0 ? r.sigma3.minCoeff() : 0.0;
   sj["max_distortion"] = sc.params.max_distortion;
+  sj["max_sigma1"] = sc.params.max_sigma1;
+  sj["min_sigma3"] = sc.params.min_sigma3;
   sj["mesh_coverage"] = report.mesh_coverage;
   sj["domain"] = report.domain;
   if (report.domain == "mesh") sj["domain_statement"] = report.domain_statement;

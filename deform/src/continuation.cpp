@@ -106,11 +106,9 @@ struct Runner {
     r.iterations = used;
     r.seconds = seconds;
     // A run the distortion bound stopped says so, whichever strategy reported the stop last.
-    const std::string& why = solver.distortion_rejection();
-    if (!why.empty() && !r.targets_met() && !reached() && r.reason != StopReason::kInterrupted &&
+    if (!r.targets_met() && !reached() && r.reason != StopReason::kInterrupted &&
         r.message.find("distortion bound") == std::string::npos)
-      r.message += "; the distortion bound blocks it (max_distortion " +
-                   format_g(solver.params().max_distortion) + ", last rejected trial: " + why + ")";
+      r.message += solver.distortion_note();
     std::string tried;
     for (const std::string& s : report.strategies) tried += (tried.empty() ? "" : ", ") + s;
     if (report.stages > 0 || report.strategies.size() > 1)

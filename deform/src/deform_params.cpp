@@ -94,6 +94,13 @@ std::vector<ParamInfo> make_table() {
        "above 0: a bound K on the distortion sigma1/sigma3: a map is certified only when every leaf's upper "
        "bound of sigma1/sigma3 is <= K (leaves above it are refined); the line search accepts only such maps "
        "(0 = off; docs/certificate.md, 'Bounded distortion')"},
+      {"max_sigma1", "certificate", &D::max_sigma1, 0, 1e12,
+       "above 0: a bound on the largest singular value sigma1 of J (the most any length is stretched), "
+       "proven on every leaf like max_distortion; the line search accepts only such maps (0 = off)"},
+      {"min_sigma3", "certificate", &D::min_sigma3, 0, 1,
+       "above 0: a lower bound on the smallest singular value sigma3 of J (the most any length is "
+       "compressed), proven on every leaf like max_distortion; the line search accepts only such maps "
+       "(0 = off)"},
       {"injectivity", "certificate", &D::injectivity, 0, 0,
        "what the line search proves of an accepted map: \"local\" (the octree certificate) or \"global\" "
        "(also that the shape does not pass through itself: a step that would is shortened, the solve stops "
@@ -393,6 +400,11 @@ void validate_params(const DeformParams& params, const std::string& where) {
                      "parameter \"max_distortion\" must be 0 (off) or >= 1 (sigma1/sigma3 >= 1 "
                      "always), got " +
                          format_g(params.max_distortion));
+  // The map a solve starts from (the identity) has σ1 = 1: a bound below 1 would refuse every map.
+  if (params.max_sigma1 > 0 && params.max_sigma1 < 1)
+    throw InputError(
+        where, "parameter \"max_sigma1\" must be 0 (off) or >= 1 (the rest state has sigma1 = 1), got " +
+                   format_g(params.max_sigma1));
 }
 
 nlohmann::ordered_json params_to_json(const DeformParams& params) {
@@ -439,6 +451,8 @@ CertifyParams certify_params_of(const DeformParams& params, bool stop_on_failure
   cp.keep_leaves = keep_leaves;
   cp.bound_tolerance = params.bound_tolerance;
   cp.max_distortion = params.max_distortion;
+  cp.max_sigma1 = params.max_sigma1;
+  cp.min_sigma3 = params.min_sigma3;
   return cp;
 }
 

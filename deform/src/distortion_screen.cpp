@@ -7,7 +7,8 @@
 
 namespace lidef {
 
-long largest_distortion_sample(const MatJT& J0, const MatJT& dJ, double t, double* k_out) {
+long largest_excess_sample(const MatJT& J0, const MatJT& dJ, double t, const DistortionTargets& targets,
+                           double* excess) {
   const long n = J0.rows() / 3;
   long best = -1;
   double best_k = 0;
@@ -23,13 +24,13 @@ long largest_distortion_sample(const MatJT& J0, const MatJT& dJ, double t, doubl
       es.computeDirect(J.transpose() * J, Eigen::EigenvaluesOnly);
       const double lo = es.eigenvalues()(0), hi = es.eigenvalues()(2);
       if (!(lo > 0)) continue;
-      const double k = std::sqrt(hi / lo);
-      if (k > bk) bk = k, b = i;  // the first of equal ratios within this thread's ascending range
+      const double k = targets.excess(std::sqrt(hi), std::sqrt(lo), std::sqrt(hi / lo));
+      if (k > bk) bk = k, b = i;  // the first of equal excesses within this thread's ascending range
     }
 #pragma omp critical
     if (b >= 0 && (bk > best_k || (bk == best_k && b < best))) best_k = bk, best = b;
   }
-  *k_out = best_k;
+  *excess = best_k;
   return best;
 }
 

@@ -73,7 +73,7 @@ Certificate Frame::from_normalized(Certificate c) const {
     }
   // The distortion stage names its worst leaf in the certifier's frame: name it in the model's.
   if (c.distortion_failed && !c.failing.empty())
-    c.reason = distortion_reason(c.max_distortion, c.failing.front().center);
+    c.reason = c.targets().reason(c.distortion_failed_on, c.failing.front().center);
   return c;
 }
 

@@ -295,6 +295,7 @@ struct OctreeCertifier::Run {
   const double* yr_ptr;  // reduced coefficients (s by 3, column-major) or nullptr
   long yr_rows;
   const CertifyParams& p;
+  const DistortionTargets targets;  // p's (Run keeps the value: the stages ask it per leaf)
   const long N, E;
   const double side;      // base voxel side (a voxel's own: side_of(i))
   const bool third;       // ‖H(c)‖ and Σ δ Θ needed (third and combined)
@@ -332,6 +333,7 @@ struct OctreeCertifier::Run {
         yr_ptr(yr),
         yr_rows(yr_n),
         p(params),
+        targets(params.targets()),
         N(o.sampling_.size()),
         E(o.cage_.num_edges()),
         side(o.sampling_.side),
@@ -391,6 +393,19 @@ struct OctreeCertifier::Run {
     l.sigma1_upper = std::isfinite(up) && s1 >= 0 ? up : kInf;
     l.distortion_upper = distortion_of(l.sigma1_upper, l.margin);
   }
+  // The targets asked for, as the certificate reports them.
+  void set_targets(Certificate& c) const {
+    c.max_distortion = targets.max_distortion;
+    c.max_sigma1 = targets.max_sigma1;
+    c.min_sigma3 = targets.min_sigma3;
+  }
+  // The leaf's bounds against the targets (DistortionTargets::unproven and excess).
+  DistortionTarget unproven(const CertLeaf& l) const {
+    return targets.unproven(l.sigma1_upper, l.margin, l.distortion_upper);
+  }
+  double excess(const CertLeaf& l) const {
+    return targets.excess(l.sigma1_upper, l.margin, l.distortion_upper);
+  }
   // An upper bound of σ1/σ3 from an upper bound of σ1 and a positive lower bound of σ3 (the quotient rounded
   // up by 1e-15 relative); +∞ without a positive lower bound.
   static double distortion_of(double upper, double lower) {
@@ -399,18 +414,18 @@ struct OctreeCertifier::Run {
     return std::isfinite(k) ? k : kInf;
   }
 
-  // --- −1. Probing the distortion target (CertifyParams::distortion_probes). At a probe q inside the voxels,
-  // σ_i(J(q)) lies within τ_i (the rounding allowance of the double-precision evaluation, as for a center)
-  // of the computed σ̃_i; (σ̃1 − τ1)/(σ̃3 + τ3) > K then proves σ1/σ3 > K at q, and the leaf holding q can
-  // never be proven ≤ K (its bound covers a ball containing q). Returns true with `out` filled (not
-  // certified, the distortion reason at q) when a probe fails.
+  // --- −1. Probing the distortion targets (CertifyParams::distortion_probes). At a probe q inside the
+  // voxels, σ_i(J(q)) lies within τ_i (the rounding allowance of the double-precision evaluation, as for a
+  // center) of the computed σ̃_i; (σ̃1 − τ1)/(σ̃3 + τ3) > K then proves σ1/σ3 > K at q (σ̃1 − τ1 > S proves
+  // σ1 > S, σ̃3 + τ3 < s proves σ3 < s), and the leaf holding q can never prove the target (its bounds cover
+  // a ball containing q). Returns true with `out` filled (not certified, the distortion reason at q) when a
+  // probe fails.
   bool distortion_probe(Certificate& out) const {
-    if (!p.stop_on_failure || !(p.max_distortion > 0) || p.distortion_probes.empty()) return false;
+    if (!p.stop_on_failure || !targets.any() || p.distortion_probes.empty()) return false;
     MatX3d Q(static_cast<Eigen::Index>(p.distortion_probes.size()), 3);
     for (size_t k = 0; k < p.distortion_probes.size(); ++k)
       Q.row(static_cast<Eigen::Index>(k)) = p.distortion_probes[k].transpose();
     const VecXi voxel = containing_voxel(oc.sampling_, Q);
-    const double K = p.max_distortion;
     for (Eigen::Index k = 0; k < Q.rows(); ++k) {
       if (voxel(k) < 0) continue;
       const Vec3 q = Q.row(k).transpose();
@@ -421,7 +436,8 @@ struct OctreeCertifier::Run {
       const Vec3 sv = signed_singular_values(J, &resolved);
       const double s1 = sv(0) - tolerance(sJ, 0, sv(0), 0, 0, 0);
       const double s3 = sv(2) + tolerance(sJ, 0, sv(2), 0, 0, 0);
-      if (!resolved || !(s3 > 0) || !(s1 > K * s3 * (1 + 1e-12))) continue;
+      const DistortionTarget which = resolved ? targets.violated(s1, s3, 1e-12) : DistortionTarget::kNone;
+      if (which == DistortionTarget::kNone) continue;
       CertLeaf l;
       l.center = q;
       l.sigma3 = sv(2);
@@ -432,11 +448,12 @@ struct OctreeCertifier::Run {
       out.failed_voxels.push_back(voxel(k));
       out.certified = false;
       out.distortion_failed = true;
-      out.max_distortion = K;
+      out.distortion_failed_on = which;
+      set_targets(out);
       out.voxel_side = side;
       out.voxels = static_cast<int>(N);
       out.min_sigma3_center = sv(2);
-      out.reason = distortion_reason(K, q);
+      out.reason = targets.reason(which, q);
       return true;
     }
     return false;
@@ -479,7 +496,7 @@ struct OctreeCertifier::Run {
       const double lb = lower[i] - change;
       // σ1 moves by at most the same ‖ΔJ‖₂ (Weyl), so σ1 ≤ base_upper + change on the voxel.
       const double ub = upper ? (*upper)[i] + change : kInf;
-      const bool distortion_ok = !(p.max_distortion > 0) || distortion_of(ub, lb) <= p.max_distortion;
+      const bool distortion_ok = targets.unproven(ub, lb, distortion_of(ub, lb)) == DistortionTarget::kNone;
       if (im.clear[i] && lb > 0 && lb > p.perturbation_floor && distortion_ok) {
         perturbed[i] = 1;
         perturbed_lower(i) = lb;
@@ -1396,7 +1413,7 @@ struct OctreeCertifier::Run {
         if (static_cast<int>(cert.failing.size()) < p.max_failing_reported) cert.failing.push_back(l);
       }
       // tighten() and enforce_distortion() need them
-      if (p.keep_leaves || p.bound_tolerance > 0 || p.max_distortion > 0) cert.leaves.push_back(l);
+      if (p.keep_leaves || p.bound_tolerance > 0 || p.targets().any()) cert.leaves.push_back(l);
     };
     std::vector<int> stack;
     size_t fi = 0;
@@ -1515,17 +1532,16 @@ struct OctreeCertifier::Run {
     return leaf;
   }
 
-  // --- 7. Bounded distortion (CertifyParams::max_distortion; docs/certificate.md, "Bounded distortion"),
-  // only once the map is certified. Each round splits the leaves whose bound of K = σ1/σ3 exceeds the target
-  // into 8 children evaluated like the tightening stage's. A leaf is replaced by its children only when all
-  // are certified and their largest K bound is below the leaf's (both are valid bounds on the same voxel);
-  // the leaves still tile the base voxels. A bound still above the target when depth or budget runs out
-  // makes the map not certified, naming the leaf.
+  // --- 7. Bounded distortion (CertifyParams::max_distortion, max_sigma1, min_sigma3; docs/certificate.md,
+  // "Bounded distortion"), only once the map is certified. Each round splits the leaves whose bounds do not
+  // prove a target into 8 children evaluated like the tightening stage's. A leaf is replaced by its children
+  // only when all are certified and their largest excess (DistortionTargets::excess) is below the leaf's
+  // (both are valid bounds on the same voxel); the leaves still tile the base voxels. A target still unproven
+  // when depth or budget runs out makes the map not certified, naming the leaf.
   void enforce_distortion(Certificate& c) {
-    c.max_distortion = p.max_distortion;
+    set_targets(c);
     c.distortion_met = false;
-    if (!(p.max_distortion > 0) || !c.certified) return;
-    const double K = p.max_distortion;
+    if (!targets.any() || !c.certified) return;
     const auto t0 = Clock::now();
     std::vector<char> settled(c.leaves.size(), 0);
     std::vector<int> batch;
@@ -1534,13 +1550,14 @@ struct OctreeCertifier::Run {
       std::vector<size_t> split;
       for (size_t i = 0; i < c.leaves.size() && !hopeless; ++i) {
         const CertLeaf& l = c.leaves[i];
-        if (l.distortion_upper <= K) continue;
-        // σ1/σ3 at the center itself above K beyond the float storage allowance (sigma3_error, which bounds
-        // both singular values' error by Weyl) and rounding: no child's bound can get below K, as each
+        if (unproven(l) == DistortionTarget::kNone) continue;
+        // A target violated at the center itself beyond the float storage allowance (sigma3_error, which
+        // bounds both singular values' error by Weyl) and rounding: no child's bounds can prove it, as each
         // child's ball contains the center. Not split; a line search trial fails here.
         const double e = std::isfinite(l.sigma3_error) ? l.sigma3_error : kInf;
-        const bool center_above = l.sigma3 + e > 0 && l.sigma1 - e > K * (l.sigma3 + e) * (1 + 1e-9);
-        if (!settled[i] && !center_above && l.depth - level(l.base) < p.max_depth &&
+        const bool center_violates =
+            targets.violated(l.sigma1 - e, l.sigma3 + e, 1e-9) != DistortionTarget::kNone;
+        if (!settled[i] && !center_violates && l.depth - level(l.base) < p.max_depth &&
             budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
           split.push_back(i);
         else
@@ -1564,12 +1581,12 @@ struct OctreeCertifier::Run {
         bool all_certified = true;
         for (int k = 0; k < 8; ++k) {
           kids[k] = child_leaf(tree[8 * si + k], vals[8 * si + k], l.base);
-          worst = std::max(worst, kids[k].distortion_upper);
+          worst = std::max(worst, excess(kids[k]));
           all_certified = all_certified && kids[k].certified;
           c.min_sigma3_center = std::min(c.min_sigma3_center, kids[k].sigma3);
         }
         ++si;
-        if (all_certified && worst < l.distortion_upper) {
+        if (all_certified && worst < excess(l)) {
           ++c.refined;
           for (const CertLeaf& kid : kids) {
             next.push_back(kid);
@@ -1585,20 +1602,23 @@ struct OctreeCertifier::Run {
     }
     c.num_leaves = static_cast<long>(c.leaves.size());
     summarize_leaves(c);
-    c.distortion_met = c.max_distortion_upper_bound <= K;
+    c.distortion_met = true;
+    for (const CertLeaf& l : c.leaves) {
+      const DistortionTarget which = unproven(l);
+      if (which == DistortionTarget::kNone) continue;
+      if (c.distortion_met) c.distortion_failed_on = which;  // the first failing leaf's: the reason names it
+      c.distortion_met = false;
+      c.failing.push_back(l);
+      if (static_cast<long>(c.failed_voxels.size()) < 64) c.failed_voxels.push_back(l.base);
+      if (static_cast<int>(c.failing.size()) >= p.max_failing_reported) break;
+    }
     if (!c.distortion_met) {
-      for (const CertLeaf& l : c.leaves)
-        if (!(l.distortion_upper <= K)) {
-          c.failing.push_back(l);
-          if (static_cast<long>(c.failed_voxels.size()) < 64) c.failed_voxels.push_back(l.base);
-          if (static_cast<int>(c.failing.size()) >= p.max_failing_reported) break;
-        }
       std::sort(c.failed_voxels.begin(), c.failed_voxels.end());
       c.failed_voxels.erase(std::unique(c.failed_voxels.begin(), c.failed_voxels.end()),
                             c.failed_voxels.end());
       c.certified = false;
       c.distortion_failed = true;
-      c.reason = distortion_reason(K, c.failing.front().center);
+      c.reason = targets.reason(c.distortion_failed_on, c.failing.front().center);
       c.base_lower.clear();
       c.base_upper.clear();
     }
@@ -1677,11 +1697,6 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
 
 const char* to_string(RefinementEval r) {
   return enum_name(r);
-}
-
-std::string distortion_reason(double max_distortion, const Vec3& where) {
-  return "distortion bound " + format_g(max_distortion) + " not proven at (" + format_g(where.x()) + ", " +
-         format_g(where.y()) + ", " + format_g(where.z()) + ")";
 }
 
 Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y,

@@ -357,7 +357,7 @@ GlobalInjectivity DeformationSolver::global_injectivity() const {
 
 std::string DeformationSolver::distortion_note() const {
   if (distortion_rejection_.empty()) return "";
-  return "; the distortion bound blocks it (max_distortion " + format_g(params_.max_distortion) +
+  return "; the distortion bound blocks it (" + certify_params(true, false).targets().describe() +
          ", last rejected trial: " + distortion_rejection_ + ")";
 }
 
@@ -746,7 +746,7 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
   cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
   cp.distortion_probes = distortion_probes_;
-  screen_distortion(t, cp.distortion_probes);
+  screen_distortion(t, cp);
   if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
     cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
     cp.previous_lower = &perturb_lower_;
@@ -782,20 +782,22 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   return c;
 }
 
-// With a distortion target, the trial's sample of largest σ1/σ3 (from the kernels' Jacobians, which the
-// energy has just used) becomes the first probe when it seems above the target: the certifier evaluates it
-// exactly and refuses the trial at once if σ1/σ3 > K is proven there (docs/certificate.md, "Probes"), instead
-// of refining leaves toward a bound no certificate can reach. Only a proof refuses, so the verdict is the
-// certificate's. CPU kernels only (an OpenCL backend keeps its Jacobians on the device).
-void DeformationSolver::screen_distortion(double t, std::vector<Vec3>& probes) const {
-  const MatJT* dJ = params_.max_distortion > 0 ? kernels_->direction_jacobians() : nullptr;
+// With distortion targets, the trial's sample farthest beyond them (largest σ1/σ3 for K alone; from the
+// kernels' Jacobians, which the energy has just used) becomes the first probe when it seems beyond a target:
+// the certifier evaluates it exactly and refuses the trial at once if the violation is proven there
+// (docs/certificate.md, "Probes"), instead of refining leaves toward a bound no certificate can reach. Only a
+// proof refuses, so the verdict is the certificate's. CPU kernels only (an OpenCL backend keeps its Jacobians
+// on the device).
+void DeformationSolver::screen_distortion(double t, CertifyParams& cp) const {
+  const DistortionTargets targets = cp.targets();
+  const MatJT* dJ = targets.any() ? kernels_->direction_jacobians() : nullptr;
   if (!dJ) return;
   const MatJT J0 = kernels_->current_jacobians();
   if (J0.rows() != dJ->rows() || J0.rows() != 3 * nsampling_.centers.rows()) return;
-  double k = 0;
-  const long i = largest_distortion_sample(J0, *dJ, t, &k);
-  if (i >= 0 && k > params_.max_distortion)
-    probes.insert(probes.begin(), nsampling_.centers.row(i).transpose());
+  double excess = 0;
+  const long i = largest_excess_sample(J0, *dJ, t, targets, &excess);
+  if (i >= 0 && excess > 1)
+    cp.distortion_probes.insert(cp.distortion_probes.begin(), nsampling_.centers.row(i).transpose());
 }
 
 bool DeformationSolver::globally_injective_trial(const MatS3& yt, IterationRecord& rec) {

@@ -901,6 +901,10 @@ std::string distortion_bound_text(const SessionFrame& f) {
   const Certificate& c = *f.leaves;
   if (!c.certified) return "; no certified bound (the map is not certified)";
   std::string t = "; certified on the domain: sigma1/sigma3 <= " + format_g(c.max_distortion_upper_bound, 4);
+  // With the isometric targets on, the two bounds they constrain too.
+  if (c.max_sigma1 > 0 || c.min_sigma3 > 0)
+    t += ", sigma1 <= " + format_g(c.max_sigma1_upper_bound, 4) +
+         ", sigma3 >= " + format_g(c.min_lower_bound, 4);
   if (f.leaves_version != f.map_version) t += " (of an earlier iterate)";
   return t;
 }

@@ -468,6 +468,14 @@ void bind(py::module_& m) {
           "max_distortion_upper_bound",
           [](const PyCertificate& c) { return c.cert.max_distortion_upper_bound; },
           "An upper bound of sigma1/sigma3 on the certified domain (inf: none proven).")
+      .def_property_readonly(
+          "distortion_met",
+          [](const PyCertificate& c) -> py::object {
+            if (!c.cert.targets().any()) return py::none();
+            return py::bool_(c.cert.distortion_met);
+          },
+          "Whether every distortion bound asked for (max_distortion, max_sigma1, min_sigma3) was proven on "
+          "every leaf; None when none was asked for.")
       .def_property_readonly("voxels", [](const PyCertificate& c) { return c.cert.voxels; })
       .def_property_readonly("leaves", &PyCertificate::leaves)
       .def("write", &PyCertificate::write, py::arg("dir"),

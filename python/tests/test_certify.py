@@ -110,3 +110,25 @@ def test_distortion_bounds_hold_at_the_leaves_and_at_random_points(beam):
     assert cert.max_distortion_upper_bound >= (sigma1 / sigma3).max()
     # Not vacuous: within a factor of the sampled values (a stretch of 1.5 gives K near 1.5).
     assert cert.max_distortion_upper_bound < 2 * (sigma1 / sigma3).max()
+
+
+def test_isometric_targets_are_proven_or_named(beam):
+    # A stretch by 1.5 along x: sigma1 = 1.5 and sigma3 = 1 everywhere. A bound on sigma1 above 1.5 with room
+    # is proven (distortion_met), one below 1.5 can never be and is named in the reason; the same for sigma3.
+    Y = beam.identity().copy()
+    Y[:, 0] *= 1.5
+    free = lidef.certify(beam, Y, **PARAMS)
+    assert free.certified and free.distortion_met is None
+    met = lidef.certify(beam, Y, max_sigma1=1.6, min_sigma3=0.9, **PARAMS)
+    assert met.certified, met.reason
+    assert met.distortion_met is True
+    assert met.max_sigma1_upper_bound <= 1.6 and met.min_lower_bound >= 0.9
+    too_tight = lidef.certify(beam, Y, max_sigma1=1.4, **PARAMS)
+    assert not too_tight.certified and too_tight.distortion_met is False
+    assert "distortion bound sigma1 <= 1.4 not proven at" in too_tight.reason
+    Y[:, 1] *= 0.8
+    squeezed = lidef.certify(beam, Y, min_sigma3=0.85, **PARAMS)
+    assert not squeezed.certified
+    assert "distortion bound sigma3 >= 0.85 not proven at" in squeezed.reason
+    with pytest.raises(lidef.InputError, match="max_sigma1"):
+        lidef.certify(beam, Y, max_sigma1=0.5)

@@ -73,6 +73,8 @@ struct DeformParams {
                                // this fraction of the smallest sampled σ3 (CertifyParams::bound_tolerance)
   double max_distortion =
       0;  // > 0: certified maps have σ1/σ3 ≤ this on every leaf (CertifyParams::max_distortion)
+  double max_sigma1 = 0;  // > 0: certified maps have σ1 ≤ this on every leaf (isometric distortion bound)
+  double min_sigma3 = 0;  // > 0: certified maps have σ3 ≥ this on every leaf (isometric distortion bound)
   // global: an accepted step must also be proven globally injective on the mesh's solid (the shape stops
   // where it would pass through itself). local by default: the check costs far more than a Newton step
   // (docs/solver.md, "Global injectivity mode").

@@ -21,6 +21,7 @@
 #include "lidef/cage.h"
 #include "lidef/compute_backend.h"
 #include "lidef/deform_params.h"
+#include "lidef/distortion_targets.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/sampling.h"
@@ -80,17 +81,22 @@ struct CertifyParams {
   // every leaf's upper bound of K = σ1/σ3 at most this; leaves above it are split (depth and
   // max_refined_voxels permitting) and a bound still above it makes the map not certified ("distortion bound
   // K not proven at
-  // ..."). 0: off (the bounds are still computed and reported).
+  // ..."). 0: off (the bounds are still computed and reported). max_sigma1 and min_sigma3 (0: off) bound σ1
+  // from above and σ3 from below the same way ("distortion bound sigma1 <= S not proven at ...").
   double max_distortion = DeformParams().max_distortion;
+  double max_sigma1 = DeformParams().max_sigma1;
+  double min_sigma3 = DeformParams().min_sigma3;
+  DistortionTargets targets() const { return {max_distortion, max_sigma1, min_sigma3}; }
   // With previous_y/previous_lower: that certificate's Certificate::base_upper (per base voxel an upper bound
   // of σ1). A voxel taken over gets σ1 ≤ base_upper[i] + Γ_i ‖ỹ − ỹ₀‖_F; without it a taken-over voxel has no
-  // finite σ1 bound, and with max_distortion > 0 no voxel is taken over.
+  // finite σ1 bound, and with a K or σ1 target no voxel is taken over.
   const std::vector<double>* previous_upper = nullptr;
-  // With max_distortion and stop_on_failure (the line search): points, in the frame of y, where a previous
-  // trial's distortion bound failed. σ1/σ3 is evaluated there first, and where it is certainly above
-  // max_distortion the map is refused at once with the verdict the full certificate would reach: the leaf
-  // whose cell holds the point bounds σ1/σ3 from above on a ball containing it. Points outside the voxels are
-  // skipped. Never changes a verdict; saves the full evaluation of trials that fail where the last one did.
+  // With a distortion target and stop_on_failure (the line search): points, in the frame of y, where a
+  // previous trial's distortion bound failed. σ1 and σ3 are evaluated there first, and where a target is
+  // certainly violated (σ1/σ3 above max_distortion, σ1 above max_sigma1, σ3 below min_sigma3) the map is
+  // refused at once with the verdict the full certificate would reach: the leaf whose cell holds the point
+  // bounds σ1 and σ3 on a ball containing it. Points outside the voxels are skipped. Never changes a verdict;
+  // saves the full evaluation of trials that fail where the last one did.
   std::vector<Vec3> distortion_probes;
 };
 
@@ -153,14 +159,19 @@ struct Certificate {
   // (CertifyParams::previous_upper).
   std::vector<double> base_upper;
   // Over the leaves: the largest upper bound of σ1 and of K = σ1/σ3 (+∞ when a leaf has none, e.g. one not
-  // certified). The distortion target asked for (CertifyParams::max_distortion, 0: none) and whether every
-  // leaf's bound reached it.
+  // certified). The distortion targets asked for (CertifyParams::max_distortion, max_sigma1, min_sigma3; 0:
+  // off) and whether every leaf's bounds reached all of them.
   double max_sigma1_upper_bound = std::numeric_limits<double>::infinity();
   double max_distortion_upper_bound = std::numeric_limits<double>::infinity();
   double max_distortion = 0;
+  double max_sigma1 = 0;
+  double min_sigma3 = 0;
+  DistortionTargets targets() const { return {max_distortion, max_sigma1, min_sigma3}; }
   bool distortion_met = false;
-  // σ3 > 0 was proven but the distortion target was not: the reason is distortion_reason(...).
+  // σ3 > 0 was proven but a distortion target was not: the target (distortion_failed_on) and the reason,
+  // targets().reason(distortion_failed_on, failing.front().center).
   bool distortion_failed = false;
+  DistortionTarget distortion_failed_on = DistortionTarget::kNone;
   long perturbed_voxels = 0;  // base voxels certified by perturbation (σ3 and L not evaluated: NaN)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
@@ -249,10 +260,6 @@ class OctreeCertifier {
   std::unique_ptr<Impl> impl_;
   double precompute_seconds_ = 0;
 };
-
-// The reason of a certificate whose distortion bound K (CertifyParams::max_distortion) was not proven on the
-// leaf centered at `where`: "distortion bound K not proven at (x, y, z)".
-std::string distortion_reason(double max_distortion, const Vec3& where);
 
 // One-shot convenience: precompute and certify once.
 Certificate certify_map(const Cage& cage, const VoxelSampling& sampling, const MatX3d& y,

@@ -213,9 +213,12 @@ class DeformationSolver {
   MatX3d coefficients() const;  // #V+#F by 3, model units
   // Of the current map (keep_leaves = false), model units (leaf centers, sides, L).
   const Certificate& certificate() const { return cert_; }
-  // The reason of the last line-search trial of the last iteration that the distortion bound
-  // (max_distortion) rejected: "distortion bound K not proven at (x, y, z)"; empty when none.
+  // The reason of the last line-search trial of the last iteration that a distortion bound (max_distortion,
+  // max_sigma1, min_sigma3) rejected: "distortion bound K not proven at (x, y, z)"; empty when none.
   const std::string& distortion_rejection() const { return distortion_rejection_; }
+  // For stop messages: "; the distortion bound blocks it (max_distortion K, last rejected trial: ...)", or ""
+  // when no trial was rejected by a distortion bound.
+  std::string distortion_note() const;
   // Injectivity "global": why the last line-search trial refused by the global check was refused ("the shape
   // would pass through itself near (x, y, z)", model units); empty when none of the last iteration was.
   const std::string& global_rejection() const { return global_rejection_; }
@@ -276,7 +279,7 @@ class DeformationSolver {
                                       const std::atomic<bool>* stop);
   Certificate certify_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et,
                             IterationRecord& rec);
-  void screen_distortion(double t, std::vector<Vec3>& probes) const;
+  void screen_distortion(double t, CertifyParams& cp) const;
   bool globally_injective_trial(const MatS3& yt, IterationRecord& rec);
   void accept_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et, Certificate&& c,
                     IterationRecord& rec);
@@ -332,9 +335,8 @@ class DeformationSolver {
   std::vector<double> perturb_lower_;
   std::vector<double> perturb_upper_;  // and per voxel upper bounds of σ1 (CertifyParams::previous_upper)
   // The reason of the last line-search trial of this iteration rejected by the distortion bound
-  // (CertifyParams::max_distortion), in the model's frame; empty when none was.
+  // (CertifyParams::max_distortion, max_sigma1, min_sigma3), in the model's frame; empty when none was.
   std::string distortion_rejection_;
-  std::string distortion_note() const;  // "; the distortion bound blocks it (...)" or ""
   // Global injectivity (injectivity "global"): the rest-state surface (#V by 3, #F by 3) when the domain is
   // the mesh's solid, its checker (built on first use, then reused for every trial), the last map proven
   // globally injective and the last refusal's reason.
