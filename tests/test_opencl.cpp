@@ -251,10 +251,10 @@ TEST(OpenCL, SignedSigma3MatchesCpuOnHardMatrices) {
     std::vector<float> F(static_cast<size_t>(N) * E, 1.0f);
     k->set_factors(true, F.data(), E);
     const double Y[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    VecXd s3, hn, T;
+    VecXd s3, s1, hn, T;
     std::vector<char> unresolved;
     const VecXd delta = VecXd::LinSpaced(E, 0.0, 1.0);
-    k->base_stage(Y, true, delta, s3, hn, T, unresolved);
+    k->base_stage(Y, true, delta, s3, s1, hn, T, unresolved);
     int worst = -1;
     double worst_err = 0;
     for (long i = 0; i < N; ++i) {
@@ -264,7 +264,8 @@ TEST(OpenCL, SignedSigma3MatchesCpuOnHardMatrices) {
       if (!resolved) {
         EXPECT_EQ(s3(i), 0.0) << "matrix " << i;
       }
-      const double err = std::abs(s3(i) - ref(2)) / std::max(ref(0), 1e-300);
+      const double err =
+          std::max(std::abs(s3(i) - ref(2)), std::abs(s1(i) - ref(0))) / std::max(ref(0), 1e-300);
       if (err > worst_err) worst_err = err, worst = static_cast<int>(i);
       if (ref(2) != 0 && std::abs(ref(2)) > 1e-10 * ref(0)) {
         EXPECT_EQ(s3(i) < 0, ref(2) < 0) << "matrix " << i;
@@ -310,7 +311,8 @@ TEST(OpenCL, NodeEvaluationMatchesCpu) {
     for (long j = 0; j < P.rows(); ++j) {
       double sJ, sH;
       const MapJet jet = basis.differential_jet(fm, P.row(j).transpose(), third ? 2 : 1, &sJ, &sH);
-      const double s3 = signed_singular_values(jet.J)(2);
+      const Vec3 sv = signed_singular_values(jet.J);
+      const double s3 = sv(2);
       double own = 0;
       for (int e = 0; e < cage.num_edges(); ++e)
         if (delta(e) != 0)
@@ -319,6 +321,7 @@ TEST(OpenCL, NodeEvaluationMatchesCpu) {
               (third ? third_order_edge_factor(data.edge_u[e], data.edge_w[e], P.row(j).transpose(), rad(j))
                      : first_order_edge_factor(data.edge_u[e], data.edge_w[e], P.row(j).transpose(), rad(j)));
       EXPECT_LT(rel(out[j].sigma3, s3), 1e-12) << j;
+      EXPECT_LT(rel(out[j].sigma1, sv(0)), 1e-12) << j;
       if (third) {
         EXPECT_LT(rel(out[j].hnorm, jet.hessian_norm()), 1e-12) << j;
         EXPECT_LT(rel(out[j].scale_H, sH), 1e-12) << j;
@@ -372,6 +375,11 @@ void expect_same_certificate(const Certificate& a, const Certificate& b, double 
     }
     if (std::isfinite(x.margin) || std::isfinite(y.margin)) {
       EXPECT_LT(std::abs(x.margin - y.margin), tol * (std::abs(x.sigma3) + x.L)) << "leaf " << i;
+    }
+    // The distortion bounds: σ1 comes from the device too (base stage and octree nodes).
+    EXPECT_EQ(std::isfinite(x.sigma1_upper), std::isfinite(y.sigma1_upper)) << "leaf " << i;
+    if (std::isfinite(x.sigma1_upper)) {
+      EXPECT_LT(rel(x.sigma1_upper, y.sigma1_upper), tol) << "leaf " << i;
     }
   }
   EXPECT_LT(rel(a.min_lower_bound, b.min_lower_bound), tol);
@@ -444,6 +452,23 @@ TEST(OpenCL, CertificatesMatchCpu) {
       if (c.refined > 0) ++refined_cases;
     }
   EXPECT_GE(refined_cases, 2) << "the test maps should exercise the refinement";
+
+  // Distortion targets: the device's σ1 (base stage and octree nodes) gives the CPU's bounds, so a target
+  // just below the unconstrained bound is proven by the same refinement on both.
+  CertifyParams per_face;
+  per_face.refinement = RefinementEval::kPerFace;
+  per_face.max_refined_voxels = 20000;
+  CertifyParams cp = per_face;
+  cp.refinement = RefinementEval::kPerEdgeBatched;
+  const Certificate free = cpu.certify(bent(0.9), per_face);
+  ASSERT_TRUE(free.certified) << free.reason;
+  per_face.max_distortion = cp.max_distortion = 0.9 * free.max_distortion_upper_bound;
+  per_face.max_sigma1 = cp.max_sigma1 = std::max(1.0, 0.95 * free.max_sigma1_upper_bound);
+  const Certificate c = cpu.certify(bent(0.9), per_face), g = gpu.certify(bent(0.9), cp);
+  EXPECT_TRUE(c.distortion_met) << c.reason;
+  EXPECT_EQ(g.distortion_met, c.distortion_met) << g.reason;
+  EXPECT_GT(c.refined, free.refined);
+  expect_same_certificate(c, g, 1e-10);
 }
 
 // The solver on both backends with double-precision Hessian products: the same accepted steps, the same

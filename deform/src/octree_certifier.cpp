@@ -749,7 +749,7 @@ struct OctreeCertifier::Run {
         has = true;
       }
       const auto td = Clock::now();
-      im.kernels->base_stage(device_Y.data(), third, delta, sigma3, hnorm, T, sign_unresolved);
+      im.kernels->base_stage(device_Y.data(), third, delta, sigma3, sigma1, hnorm, T, sign_unresolved);
       device_ms = ms_since(td);
       cert.ms_jacobian += device_ms;
     }

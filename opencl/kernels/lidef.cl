@@ -115,10 +115,12 @@ inline int det_sign3(const double* m, int* resolved) {
 }
 
 // Signed σ3 as signed_singular_values(J)(2): the smallest singular value, negative when det J < 0, and 0 when
-// the sign of det J is not resolved (*resolved = 0) or det J = 0 exactly.
-inline double signed_sigma3(const double* J, int* resolved) {
+// the sign of det J is not resolved (*resolved = 0) or det J = 0 exactly; *sigma1 = σ1 (signed_singular_values
+// (J)(0), the bounded-distortion stage's σ1) from the same decomposition.
+inline double signed_sigma3(const double* J, int* resolved, double* sigma1) {
   double U[9], S[3], V[9];
   signed_svd3(J, U, S, V);
+  *sigma1 = fabs(S[0]);
   const double s3 = fabs(S[2]);
   const int sg = det_sign3(J, resolved);
   return sg == 0 ? 0.0 : (sg < 0 ? -s3 : s3);
@@ -439,10 +441,10 @@ __kernel void certify_rows_blocks(__global const float* GH, long N, int m, __glo
 }
 
 // Base stage, part 2 per voxel: ‖H‖ (full 27-entry norm; 0 when only the gradient rows were formed), signed
-// σ3, and T = Σ_e δ_e F(i, e) (skipping δ_e = 0, whose factor may be +∞).
+// σ3 and σ1, and T = Σ_e δ_e F(i, e) (skipping δ_e = 0, whose factor may be +∞).
 __kernel void certify_finish(__global const double* JH, long N, int third, __global const float* Ft, int E,
                              __global const double* delta, __global double* sigma3, __global double* hnorm,
-                             __global double* T, __global double* unresolved) {
+                             __global double* T, __global double* unresolved, __global double* sigma1) {
   const long i = get_global_id(0);
   if (i >= N) return;
   double J[9];
@@ -457,7 +459,9 @@ __kernel void certify_finish(__global const double* JH, long N, int third, __glo
     }
   hnorm[i] = sqrt(hs);
   int resolved = 1;
-  sigma3[i] = signed_sigma3(J, &resolved);
+  double s1 = 0;
+  sigma3[i] = signed_sigma3(J, &resolved, &s1);
+  sigma1[i] = s1;
   unresolved[i] = resolved ? 0.0 : 1.0;
   double t = 0;
   for (int e = 0; e < E; ++e) {
@@ -502,7 +506,9 @@ inline double edge_factor(const double* u, const double* w, const double* p, dou
 // Octree nodes: the differential representation (HarmonicBasis::differential_jet) at each node center plus
 // the node's own bound Σ_e δ_e factor_e(center, radius) (skipping δ_e = 0).
 // faces: per face x0,x1,x2 (9) and dlen (3); fm: per face A (9, row-major), AD_k (3 x 9), A_abs (1).
-// out per node: σ3, ‖H‖ (third only, else 0), own bound, scale_J, scale_H.
+#define kNodeOut 7
+// out per node (kNodeOut values; the host reads the same layout, opencl_backend.cpp): σ3, ‖H‖ (third only,
+// else 0), own bound, scale_J, scale_H, 1 when det J's sign is not resolved (else 0), σ1.
 __kernel void eval_nodes(__global const double* centers, __global const double* radii, long count,
                          __global const double* faces, __global const double* fm, int nf, int third,
                          __global const double* edges, __global const double* delta, int E,
@@ -583,10 +589,12 @@ __kernel void eval_nodes(__global const double* centers, __global const double* 
     }
   }
   int resolved = 1;
-  out[6 * j] = signed_sigma3(J, &resolved);
-  out[6 * j + 1] = hn;
-  out[6 * j + 2] = own;
-  out[6 * j + 3] = sJ;
-  out[6 * j + 4] = sH;
-  out[6 * j + 5] = resolved ? 0.0 : 1.0;
+  double s1 = 0;
+  out[kNodeOut * j] = signed_sigma3(J, &resolved, &s1);
+  out[kNodeOut * j + 1] = hn;
+  out[kNodeOut * j + 2] = own;
+  out[kNodeOut * j + 3] = sJ;
+  out[kNodeOut * j + 4] = sH;
+  out[kNodeOut * j + 5] = resolved ? 0.0 : 1.0;
+  out[kNodeOut * j + 6] = s1;
 }

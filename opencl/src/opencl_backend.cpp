@@ -491,6 +491,9 @@ class OpenCLEnergyKernels final : public EnergyKernels {
 // ------------------------------------------------------------------------------------------------
 // certificate
 
+// Values per octree node that eval_nodes writes (kNodeOut in kernels/lidef.cl, the same layout).
+constexpr long kNodeOut = 7;
+
 class OpenCLCertifierKernels final : public CertifierKernels {
  public:
   OpenCLCertifierKernels(std::shared_ptr<Device> dev, const CertifierData& data)
@@ -534,6 +537,7 @@ class OpenCLCertifierKernels final : public CertifierKernels {
     if (m_ > 0) {
       Y_ = make_buffer<double>(*d_, 3 * m_, "allocating coefficients");
       s3_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
+      s1_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       hn_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       T_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
       unres_ = make_buffer<double>(*d_, N_, "allocating certificate outputs");
@@ -556,11 +560,12 @@ class OpenCLCertifierKernels final : public CertifierKernels {
                                              CL_MEM_READ_ONLY, t.data());
   }
 
-  void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& hnorm, VecXd& T,
-                  std::vector<char>& unresolved) override {
+  void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& sigma1, VecXd& hnorm,
+                  VecXd& T, std::vector<char>& unresolved) override {
     if (m_ == 0) throw OpenCLError("OpenCL (" + d_->label + "): no stored derivatives for the base stage");
     std::lock_guard<std::mutex> lock(d_->mutex);
     sigma3.resize(N_);
+    sigma1.resize(N_);
     hnorm.resize(N_);
     T.resize(N_);
     std::vector<double> unres(N_);
@@ -585,9 +590,11 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       k_finish_.setArg(7, hn_);
       k_finish_.setArg(8, T_);
       k_finish_.setArg(9, unres_);
+      k_finish_.setArg(10, s1_);
       d_->queue.enqueueNDRangeKernel(k_finish_, cl::NullRange, cl::NDRange(round_up(N_, 64)),
                                      cl::NDRange(64));
       d_->queue.enqueueReadBuffer(s3_, CL_FALSE, 0, N_ * sizeof(double), sigma3.data());
+      d_->queue.enqueueReadBuffer(s1_, CL_FALSE, 0, N_ * sizeof(double), sigma1.data());
       d_->queue.enqueueReadBuffer(hn_, CL_FALSE, 0, N_ * sizeof(double), hnorm.data());
       d_->queue.enqueueReadBuffer(T_, CL_FALSE, 0, N_ * sizeof(double), T.data());
       d_->queue.enqueueReadBuffer(unres_, CL_TRUE, 0, N_ * sizeof(double), unres.data());
@@ -614,14 +621,14 @@ class OpenCLCertifierKernels final : public CertifierKernels {
         }
       F[36] = A_abs[f];
     }
-    std::vector<double> c(3 * count), res(6 * count);
+    std::vector<double> c(3 * count), res(kNodeOut * count);
     for (long j = 0; j < count; ++j)
       for (int q = 0; q < 3; ++q) c[3 * j + q] = centers(j, q);
     if (count > cap_) {
       cap_ = std::max<long>(count, 2 * cap_);
       centers_ = make_buffer<double>(*d_, 3 * cap_, "allocating octree nodes");
       radii_ = make_buffer<double>(*d_, cap_, "allocating octree nodes");
-      out_ = make_buffer<double>(*d_, 6 * cap_, "allocating octree nodes");
+      out_ = make_buffer<double>(*d_, kNodeOut * cap_, "allocating octree nodes");
     }
     guarded(d_->label, "octree node evaluation", [&] {
       d_->queue.enqueueWriteBuffer(fm_, CL_FALSE, 0, fm.size() * sizeof(double), fm.data());
@@ -649,12 +656,14 @@ class OpenCLCertifierKernels final : public CertifierKernels {
     for (long j = 0; j < count; ++j) {
       NodeValues& v = out[j];
       v = NodeValues();
-      v.sigma3 = res[6 * j];
-      v.hnorm = res[6 * j + 1];
-      v.own_bound = res[6 * j + 2];
-      v.scale_J = res[6 * j + 3];
-      v.scale_H = res[6 * j + 4];
-      v.sign_unresolved = res[6 * j + 5] != 0;
+      const double* r = &res[kNodeOut * j];
+      v.sigma3 = r[0];
+      v.hnorm = r[1];
+      v.own_bound = r[2];
+      v.scale_J = r[3];
+      v.scale_H = r[4];
+      v.sign_unresolved = r[5] != 0;
+      v.sigma1 = r[6];
     }
   }
 
@@ -662,8 +671,8 @@ class OpenCLCertifierKernels final : public CertifierKernels {
   std::shared_ptr<Device> d_;
   long N_ = 0, m_ = 0, cap_ = 0;
   int nf_ = 0, E_ = 0;
-  cl::Buffer GHt_, JH_, faces_, edges_, delta_, fm_, Y_, s3_, hn_, T_, unres_, F1_, F3_, centers_, radii_,
-      out_;
+  cl::Buffer GHt_, JH_, faces_, edges_, delta_, fm_, Y_, s3_, s1_, hn_, T_, unres_, F1_, F3_, centers_,
+      radii_, out_;
   cl::Kernel k_rows_, k_finish_, k_nodes_;
 };
 

@@ -76,7 +76,7 @@ struct NodeValues {
   // Far-field refinement (CPU): sigma3 and hnorm are those of an approximate J̃ and H̃ with |J − J̃|₂ ≤ eps_J
   // and ‖H − H̃‖_F ≤ eps_H at the center (docs/certificate.md, Step 4d); 0 for an exact evaluation.
   double eps_J = 0, eps_H = 0;
-  // Bounded distortion (CPU): σ1 at the center (NaN: not computed, no σ1 bound) and, for the spectral bound,
+  // Bounded distortion: σ1 at the center (NaN: not computed, no σ1 bound) and, for the spectral bound (CPU),
   // the operator-norm bound of H(c) before the σ3-specific Taylor term replaced it (a bound on J's change).
   double sigma1 = std::numeric_limits<double>::quiet_NaN();
   double hnorm_op_j = 0;
@@ -87,11 +87,11 @@ class CertifierKernels {
   virtual ~CertifierKernels() = default;
   // Edge factor matrix of one bound (N by #E, row-major, rounded up to float), given once per bound.
   virtual void set_factors(bool third, const float* factors, long edges) = 0;
-  // Base voxels: σ3, ‖H‖ (stored Hessian rows) and T_i = Σ_e δ_e F(i, e) (δ_e = 0 skipped), for the stored
-  // derivatives times Y (m by 3, column-major). Outputs are N-vectors; `unresolved` (1: det J's sign at
-  // the center is not resolved in double precision, σ3 = 0 there) as well.
-  virtual void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& hnorm,
-                          VecXd& T, std::vector<char>& unresolved) = 0;
+  // Base voxels: σ3, σ1 (the bounded-distortion stage's), ‖H‖ (stored Hessian rows) and T_i = Σ_e δ_e F(i, e)
+  // (δ_e = 0 skipped), for the stored derivatives times Y (m by 3, column-major). Outputs are N-vectors;
+  // `unresolved` (1: det J's sign at the center is not resolved in double precision, σ3 = 0 there) as well.
+  virtual void base_stage(const double* Y, bool third, const VecXd& delta, VecXd& sigma3, VecXd& sigma1,
+                          VecXd& hnorm, VecXd& T, std::vector<char>& unresolved) = 0;
   // Octree nodes (centers #nodes by 3, radii #nodes) through the differential representation of the map
   // whose face matrices are `fm`.
   virtual void evaluate_nodes(const std::vector<Mat3>& A, const std::vector<std::array<Mat3, 3>>& AD,
