@@ -438,6 +438,8 @@ struct OctreeCertifier::Run {
       const double s3 = sv(2) + tolerance(sJ, 0, sv(2), 0, 0, 0);
       const DistortionTarget which = resolved ? targets.violated(s1, s3, 1e-12) : DistortionTarget::kNone;
       if (which == DistortionTarget::kNone) continue;
+      // σ3 below s where it may be ≤ 0: a fold, not a distortion; the full certificate names it.
+      if (which == DistortionTarget::kSigma3 && !(sv(2) - tolerance(sJ, 0, sv(2), 0, 0, 0) > 0)) continue;
       CertLeaf l;
       l.center = q;
       l.sigma3 = sv(2);
