@@ -207,6 +207,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       std::cout << "  min sigma3 at centers " << format_g(cert.min_sigma3_center) << ", min margin "
                 << format_g(cert.min_margin) << ", min lower bound of sigma3 "
                 << format_g(cert.min_lower_bound) << "\n";
+      if (cert.targets().any()) std::cout << "  " << distortion_targets_summary(cert) << "\n";
       std::cout << "  mesh coverage " << format_g(100 * report.mesh_coverage) << "% ("
                 << report.mesh_vertices_uncovered << " of " << report.mesh_vertices
                 << " mesh vertices outside the voxels"

@@ -19,6 +19,7 @@
 
 #include "cache_flags.h"
 #include "commands.h"
+#include "lidef/analysis/certificate_report.h"
 #include "lidef/analysis/deform_outputs.h"
 #include "lidef/cage/auto_cage.h"
 #include "lidef/coefficients.h"
@@ -208,6 +209,7 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << cert.voxels << (result.sampling.domain == "mesh" ? " voxels)" : " voxels")
                 << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
                 << format_g(100 * out.mesh_coverage, 3) << "%\n"
+                << (cert.targets().any() ? "  " + distortion_targets_summary(cert) + "\n" : "")
                 << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
                         ? "  the shape does not pass through itself\n"
                     : out.global.verdict == GlobalInjectivity::Verdict::kOverlap

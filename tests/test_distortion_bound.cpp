@@ -513,6 +513,10 @@ TEST_F(DistortionCli, IsometricTargetsHoldOnTheWrittenMapAndVerifyAgrees) {
   EXPECT_TRUE(rc == 0 || rc == 1) << output;
   const nlohmann::json sum = read_json(tmp / "iso/summary.json");
   EXPECT_EQ(sum["certified"], true) << output;
+  EXPECT_NE(output.find("distortion targets (max_sigma1 " + format_g(S) + ", min_sigma3 " + format_g(s) +
+                        ") proven: sigma1 <= "),
+            std::string::npos)
+      << output;
   EXPECT_EQ(sum["max_sigma1"].get<double>(), S);
   EXPECT_EQ(sum["min_sigma3"].get<double>(), s);
   EXPECT_LE(sum["max_sigma1_upper_bound"].get<double>(), S);

@@ -203,6 +203,16 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
 // sigma1, sigma1_upper, distortion_upper (since the distortion bounds): σ1 at the center and the leaf's upper
 // bounds of σ1 and σ1/σ3 ("inf" where none). Files written before them have the first 9 or 10 columns only;
 // they are still read.
+std::string distortion_targets_summary(const Certificate& cert) {
+  const DistortionTargets t = cert.targets();
+  if (!t.any()) return "";
+  const std::string head = "distortion targets (" + t.describe() + ") ";
+  if (!cert.distortion_met) return head + "not proven" + (cert.reason.empty() ? "" : ": " + cert.reason);
+  return head + "proven: sigma1 <= " + format_g(cert.max_sigma1_upper_bound, 4) +
+         ", sigma3 >= " + format_g(cert.min_lower_bound, 4) +
+         ", sigma1/sigma3 <= " + format_g(cert.max_distortion_upper_bound, 4);
+}
+
 const char* voxels_csv_header() {
   return "cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,distortion_upper";
 }

@@ -83,6 +83,11 @@ CertificateReport make_certificate_report(const Certificate& cert, const Cage& c
                                           const VoxelSampling& sampling, const CertifyParams& params,
                                           const GlobalInjectivity* known_global = nullptr);
 
+// For console summaries when a distortion target is on (empty otherwise): "distortion targets
+// (max_sigma1 1.2, min_sigma3 0.8) proven: sigma1 <= 1.19, sigma3 >= 0.81, sigma1/sigma3 <= 1.46" or "... not
+// proven: <reason>".
+std::string distortion_targets_summary(const Certificate& cert);
+
 // voxels.csv: header `cx,cy,cz,side,depth,sigma3,L,margin,certified,sigma3_error,sigma1,sigma1_upper,
 // distortion_upper`, one row per leaf in leaf order (base-voxel order, children depth-first), certified =
 // 1/0.
