@@ -69,6 +69,23 @@ double check_against_sampling(const HarmonicBasis& basis, const MatX3d& y, const
   return v.max_distortion;
 }
 
+// The bent map of the target tests (a smooth map of the icosphere's cage), certified at depth 3 without a
+// target: once for all of them.
+struct BentMap {
+  OctreeCertifier cert{sphere().cage, sphere().sampling};
+  MatX3d y = lidef::test::smooth_map(sphere().cage, sphere().sub, 0.9, 12);
+  CertifyParams p = [] {
+    CertifyParams q;
+    q.max_depth = 3;
+    return q;
+  }();
+  Certificate c0 = cert.certify(y, p);
+};
+const BentMap& bent_map() {
+  static const BentMap b;
+  return b;
+}
+
 }  // namespace
 
 TEST(DistortionBound, NeverBelowDenseSamplingOnRandomMapsAndEveryBound) {
@@ -164,12 +181,11 @@ TEST(DistortionBound, StoredDerivativesFarFieldAndPerturbationChainsStaySound) {
 }
 
 TEST(DistortionBound, TargetIsProvenByRefinementOrReportedNotCertified) {
-  const Sphere& s = sphere();
-  OctreeCertifier cert(s.cage, s.sampling);
-  const MatX3d y = lidef::test::smooth_map(s.cage, s.sub, 0.9, 12);
-  CertifyParams p;
-  p.max_depth = 3;
-  const Certificate c0 = cert.certify(y, p);
+  const BentMap& b = bent_map();
+  const OctreeCertifier& cert = b.cert;
+  const MatX3d& y = b.y;
+  const CertifyParams& p = b.p;
+  const Certificate& c0 = b.c0;
   ASSERT_TRUE(c0.certified) << c0.reason;
   const double sampled = check_against_sampling(cert.basis(), y, c0);
   const double bound0 = c0.max_distortion_upper_bound;
@@ -213,12 +229,11 @@ TEST(DistortionBound, TargetIsProvenByRefinementOrReportedNotCertified) {
 // agrees); beyond the sampled extreme the map is not certified, naming the target; together with a K target
 // the one that fails is named.
 TEST(DistortionBound, IsometricTargetsAreProvenByRefinementOrReportedNotCertified) {
-  const Sphere& s = sphere();
-  OctreeCertifier cert(s.cage, s.sampling);
-  const MatX3d y = lidef::test::smooth_map(s.cage, s.sub, 0.9, 12);
-  CertifyParams p;
-  p.max_depth = 3;
-  const Certificate c0 = cert.certify(y, p);
+  const BentMap& b = bent_map();
+  const OctreeCertifier& cert = b.cert;
+  const MatX3d& y = b.y;
+  const CertifyParams& p = b.p;
+  const Certificate& c0 = b.c0;
   ASSERT_TRUE(c0.certified) << c0.reason;
   const VerificationResult v0 = verify_certificate(cert.basis(), y, c0.leaves, 8, 3);
   ASSERT_GT(c0.max_sigma1_upper_bound, v0.max_sigma1);

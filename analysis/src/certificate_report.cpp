@@ -208,9 +208,9 @@ std::string distortion_targets_summary(const Certificate& cert) {
   if (!t.any()) return "";
   const std::string head = "distortion targets (" + t.describe() + ") ";
   if (!cert.distortion_met) return head + "not proven" + (cert.reason.empty() ? "" : ": " + cert.reason);
-  return head + "proven: sigma1 <= " + format_g(cert.max_sigma1_upper_bound, 4) +
-         ", sigma3 >= " + format_g(cert.min_lower_bound, 4) +
-         ", sigma1/sigma3 <= " + format_g(cert.max_distortion_upper_bound, 4);
+  return head + "proven: sigma1 <= " + format_bound(cert.max_sigma1_upper_bound, true, 4) +
+         ", sigma3 >= " + format_bound(cert.min_lower_bound, false, 4) +
+         ", sigma1/sigma3 <= " + format_bound(cert.max_distortion_upper_bound, true, 4);
 }
 
 const char* voxels_csv_header() {

@@ -903,8 +903,8 @@ std::string distortion_bound_text(const SessionFrame& f) {
   std::string t = "; certified on the domain: sigma1/sigma3 <= " + format_g(c.max_distortion_upper_bound, 4);
   // With the isometric targets on, the two bounds they constrain too.
   if (c.max_sigma1 > 0 || c.min_sigma3 > 0)
-    t += ", sigma1 <= " + format_g(c.max_sigma1_upper_bound, 4) +
-         ", sigma3 >= " + format_g(c.min_lower_bound, 4);
+    t += ", sigma1 <= " + format_bound(c.max_sigma1_upper_bound, true, 4) +
+         ", sigma3 >= " + format_bound(c.min_lower_bound, false, 4);
   if (f.leaves_version != f.map_version) t += " (of an earlier iterate)";
   return t;
 }

@@ -12,6 +12,11 @@ std::string format_double(double x);
 // them.
 std::string format_g(double x, int digits = 6);
 
+// format_g for a number that is a bound: the `digits`-digit text rounded away from what it bounds (up for an
+// upper bound, down for a lower one), so that the printed number is a bound too ("sigma1 <= 1.314" for
+// 1.31349). Non-finite numbers as format_g writes them.
+std::string format_bound(double x, bool upper, int digits = 6);
+
 // printf's "%.<decimals>f": durations and percentages ("0.12").
 std::string format_fixed(double x, int decimals);
 
