@@ -205,8 +205,8 @@ void add_certify_command(CLI::App& app, Action& action) {
                 << cert.num_leaves << ", refined " << cert.refined << ", depth used " << cert.max_depth_used
                 << " of " << cp.max_depth << "\n";
       std::cout << "  min sigma3 at centers " << format_g(cert.min_sigma3_center) << ", min margin "
-                << format_g(cert.min_margin) << ", min lower bound of sigma3 "
-                << format_g(cert.min_lower_bound) << "\n";
+                << format_bound(cert.min_margin, false) << ", min lower bound of sigma3 "
+                << format_bound(cert.min_lower_bound, false) << "\n";
       if (cert.targets().any()) std::cout << "  " << distortion_targets_summary(cert) << "\n";
       std::cout << "  mesh coverage " << format_g(100 * report.mesh_coverage) << "% ("
                 << report.mesh_vertices_uncovered << " of " << report.mesh_vertices

@@ -207,8 +207,8 @@ void add_deform_command(CLI::App& app, Action& action) {
                         ? "the domain (" + mesh_domain_of(model.mesh.V, model.mesh.F).description() + ": "
                         : std::string("the union of "))
                 << cert.voxels << (result.sampling.domain == "mesh" ? " voxels)" : " voxels")
-                << ", min lower bound of sigma3 " << format_g(cert.min_lower_bound, 4) << ", mesh coverage "
-                << format_g(100 * out.mesh_coverage, 3) << "%\n"
+                << ", min lower bound of sigma3 " << format_bound(cert.min_lower_bound, false, 4)
+                << ", mesh coverage " << format_g(100 * out.mesh_coverage, 3) << "%\n"
                 << (cert.targets().any() ? "  " + distortion_targets_summary(cert) + "\n" : "")
                 << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
                         ? "  the shape does not pass through itself\n"

@@ -441,7 +441,7 @@ void print_show_summary(const ojson& s, const std::string& tag) {
   std::cout << "  local injectivity on the ball: "
             << (li["certified"].get<bool>() ? "certified" : "NOT certified");
   if (li.contains("min_lower_bound") && !li["min_lower_bound"].is_null())
-    std::cout << " (sigma3 >= " << format_g(li["min_lower_bound"].get<double>()) << ", "
+    std::cout << " (sigma3 >= " << format_bound(li["min_lower_bound"].get<double>(), false) << ", "
               << li["leaves"].get<long>() << " cells)";
   if (!li["reason"].get<std::string>().empty()) std::cout << ": " << li["reason"].get<std::string>();
   std::cout << "\n";
@@ -450,7 +450,7 @@ void print_show_summary(const ojson& s, const std::string& tag) {
     std::cout << "  sigma3 > interior minimum on the whole sphere: "
               << (b["certified"].get<bool>() ? "certified" : "NOT certified");
     if (!b["min_lower_bound"].is_null())
-      std::cout << " (sigma3 >= " << format_g(b["min_lower_bound"].get<double>()) << " there)";
+      std::cout << " (sigma3 >= " << format_bound(b["min_lower_bound"].get<double>(), false) << " there)";
     std::cout << "\n";
   }
   if (!s["boundary_injectivity"].is_null()) {

@@ -112,8 +112,8 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
   std::cout << "  coverage: " << coverage.reason << "\n";
   std::cout << "  distortion: " << v.distortion_proven << " of " << checked
             << " certified leaves' sigma1 and sigma1/sigma3 bounds re-proven (max sigma1 <= "
-            << format_g(v.max_sigma1_hi) << ", max sigma1/sigma3 <= " << format_g(v.max_distortion_hi)
-            << ")\n";
+            << format_bound(v.max_sigma1_hi, true)
+            << ", max sigma1/sigma3 <= " << format_bound(v.max_distortion_hi, true) << ")\n";
   if (targets.any())
     std::cout << "  distortion targets (" << targets.describe() << "): " << checked - targets_not_proven
               << " of " << checked << " certified leaves re-proven within them\n";
@@ -132,11 +132,13 @@ ExitCode run_interval_verify(const CertificateReport& rep, const Model& model, c
       std::cout << "  not proven: leaf " << v.leaf_index[q] << " (row " << v.leaf_index[q] + 2
                 << " of voxels.csv), center (" << format_g(l.center.x()) << ", " << format_g(l.center.y())
                 << ", " << format_g(l.center.z()) << "), side " << format_g(l.side)
-                << ": sigma3 >= " << format_g(r.sigma3_lo) << ", L <= " << format_g(r.L_hi)
-                << ", margin >= " << format_g(r.margin_lo) << ", sigma1 <= " << format_g(r.sigma1_hi)
-                << ", sigma1/sigma3 <= " << format_g(r.distortion_hi)
-                << " (certificate: " << format_g(l.sigma1_upper) << ", " << format_g(l.distortion_upper)
-                << ")\n";
+                << ": sigma3 >= " << format_bound(r.sigma3_lo, false)
+                << ", L <= " << format_bound(r.L_hi, true)
+                << ", margin >= " << format_bound(r.margin_lo, false)
+                << ", sigma1 <= " << format_bound(r.sigma1_hi, true)
+                << ", sigma1/sigma3 <= " << format_bound(r.distortion_hi, true)
+                << " (certificate: " << format_bound(l.sigma1_upper, true) << ", "
+                << format_bound(l.distortion_upper, true) << ")\n";
     }
   }
   return ok ? kOk : kNotCertified;
@@ -331,10 +333,10 @@ void add_verify_command(CLI::App& app, Action& action) {
                 << v.nonpositive_in_certified << "\n";
       std::cout << "  max tightness (sampled Lipschitz / L) " << format_g(max_tight) << "\n";
       std::cout << "  distortion: sampled max sigma1 " << format_g(v.max_sigma1) << " (certified bound "
-                << format_g(rep.cert.max_sigma1_upper_bound) << "), sampled max sigma1/sigma3 "
+                << format_bound(rep.cert.max_sigma1_upper_bound, true) << "), sampled max sigma1/sigma3 "
                 << format_g(v.max_distortion) << " (certified bound "
-                << format_g(rep.cert.max_distortion_upper_bound) << "), samples above their leaf's bounds "
-                << v.distortion_violations << "\n";
+                << format_bound(rep.cert.max_distortion_upper_bound, true)
+                << "), samples above their leaf's bounds " << v.distortion_violations << "\n";
       if (targets.any())
         std::cout << "  distortion targets (" << targets.describe() << "): "
                   << (rep.cert.distortion_met ? "proven by the certificate" : "not proven by the certificate")

@@ -147,7 +147,7 @@ UnreachabilityProof prove_targets_unreachable(const DeformationSolver& solver) {
     p.proven = true;
     p.kind = "residual";
     p.reason = "no map of the subspace reaches the targets: the least-squares residual is at least " +
-               format_g(p.residual_lower, 4) + " (computed " + format_g(p.residual, 4) +
+               format_bound(p.residual_lower, false, 4) + " (computed " + format_g(p.residual, 4) +
                ", less its rounding), at least " + format_g(kMargin, 2) +
                " x max(sqrt(#handles) x tolerance, rounding floor) = " + format_g(needed, 4) +
                " (normalized frame)";

@@ -900,7 +900,8 @@ std::string distortion_bound_text(const SessionFrame& f) {
   if (!f.leaves) return "; certified bound: computing...";
   const Certificate& c = *f.leaves;
   if (!c.certified) return "; no certified bound (the map is not certified)";
-  std::string t = "; certified on the domain: sigma1/sigma3 <= " + format_g(c.max_distortion_upper_bound, 4);
+  std::string t =
+      "; certified on the domain: sigma1/sigma3 <= " + format_bound(c.max_distortion_upper_bound, true, 4);
   // With the isometric targets on, the two bounds they constrain too.
   if (c.max_sigma1 > 0 || c.min_sigma3 > 0)
     t += ", sigma1 <= " + format_bound(c.max_sigma1_upper_bound, true, 4) +
@@ -1303,7 +1304,7 @@ std::string global_text(const SessionFrame& f, const ViewSettings& s) {
 void Scene::Impl::set_caption(const std::string& what, const SessionFrame& f, const ViewSettings& s) {
   const std::string cert = (f.certified ? "certified" : "NOT certified") + global_text(f, s);
   set_caption_text((model_name.empty() ? "" : model_name + ": ") + what + "\n" + cert +
-                   ", min sigma3 lower bound " + format_g(f.min_lower_bound, 4) + ", iteration " +
+                   ", min sigma3 lower bound " + format_bound(f.min_lower_bound, false, 4) + ", iteration " +
                    std::to_string(f.history.size()));
 }
 

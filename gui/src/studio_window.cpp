@@ -1722,7 +1722,7 @@ void StudioWindow::update_status(const SessionFrame& f) {
   std::ostringstream s;
   s << name << to_string(f.state) << " | " << stop_reason_in_words(f.status) << " | iteration "
     << f.history.size() << " | energy " << format_g(f.energy.total, 4) << " | min sigma3 LB "
-    << format_g(f.min_lower_bound, 4) << " | handle error " << format_g(f.max_handle_error, 3);
+    << format_bound(f.min_lower_bound, false, 4) << " | handle error " << format_g(f.max_handle_error, 3);
   const int unreached = scene_->unreached_handles();
   if (unreached > 0)
     s << " | " << unreached << " handle" << (unreached > 1 ? "s" : "")
