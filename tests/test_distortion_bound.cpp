@@ -375,6 +375,60 @@ TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
   EXPECT_GT(report.num_leaves, 0);
 }
 
+// The line search's distortion stage refines the voxels most likely to fail first (priority voxels, probes,
+// leaves within 0.5% of a target): a provable target gives the same leaves, in the same order, as one pass
+// over all leaves (a report, stop_on_failure off); an unprovable one is refused with no more refinement than
+// the full pass, naming a leaf of the first phase.
+TEST(DistortionBound, CriticalVoxelsFirstChangeNeitherLeavesNorVerdict) {
+  const BentMap& b = bent_map();
+  ASSERT_TRUE(b.c0.certified) << b.c0.reason;
+  const double sampled = check_against_sampling(b.cert.basis(), b.y, b.c0);
+  const double bound0 = b.c0.max_distortion_upper_bound;
+  CertifyParams report = b.p;
+  report.max_distortion = sampled + 0.3 * (bound0 - sampled);
+  CertifyParams search = report;
+  search.stop_on_failure = true;
+  search.priority_voxels = {0, 7, static_cast<long>(b.c0.leaves.back().base)};
+  search.distortion_probes = {b.c0.leaves[b.c0.leaves.size() / 2].center};
+  const Certificate full = b.cert.certify(b.y, report);
+  const Certificate phased = b.cert.certify(b.y, search);
+  ASSERT_TRUE(full.certified) << full.reason;
+  ASSERT_TRUE(phased.certified) << phased.reason;
+  ASSERT_EQ(phased.leaves.size(), full.leaves.size());
+  for (size_t i = 0; i < full.leaves.size(); ++i) {
+    EXPECT_EQ(phased.leaves[i].center, full.leaves[i].center) << i;
+    EXPECT_EQ(phased.leaves[i].side, full.leaves[i].side) << i;
+    EXPECT_EQ(phased.leaves[i].distortion_upper, full.leaves[i].distortion_upper) << i;
+    EXPECT_EQ(phased.leaves[i].margin, full.leaves[i].margin) << i;
+  }
+  EXPECT_EQ(phased.max_distortion_upper_bound, full.max_distortion_upper_bound);
+  EXPECT_EQ(phased.refined, full.refined);
+
+  // Just above the largest value at a leaf center: the proof near that center would need leaves far below
+  // the depth limit, so the map is refused either way; the phased stage refines that voxel in its first
+  // phase, refines less than the full pass and names a voxel of the first phase.
+  double kmax = 0;
+  for (const CertLeaf& l : b.c0.leaves)
+    if (l.sigma3 > 0) kmax = std::max(kmax, l.sigma1 / l.sigma3);
+  report.max_distortion = search.max_distortion = std::max(1.0, 1.0005 * kmax);
+  search.distortion_probes.clear();
+  search.priority_voxels.clear();
+  const Certificate full_no = b.cert.certify(b.y, report);
+  const Certificate phased_no = b.cert.certify(b.y, search);
+  EXPECT_FALSE(full_no.certified);
+  EXPECT_FALSE(phased_no.certified);
+  EXPECT_TRUE(phased_no.distortion_failed);
+  EXPECT_LT(phased_no.refined, full_no.refined);
+  ASSERT_FALSE(phased_no.failing.empty());
+  bool critical = false;
+  for (const CertLeaf& l : b.c0.leaves)
+    if (l.base == phased_no.failing.front().base && l.sigma3 > 0 &&
+        l.sigma1 / l.sigma3 > 0.995 * search.max_distortion)
+      critical = true;
+  EXPECT_TRUE(critical) << "the refused trial names a voxel outside its first phase";
+  std::printf("refused: %ld nodes refined in phases, %ld in one pass\n", phased_no.refined, full_no.refined);
+}
+
 TEST(DistortionBound, IntervalReproofConfirmsEveryCertifiedLeafAndRefusesATamperedOne) {
   BallParams bp;
   bp.cage_subdivisions = 1;

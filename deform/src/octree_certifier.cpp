@@ -74,6 +74,9 @@ struct OctreeCertifier::Impl {
   };
   mutable std::once_flag gamma_once;
   mutable PerturbationConstants pert;
+  // The voxel lookup of the distortion probes (built on first use: every line-search trial asks it).
+  mutable std::once_flag locator_once;
+  mutable std::unique_ptr<VoxelLocator> locator;
   mutable std::vector<char> first_finite, third_finite;  // per voxel: no factor is +∞
   // Stored as floats rounded *up*, so that they stay upper bounds.
   mutable Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> first, third;
@@ -422,13 +425,10 @@ struct OctreeCertifier::Run {
   // probe fails.
   bool distortion_probe(Certificate& out) const {
     if (!p.stop_on_failure || !targets.any() || p.distortion_probes.empty()) return false;
-    MatX3d Q(static_cast<Eigen::Index>(p.distortion_probes.size()), 3);
-    for (size_t k = 0; k < p.distortion_probes.size(); ++k)
-      Q.row(static_cast<Eigen::Index>(k)) = p.distortion_probes[k].transpose();
-    const VecXi voxel = containing_voxel(oc.sampling_, Q);
-    for (Eigen::Index k = 0; k < Q.rows(); ++k) {
-      if (voxel(k) < 0) continue;
-      const Vec3 q = Q.row(k).transpose();
+    const std::vector<long> voxel = probe_voxels();
+    for (size_t k = 0; k < voxel.size(); ++k) {
+      if (voxel[k] < 0) continue;
+      const Vec3& q = p.distortion_probes[k];
       Mat3 J;
       double hn = 0, sJ = 0, sH = 0;
       eval_point(q, J, hn, sJ, sH);
@@ -444,10 +444,10 @@ struct OctreeCertifier::Run {
       l.center = q;
       l.sigma3 = sv(2);
       l.sigma1 = sv(0);
-      l.base = voxel(k);
+      l.base = static_cast<int>(voxel[k]);
       l.certified = true;  // σ3 is not in question here; the distortion is
       out.failing.push_back(l);
-      out.failed_voxels.push_back(voxel(k));
+      out.failed_voxels.push_back(voxel[k]);
       out.certified = false;
       out.distortion_failed = true;
       out.distortion_failed_on = which;
@@ -459,6 +459,16 @@ struct OctreeCertifier::Run {
       return true;
     }
     return false;
+  }
+
+  // The base voxel holding each distortion probe (−1: none).
+  std::vector<long> probe_voxels() const {
+    MatX3d Q(static_cast<Eigen::Index>(p.distortion_probes.size()), 3);
+    for (size_t k = 0; k < p.distortion_probes.size(); ++k)
+      Q.row(static_cast<Eigen::Index>(k)) = p.distortion_probes[k].transpose();
+    std::call_once(im.locator_once, [&] { im.locator = std::make_unique<VoxelLocator>(oc.sampling_); });
+    const VecXi v = im.locator->find(Q);
+    return std::vector<long>(v.data(), v.data() + v.size());
   }
 
   // --- 0. Certifying by perturbation (Step 4e): base voxels whose bound at the previous certified map ỹ₀
@@ -1540,6 +1550,9 @@ struct OctreeCertifier::Run {
   // only when all are certified and their largest excess (DistortionTargets::excess) is below the leaf's
   // (both are valid bounds on the same voxel); the leaves still tile the base voxels. A target still unproven
   // when depth or budget runs out makes the map not certified, naming the leaf.
+  // The center values' excess (σ1/σ3 over K, σ1 over S, s over σ3) above which the line search's distortion
+  // stage refines a leaf in its first phase: within 0.5% of a target, where proofs are deepest and fail.
+  static constexpr double kCriticalExcess = 0.995;
   void enforce_distortion(Certificate& c) {
     set_targets(c);
     c.distortion_met = false;
@@ -1548,22 +1561,56 @@ struct OctreeCertifier::Run {
     std::vector<char> settled(c.leaves.size(), 0);
     std::vector<int> batch;
     std::vector<NodeValues> vals;
-    for (bool hopeless = false; !hopeless;) {
+    // In a line search (stop_on_failure) the base voxels most likely to fail are refined first, to
+    // completion: the priority voxels and those of the distortion probes (where earlier trials failed) and
+    // those with a leaf whose center is within kCriticalExcess of a target. A trial that cannot prove a
+    // target there is refused before the rest is refined. Each leaf's refinement depends on its own values
+    // only, so the verdict and, when the map is certified, the leaves are those of one pass over all leaves
+    // (the budget, counted in both, runs out in both alike).
+    std::vector<long> prio;
+    if (p.stop_on_failure) {
+      prio = p.priority_voxels;
+      for (long i : probe_voxels())
+        if (i >= 0) prio.push_back(i);
+      for (const CertLeaf& l : c.leaves)
+        if (l.sigma3 > 0 && targets.excess(l.sigma1, l.sigma3, l.sigma1 / l.sigma3) > kCriticalExcess)
+          prio.push_back(l.base);
+    }
+    std::sort(prio.begin(), prio.end());
+    // Per base voxel, so that a leaf's children stay in its phase.
+    auto in_phase = [&](const CertLeaf& l, bool first) {
+      return !first || std::binary_search(prio.begin(), prio.end(), static_cast<long>(l.base));
+    };
+    // A leaf that does not prove a target and cannot be split (settled, its center already beyond a target,
+    // or at the depth limit); the budget is checked apart.
+    auto splittable = [&](const CertLeaf& l, char leaf_settled) {
+      // A target violated at the center itself beyond the float storage allowance (sigma3_error, which
+      // bounds both singular values' error by Weyl) and rounding: no child's bounds can prove it, as each
+      // child's ball contains the center. Not split; a line search trial fails here.
+      const double e = std::isfinite(l.sigma3_error) ? l.sigma3_error : kInf;
+      const bool center_violates =
+          targets.violated(l.sigma1 - e, l.sigma3 + e, 1e-9) != DistortionTarget::kNone;
+      return !leaf_settled && !center_violates && l.depth - level(l.base) < p.max_depth;
+    };
+    bool hopeless = false, first_phase = p.stop_on_failure;
+    // A leaf that fails at once fails the trial before any phase (as the first round of one pass would).
+    for (size_t i = 0; i < c.leaves.size() && first_phase; ++i)
+      if (unproven(c.leaves[i]) != DistortionTarget::kNone && !splittable(c.leaves[i], settled[i]))
+        hopeless = true, first_phase = false;
+    for (; !hopeless;) {
       std::vector<size_t> split;
       for (size_t i = 0; i < c.leaves.size() && !hopeless; ++i) {
         const CertLeaf& l = c.leaves[i];
-        if (unproven(l) == DistortionTarget::kNone) continue;
-        // A target violated at the center itself beyond the float storage allowance (sigma3_error, which
-        // bounds both singular values' error by Weyl) and rounding: no child's bounds can prove it, as each
-        // child's ball contains the center. Not split; a line search trial fails here.
-        const double e = std::isfinite(l.sigma3_error) ? l.sigma3_error : kInf;
-        const bool center_violates =
-            targets.violated(l.sigma1 - e, l.sigma3 + e, 1e-9) != DistortionTarget::kNone;
-        if (!settled[i] && !center_violates && l.depth - level(l.base) < p.max_depth &&
+        if (unproven(l) == DistortionTarget::kNone || !in_phase(l, first_phase)) continue;
+        if (splittable(l, settled[i]) &&
             budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
           split.push_back(i);
         else
           hopeless = p.stop_on_failure;  // a line search trial fails here whatever the others give: stop
+      }
+      if (split.empty() && first_phase && !hopeless) {
+        first_phase = false;
+        continue;
       }
       if (split.empty() || hopeless) break;
       evaluate_children(c.leaves, split, batch, vals);
@@ -1607,7 +1654,8 @@ struct OctreeCertifier::Run {
     c.distortion_met = true;
     for (const CertLeaf& l : c.leaves) {
       const DistortionTarget which = unproven(l);
-      if (which == DistortionTarget::kNone) continue;
+      // Refused in the first phase: the other leaves were not refined, so only the priority leaves are named.
+      if (which == DistortionTarget::kNone || !in_phase(l, first_phase)) continue;
       if (c.distortion_met) c.distortion_failed_on = which;  // the first failing leaf's: the reason names it
       c.distortion_met = false;
       c.failing.push_back(l);

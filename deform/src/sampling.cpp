@@ -328,38 +328,49 @@ std::vector<int> select_hessian_subset(const VoxelSampling& s, double fraction) 
   return out;
 }
 
-VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
-  VecXi out = VecXi::Constant(P.rows(), -1);
-  if (s.size() == 0 || P.rows() == 0) return out;
-  const double h = s.side;
-  if (!(h > 0)) throw InputError("", "containing_voxel: sampling has no voxel side");
-  // Buckets of side h: a cube containing p has its center within h/2 of p in every coordinate, so it sits in
-  // p's bucket or one of the 26 around it (a refined voxel lies in its base cell: within h of p too).
-  const Vec3 o = s.centers.colwise().minCoeff().transpose();
-  constexpr long kOff = 1 << 20;
-  auto key = [&](long x, long y, long z) {
-    return (static_cast<std::uint64_t>(z + kOff) << 42) | (static_cast<std::uint64_t>(y + kOff) << 21) |
-           static_cast<std::uint64_t>(x + kOff);
-  };
-  auto cell = [&](const Vec3& p, int a) { return static_cast<long>(std::floor((p(a) - o(a)) / h)); };
-  std::unordered_map<std::uint64_t, std::vector<int>> buckets;
+namespace {
+constexpr long kBucketOffset = 1 << 20;
+std::uint64_t bucket_key(long x, long y, long z) {
+  return (static_cast<std::uint64_t>(z + kBucketOffset) << 42) |
+         (static_cast<std::uint64_t>(y + kBucketOffset) << 21) |
+         static_cast<std::uint64_t>(x + kBucketOffset);
+}
+}  // namespace
+
+// Buckets of side h: a cube containing p has its center within h/2 of p in every coordinate, so it sits in
+// p's bucket or one of the 26 around it (a refined voxel lies in its base cell: within h of p too).
+VoxelLocator::VoxelLocator(const VoxelSampling& s) : s_(s) {
+  if (s.size() == 0) return;
+  if (!(s.side > 0)) throw InputError("", "containing_voxel: sampling has no voxel side");
+  origin_ = s.centers.colwise().minCoeff().transpose();
   for (int i = 0; i < s.size(); ++i) {
     const Vec3 c = s.centers.row(i);
-    buckets[key(cell(c, 0), cell(c, 1), cell(c, 2))].push_back(i);
+    const Vec3 k = ((c - origin_) / s.side).array().floor();
+    buckets_[bucket_key(static_cast<long>(k(0)), static_cast<long>(k(1)), static_cast<long>(k(2)))].push_back(
+        i);
   }
-#pragma omp parallel for schedule(static)
+}
+
+VecXi VoxelLocator::find(const MatX3d& P) const {
+  VecXi out = VecXi::Constant(P.rows(), -1);
+  if (s_.size() == 0 || P.rows() == 0) return out;
+  const double h = s_.side;
+  auto cell = [&](const Vec3& p, int a) { return static_cast<long>(std::floor((p(a) - origin_(a)) / h)); };
+#pragma omp parallel for schedule(static) if (P.rows() > 64)
   for (Eigen::Index v = 0; v < P.rows(); ++v) {
     const Vec3 p = P.row(v);
     const long cx = cell(p, 0), cy = cell(p, 1), cz = cell(p, 2);
-    if (std::abs(cx) > kOff - 2 || std::abs(cy) > kOff - 2 || std::abs(cz) > kOff - 2) continue;
+    if (std::abs(cx) > kBucketOffset - 2 || std::abs(cy) > kBucketOffset - 2 ||
+        std::abs(cz) > kBucketOffset - 2)
+      continue;
     int found = -1;
     for (long dz = -1; dz <= 1 && found < 0; ++dz)
       for (long dy = -1; dy <= 1 && found < 0; ++dy)
         for (long dx = -1; dx <= 1 && found < 0; ++dx) {
-          auto it = buckets.find(key(cx + dx, cy + dy, cz + dz));
-          if (it == buckets.end()) continue;
+          auto it = buckets_.find(bucket_key(cx + dx, cy + dy, cz + dz));
+          if (it == buckets_.end()) continue;
           for (int i : it->second)
-            if ((p - s.centers.row(i).transpose()).cwiseAbs().maxCoeff() <= 0.5 * s.side_of(i)) {
+            if ((p - s_.centers.row(i).transpose()).cwiseAbs().maxCoeff() <= 0.5 * s_.side_of(i)) {
               found = i;
               break;
             }
@@ -367,6 +378,11 @@ VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
     out(v) = found;
   }
   return out;
+}
+
+VecXi containing_voxel(const VoxelSampling& s, const MatX3d& P) {
+  if (s.size() == 0 || P.rows() == 0) return VecXi::Constant(P.rows(), -1);
+  return VoxelLocator(s).find(P);
 }
 
 double mesh_coverage(const VoxelSampling& s, const MatX3d& mesh_V) {

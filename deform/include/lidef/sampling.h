@@ -9,8 +9,10 @@
 // bound as a ball nears the cage, stays finite on every voxel.
 #pragma once
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "lidef/cage.h"
@@ -96,6 +98,20 @@ std::vector<int> select_hessian_subset(const VoxelSampling& sampling, double fra
 
 // For each point (#P by 3), the index of a voxel (closed cube of side side_of(i)) containing it, or -1.
 VecXi containing_voxel(const VoxelSampling& sampling, const MatX3d& points);
+
+// containing_voxel's lookup (buckets of the base side), built once for many queries on the same sampling
+// (the line search's probes: building it costs ~2 ms on 30,000 voxels, a query microseconds). Keeps a
+// reference to the sampling, which must outlive it.
+class VoxelLocator {
+ public:
+  explicit VoxelLocator(const VoxelSampling& sampling);
+  VecXi find(const MatX3d& points) const;  // #P by 3 → the voxel index or -1, as containing_voxel
+
+ private:
+  const VoxelSampling& s_;
+  Vec3 origin_ = Vec3::Zero();
+  std::unordered_map<std::uint64_t, std::vector<int>> buckets_;
+};
 
 // Fraction of mesh vertices (#V by 3) inside the union of the voxels (closed cubes).
 double mesh_coverage(const VoxelSampling& sampling, const MatX3d& mesh_V);
