@@ -100,8 +100,8 @@ std::vector<int> select_hessian_subset(const VoxelSampling& sampling, double fra
 VecXi containing_voxel(const VoxelSampling& sampling, const MatX3d& points);
 
 // containing_voxel's lookup (buckets of the base side), built once for many queries on the same sampling
-// (the line search's probes: building it costs ~2 ms on 30,000 voxels, a query microseconds). Keeps a
-// reference to the sampling, which must outlive it.
+// (the line search's probes, every trial: building it is most of what a probe-refused trial cost, docs/
+// benchmarks.md). Keeps a reference to the sampling, which must outlive it.
 class VoxelLocator {
  public:
   explicit VoxelLocator(const VoxelSampling& sampling);
