@@ -26,6 +26,12 @@ Vec3 random_unit(std::mt19937& rng) {
   return Vec3(N01(rng), N01(rng), N01(rng)).normalized();
 }
 
+// A uniformly random rotation (a normalized Gaussian quaternion).
+Mat3 random_rotation(std::mt19937& rng) {
+  std::normal_distribution<double> N01;
+  const Eigen::Quaterniond q(N01(rng), N01(rng), N01(rng), N01(rng));
+  return Mat3(q.normalized().toRotationMatrix());
+}
 }  // namespace
 
 TEST(EdgeJet, MatchesPerFaceRepresentationAndPerEdgeFactors) {
@@ -98,10 +104,7 @@ TEST(CombinedBound, TaylorSigma3LowerBoundHoldsOnSampledDirections) {
   std::mt19937 rng(31);
   std::normal_distribution<double> N01;
   std::uniform_real_distribution<double> U(0, 1);
-  auto rotation = [&] {
-    const Eigen::Quaterniond q(N01(rng), N01(rng), N01(rng), N01(rng));
-    return Mat3(q.normalized().toRotationMatrix());
-  };
+  auto rotation = [&] { return random_rotation(rng); };
   int positive = 0, tight = 0, tight_cases = 0;
   for (int trial = 0; trial < 400; ++trial) {
     Vec3 sv(1 + U(rng), 0.5 + 0.5 * U(rng), 0.1 + 0.4 * U(rng));
@@ -148,6 +151,90 @@ TEST(CombinedBound, TaylorSigma3LowerBoundHoldsOnSampledDirections) {
   EXPECT_GT(positive, 150);
   EXPECT_GT(tight_cases, 5);
   EXPECT_GE(tight, tight_cases * 9 / 10);
+}
+
+// Step 3d: σ1(J + H[v]) ≤ upper1 + g1·v and σ3ˢ(J + H[v]) ≥ lower3 + g3·v at every sampled |v| ≤ r, and the
+// bounds of σ1, σ3 and σ1/σ3 hold for J + H[v] + R with any ‖R‖₂ ≤ ρ; on random J of every kind (gaps,
+// σ1 = σ2, σ2 = σ3, near-isotropic, det < 0 → not valid) and random symmetric H, radii from tiny to large.
+// With gaps and small balls the bound of K is nearly exact: its excess over K(c) within 20% of the sampled
+// one, and below the quotient of Lipschitz bounds' (which loses r(1 + K)‖H‖_op/σ3 to first order where this
+// one loses r|∇K|).
+TEST(CombinedBound, TaylorDistortionBoundHoldsOnSampledDirections) {
+  std::mt19937 rng(37);
+  std::normal_distribution<double> N01;
+  std::uniform_real_distribution<double> U(0, 1);
+  auto rotation = [&] { return random_rotation(rng); };
+  int valid = 0, finite_k = 0, tight = 0, tight_cases = 0, beats_quotient = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    Vec3 sv(1 + U(rng), 0.5 + 0.5 * U(rng), 0.1 + 0.4 * U(rng));
+    const int kind = trial % 4;
+    if (kind == 1) sv(2) = sv(1) * (1 - 1e-9 * U(rng));  // σ2 = σ3
+    if (kind == 2) sv(1) = sv(0) * (1 - 1e-9 * U(rng));  // σ1 = σ2
+    if (kind == 3) sv = Vec3(1, 1 - 1e-3 * U(rng), 1 - 2e-3 * U(rng));
+    Mat3 J = rotation() * sv.asDiagonal() * rotation();
+    if (trial % 23 == 0) J.col(0) = -J.col(0);
+    std::array<Mat3, 3> H;
+    const double scale = std::pow(10.0, N01(rng));
+    for (int a = 0; a < 3; ++a) {
+      Mat3 M;
+      for (int k = 0; k < 9; ++k) M.data()[k] = scale * (2 * U(rng) - 1);
+      H[a] = M + M.transpose();
+    }
+    const double r = sv(2) / scale * std::pow(10.0, -3 + 3 * U(rng));
+    const TaylorSingularBounds t = taylor_singular_bounds(J, H, r);
+    if (J.determinant() <= 0) {
+      EXPECT_FALSE(t.valid);
+      continue;
+    }
+    if (!t.valid) continue;
+    ++valid;
+    const double rho = (trial / 4) % 2 ? 0.0 : 0.05 * r * scale * U(rng);
+    const double K = taylor_distortion_bound(t, r, rho);
+    const double S1 = taylor_sigma1_upper_bound(t, r, rho), S3 = taylor_sigma3_lower_bound(t, r, rho);
+    const Vec3 c = signed_singular_values(J);
+    EXPECT_GE(S1, c(0) * (1 - 1e-12));
+    EXPECT_LE(S3, c(2) * (1 + 1e-12));
+    if (std::isfinite(K)) {
+      ++finite_k;
+      EXPECT_GE(K, c(0) / c(2) * (1 - 1e-12));
+    }
+    double kmax = c(0) / c(2);
+    for (int k = 0; k < 2000; ++k) {
+      const Vec3 v = r * (k % 2 ? 1.0 : std::cbrt(U(rng))) * random_unit(rng);
+      Mat3 E;
+      for (int a = 0; a < 3; ++a) E.row(a) = (H[a] * v).transpose();
+      const Vec3 s = signed_singular_values(J + E);
+      const double tol = 1e-13 * c(0);
+      ASSERT_LE(s(0), t.upper1 + t.g1.dot(v) + tol) << "trial " << trial << ", kind " << kind;
+      ASSERT_GE(s(2), t.lower3 + t.g3.dot(v) - tol) << "trial " << trial << ", kind " << kind;
+      kmax = std::max(kmax, s(0) / s(2));
+      // A perturbation of spectral norm ρ (a random direction, rescaled by its largest singular value).
+      Mat3 R;
+      for (int q = 0; q < 9; ++q) R.data()[q] = N01(rng);
+      R *= rho / signed_singular_values(R).cwiseAbs().maxCoeff();
+      const Vec3 sr = signed_singular_values(J + E + R);
+      ASSERT_LE(sr(0), S1 + tol);
+      ASSERT_GE(sr(2), S3 - tol);
+      if (std::isfinite(K)) {
+        ASSERT_LE(sr(0) / sr(2), K * (1 + 1e-12)) << "trial " << trial << ", kind " << kind;
+      }
+    }
+    if (kind == 0 && rho == 0 && sv(0) - sv(1) > 0.2 && sv(1) - sv(2) > 0.2 && r * scale < 1e-2 * sv(2)) {
+      ++tight_cases;
+      const double k0 = c(0) / c(2);
+      if (K - k0 <= 1.2 * (kmax - k0) + 1e-12 * k0) ++tight;
+      // The quotient of the per-leaf Lipschitz bounds with the operator norm of H (the best of Steps 3-3b).
+      const double hop = hessian_operator_norm(H);
+      if (K < (c(0) + r * hop) / (c(2) - r * hop)) ++beats_quotient;
+    }
+  }
+  std::cout << valid << " valid, " << finite_k << " finite K bounds; nearly exact on " << tight << " of "
+            << tight_cases << " small balls with gaps; below the quotient on " << beats_quotient << "\n";
+  EXPECT_GT(valid, 200);
+  EXPECT_GT(finite_k, 180);
+  EXPECT_GT(tight_cases, 5);
+  EXPECT_GE(tight, tight_cases * 9 / 10);
+  EXPECT_EQ(beats_quotient, tight_cases);
 }
 
 // For balls around random interior points, with radius from the distance to the cage over a safety factor

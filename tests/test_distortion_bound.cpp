@@ -450,12 +450,29 @@ TEST(DistortionBound, IntervalReproofConfirmsEveryCertifiedLeafAndRefusesATamper
     EXPECT_EQ(v.distortion_proven, cert.num_leaves);
     EXPECT_LE(v.max_distortion_hi, cert.max_distortion_upper_bound);
     EXPECT_GE(v.max_distortion_hi, 1 / 0.7 * 0.9);  // the map's K is about 1/0.7
-    // A leaf claiming a smaller K than the intervals prove is refused.
+    // A leaf claiming a K below the one at its own center (false) is refused.
     std::vector<CertLeaf> tampered = cert.leaves;
-    tampered[0].distortion_upper = 0.999 * v.results[0].distortion_hi;
+    tampered[0].distortion_upper = 0.999 * tampered[0].sigma1 / tampered[0].sigma3;
     const IntervalVerification t = verify_certificate_intervals(model.cage, y, tampered, b);
     EXPECT_EQ(t.distortion_not_proven, 1);
   }
+  // Under a target the leaves whose Lipschitz bounds do not prove it carry the Taylor bounds of Step 3d
+  // (third-order sums): the intervals re-prove them too, and they are tighter than the quotient's.
+  CertifyParams cp;
+  const Certificate free = certify_map(model.cage, samp, y, cp);
+  cp.max_distortion = 0.6 * free.max_distortion_upper_bound;
+  const Certificate cert = certify_map(model.cage, samp, y, cp);
+  ASSERT_TRUE(cert.certified) << cert.reason;
+  EXPECT_LT(cert.max_distortion_upper_bound, free.max_distortion_upper_bound);
+  const IntervalVerification v = verify_certificate_intervals(model.cage, y, cert.leaves, cp.bound);
+  EXPECT_EQ(v.not_proven, 0);
+  EXPECT_EQ(v.distortion_not_proven, 0);
+  EXPECT_EQ(v.distortion_proven, cert.num_leaves);
+  const HarmonicBasis basis(model.cage);
+  const VerificationResult dense = verify_certificate(basis, y, cert.leaves, 16, 3);
+  EXPECT_EQ(dense.distortion_violations, 0);
+  std::printf("K bound without / with the Taylor bounds %.6g / %.6g, sampled %.6g\n",
+              free.max_distortion_upper_bound, cert.max_distortion_upper_bound, dense.max_distortion);
 }
 
 TEST(DistortionBound, VoxelsCsvCarriesTheBoundsAndOlderFilesAreRead) {

@@ -454,10 +454,13 @@ TEST(OpenCL, CertificatesMatchCpu) {
   EXPECT_GE(refined_cases, 2) << "the test maps should exercise the refinement";
 
   // Distortion targets: the device's σ1 (base stage and octree nodes) gives the CPU's bounds, so a target
-  // just below the unconstrained bound is proven by the same refinement on both.
+  // just below the unconstrained bound is proven by the same refinement on both. The CPU's Taylor bounds
+  // (Step 3d) need J and H on the host, which the device keeps: compared without them, and with them the
+  // CPU proves the same target with no more refinement.
   CertifyParams per_face;
   per_face.refinement = RefinementEval::kPerFace;
   per_face.max_refined_voxels = 20000;
+  per_face.taylor_bounds = false;
   CertifyParams cp = per_face;
   cp.refinement = RefinementEval::kPerEdgeBatched;
   const Certificate free = cpu.certify(bent(0.9), per_face);
@@ -469,6 +472,10 @@ TEST(OpenCL, CertificatesMatchCpu) {
   EXPECT_EQ(g.distortion_met, c.distortion_met) << g.reason;
   EXPECT_GT(c.refined, free.refined);
   expect_same_certificate(c, g, 1e-10);
+  per_face.taylor_bounds = true;
+  const Certificate t = cpu.certify(bent(0.9), per_face);
+  EXPECT_TRUE(t.distortion_met) << t.reason;
+  EXPECT_LE(t.refined, c.refined);
 }
 
 // The solver on both backends with double-precision Hessian products: the same accepted steps, the same

@@ -205,6 +205,87 @@ double hessian_operator_norm_hi(const std::array<IM3, 3>& H, double frobenius) {
   return std::isfinite(mu) ? std::min(frobenius, hi(isqrt(pt(mu)))) : frobenius;
 }
 
+// One basis' reduction in intervals: μ = (BᵀMB)_00, ρ = |(BᵀMB)_Z0|, the 2x2 block's eigenvalue bounds,
+// w = Σ_a (JBe0)_a H[a]ᵀ x (f(v) = 2 w·v), zk ≥ ‖B_ZᵀK‖₂ (B_ZᵀF(v)x = B_ZᵀK v).
+struct ReductionI {
+  I mu, rho, zz_min, zz_max, zk;
+  IV3 w;
+};
+ReductionI reduce_i(const IM3& J, const std::array<IM3, 3>& H, const Mat3& B) {
+  ReductionI R;
+  IM3 JB = zero_m3(), S = zero_m3();
+  for (int a = 0; a < 3; ++a)
+    for (int j = 0; j < 3; ++j)
+      for (int b = 0; b < 3; ++b) JB[a][j] += J[a][b] * pt(B(b, j));
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int a = 0; a < 3; ++a) S[i][j] += JB[a][i] * JB[a][j];
+  R.mu = S[0][0];
+  R.rho = isqrt(sq(S[1][0]) + sq(S[2][0]));
+  const I half = (S[1][1] + S[2][2]) / pt(2), rad = isqrt(sq((S[1][1] - S[2][2]) / pt(2)) + sq(S[1][2]));
+  R.zz_min = half - rad;
+  R.zz_max = half + rad;
+  IM3 K1 = zero_m3(), K2 = zero_m3(), K = zero_m3();
+  for (int a = 0; a < 3; ++a) {
+    const I jx = JB[a][0];
+    for (int k = 0; k < 3; ++k) {
+      I hx = pt(0);
+      for (int b = 0; b < 3; ++b) hx += H[a][b][k] * pt(B(b, 0));
+      K1[a][k] = hx;
+      R.w.v[k] += jx * hx;
+      for (int b = 0; b < 3; ++b) K2[b][k] += jx * H[a][b][k];
+    }
+  }
+  for (int b = 0; b < 3; ++b)
+    for (int k = 0; k < 3; ++k) {
+      K[b][k] = K2[b][k];
+      for (int a = 0; a < 3; ++a) K[b][k] += J[a][b] * K1[a][k];
+    }
+  std::array<IV3, 2> ZK;
+  for (int i = 0; i < 2; ++i)
+    for (int k = 0; k < 3; ++k) {
+      ZK[i].v[k] = pt(0);
+      for (int b = 0; b < 3; ++b) ZK[i].v[k] += pt(B(b, 1 + i)) * K[b][k];
+    }
+  const I g11 = dot(ZK[0], ZK[0]), g12 = dot(ZK[0], ZK[1]), g22 = dot(ZK[1], ZK[1]);
+  R.zk = isqrt((g11 + g22) / pt(2) + isqrt(sq((g11 - g22) / pt(2)) + sq(g12)));
+  return R;
+}
+// AᵀA in intervals, of an interval matrix or of a matrix of doubles.
+IM3 gram_i(const IM3& A) {
+  IM3 G = zero_m3();
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int a = 0; a < 3; ++a) G[i][j] += A[a][i] * A[a][j];
+  return G;
+}
+IM3 gram_i(const Mat3& B) {
+  IM3 P;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) P[a][b] = pt(B(a, b));
+  return gram_i(P);
+}
+// A basis from the midpoint's eigenvectors: x = column `col`, z1 from column 1, z2 = x × z1.
+Mat3 basis_around(const Eigen::SelfAdjointEigenSolver<Mat3>& es, int col) {
+  Mat3 B;
+  B.col(0) = es.eigenvectors().col(col).normalized();
+  B.col(1) = (es.eigenvectors().col(1) - B.col(0) * B.col(0).dot(es.eigenvectors().col(1))).normalized();
+  B.col(2) = B.col(0).cross(B.col(1)).normalized();
+  return B;
+}
+// Proven bounds λmax(BᵀB) ≤ hi and 1/λmin(BᵀB) ≤ inv_lo_hi (λmin ≥ 1 − ‖BᵀB − I‖_F).
+bool gram_bounds(const Mat3& B, double& lmax_hi, double& inv_lmin_hi) {
+  const IM3 G = gram_i(B);
+  std::array<I, 9> dev;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) dev[3 * i + j] = G[i][j] - pt(i == j ? 1 : 0);
+  lmax_hi = lambda_max_hi(G);
+  const I lmin = pt(1) - pt(frobenius_hi(dev.begin(), dev.end()));
+  if (!(lo(lmin) > 0) || !std::isfinite(lmax_hi)) return false;
+  inv_lmin_hi = hi(pt(1) / lmin);
+  return true;
+}
+
 // Step 3c of docs/certificate.md in intervals: a rigorous lower bound ℓ of σ3ˢ(J + H[v]) over |v| ≤ r, for
 // every J and H in the enclosures (H[a][b][k] = ∂J_ab/∂p_k, not assumed symmetric); −∞ when none. The basis
 // B = [x z1 z2] (the midpoint's eigenvectors of JᵀJ, any doubles) need not be orthonormal: in the coordinates
@@ -219,69 +300,133 @@ double taylor_sigma3_lower_bound_i(const IM3& J, const std::array<IM3, 3>& H, do
     for (int b = 0; b < 3; ++b) mid(a, b) = 0.5 * lo(J[a][b]) + 0.5 * hi(J[a][b]);
   if (!mid.allFinite()) return -kInf;
   const Eigen::SelfAdjointEigenSolver<Mat3> es(mid.transpose() * mid);
-  Mat3 B;
-  B.col(0) = es.eigenvectors().col(0).normalized();
-  B.col(1) = (es.eigenvectors().col(1) - B.col(0) * B.col(0).dot(es.eigenvectors().col(1))).normalized();
-  B.col(2) = B.col(0).cross(B.col(1)).normalized();
+  const Mat3 B = basis_around(es, 0);
   if (!B.allFinite()) return -kInf;
-  // S = Bᵀ JᵀJ B = (JB)ᵀ(JB): μ1 = S00, ρ = |S_{Z0}|, μ2 = λmin(S_ZZ).
-  IM3 JB = zero_m3(), S = zero_m3();
-  for (int a = 0; a < 3; ++a)
-    for (int j = 0; j < 3; ++j)
-      for (int b = 0; b < 3; ++b) JB[a][j] += J[a][b] * pt(B(b, j));
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      for (int a = 0; a < 3; ++a) S[i][j] += JB[a][i] * JB[a][j];
-  const I mu1 = S[0][0];
-  const I rho = isqrt(sq(S[1][0]) + sq(S[2][0]));
-  const I mu2 = (S[1][1] + S[2][2]) / pt(2) - isqrt(sq((S[1][1] - S[2][2]) / pt(2)) + sq(S[1][2]));
-  // Linear in v, with x = B e1: f(v) = 2 wᵀv, w = Σ_a (Jx)_a Hᵀ_a x ((Hᵀ_a x)_k = Σ_b H[a][b][k] x_b);
-  // ZᵀF(v)x = ZᵀK v, K = JᵀK1 + K2, K1 rows (Hᵀ_a x)ᵀ, K2[b][k] = Σ_a (Jx)_a H[a][b][k].
-  IV3 w;
-  IM3 K1 = zero_m3(), K2 = zero_m3(), K = zero_m3();
-  for (int a = 0; a < 3; ++a) {
-    const I jx = JB[a][0];
-    for (int k = 0; k < 3; ++k) {
-      I hx = pt(0);
-      for (int b = 0; b < 3; ++b) hx += H[a][b][k] * pt(B(b, 0));
-      K1[a][k] = hx;
-      w.v[k] += jx * hx;
-      for (int b = 0; b < 3; ++b) K2[b][k] += jx * H[a][b][k];
-    }
-  }
-  for (int b = 0; b < 3; ++b)
-    for (int k = 0; k < 3; ++k) {
-      K[b][k] = K2[b][k];
-      for (int a = 0; a < 3; ++a) K[b][k] += J[a][b] * K1[a][k];
-    }
-  std::array<IV3, 2> ZK;  // rows of ZᵀK
-  for (int i = 0; i < 2; ++i)
-    for (int k = 0; k < 3; ++k) {
-      ZK[i].v[k] = pt(0);
-      for (int b = 0; b < 3; ++b) ZK[i].v[k] += pt(B(b, 1 + i)) * K[b][k];
-    }
-  const I g11 = dot(ZK[0], ZK[0]), g12 = dot(ZK[0], ZK[1]), g22 = dot(ZK[1], ZK[1]);
-  const I zk = isqrt((g11 + g22) / pt(2) + isqrt(sq((g11 - g22) / pt(2)) + sq(g12)));
+  // S = Bᵀ JᵀJ B = (JB)ᵀ(JB): μ1 = S00, ρ = |S_{Z0}|, μ2 = λmin(S_ZZ); f(v) = 2 wᵀv, ‖ZᵀF(v)x‖ ≤ r zk.
+  const ReductionI R = reduce_i(J, H, B);
   // ‖J‖₂ and λmax(BᵀB) (the scale of |c|), both proven upper bounds.
-  IM3 JtJ = zero_m3(), BtB = zero_m3();
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      for (int a = 0; a < 3; ++a) {
-        JtJ[i][j] += J[a][i] * J[a][j];
-        BtB[i][j] += pt(B(a, i)) * pt(B(a, j));
-      }
-  const double jtj = lambda_max_hi(JtJ), btb = lambda_max_hi(BtB);
+  const double jtj = lambda_max_hi(gram_i(J)), btb = lambda_max_hi(gram_i(B));
   if (!std::isfinite(jtj) || !std::isfinite(btb)) return -kInf;
   // The worst case over the ball (each term at its monotone end), evaluated in intervals from those ends:
   // φ ≥ −λmax(BᵀB) ‖F‖₂ ≥ −λmax(BᵀB) 2 ‖J‖₂ r ‖H‖_op.
-  const I f = pt(-2) * pt(r) * pt(hi(norm(w)));
+  const I f = pt(-2) * pt(r) * pt(hi(norm(R.w)));
   const I phi = pt(-2) * pt(btb) * isqrt(pt(jtj)) * pt(r) * pt(hop_hi);
-  const I q = pt(hi(rho)) + pt(r) * pt(hi(zk));
-  const I m1 = pt(lo(mu1)), m2 = pt(lo(mu2));
+  const I q = pt(hi(R.rho)) + pt(r) * pt(hi(R.zk));
+  const I m1 = pt(lo(R.mu)), m2 = pt(lo(R.zz_min));
   const I D = m2 + pt(lo(phi)) - m1 - pt(lo(f));
   const I lam = m1 + pt(lo(f)) + (D - isqrt(sq(D) + pt(4) * sq(q))) / pt(2);
   if (!(lo(lam) > 0)) return -kInf;
   return lo(isqrt(pt(lo(lam)) / pt(btb)));
+}
+
+// Step 3d of docs/certificate.md in intervals (the double version: taylor_singular_bounds): for every J and H
+// in the enclosures and |v| ≤ r,  σ1(J + H[v]) ≤ C1 + g1·v  and  σ3ˢ(J + H[v]) ≥ C3 + g3·v,  with g1, g3 in
+// the returned interval vectors. The bases B = [x z1 z2] (x the midpoint's eigenvector of JᵀJ for its largest
+// (σ1) or smallest (σ3) eigenvalue, any doubles) need not be orthonormal: with y = B c for unit y,
+// 1/λmax(BᵀB) ≤ |c|² ≤ 1/λmin(BᵀB), and in the coordinates c the 2x2 reductions are exact linear algebra.
+struct TaylorBoundsI {
+  bool valid = false;
+  double C1 = kInf, C3 = -kInf;
+  IV3 g1, g3;
+};
+
+TaylorBoundsI taylor_singular_bounds_i(const IM3& J, const std::array<IM3, 3>& H, double r, double hop_hi) {
+  TaylorBoundsI out;
+  const I det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) +
+                J[0][1] * (J[1][2] * J[2][0] - J[1][0] * J[2][2]) +
+                J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+  if (!(lo(det) > 0) || !(r >= 0) || !std::isfinite(hop_hi)) return out;
+  Mat3 mid;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) mid(a, b) = 0.5 * lo(J[a][b]) + 0.5 * hi(J[a][b]);
+  if (!mid.allFinite()) return out;
+  const Eigen::SelfAdjointEigenSolver<Mat3> es(mid.transpose() * mid);
+  const Mat3 B1 = basis_around(es, 2), B3 = basis_around(es, 0);
+  double l1, inv1, l3, inv3;
+  if (!B1.allFinite() || !B3.allFinite() || !gram_bounds(B1, l1, inv1) || !gram_bounds(B3, l3, inv3))
+    return out;
+  const double jtj = lambda_max_hi(gram_i(J));
+  if (!std::isfinite(jtj)) return out;
+  const I R_ = pt(r), hop = pt(hop_hi), E2 = sq(R_ * hop);  // ‖H[v]‖₂² ≤ r² hop²
+  const I normF = pt(2) * isqrt(pt(jtj)) * R_ * hop;        // ‖F(v)‖₂ ≤ 2‖J‖₂ r hop
+
+  // σ1: for unit y = B1 c, yᵀ(M + F)y ≤ |c|² λmax([[μ + f, q], [q, zz_max + λmax(B_ZᵀB_Z)‖F‖]]) when that is
+  // ≥ 0; λmax = μ + f + h1(D), h1 increasing in D, at D's largest value over the ball.
+  const ReductionI R1 = reduce_i(J, H, B1);
+  const I w1 = norm(R1.w);
+  const I D1 = pt(hi(R1.zz_max + pt(l1) * normF - R1.mu + pt(2) * R_ * w1));
+  const I q1 = pt(hi(R1.rho + R_ * R1.zk));
+  const I s1 = isqrt(sq(D1) + pt(4) * sq(q1));
+  const I h1 = lo(D1) < 0 ? pt(2) * sq(q1) / (s1 - D1) : (D1 + s1) / pt(2);
+  const I base1 = R1.mu + pt(hi(h1));  // μ + h1; with f(v) = 2 w·v ≥ −2r|w| it stays ≥ 0 (checked)
+  if (!(lo(base1 - pt(2) * R_ * w1) >= 0)) return out;
+  // σ1² ≤ β(μ + h1 + 2 w·v) + r² hop² (β ≥ 1/λmin(BᵀB)); σ1 ≤ (a² + X)/(2a) for any a > 0.
+  const double a1 = std::sqrt(0.5 * lo(R1.mu) + 0.5 * hi(R1.mu));
+  if (!(a1 > 0)) return out;
+  const I A1 = pt(a1), beta = pt(inv1);
+  out.C1 = hi((sq(A1) + beta * base1 + E2) / (pt(2) * A1));
+  out.g1 = (beta / A1) * R1.w;
+
+  // σ3: yᵀ(M + F)y ≥ |c|² (μ + f − h3(D)) ≥ (μ + f − h3)/λmax(BᵀB) when μ + f − h3 ≥ 0, h3 decreasing in D,
+  // at D's smallest value.
+  const ReductionI R3 = reduce_i(J, H, B3);
+  const I w3 = norm(R3.w);
+  const I D3 = pt(lo(R3.zz_min - pt(l3) * normF - R3.mu - pt(2) * R_ * w3));
+  const I q3 = pt(hi(R3.rho + R_ * R3.zk));
+  const I s3 = isqrt(sq(D3) + pt(4) * sq(q3));
+  const I h3 = hi(D3) > 0 ? pt(2) * sq(q3) / (s3 + D3) : (s3 - D3) / pt(2);
+  const I L3 = pt(l3);
+  if (!(lo(R3.mu - pt(hi(h3)) - pt(2) * R_ * w3) > 0)) return out;
+  // σ3² ≥ a² + t(v), t(v) = (μ − h3)/λ − a² + (2w/λ)·v ≥ −c0 + (2w/λ)·v, |t| ≤ T < a²:
+  // σ3 ≥ a − c0/(2a) − T²/(2a³) + (w/(λa))·v.
+  const double a3 = std::sqrt((0.5 * lo(R3.mu) + 0.5 * hi(R3.mu)) / l3);
+  if (!(a3 > 0)) return out;
+  const I A3 = pt(a3);
+  const I t0 = (R3.mu - pt(hi(h3))) / L3 - sq(A3);
+  const double c0 = std::max(0.0, -lo(t0));
+  const double T = hi(pt(std::max(c0, abs_hi(t0))) + pt(2) * R_ * w3 / L3);
+  if (!(T < lo(sq(A3)))) return out;
+  out.C3 = lo(A3 - pt(c0) / (pt(2) * A3) - sq(pt(T)) / (pt(2) * A3 * A3 * A3));
+  out.g3 = R3.w / (L3 * A3);
+  out.valid = std::isfinite(out.C1) && out.C3 > 0;
+  return out;
+}
+
+// φ(K) = C1 + ρ + r|g1 − K g3| − K(C3 − ρ) ≤ 0 proven for every g1, g3 in the enclosures.
+bool taylor_distortion_holds_i(const TaylorBoundsI& t, double r, double rho, double K) {
+  const IV3 d = t.g1 - pt(K) * t.g3;
+  return hi(pt(t.C1) + pt(rho) + pt(r) * norm(d) - pt(K) * (pt(t.C3) - pt(rho))) <= 0;
+}
+
+// The Taylor bounds of σ1, σ3 and σ1/σ3 (Step 3d) on the ball, with ρ = ½ r² T3 the remainder of the exact
+// Taylor polynomial. For σ1/σ3 the certifier's claim when it is re-proven, else the smallest K found (the
+// root of φ computed from the midpoints and moved up until φ(K) ≤ 0 is proven); +∞ (−∞) when none.
+void taylor_distortion_bound_i(const TaylorBoundsI& t, double r, double rho, double claim_k,
+                               double& sigma1_hi, double& sigma3_lo, double& k_hi) {
+  sigma1_hi = k_hi = kInf;
+  sigma3_lo = -kInf;
+  if (!t.valid || !std::isfinite(rho)) return;
+  sigma1_hi = hi(pt(t.C1) + pt(rho) + pt(r) * norm(t.g1));
+  sigma3_lo = lo(pt(t.C3) - pt(rho) - pt(r) * norm(t.g3));
+  if (std::isfinite(claim_k) && taylor_distortion_holds_i(t, r, rho, claim_k)) {
+    k_hi = claim_k;
+    return;
+  }
+  Vec3 g1, g3;
+  for (int k = 0; k < 3; ++k) {
+    g1(k) = 0.5 * lo(t.g1[k]) + 0.5 * hi(t.g1[k]);
+    g3(k) = 0.5 * lo(t.g3[k]) + 0.5 * hi(t.g3[k]);
+  }
+  const double A = t.C1 + rho, B = t.C3 - rho;
+  const double alpha = B * B - r * r * g3.squaredNorm();
+  if (!(B > 0) || !(alpha > 0)) return;
+  const double beta = A * B - r * r * g1.dot(g3), gamma = A * A - r * r * g1.squaredNorm();
+  const double K0 = std::max((beta + std::sqrt(std::max(0.0, beta * beta - alpha * gamma))) / alpha, A / B);
+  for (const double bump : {1e-12, 1e-9, 1e-6, 1e-3})
+    if (taylor_distortion_holds_i(t, r, rho, K0 * (1 + bump))) {
+      k_hi = K0 * (1 + bump);
+      return;
+    }
 }
 
 double sigma3_lower_bound_i(const IM3& J) {
@@ -583,7 +728,8 @@ JetEnclosure IntervalVerifier::jet(const Vec3& p) const {
   return out;
 }
 
-IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double radius_slack) const {
+IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double radius_slack,
+                                           double claim_distortion, double claim_sigma1) const {
   const Impl& im = *impl_;
   IntervalLeaf res;
   // The ball: the voxel of side h around c has circumradius (√3/2) h. voxels.csv holds shortest round-trip
@@ -641,6 +787,28 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double ra
   }
   res.proven = res.margin_lo > 0;
   add_distortion_bound_i(res, J, r, L_jacobian_hi);
+  // Step 3d: the Taylor bounds of σ1, σ3 and σ1/σ3 (third-order sums only: ½ r² Σ δ Θ bounds the
+  // remainder), where the Lipschitz bounds do not re-prove the certifier's claims; the better of each pair
+  // holds; σ3's and σ1/σ3's only where σ3 is proven positive, as the certifier's (which leaves are proven
+  // stays the Lipschitz bound's decision).
+  if (third && (res.distortion_hi > claim_distortion || res.sigma1_hi > claim_sigma1)) {
+    if (!std::isfinite(hop)) {
+      std::array<I, 27> hs;
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b)
+          for (int k = 0; k < 3; ++k) hs[9 * a + 3 * b + k] = H[a][b][k];
+      hop = hessian_operator_norm_hi(H, frobenius_hi(hs.begin(), hs.end()));
+    }
+    const double rho = hi(pt(r) * pt(r) * sum / pt(2));
+    double s1 = kInf, s3 = -kInf, k = kInf;
+    taylor_distortion_bound_i(taylor_singular_bounds_i(J, H, r, hop), r, rho, claim_distortion, s1, s3, k);
+    res.sigma1_hi = std::min(res.sigma1_hi, s1);
+    if (res.margin_lo > 0) {
+      res.margin_lo = std::max(res.margin_lo, s3);
+      const double kq = hi(pt(res.sigma1_hi) / pt(res.margin_lo));
+      res.distortion_hi = std::min({res.distortion_hi, std::isnan(kq) ? kInf : kq, k});
+    }
+  }
   return res;
 }
 
@@ -657,7 +825,7 @@ IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d
 #pragma omp parallel for schedule(dynamic, 8)
   for (long q = 0; q < n; ++q) {
     const CertLeaf& l = leaves[out.leaf_index[q]];
-    out.results[q] = verifier.verify_leaf(l.center, l.side, radius_slack);
+    out.results[q] = verifier.verify_leaf(l.center, l.side, radius_slack, l.distortion_upper, l.sigma1_upper);
   }
   out.worst_slack = kInf;
   for (const IntervalLeaf& r : out.results) {

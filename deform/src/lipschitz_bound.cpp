@@ -136,6 +136,93 @@ double lambda_max_2x2(double a, double b, double c) {
 }
 }  // namespace
 
+namespace {
+// The 2x2 reduction of Step 3c around a unit vector x with an orthonormal basis z1, z2 of x⊥, for M = JᵀJ and
+// F(v) = JᵀH[v] + H[v]ᵀJ, without rounding allowances (the callers add them): μ = xᵀMx, ρ = |ZᵀMx|, the
+// eigenvalues of ZᵀMZ, f(v) = xᵀF(v)x = 2 w·v with w = Σ_a (Jx)_a H[a]ᵀ x, and ‖ZᵀF(v)x‖ ≤ |v|·zk:
+// F(v)x = K v with K = JᵀK1 + K2, K1 = rows (H[a]ᵀ x)ᵀ, K2 = Σ_a (Jx)_a H[a].
+struct Reduction {
+  double mu, rho, zz_min, zz_max, zk;
+  Vec3 w;
+};
+Reduction reduce(const Mat3& J, const std::array<Mat3, 3>& H, const Mat3& M, const Vec3& x, const Vec3& z1,
+                 const Vec3& z2) {
+  Reduction R;
+  const Vec3 Mx = M * x;
+  R.mu = x.dot(Mx);
+  R.rho = std::hypot(z1.dot(Mx), z2.dot(Mx));
+  const double m11 = z1.dot(M * z1), m12 = z1.dot(M * z2), m22 = z2.dot(M * z2);
+  R.zz_min = 0.5 * (m11 + m22) - std::hypot(0.5 * (m11 - m22), m12);
+  R.zz_max = 0.5 * (m11 + m22) + std::hypot(0.5 * (m11 - m22), m12);
+  const Vec3 Jx = J * x;
+  R.w = Vec3::Zero();
+  Mat3 K1, K2 = Mat3::Zero();
+  for (int a = 0; a < 3; ++a) {
+    const Vec3 Hx = H[a].transpose() * x;  // (E(v)x)_a = vᵀ H[a]ᵀ x
+    R.w += Jx(a) * Hx;
+    K1.row(a) = Hx.transpose();
+    K2 += Jx(a) * H[a];
+  }
+  const Mat3 K = J.transpose() * K1 + K2;
+  const Vec3 k1 = K.transpose() * z1, k2 = K.transpose() * z2;  // rows of ZᵀK
+  const double zk2 = lambda_max_2x2(k1.squaredNorm(), k1.dot(k2), k2.squaredNorm());
+  R.zk = std::sqrt(std::max(zk2, 0.0) + 1e-12 * (k1.squaredNorm() + k2.squaredNorm()));
+  return R;
+}
+// x = the eigenvector of M's column `col` (0: smallest eigenvalue, 2: largest), z1 from its column 1, z2 =
+// x × z1: a unit vector and an orthonormal basis of x⊥ whatever the eigenvectors' accuracy.
+void reduction_basis(const Eigen::SelfAdjointEigenSolver<Mat3>& es, int col, Vec3& x, Vec3& z1, Vec3& z2) {
+  x = es.eigenvectors().col(col).normalized();
+  if (!x.allFinite()) x = Vec3::UnitX();
+  z1 = es.eigenvectors().col(1);
+  z1 = (z1 - x * x.dot(z1)).normalized();
+  if (!z1.allFinite() || std::abs(z1.dot(x)) > 1e-6) z1 = x.unitOrthogonal();
+  z2 = x.cross(z1).normalized();
+}
+// The rounding allowances of the quadratic forms of M and F: ~10⁴ times their double-precision rounding (the
+// eigensolver is backward stable, the products are short sums; docs/certificate.md Step 3c).
+struct Allowances {
+  double epsM, epsF;
+};
+Allowances allowances(const std::array<Mat3, 3>& H, double nJ2) {
+  const double hF = std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
+  return {1e-12 * nJ2, 1e-12 * std::sqrt(nJ2) * hF};
+}
+bool finite_jet(const Mat3& J, const std::array<Mat3, 3>& H, double r) {
+  return r >= 0 && J.allFinite() && H[0].allFinite() && H[1].allFinite() && H[2].allFinite();
+}
+// An upper bound of ‖J‖₂ = sqrt(λmax(M)) from the σ3 reduction: λmax(M) ≤ λmax([[xᵀMx, ρ], [ρ, λmax(ZᵀMZ)]]).
+double spectral_norm_upper(const Reduction& R, double epsM) {
+  return std::sqrt(std::max(lambda_max_2x2(R.mu + epsM, R.rho + epsM, R.zz_max + epsM), 0.0) + epsM);
+}
+// What both Taylor bounds start from: M = JᵀJ, the allowances and M's closed-form eigenvectors
+// (computeDirect: x and Z only need to be a unit vector and an orthonormal basis of x⊥, their accuracy only
+// makes the bounds tighter, and it costs less than the iterative solver — the spectral term's overhead per
+// certification went from ~13-16 to ~10 ms, CHANGELOG.md, 2026-11-24). ok = false: J or H not finite, det J ≤
+// 0, or J = 0.
+struct JetSetup {
+  bool ok = false;
+  Mat3 M;
+  Allowances eps{0, 0};
+  Eigen::SelfAdjointEigenSolver<Mat3> es;
+  JetSetup(const Mat3& J, const std::array<Mat3, 3>& H, double r) {
+    if (!finite_jet(J, H, r) || !(J.determinant() > 0)) return;
+    M = J.transpose() * J;
+    const double nJ2 = M.trace();  // ‖J‖_F²
+    if (!(nJ2 > 0)) return;
+    eps = allowances(H, nJ2);
+    es.computeDirect(M);
+    ok = true;
+  }
+  // The reduction around M's eigenvector of column `col` (0: σ3, 2: σ1).
+  Reduction reduction(const Mat3& J, const std::array<Mat3, 3>& H, int col) const {
+    Vec3 x, z1, z2;
+    reduction_basis(es, col, x, z1, z2);
+    return reduce(J, H, M, x, z1, z2);
+  }
+};
+}  // namespace
+
 // Step 3c of docs/certificate.md, in its notation: x the unit eigenvector of M = JᵀJ for its smallest
 // eigenvalue, Z an orthonormal basis of x⊥; every unit y is a x + Z b with a² + |b|² = 1 and
 //   yᵀ(M + F)y ≥ a²(μ1 + f11) − 2|a||b|(ρ + p) + |b|²(μ2 + φ)
@@ -144,58 +231,106 @@ double lambda_max_2x2(double a, double b, double c) {
 // f11, increasing in f11 and φ and decreasing in p, so their worst values over |v| ≤ r give the bound.
 double taylor_sigma3_lower_bound(const Mat3& J, const std::array<Mat3, 3>& H, double r) {
   constexpr double kNone = -std::numeric_limits<double>::infinity();
-  if (!(r >= 0) || !J.allFinite() || !H[0].allFinite() || !H[1].allFinite() || !H[2].allFinite())
-    return kNone;
-  if (!(J.determinant() > 0)) return kNone;
-  const Mat3 M = J.transpose() * J;
-  const double nJ2 = M.trace();  // ‖J‖_F²
-  if (!(nJ2 > 0)) return kNone;
-  // Rounding allowance of the quadratic forms of M and F: ~10⁴ times their double-precision rounding (the
-  // eigensolver is backward stable, the products are short sums; docs/certificate.md Step 3c).
-  const double hF = std::sqrt(H[0].squaredNorm() + H[1].squaredNorm() + H[2].squaredNorm());
-  const double epsM = 1e-12 * nJ2, epsF = 1e-12 * std::sqrt(nJ2) * hF;
-  // x and Z only need to be a unit vector and an orthonormal basis of x⊥ (their accuracy only makes the bound
-  // tighter): the closed-form eigenvectors (computeDirect) do, and cost less than the iterative solver (the
-  // spectral term's overhead per certification went from ~13-16 to ~10 ms, CHANGELOG.md, 2026-11-24).
-  Eigen::SelfAdjointEigenSolver<Mat3> es;
-  es.computeDirect(M);
-  Vec3 x = es.eigenvectors().col(0).normalized();
-  if (!x.allFinite()) x = Vec3::UnitX();
-  Vec3 z1 = es.eigenvectors().col(1);
-  z1 = (z1 - x * x.dot(z1)).normalized();
-  if (!z1.allFinite() || std::abs(z1.dot(x)) > 1e-6) z1 = x.unitOrthogonal();
-  const Vec3 z2 = x.cross(z1).normalized();
-  const Vec3 Mx = M * x;
-  const double xMx = x.dot(Mx);
-  const double mu1 = xMx - epsM;
-  const double rho = std::hypot(z1.dot(Mx), z2.dot(Mx)) + epsM;
-  const double m11 = z1.dot(M * z1), m12 = z1.dot(M * z2), m22 = z2.dot(M * z2);
-  const double mu2 = 0.5 * (m11 + m22) - std::hypot(0.5 * (m11 - m22), m12) - epsM;
-  // ‖J‖₂² = λmax(M) ≤ λmax([[xᵀMx, ρ], [ρ, λmax(ZᵀMZ)]]) (the same reduction, from above).
-  const double zz_max = 0.5 * (m11 + m22) + std::hypot(0.5 * (m11 - m22), m12) + epsM;
-  const double j2 = std::sqrt(std::max(lambda_max_2x2(xMx + epsM, rho, zz_max), 0.0) + epsM);  // ≥ ‖J‖₂
-  // Linear in v: f11(v) = 2 wᵀv with w = Σ_a (Jx)_a H[a]ᵀ x; F(v)x = K v with K = Jᵀ K1 + K2,
-  // K1 = rows (H[a]ᵀ x)ᵀ, K2 = Σ_a (Jx)_a H[a].
-  const Vec3 Jx = J * x;
-  Vec3 w = Vec3::Zero();
-  Mat3 K1, K2 = Mat3::Zero();
-  for (int a = 0; a < 3; ++a) {
-    const Vec3 Hx = H[a].transpose() * x;  // (E(v)x)_a = vᵀ H[a]ᵀ x (H[a] symmetric up to rounding)
-    w += Jx(a) * Hx;
-    K1.row(a) = Hx.transpose();
-    K2 += Jx(a) * H[a];
-  }
-  const Mat3 K = J.transpose() * K1 + K2;
-  const Vec3 k1 = K.transpose() * z1, k2 = K.transpose() * z2;  // rows of ZᵀK
-  const double zk2 = lambda_max_2x2(k1.squaredNorm(), k1.dot(k2), k2.squaredNorm());
-  const double zk = std::sqrt(std::max(zk2, 0.0) + 1e-12 * (k1.squaredNorm() + k2.squaredNorm())) + epsF;
-  const double f11 = -2 * r * (w.norm() + epsF);
+  const JetSetup js(J, H, r);
+  if (!js.ok) return kNone;
+  const auto [epsM, epsF] = js.eps;
+  const Reduction R = js.reduction(J, H, 0);
+  const double mu1 = R.mu - epsM;
+  const double rho = R.rho + epsM;
+  const double mu2 = R.zz_min - epsM;
+  const double j2 = spectral_norm_upper(R, epsM);  // ≥ ‖J‖₂
+  const double zk = R.zk + epsF;
+  const double f11 = -2 * r * (R.w.norm() + epsF);
   const double phi = -2 * j2 * r * hessian_operator_norm(H) - 2 * r * epsF;
   const double q = rho + r * zk;
   const double D = mu2 + phi - mu1 - f11;
   const double lam = mu1 + f11 + 0.5 * (D - std::hypot(D, 2 * q));
   if (!(lam > 0) || !std::isfinite(lam)) return kNone;
   return std::sqrt(lam) * (1 - 1e-14);
+}
+
+// Step 3d of docs/certificate.md, in its notation (items 2-5 there). Both reductions of Step 3c, one around
+// the smallest eigenvector of M (σ3), one around the largest (σ1); each second-order term h is taken at its
+// worst over the ball, the linear terms f(v) = 2 w·v are kept, and the square roots are linearized:
+//   σ1: sqrt(X) ≤ (a² + X)/(2a) for any a > 0 (AM-GM);
+//   σ3: sqrt(a² + t) ≥ a + t/(2a) − t²/(2a³) for t ≥ −a².
+TaylorSingularBounds taylor_singular_bounds(const Mat3& J, const std::array<Mat3, 3>& H, double r) {
+  TaylorSingularBounds out;
+  const JetSetup js(J, H, r);
+  if (!js.ok) return out;
+  const auto [epsM, epsF] = js.eps;
+  const Reduction R3 = js.reduction(J, H, 0), R1 = js.reduction(J, H, 2);
+  const double hop = hessian_operator_norm(H);  // ‖H[v]‖₂ ≤ r·hop
+  // ‖F(v)‖₂ ≤ 2‖J‖₂‖H[v]‖₂ bounds ZᵀF(v)Z from both sides (items 2 and 3).
+  const double psi = 2 * spectral_norm_upper(R3, epsM) * r * hop + 2 * r * epsF;
+  const double lin = 2 * r * epsF;  // |2 (w − w̃)·v| for the computed w̃ (|w − w̃| ≤ epsF)
+
+  // σ1 (item 2): λmax(M + F(v)) ≤ μ + f(v) + h1 with h1 = (D + sqrt(D² + 4q²))/2, increasing in D and q, at
+  // D's largest value over the ball (f at −2r|w|, μ at its low end); σ1(J + H[v])² ≤ λmax(M + F) + ‖H[v]‖₂².
+  const double w1 = R1.w.norm() + epsF;
+  const double D1 = (R1.zz_max + epsM) + psi - (R1.mu - epsM) + 2 * r * w1;
+  const double q1 = R1.rho + epsM + r * (R1.zk + epsF);
+  const double s1 = std::hypot(D1, 2 * q1);
+  const double h1 = D1 < 0 ? 2 * q1 * q1 / (s1 - D1) : 0.5 * (D1 + s1);  // cancellation-free for D1 < 0
+  const double mu1 = R1.mu + epsM;
+  const double a1 = std::sqrt(mu1);
+  if (!(a1 > 0)) return out;
+  // X = σ1² ≤ mu1 + 2 w̃·v + (h1 + r² hop² + lin): σ1 ≤ (a² + X)/(2a).
+  out.upper1 = (a1 * a1 + mu1 + h1 + r * r * hop * hop + lin) / (2 * a1) * (1 + 1e-12);
+  out.g1 = R1.w / a1;
+
+  // σ3 (item 3): λmin(M + F(v)) ≥ μ + f(v) − h3, h3 = (sqrt(D² + 4q²) − D)/2 decreasing in D, at D's smallest
+  // value (f at +2r|w|, μ at its high end, φ = −psi).
+  const double w3 = R3.w.norm() + epsF;
+  const double D3 = (R3.zz_min - epsM) - psi - (R3.mu + epsM) - 2 * r * w3;
+  const double q3 = R3.rho + epsM + r * (R3.zk + epsF);
+  const double s3 = std::hypot(D3, 2 * q3);
+  const double h3 = D3 > 0 ? 2 * q3 * q3 / (s3 + D3) : 0.5 * (s3 - D3);
+  const double mu3 = R3.mu - epsM;
+  const double a3 = std::sqrt(mu3);
+  if (!(a3 > 0)) return out;
+  // σ3² ≥ a3² + t(v), t(v) ≥ −c0 + 2 w̃·v with c0 = h3 + lin + |mu3 − a3²| (the last: the square root's
+  // rounding, 4 ulps), |t| ≤ T; T < a3² keeps J + H[v] nonsingular on the ball (det keeps det J's sign).
+  const double c0 = h3 + lin + std::abs(mu3 - a3 * a3) + 4e-16 * mu3;
+  const double T = c0 + 2 * r * R3.w.norm();
+  if (!(T < a3 * a3)) return out;
+  out.lower3 = (a3 - c0 / (2 * a3) - T * T / (2 * a3 * a3 * a3)) - 1e-12 * a3;
+  out.g3 = R3.w / a3;
+  out.valid = std::isfinite(out.upper1) && out.lower3 > 0 && out.g1.allFinite() && out.g3.allFinite();
+  return out;
+}
+
+double taylor_distortion_bound(const TaylorSingularBounds& t, double r, double rho) {
+  if (!t.valid || !(rho >= 0) || !(r >= 0)) return kInf;
+  const double A = (t.upper1 + rho) * (1 + 1e-15), B = (t.lower3 - rho) * (1 - 1e-15);
+  if (!(B > 0) || !std::isfinite(A)) return kInf;
+  // φ(K) = A + r|g1 − K g3| − K B is convex in K and positive at K = A/B; its zero beyond A/B is the larger
+  // root of (KB − A)² = r²|g1 − K g3|² when B > r|g3| (else φ never becomes ≤ 0).
+  const double G11 = t.g1.squaredNorm(), G13 = t.g1.dot(t.g3), G33 = t.g3.squaredNorm();
+  const double alpha = B * B - r * r * G33;
+  if (!(alpha > 0)) return kInf;
+  const double beta = A * B - r * r * G13, gamma = A * A - r * r * G11;
+  const double K0 = std::max((beta + std::sqrt(std::max(0.0, beta * beta - alpha * gamma))) / alpha, A / B);
+  // The root is computed in floating point: the returned K is one at which φ(K) ≤ 0 is checked with the
+  // rounding of that check allowed for (the norm's cancellation, relative to its terms' sizes).
+  const double n1 = std::sqrt(G11), n3 = std::sqrt(G33);
+  for (const double bump : {1e-12, 1e-9, 1e-6, 1e-3}) {
+    const double K = K0 * (1 + bump);
+    const double lhs = (A + r * ((t.g1 - K * t.g3).norm() + 1e-14 * (n1 + K * n3))) * (1 + 1e-13);
+    if (lhs <= K * B * (1 - 1e-13)) return K;
+  }
+  return kInf;
+}
+
+double taylor_sigma1_upper_bound(const TaylorSingularBounds& t, double r, double rho) {
+  if (!t.valid || !(rho >= 0) || !(r >= 0)) return kInf;
+  return (t.upper1 + rho + r * t.g1.norm()) * (1 + 1e-13);
+}
+
+double taylor_sigma3_lower_bound(const TaylorSingularBounds& t, double r, double rho) {
+  if (!t.valid || !(rho >= 0) || !(r >= 0)) return -kInf;
+  const double b = t.lower3 - rho - r * t.g3.norm();
+  return b > 0 ? b * (1 - 1e-13) : b * (1 + 1e-13);
 }
 
 double alpha_beta_norm2(const Vec3& u, const Vec3& w, const Vec3& q) {

@@ -306,6 +306,10 @@ struct OctreeCertifier::Run {
   const bool spectral;    // combined, and the Taylor σ3 lower bound as a third candidate (Step 3c)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
   const bool far_mode;    // far-field refinement (third-order bound; on the host with every backend)
+  // Step 3d: the Taylor bounds of σ1, σ3 and σ1/σ3 (taylor_singular_bounds) at every exactly evaluated
+  // center, with a third-order bound (its T bounds the Taylor remainder) and distortion targets (without
+  // targets the certificates stay those of the Lipschitz bounds alone).
+  const bool taylor;
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
   // Base voxels.
@@ -313,6 +317,10 @@ struct OctreeCertifier::Run {
   VecXd sigma1;   // σ1 at the base centers (NaN: not computed, e.g. on a backend's base stage)
   VecXd hop, T1;  // combined: operator-norm bound of H(c) and the first-order Σ δ Γ
   VecXd lb2;      // spectral: taylor_sigma3_lower_bound at the base centers (−∞: none)
+  // taylor: at the base centers evaluated on the fly (not valid: none); from the stored derivatives only the
+  // Hessians are kept (Hbase), and the bounds are formed where the Lipschitz bounds do not prove a target.
+  std::vector<TaylorSingularBounds> tsb;
+  std::vector<std::array<Mat3, 3>> Hbase;
   std::vector<Mat3> Jc;
   std::vector<char> sign_unresolved;  // per base voxel: det J's sign at the center not resolved
   std::vector<double> device_Y;       // coefficients for the backend's base stage (empty: CPU)
@@ -345,6 +353,7 @@ struct OctreeCertifier::Run {
         spectral(params.bound == LipschitzBound::kSpectral),
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
         far_mode(params.refinement == RefinementEval::kFarField && third && !combined),
+        taylor(third && params.taylor_bounds && params.targets().any()),
         fm(o.basis_.face_matrices(y_)) {
     cert.bound = p.bound;
     cert.voxel_side = side;
@@ -354,12 +363,13 @@ struct OctreeCertifier::Run {
   // Exact J, ‖H‖ and rounding scales at any point, from the full coefficients through the differential
   // representation (one pass over the faces per point; see HarmonicBasis::differential_jet).
   void eval_point(const Vec3& c, Mat3& J, double& hn, double& sJ, double& sH, double* hn_op = nullptr,
-                  double rad = 0, double* lb = nullptr) const {
+                  double rad = 0, double* lb = nullptr, TaylorSingularBounds* tb = nullptr) const {
     const MapJet jet = oc.basis_.differential_jet(fm, c, third ? 2 : 1, &sJ, &sH);
     J = jet.J;
     hn = third ? jet.hessian_norm() : 0.0;
     if (hn_op) *hn_op = combined ? hessian_operator_norm(jet.H) : 0.0;
     if (lb) *lb = spectral ? taylor_sigma3_lower_bound(jet.J, jet.H, rad) : -kInf;
+    if (tb && taylor) *tb = taylor_singular_bounds(jet.J, jet.H, rad);
   }
   // Spectral: the smaller of ‖H(c)‖_op and the Taylor σ3 bound's first-order loss (σ3(c) − ℓ)/r, so that
   // lipschitz() gives min(first order, that + ½ r T3) (Step 3c).
@@ -389,12 +399,30 @@ struct OctreeCertifier::Run {
   // is specific to σ3); τ1 is the allowance τ with σ1 and L1 in place of σ3 and L. The factor 1 + 1e-15
   // covers the rounding of the four additions (each ≤ u relative, all terms ≥ 0). σ1 NaN (not computed):
   // no bound (+∞).
-  static void set_distortion(CertLeaf& l, double s1, double eps_J, double L1, double rad, double sJ,
-                             double sH, double storage) {
+  // Where the leaf's center was evaluated exactly (or from the stored derivatives), `tb` holds its Taylor
+  // bounds (Step 3d) and `T3` its third-order sum: of each pair of bounds (σ1, σ3, σ1/σ3) the better one is
+  // kept, as both hold on the whole ball. Only on a certified leaf for σ3 and σ1/σ3: which leaves are
+  // certified stays the Lipschitz bound's decision, the Taylor bound only tightens their margins.
+  void set_distortion(CertLeaf& l, double s1, double eps_J, double L1, double rad, double sJ, double sH,
+                      double storage, const TaylorSingularBounds* tb = nullptr, double T3 = kInf) const {
     l.sigma1 = s1;
     const double up = (s1 + eps_J + rad * L1 + tolerance(sJ, sH, s1, L1, rad, storage)) * (1 + 1e-15);
     l.sigma1_upper = std::isfinite(up) && s1 >= 0 ? up : kInf;
+    if (tb && tb->valid && eps_J == 0) {
+      const double rho = taylor_remainder(rad, T3, sJ, sH, storage);
+      l.sigma1_upper = std::min(l.sigma1_upper, taylor_sigma1_upper_bound(*tb, rad, rho));
+      if (l.margin > 0) l.margin = std::max(l.margin, taylor_sigma3_lower_bound(*tb, rad, rho));
+      l.distortion_upper = std::min(distortion_of(l.sigma1_upper, l.margin),
+                                    l.margin > 0 ? taylor_distortion_bound(*tb, rad, rho) : kInf);
+      return;
+    }
     l.distortion_upper = distortion_of(l.sigma1_upper, l.margin);
+  }
+  // Step 3d's ρ ≥ ‖J(q) − J̃ − H̃[q − c]‖₂ on the ball: the Taylor remainder ½ r² T3 (Step 3b (c)), the
+  // double-precision evaluation of J̃ and H̃ (kRoundingRel of their scales) and the float storage of the
+  // basis derivatives (`storage`, Step 5).
+  static double taylor_remainder(double rad, double T3, double sJ, double sH, double storage) {
+    return (0.5 * rad * rad * T3 + (kRoundingRel + storage) * (sJ + rad * sH)) * (1 + 1e-12);
   }
   // The targets asked for, as the certificate reports them.
   void set_targets(Certificate& c) const {
@@ -621,6 +649,8 @@ struct OctreeCertifier::Run {
     hnorm.resize(N);
     hop.setZero(N);
     lb2.setConstant(N, -kInf);
+    tsb.assign(taylor ? N : 0, {});
+    Hbase.clear();  // filled by stored_derivatives only (a backend's base stage keeps J and H on the device)
     Jc.resize(N);
     if (use_stored) {
       std::vector<double> Ycols = coefficient_columns();
@@ -643,7 +673,7 @@ struct OctreeCertifier::Run {
 #pragma omp parallel for schedule(dynamic, 64)
       for (long i = 0; i < N; ++i)
         eval_point(oc.sampling_.centers.row(i).transpose(), Jc[i], hnorm(i), scaleJ(i), scaleH(i), &hop(i),
-                   oc.sampling_.radius_of(static_cast<int>(i)), &lb2(i));
+                   oc.sampling_.radius_of(static_cast<int>(i)), &lb2(i), taylor ? &tsb[i] : nullptr);
     }
     cert.ms_jacobian = ms_since(t0);
   }
@@ -692,6 +722,7 @@ struct OctreeCertifier::Run {
   // J and ‖H‖ at every base center: the 9 stored rows of each voxel times the coefficient columns.
   void stored_derivatives(const std::vector<double>& Ycols) {
     const long m = im.m;
+    if (taylor) Hbase.assign(N, {});
 #pragma omp parallel for schedule(static)
     for (long i = 0; i < N; ++i) {
       if (!evaluated(i)) continue;
@@ -705,12 +736,14 @@ struct OctreeCertifier::Run {
       for (int a = 0; a < 3; ++a)
         for (int q = 0; q < 6; ++q) H6[a][q] = out[3 + q][a];
       hnorm(i) = hessian_norm_sym(&H6[0][0], 6);
-      if (combined) {
+      if (combined || taylor) {
         std::array<Mat3, 3> H;
         for (int a = 0; a < 3; ++a)
           H[a] << H6[a][0], H6[a][1], H6[a][2], H6[a][1], H6[a][3], H6[a][4], H6[a][2], H6[a][4], H6[a][5];
-        hop(i) = hessian_operator_norm(H);
-        if (spectral) lb2(i) = taylor_sigma3_lower_bound(J, H, oc.sampling_.radius_of(static_cast<int>(i)));
+        const double r = oc.sampling_.radius_of(static_cast<int>(i));
+        if (combined) hop(i) = hessian_operator_norm(H);
+        if (spectral) lb2(i) = taylor_sigma3_lower_bound(J, H, r);
+        if (taylor) Hbase[i] = H;
       }
     }
   }
@@ -742,7 +775,8 @@ struct OctreeCertifier::Run {
   int level(long i) const {
     return oc.sampling_.level.empty() ? 0 : oc.sampling_.level[i];
   }
-  std::vector<long> uncleared;  // base voxels refused by the guard
+  std::vector<long> uncleared;    // base voxels refused by the guard
+  std::vector<long> taylor_base;  // base voxels whose Lipschitz bounds do not prove a target (Step 3d)
 
   // --- 3. Lipschitz constants of the base voxels: δ norms (map) times the per-voxel per-edge factors (cage
   // only), and condition (6) for each base voxel.
@@ -803,8 +837,21 @@ struct OctreeCertifier::Run {
       // J's Lipschitz constant: L without the spectral bound's σ3-specific Taylor term (hop(i) is ‖H‖_op).
       const double L1 = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
       set_distortion(base[i], sigma1(i), 0.0, L1, r, scaleJ(i), scaleH(i), base_storage);
+      if (taylor && unproven(base[i]) != DistortionTarget::kNone) taylor_base.push_back(i);
       if (!(margin > 0)) failing_base.push_back(i);
     }
+    // Step 3d where the Lipschitz bounds do not prove a target (a few percent of the voxels near a binding
+    // target): forming the bounds at every center would cost more than the refinement they save.
+    const long nt = static_cast<long>(taylor_base.size());
+#pragma omp parallel for schedule(dynamic, 64)
+    for (long k = 0; k < nt; ++k) {
+      const long i = taylor_base[k];
+      const double r = oc.sampling_.radius_of(static_cast<int>(i));
+      if (!Hbase.empty()) tsb[i] = taylor_singular_bounds(Jc[i], Hbase[i], r);
+      const double L1 = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
+      set_distortion(base[i], sigma1(i), 0.0, L1, r, scaleJ(i), scaleH(i), base_storage, &tsb[i], T(i));
+    }
+    taylor_base.clear();
     cert.ms_bound = ms_since(t0) - device_ms;
   }
   // T_i = Σ_e δ_e F(i, e) for every base voxel. An edge whose factor is +∞ (the voxel's ball may touch it)
@@ -1003,7 +1050,7 @@ struct OctreeCertifier::Run {
       Mat3 J;
       NodeValues& v = vals[q];
       double lb = -kInf;
-      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H, &v.hnorm_op, rad, &lb);
+      eval_point(nd.c, J, v.hnorm, v.scale_J, v.scale_H, &v.hnorm_op, rad, &lb, &v.taylor);
       bool resolved = true;
       const Vec3 sv = signed_singular_values(J, &resolved);
       v.sigma3 = sv(2);
@@ -1048,6 +1095,7 @@ struct OctreeCertifier::Run {
       v.hnorm_op = taylor_part(v.hnorm_op, v.sigma3, taylor_sigma3_lower_bound(ev.J, ev.H, rad), rad);
     v.own_bound = third ? ev.T_third : ev.T_first;
     v.own_first = ev.T_first;
+    if (taylor) v.taylor = taylor_singular_bounds(ev.J, ev.H, rad);
   }
   // Runs `eval(c, rad, n, first)` on consecutive groups of at most kLanes of `count` items (items first ..
   // first + n − 1), `point(k, c, rad)` giving item k's center and ball radius: one SIMD pass of
@@ -1339,10 +1387,12 @@ struct OctreeCertifier::Run {
       const double L1 = lipschitz(v.hnorm + v.eps_H, v.hnorm_op_j, bnd1, bnd, rad);
       if (margin > 0) {
         tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, true, bi, v.sign_unresolved, v.eps_J};
-        set_distortion(tree[id].leaf, v.sigma1, v.eps_J, L1, rad, v.scale_J, v.scale_H, 0.0);
+        set_distortion(tree[id].leaf, v.sigma1, v.eps_J, L1, rad, v.scale_J, v.scale_H, 0.0, &v.taylor,
+                       v.own_bound);
       } else if (v.sigma3 <= 0 || depth >= p.max_depth || (p.stop_on_failure && abort)) {
         tree[id].leaf = {c, sd, leaf_depth, v.sigma3, L, margin, false, bi, v.sign_unresolved, v.eps_J};
-        set_distortion(tree[id].leaf, v.sigma1, v.eps_J, L1, rad, v.scale_J, v.scale_H, 0.0);
+        set_distortion(tree[id].leaf, v.sigma1, v.eps_J, L1, rad, v.scale_J, v.scale_H, 0.0, &v.taylor,
+                       v.own_bound);
         st.ok = false;
         if (v.sigma3 <= 0 || depth >= p.max_depth) st.failed_here = true;
         // σ3 ≤ 0 (or a sign not resolved, σ3 = 0) at a center settles this voxel: refining its other nodes
@@ -1540,7 +1590,7 @@ struct OctreeCertifier::Run {
     CertLeaf leaf{nd.c, nd.side, nd.depth, v.sigma3, L, margin, margin > 0, base_index, v.sign_unresolved};
     const double L1 =
         lipschitz(v.hnorm, v.hnorm_op_j, combined ? v.own_first : v.own_bound, v.own_bound, rad);
-    set_distortion(leaf, v.sigma1, 0.0, L1, rad, v.scale_J, v.scale_H, 0.0);
+    set_distortion(leaf, v.sigma1, 0.0, L1, rad, v.scale_J, v.scale_H, 0.0, &v.taylor, v.own_bound);
     return leaf;
   }
 

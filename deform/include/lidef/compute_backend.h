@@ -17,6 +17,7 @@
 #include "lidef/cage.h"
 #include "lidef/deformation_energy.h"
 #include "lidef/errors.h"
+#include "lidef/lipschitz_bound.h"
 #include "lidef/types.h"
 
 namespace lidef {
@@ -80,6 +81,8 @@ struct NodeValues {
   // the operator-norm bound of H(c) before the σ3-specific Taylor term replaced it (a bound on J's change).
   double sigma1 = std::numeric_limits<double>::quiet_NaN();
   double hnorm_op_j = 0;
+  // Step 3d (CPU, exact evaluations, when the certifier asks for it): the Taylor bounds of σ1 and σ3.
+  TaylorSingularBounds taylor;
 };
 
 class CertifierKernels {

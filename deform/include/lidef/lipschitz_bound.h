@@ -67,6 +67,29 @@ double hessian_operator_norm(const std::array<Mat3, 3>& H);
 // with a rounding allowance. −∞ when det J ≤ 0, J or H is not finite, or the bound is not positive.
 double taylor_sigma3_lower_bound(const Mat3& J, const std::array<Mat3, 3>& H, double r);
 
+// Step 3d of docs/certificate.md (bounded distortion): bounds of σ1 and σ3 on the first-order Taylor
+// polynomial J + H[v] of the map's Jacobian that are linear in v up to a second-order remainder,
+//   σ1(J + H[v]) ≤ upper1 + g1·v,   σ3ˢ(J + H[v]) ≥ lower3 + g3·v   for every |v| ≤ r,
+// g1 and g3 the gradients of σ1 and σ3 at the center (from the computed singular vectors), upper1 and lower3
+// the center values moved by the second-order terms of the 2x2 reductions of Step 3c (for λmax and λmin of
+// JᵀJ) and by rounding allowances. Near a maximum of σ1/σ3 the gradients nearly cancel in g1 − K g3, so the
+// bound of K below loses O(r²) where the per-leaf quotient of Lipschitz bounds loses O(r).
+// valid = false when det J ≤ 0, J or H is not finite, or σ3's remainder is not below σ3.
+struct TaylorSingularBounds {
+  bool valid = false;
+  double upper1 = 0, lower3 = 0;
+  Vec3 g1 = Vec3::Zero(), g3 = Vec3::Zero();
+};
+TaylorSingularBounds taylor_singular_bounds(const Mat3& J, const std::array<Mat3, 3>& H, double r);
+// With ‖J(q) − J − H[q − c]‖₂ ≤ rho on the ball (Taylor remainder, storage and rounding allowances): the
+// smallest K (rounded up, verified) with upper1 + rho + r|g1 − K g3| ≤ K (lower3 − rho), so that
+// σ1(J(q)) ≤ K σ3(J(q)) on the whole ball; +∞ when there is none (or t is not valid).
+double taylor_distortion_bound(const TaylorSingularBounds& t, double r, double rho);
+// The same ball's upper bound of σ1: upper1 + rho + r|g1| (+∞ when t is not valid).
+double taylor_sigma1_upper_bound(const TaylorSingularBounds& t, double r, double rho);
+// The same ball's lower bound of σ3: lower3 − rho − r|g3| (−∞ when t is not valid).
+double taylor_sigma3_lower_bound(const TaylorSingularBounds& t, double r, double rho);
+
 // Lower bound of |q−u| + |q−w| over q in the ball B(p, r): the larger of
 // (|p−u| − r) + (|p−w| − r)  and  2 sqrt(ρ² + d²/4), ρ = max(0, dist(p, line uw) − r).
 double edge_sum_lower_bound(const Vec3& u, const Vec3& w, const Vec3& p, double r);

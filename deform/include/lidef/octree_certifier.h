@@ -46,6 +46,10 @@ struct CertifyParams {
   // exactly, a smaller remainder.
   double far_field_reach = 4.0;
   int max_failing_reported = 20;
+  // With distortion targets and third-order sums: also bound σ1, σ3 and σ1/σ3 per leaf by their first-order
+  // Taylor change (docs/certificate.md, Step 3d), the better of each pair kept. false: the Lipschitz bounds
+  // alone (what the OpenCL kernels compute; for comparisons).
+  bool taylor_bounds = true;
   // Above 0 (a fraction, 0.1 = 10%): once the map is certified, keep refining the leaves whose bound is
   // loosest until min_lower_bound ≥ (1 − bound_tolerance) · min_sigma3_center, so the lower bound says how
   // small σ3 really is, not merely that it is positive. Never changes the verdict; uses what is left of

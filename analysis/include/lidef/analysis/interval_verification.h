@@ -14,7 +14,8 @@
 // A leaf is *proven* when that margin is > 0. Nothing here is a floating-point estimate called proven.
 // The ball's radius covers the decimal round trip of voxels.csv: r = (√3/2)(h + ulp(h)) + ‖ulp(c)‖₂, plus the
 // slack that makes it hold the exact grid cell the leaf stands for (leaf_coverage.h). That the leaves cover
-// the certified domain at all is proven separately by prove_leaf_coverage; `lidef verify --interval` runs both.
+// the certified domain at all is proven separately by prove_leaf_coverage; `lidef verify --interval` runs
+// both.
 #pragma once
 #include <array>
 #include <limits>
@@ -71,7 +72,13 @@ class IntervalVerifier {
   JetEnclosure jet(const Vec3& p) const;
   // Re-proves the leaf with center `center` and side `side` as read from voxels.csv, on its ball widened by
   // `radius_slack` (leaf_coverage.h: so that the ball holds the exact grid cell the leaf stands for).
-  IntervalLeaf verify_leaf(const Vec3& center, double side, double radius_slack = 0) const;
+  // claim_distortion, claim_sigma1: the certifier's bounds of σ1/σ3 and σ1 on the leaf. Where the Lipschitz
+  // bounds do not re-prove them, the Taylor bounds of Step 3d are formed (with third-order sums); where that
+  // re-proves the claimed σ1/σ3 exactly, distortion_hi is the claim (a root found here could differ from it
+  // in the last bits). Without claims (+∞) the Lipschitz bounds alone.
+  IntervalLeaf verify_leaf(const Vec3& center, double side, double radius_slack = 0,
+                           double claim_distortion = std::numeric_limits<double>::infinity(),
+                           double claim_sigma1 = std::numeric_limits<double>::infinity()) const;
 
  private:
   struct Impl;
@@ -90,8 +97,8 @@ struct IntervalVerification {
   double seconds = 0;
 };
 
-// Re-proves every certified leaf of `leaves` (OpenMP threads; the results do not depend on their number), each
-// on its ball widened by `radius_slack` (model units).
+// Re-proves every certified leaf of `leaves` (OpenMP threads; the results do not depend on their number),
+// each on its ball widened by `radius_slack` (model units).
 IntervalVerification verify_certificate_intervals(const Cage& cage, const MatX3d& y,
                                                   const std::vector<CertLeaf>& leaves, LipschitzBound bound,
                                                   double radius_slack = 0);
