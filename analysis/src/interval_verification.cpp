@@ -286,20 +286,28 @@ bool gram_bounds(const Mat3& B, double& lmax_hi, double& inv_lmin_hi) {
   return true;
 }
 
+// What both interval Taylor bounds (Steps 3c, 3d) start from: det J > 0 proven, r ≥ 0, a finite ‖H‖_op bound,
+// and the eigenvectors of the midpoint's JᵀJ (any doubles: the bases built from them need not be exact).
+bool taylor_setup_i(const IM3& J, double r, double hop_hi, Eigen::SelfAdjointEigenSolver<Mat3>& es) {
+  const I det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) +
+                J[0][1] * (J[1][2] * J[2][0] - J[1][0] * J[2][2]) +
+                J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+  if (!(lo(det) > 0) || !(r >= 0) || !std::isfinite(hop_hi)) return false;
+  Mat3 mid;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) mid(a, b) = 0.5 * lo(J[a][b]) + 0.5 * hi(J[a][b]);
+  if (!mid.allFinite()) return false;
+  es.compute(mid.transpose() * mid);
+  return true;
+}
+
 // Step 3c of docs/certificate.md in intervals: a rigorous lower bound ℓ of σ3ˢ(J + H[v]) over |v| ≤ r, for
 // every J and H in the enclosures (H[a][b][k] = ∂J_ab/∂p_k, not assumed symmetric); −∞ when none. The basis
 // B = [x z1 z2] (the midpoint's eigenvectors of JᵀJ, any doubles) need not be orthonormal: in the coordinates
 // c of y = B c the 2x2 reduction is exact linear algebra for unit c, and |y| = 1 gives |c|² ≥ 1/λmax(BᵀB).
 double taylor_sigma3_lower_bound_i(const IM3& J, const std::array<IM3, 3>& H, double r, double hop_hi) {
-  const I det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) +
-                J[0][1] * (J[1][2] * J[2][0] - J[1][0] * J[2][2]) +
-                J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-  if (!(lo(det) > 0) || !(r >= 0) || !std::isfinite(hop_hi)) return -kInf;
-  Mat3 mid;
-  for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) mid(a, b) = 0.5 * lo(J[a][b]) + 0.5 * hi(J[a][b]);
-  if (!mid.allFinite()) return -kInf;
-  const Eigen::SelfAdjointEigenSolver<Mat3> es(mid.transpose() * mid);
+  Eigen::SelfAdjointEigenSolver<Mat3> es;
+  if (!taylor_setup_i(J, r, hop_hi, es)) return -kInf;
   const Mat3 B = basis_around(es, 0);
   if (!B.allFinite()) return -kInf;
   // S = Bᵀ JᵀJ B = (JB)ᵀ(JB): μ1 = S00, ρ = |S_{Z0}|, μ2 = λmin(S_ZZ); f(v) = 2 wᵀv, ‖ZᵀF(v)x‖ ≤ r zk.
@@ -332,15 +340,8 @@ struct TaylorBoundsI {
 
 TaylorBoundsI taylor_singular_bounds_i(const IM3& J, const std::array<IM3, 3>& H, double r, double hop_hi) {
   TaylorBoundsI out;
-  const I det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) +
-                J[0][1] * (J[1][2] * J[2][0] - J[1][0] * J[2][2]) +
-                J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-  if (!(lo(det) > 0) || !(r >= 0) || !std::isfinite(hop_hi)) return out;
-  Mat3 mid;
-  for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) mid(a, b) = 0.5 * lo(J[a][b]) + 0.5 * hi(J[a][b]);
-  if (!mid.allFinite()) return out;
-  const Eigen::SelfAdjointEigenSolver<Mat3> es(mid.transpose() * mid);
+  Eigen::SelfAdjointEigenSolver<Mat3> es;
+  if (!taylor_setup_i(J, r, hop_hi, es)) return out;
   const Mat3 B1 = basis_around(es, 2), B3 = basis_around(es, 0);
   double l1, inv1, l3, inv3;
   if (!B1.allFinite() || !B3.allFinite() || !gram_bounds(B1, l1, inv1) || !gram_bounds(B3, l3, inv3))

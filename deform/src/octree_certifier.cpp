@@ -306,9 +306,10 @@ struct OctreeCertifier::Run {
   const bool spectral;    // combined, and the Taylor σ3 lower bound as a third candidate (Step 3c)
   const bool use_stored;  // J and H at the base centers from the stored basis derivatives
   const bool far_mode;    // far-field refinement (third-order bound; on the host with every backend)
-  // Step 3d: the Taylor bounds of σ1, σ3 and σ1/σ3 (taylor_singular_bounds) at every exactly evaluated
-  // center, with a third-order bound (its T bounds the Taylor remainder) and distortion targets (without
-  // targets the certificates stay those of the Lipschitz bounds alone).
+  // Step 3d: the Taylor bounds of σ1, σ3 and σ1/σ3 (taylor_singular_bounds) at every node evaluated exactly
+  // on the host and at the base voxels whose Lipschitz bounds do not prove a target, with a third-order
+  // bound (its T bounds the Taylor remainder) and distortion targets (without targets the certificates stay
+  // those of the Lipschitz bounds alone).
   const bool taylor;
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
