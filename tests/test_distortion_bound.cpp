@@ -464,6 +464,12 @@ TEST(DistortionBound, IntervalReproofConfirmsEveryCertifiedLeafAndRefusesATamper
   const Certificate cert = certify_map(model.cage, samp, y, cp);
   ASSERT_TRUE(cert.certified) << cert.reason;
   EXPECT_LT(cert.max_distortion_upper_bound, free.max_distortion_upper_bound);
+  // The same target with the Lipschitz bounds alone needs more refinement (or is not proven at all).
+  CertifyParams lipschitz_only = cp;
+  lipschitz_only.taylor_bounds = false;
+  const Certificate quotient = certify_map(model.cage, samp, y, lipschitz_only);
+  EXPECT_TRUE(!quotient.certified || quotient.refined > cert.refined)
+      << quotient.refined << " vs " << cert.refined;
   const IntervalVerification v = verify_certificate_intervals(model.cage, y, cert.leaves, cp.bound);
   EXPECT_EQ(v.not_proven, 0);
   EXPECT_EQ(v.distortion_not_proven, 0);
@@ -471,8 +477,11 @@ TEST(DistortionBound, IntervalReproofConfirmsEveryCertifiedLeafAndRefusesATamper
   const HarmonicBasis basis(model.cage);
   const VerificationResult dense = verify_certificate(basis, y, cert.leaves, 16, 3);
   EXPECT_EQ(dense.distortion_violations, 0);
-  std::printf("K bound without / with the Taylor bounds %.6g / %.6g, sampled %.6g\n",
-              free.max_distortion_upper_bound, cert.max_distortion_upper_bound, dense.max_distortion);
+  std::printf(
+      "K bound without / with the Taylor bounds %.6g / %.6g, sampled %.6g; refined %ld (Lipschitz "
+      "bounds alone: %ld, %s)\n",
+      free.max_distortion_upper_bound, cert.max_distortion_upper_bound, dense.max_distortion, cert.refined,
+      quotient.refined, quotient.certified ? "certified" : "not certified");
 }
 
 TEST(DistortionBound, VoxelsCsvCarriesTheBoundsAndOlderFilesAreRead) {
