@@ -149,3 +149,38 @@ TEST(DistortionTargets, UnprovenViolatedAndReasonNameTheTarget) {
   EXPECT_EQ(DistortionTargets({0, 0, 0.5}).describe(), "min_sigma3 0.5");
   EXPECT_FALSE(DistortionTargets{}.any());
 }
+
+// The screen kept for one line search (DistortionScreen) against the function: the same sample and excess at
+// every step where that excess is above 1, for ratio, σ1 and σ3 targets, and at most 1 where the function's
+// is; with 1 and 2 threads.
+TEST(DistortionScreen, KeptScreenFindsTheSameSampleAtEveryStep) {
+  const long n = 4000;
+  const MatJT J0 = random_jacobians(n, 21, 0.15),
+              dJ = 0.8 * (random_jacobians(n, 23, 0.3) - random_jacobians(n, 23, 0));
+  const int saved = omp_get_max_threads();
+  int above = 0, below = 0;
+  for (int threads = 1; threads <= 2; ++threads) {
+    omp_set_num_threads(threads);
+    const DistortionScreen screen(J0, dJ);
+    for (const DistortionTargets& targets :
+         {DistortionTargets{1.6, 0, 0}, DistortionTargets{2.5, 0, 0}, DistortionTargets{0, 1.3, 0},
+          DistortionTargets{0, 0, 0.75}, DistortionTargets{1.8, 1.35, 0.7}})
+      for (double t = 1; t > 1e-4; t *= 0.5) {
+        double e_full = 0, e_kept = 0;
+        const long i_full = largest_excess_sample(J0, dJ, t, targets, &e_full);
+        const long i_kept = screen.largest_excess_sample(t, targets, &e_kept);
+        if (e_full > 1) {
+          ++above;
+          EXPECT_EQ(i_kept, i_full) << "t = " << t;
+          EXPECT_EQ(e_kept, e_full) << "t = " << t;
+        } else {
+          ++below;
+          EXPECT_LE(e_kept, 1.0) << "t = " << t;
+        }
+      }
+  }
+  omp_set_num_threads(saved);
+  // Both cases occur: steps beyond the targets and steps within them.
+  EXPECT_GT(above, 10);
+  EXPECT_GT(below, 10);
+}

@@ -10,15 +10,29 @@ namespace {
 class CpuEnergyKernels final : public EnergyKernels {
  public:
   explicit CpuEnergyKernels(const DeformationEnergy& e) : e_(e) {}
-  void set_current(const MatS3& y) override { J_ = e_.jacobians(y); }
+  void set_current(const MatS3& y) override {
+    J_ = e_.jacobians(y);
+    forget_current();
+  }
   void set_direction(const MatS3& d) override { dJ_ = e_.jacobians(d); }
   double distortion_sum(double t) override {
-    if (t == 0) return e_.distortion_sum(J_);
+    if (t == 0) {
+      if (!has_sum0_) sum0_ = e_.distortion_sum(J_), has_sum0_ = true;
+      return sum0_;
+    }
     const MatJT Jt = J_ + t * dJ_;
     return e_.distortion_sum(Jt);
   }
-  void accept(double t) override { J_ = (J_ + t * dJ_).eval(); }
-  MatS3 distortion_gradient_sum() override { return e_.distortion_gradient_sum(J_); }
+  void accept(double t) override {
+    J_ = (J_ + t * dJ_).eval();
+    forget_current();
+  }
+  // Kept until the current map changes: an iteration whose direction is recomputed with other weights
+  // (dynamic weighting's retries) asks again at the same map, and gets the same values.
+  MatS3 distortion_gradient_sum() override {
+    if (gradient_.rows() == 0) gradient_ = e_.distortion_gradient_sum(J_);
+    return gradient_;
+  }
   MatXd distortion_pair_blocks(bool double_precision) override {
     return e_.distortion_pair_blocks(J_, double_precision);
   }
@@ -36,8 +50,15 @@ class CpuEnergyKernels final : public EnergyKernels {
   const MatJT* direction_jacobians() const override { return &dJ_; }
 
  private:
+  void forget_current() {
+    has_sum0_ = false;
+    gradient_.resize(0, 3);
+  }
   const DeformationEnergy& e_;
   MatJT J_, dJ_, sum_;
+  bool has_sum0_ = false;  // sum0_ = distortion_sum(0) at J_
+  double sum0_ = 0;
+  MatS3 gradient_;  // distortion_gradient_sum() at J_ (0 rows: not computed)
 };
 
 class CpuBackend final : public ComputeBackend {

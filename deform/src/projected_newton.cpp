@@ -704,6 +704,9 @@ DeformationSolver::LineSearchEnd DeformationSolver::certified_line_search(const 
     return t * dnorm <= params_.step_tolerance * std::max(1.0, ynorm - t * dnorm);
   };
   double t = 1;
+  screened_trials_ = 0;  // a new direction: the distortion screen starts over
+  screen_.reset();
+  screen_J0_.resize(0, 3);
   for (int trial = 0; trial <= params_.max_halvings; ++trial, t *= 0.5) {
     if (stop_requested(stop)) {
       end = LineSearchEnd::kInterrupted;
@@ -788,14 +791,25 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
 // (docs/certificate.md, "Probes"), instead of refining leaves toward a bound no certificate can reach. Only a
 // proof refuses, so the verdict is the certificate's. CPU kernels only (an OpenCL backend keeps its Jacobians
 // on the device).
-void DeformationSolver::screen_distortion(double t, CertifyParams& cp) const {
+// The line search's first trial screens every sample; the later ones (smaller steps along the same direction
+// from the same map) only the samples Weyl's inequality leaves in question (DistortionScreen): the same
+// probe.
+void DeformationSolver::screen_distortion(double t, CertifyParams& cp) {
   const DistortionTargets targets = cp.targets();
   const MatJT* dJ = targets.any() ? kernels_->direction_jacobians() : nullptr;
   if (!dJ) return;
-  const MatJT J0 = kernels_->current_jacobians();
-  if (J0.rows() != dJ->rows() || J0.rows() != 3 * nsampling_.centers.rows()) return;
+  const long rows = 3 * nsampling_.centers.rows();
   double excess = 0;
-  const long i = largest_excess_sample(J0, *dJ, t, targets, &excess);
+  long i = -1;
+  if (screened_trials_++ == 0 || !screen_) {
+    if (screened_trials_ == 1 || screen_J0_.rows() == 0) screen_J0_ = kernels_->current_jacobians();
+    if (screen_J0_.rows() != dJ->rows() || screen_J0_.rows() != rows) return;
+    if (screened_trials_ == 1)
+      i = largest_excess_sample(screen_J0_, *dJ, t, targets, &excess);
+    else
+      screen_ = std::make_unique<DistortionScreen>(screen_J0_, *dJ);
+  }
+  if (screen_) i = screen_->largest_excess_sample(t, targets, &excess);
   if (i >= 0 && excess > 1)
     cp.distortion_probes.insert(cp.distortion_probes.begin(), nsampling_.centers.row(i).transpose());
 }

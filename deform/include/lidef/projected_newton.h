@@ -49,6 +49,8 @@
 
 namespace lidef {
 
+class DistortionScreen;  // lidef/internal/distortion_screen.h
+
 // The precomputation stopped because its caller asked (PrecomputeSetup::cancel; the studio's Cancel):
 // nothing it would have produced exists.
 class Cancelled : public Error {
@@ -279,7 +281,7 @@ class DeformationSolver {
                                       const std::atomic<bool>* stop);
   Certificate certify_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et,
                             IterationRecord& rec);
-  void screen_distortion(double t, CertifyParams& cp) const;
+  void screen_distortion(double t, CertifyParams& cp);
   bool globally_injective_trial(const MatS3& yt, IterationRecord& rec);
   void accept_trial(const MatS3& yt, double t, const MatS3& delta, const EnergyTerms& et, Certificate&& c,
                     IterationRecord& rec);
@@ -328,6 +330,12 @@ class DeformationSolver {
   // (CertifyParams::priority_voxels), so a trial failing at the same place is rejected early.
   std::vector<long> line_search_failed_;
   std::vector<Vec3> distortion_probes_;  // where the last trial refused by the distortion bound failed
+  // The distortion screen of the current line search: its trials so far, and from the second on the kept
+  // singular values of the current map's samples (DistortionScreen, over screen_J0_ and the direction's
+  // Jacobians).
+  int screened_trials_ = 0;
+  MatJT screen_J0_;
+  std::unique_ptr<DistortionScreen> screen_;
   // The last map the line search accepted and its certificate's per-voxel lower bounds (normalized frame):
   // the next trials certify by perturbation from it (CertifyParams::previous_y), used only while y_ is still
   // that map, bit for bit.

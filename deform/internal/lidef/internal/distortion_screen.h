@@ -17,4 +17,21 @@ namespace lidef {
 long largest_excess_sample(const MatJT& J0, const MatJT& dJ, double t, const DistortionTargets& targets,
                            double* excess);
 
+// The same screen for the trials of one line search (one J0, one dJ; both must outlive it): σ1 and σ3 of
+// every J0_i and ‖dJ_i‖_F are kept, and a trial evaluates only the samples that may be beyond a target at its
+// step — by Weyl, σ1(J0_i + t dJ_i) ≤ σ1(J0_i) + t‖dJ_i‖ and σ3 ≥ σ3(J0_i) − t‖dJ_i‖, so a sample whose
+// excess bound from these is below 1 − 1e-6 (the margin covers the closed form's rounding) cannot be the
+// answer when it is above 1. largest_excess_sample(t, ...) returns what the function above returns whenever
+// that excess is above 1; otherwise a sample and excess at most 1, or −1 and 0.
+class DistortionScreen {
+ public:
+  DistortionScreen(const MatJT& J0, const MatJT& dJ);
+  long largest_excess_sample(double t, const DistortionTargets& targets, double* excess) const;
+
+ private:
+  const MatJT& J0_;
+  const MatJT& dJ_;
+  VecXd s1_, s3_, dn_;  // per sample: σ1(J0_i), σ3(J0_i) (−1: not usable, always evaluated), ‖dJ_i‖_F
+};
+
 }  // namespace lidef
