@@ -215,6 +215,29 @@ TEST(DistortionBound, TargetIsProvenByRefinementOrReportedNotCertified) {
   EXPECT_NE(c2.reason.find("not proven at ("), std::string::npos) << c2.reason;
   EXPECT_FALSE(c2.failing.empty());
   EXPECT_TRUE(c2.base_lower.empty());
+  // It fails where a leaf cannot be split further, not at the budget: the reason does not blame the budget.
+  EXPECT_EQ(c2.distortion_budget, 0);
+  EXPECT_EQ(c2.reason.find("budget"), std::string::npos) << c2.reason;
+
+  // A target 3% above the sampled maximum with budgets from 4,096 nodes up: where σ3 is proven and the
+  // distortion stage's next split would pass the budget, the map is not certified and the reason says that
+  // the budget ran out (a larger one may prove it).
+  q.max_distortion = 1.03 * sampled;
+  bool budget_failure_seen = false;
+  for (long budget = 4096; budget <= (1L << 20) && !budget_failure_seen; budget = budget * 5 / 4 + 8) {
+    q.max_refined_voxels = budget;
+    const Certificate c3 = cert.certify(y, q);
+    if (c3.certified) break;
+    if (!c3.distortion_failed) continue;  // the σ3 stage's budget
+    budget_failure_seen = true;
+    EXPECT_EQ(c3.distortion_budget, budget);
+    EXPECT_NE(c3.reason.find("not proven at ("), std::string::npos) << c3.reason;
+    EXPECT_NE(c3.reason.find("refinement budget of " + std::to_string(budget) + " nodes used up"),
+              std::string::npos)
+        << c3.reason;
+    EXPECT_EQ(c3.distortion_reason(), c3.reason);
+  }
+  EXPECT_TRUE(budget_failure_seen);
 
   // A target below 1 is refused as a parameter.
   DeformParams dp;

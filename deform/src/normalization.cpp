@@ -72,8 +72,7 @@ Certificate Frame::from_normalized(Certificate c) const {
       l.L /= scale;  // a Lipschitz constant of σ3 (dimensionless) per unit length
     }
   // The distortion stage names its worst leaf in the certifier's frame: name it in the model's.
-  if (c.distortion_failed && !c.failing.empty())
-    c.reason = c.targets().reason(c.distortion_failed_on, c.failing.front().center);
+  if (c.distortion_failed && !c.failing.empty()) c.reason = c.distortion_reason();
   return c;
 }
 

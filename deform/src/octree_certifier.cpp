@@ -229,6 +229,14 @@ VecXd OctreeCertifier::delta_norms(const HarmonicBasis::FaceMatrices& fm) const 
   return out;
 }
 
+std::string Certificate::distortion_reason() const {
+  if (failing.empty()) return reason;
+  std::string r = targets().reason(distortion_failed_on, failing.front().center);
+  if (distortion_budget > 0)
+    r += " (refinement budget of " + std::to_string(distortion_budget) + " nodes used up)";
+  return r;
+}
+
 Certificate OctreeCertifier::certify(const MatX3d& y, const CertifyParams& params) const {
   if (y.rows() != basis_.size())
     throw InputError("", "coefficients have " + std::to_string(y.rows()) +
@@ -1644,20 +1652,25 @@ struct OctreeCertifier::Run {
       return !leaf_settled && !center_violates && l.depth - level(l.base) < p.max_depth;
     };
     bool hopeless = false, first_phase = p.stop_on_failure;
+    // Why leaves stayed unproven: one that could be split was not (the budget ran out), or one could not be
+    // split (depth limit, a center beyond a target, children no better).
+    bool budget_out = false, stuck = false;
     // A leaf that fails at once fails the trial before any phase (as the first round of one pass would).
     for (size_t i = 0; i < c.leaves.size() && first_phase; ++i)
       if (unproven(c.leaves[i]) != DistortionTarget::kNone && !splittable(c.leaves[i], settled[i]))
-        hopeless = true, first_phase = false;
+        hopeless = stuck = true, first_phase = false;
     for (; !hopeless;) {
       std::vector<size_t> split;
       for (size_t i = 0; i < c.leaves.size() && !hopeless; ++i) {
         const CertLeaf& l = c.leaves[i];
         if (unproven(l) == DistortionTarget::kNone || !in_phase(l, first_phase)) continue;
-        if (splittable(l, settled[i]) &&
-            budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels)
+        const bool can_split = splittable(l, settled[i]);
+        if (can_split && budget_used + 8 * static_cast<long>(split.size() + 1) <= p.max_refined_voxels) {
           split.push_back(i);
-        else
-          hopeless = p.stop_on_failure;  // a line search trial fails here whatever the others give: stop
+          continue;
+        }
+        (can_split ? budget_out : stuck) = true;
+        hopeless = p.stop_on_failure;  // a line search trial fails here whatever the others give: stop
       }
       if (split.empty() && first_phase && !hopeless) {
         first_phase = false;
@@ -1719,7 +1732,8 @@ struct OctreeCertifier::Run {
                             c.failed_voxels.end());
       c.certified = false;
       c.distortion_failed = true;
-      c.reason = targets.reason(c.distortion_failed_on, c.failing.front().center);
+      c.distortion_budget = budget_out && !stuck ? p.max_refined_voxels : 0;
+      c.reason = c.distortion_reason();
       c.base_lower.clear();
       c.base_upper.clear();
     }

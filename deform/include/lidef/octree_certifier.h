@@ -173,9 +173,17 @@ struct Certificate {
   DistortionTargets targets() const { return {max_distortion, max_sigma1, min_sigma3}; }
   bool distortion_met = false;
   // σ3 > 0 was proven but a distortion target was not: the target (distortion_failed_on) and the reason,
-  // targets().reason(distortion_failed_on, failing.front().center).
+  // distortion_reason().
   bool distortion_failed = false;
   DistortionTarget distortion_failed_on = DistortionTarget::kNone;
+  // With distortion_failed: above 0 when the distortion stage stopped because its next split would have
+  // passed the refinement budget (CertifyParams::max_refined_voxels, this value): a larger budget may still
+  // prove the target. 0 when the failing leaf could not be split (depth limit, a center beyond the target,
+  // children no better).
+  long distortion_budget = 0;
+  // targets().reason(distortion_failed_on, failing.front().center), and when distortion_budget > 0 that the
+  // refinement budget ran out.
+  std::string distortion_reason() const;
   long perturbed_voxels = 0;  // base voxels certified by perturbation (σ3 and L not evaluated: NaN)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
