@@ -799,17 +799,16 @@ void DeformationSolver::screen_distortion(double t, CertifyParams& cp) {
   const MatJT* dJ = targets.any() ? kernels_->direction_jacobians() : nullptr;
   if (!dJ) return;
   const long rows = 3 * nsampling_.centers.rows();
+  if (screen_J0_.rows() == 0) screen_J0_ = kernels_->current_jacobians();  // once per line search
+  if (screen_J0_.rows() != dJ->rows() || screen_J0_.rows() != rows) return;
   double excess = 0;
   long i = -1;
-  if (screened_trials_++ == 0 || !screen_) {
-    if (screened_trials_ == 1 || screen_J0_.rows() == 0) screen_J0_ = kernels_->current_jacobians();
-    if (screen_J0_.rows() != dJ->rows() || screen_J0_.rows() != rows) return;
-    if (screened_trials_ == 1)
-      i = largest_excess_sample(screen_J0_, *dJ, t, targets, &excess);
-    else
-      screen_ = std::make_unique<DistortionScreen>(screen_J0_, *dJ);
+  if (++screened_trials_ == 1) {
+    i = largest_excess_sample(screen_J0_, *dJ, t, targets, &excess);
+  } else {
+    if (!screen_) screen_ = std::make_unique<DistortionScreen>(screen_J0_, *dJ);
+    i = screen_->largest_excess_sample(t, targets, &excess);
   }
-  if (screen_) i = screen_->largest_excess_sample(t, targets, &excess);
   if (i >= 0 && excess > 1)
     cp.distortion_probes.insert(cp.distortion_probes.begin(), nsampling_.centers.row(i).transpose());
 }
