@@ -64,8 +64,8 @@ DistortionScreen::DistortionScreen(const MatJT& J0, const MatJT& dJ) : J0_(J0), 
   const DistortionTargets none{};
 #pragma omp parallel for schedule(static)
   for (long i = 0; i < n; ++i) {
-    double a = -1, b = -1;
-    if (excess_of(J0.middleRows<3>(3 * i), none, &a, &b) < 0) a = b = -1;
+    double a = -1, b = -1;  // stay −1 where excess_of skips the sample
+    excess_of(J0.middleRows<3>(3 * i), none, &a, &b);
     s1_(i) = a;
     s3_(i) = b;
     dn_(i) = dJ.middleRows<3>(3 * i).norm();
