@@ -187,7 +187,7 @@ void add_certify_command(CLI::App& app, Action& action) {
       if (cert.certified && sampling.domain == "mesh" && g.verdict == GlobalInjectivity::Verdict::kInjective)
         std::cout << "lidef certify: CERTIFIED injective on the whole mesh and its solid (" << cert.num_leaves
                   << " leaves, " << report.leaves_meeting_domain << " meeting it; " << bound
-                  << "-order bound; the shape does not pass through itself)\n";
+                  << "-order bound; " << no_overlap_words(g) << ")\n";
       else if (cert.certified && sampling.domain == "mesh" &&
                g.verdict == GlobalInjectivity::Verdict::kOverlap)
         std::cout << "lidef certify: CERTIFIED locally injective on the whole mesh and its solid — but "

@@ -211,7 +211,7 @@ void add_deform_command(CLI::App& app, Action& action) {
                 << ", mesh coverage " << format_g(100 * out.mesh_coverage, 3) << "%\n"
                 << (cert.targets().any() ? "  " + distortion_targets_summary(cert) + "\n" : "")
                 << (out.global.verdict == GlobalInjectivity::Verdict::kInjective
-                        ? "  the shape does not pass through itself\n"
+                        ? "  " + no_overlap_words(out.global) + "\n"
                     : out.global.verdict == GlobalInjectivity::Verdict::kOverlap
                         ? "  locally injective only: " + out.global.reason + "\n"
                         : "  global injectivity not decided: " + out.global.reason + "\n")

@@ -20,6 +20,7 @@
 #include "lidef/global_injectivity.h"
 #include "lidef/green_coordinates.h"
 #include "lidef/internal/mesh_queries.h"
+#include "lidef/internal/rest_solid.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/model_check.h"
 #include "lidef/procedural_models.h"
@@ -89,6 +90,25 @@ double max_image_winding(const Cage& cage, const TriMesh& mesh, const MatX3d& y,
   return w;
 }
 
+// The model and the map y moved by t and scaled by s: x ↦ s f((x − t)/s) + t, whose vertex coefficients
+// (y_v = g(v)) move like the points and whose face coefficients (J n) stay.
+struct MovedModel {
+  Cage cage;
+  TriMesh mesh;
+  MatX3d y;
+};
+MovedModel moved_and_scaled(const Model& m, const MatX3d& y, double s, const Vec3& t) {
+  TriMesh cm;
+  cm.V = (m.cage.V * s).rowwise() + t.transpose();
+  cm.F = m.cage.F;
+  TriMesh mesh = m.mesh;
+  mesh.V = (m.mesh.V * s).rowwise() + t.transpose();
+  MatX3d ys = y;
+  const int nv = m.cage.num_vertices();
+  ys.topRows(nv) = (y.topRows(nv) * s).rowwise() + t.transpose();
+  return {Cage(cm), mesh, ys};
+}
+
 TEST(GlobalInjectivity, IdentityAndGentleBendOfSpotAreInjectiveAndNoImagePointIsCoveredTwice) {
   LIDEF_REQUIRE_SHARED();
   const Model m = load_model(test::shared_model("spot"));
@@ -112,35 +132,107 @@ TEST(GlobalInjectivity, OpenSurfaceIsNotDecided) {
   EXPECT_NE(g.reason.find("not a closed manifold"), std::string::npos) << g.reason;
 }
 
-TEST(GlobalInjectivity, RestMeshThatIntersectsItselfIsNotDecidedEvenForTheIdentity) {
+// A mesh whose vertex of largest x is moved to `tip` (inside the cage): its triangles form a cone into the
+// body.
+TriMesh with_largest_x_vertex_at(const TriMesh& mesh, const Vec3& tip) {
+  TriMesh out = mesh;
+  Eigen::Index v = 0;
+  out.V.col(0).maxCoeff(&v);
+  out.V.row(v) = tip.transpose();
+  return out;
+}
+
+// ∂D of a rest mesh that intersects itself, checked independently: beside the centroid of every boundary
+// piece (rounded to double), the exact winding number of the mesh itself (exact_winding.cpp, another code
+// path) is 0 on the side the piece faces and 1 behind it. Returns the number of pieces checked (some rays are
+// degenerate).
+int check_boundary_sides(const TriMesh& mesh, const RestSolidBoundary& b) {
+  std::vector<int> all(mesh.F.rows());
+  std::iota(all.begin(), all.end(), 0);
+  int checked = 0;
+  for (Eigen::Index i = 0; i < b.F.rows(); ++i) {
+    const Vec3 p0 = b.points.row(b.F(i, 0)), p1 = b.points.row(b.F(i, 1)), p2 = b.points.row(b.F(i, 2));
+    const Vec3 n = (p1 - p0).cross(p2 - p0);
+    const double shortest = std::min({(p1 - p0).norm(), (p2 - p1).norm(), (p0 - p2).norm()});
+    const Vec3 c = (p0 + p1 + p2) / 3.0, h = 1e-3 * shortest * n.normalized();
+    const auto out = exact_winding_number(mesh.V, mesh.F, all, c + h),
+               in = exact_winding_number(mesh.V, mesh.F, all, c - h);
+    if (!out || !in) continue;
+    EXPECT_EQ(*out, 0) << "boundary piece " << i;
+    EXPECT_EQ(*in, 1) << "boundary piece " << i;
+    ++checked;
+  }
+  return checked;
+}
+
+// A rest mesh that intersects itself is decided on D = closure{w ≥ 1} where ∂D, computed exactly, is one
+// closed manifold (Step G1): spot's vertex of largest x pushed through the body to beyond the smallest x (a
+// tunnel through the solid; the cone's tip pokes out of the far side, where w = -1). The identity is
+// injective, a shear too, and no image point is covered twice (dense winding numbers of the deformed
+// surface). The cone's tip placed exactly on a far triangle pinches ∂D at that point: not decided.
+TEST(GlobalInjectivity, RestMeshThatIntersectsItselfIsDecidedWhereTheBoundaryOfItsSolidIsOneManifold) {
   LIDEF_REQUIRE_SHARED();
   const Model m = load_model(test::shared_model("spot"));
-  // The shared spot mesh is embedded: its identity is decided.
   ASSERT_TRUE(find_self_intersections(m.mesh.V, m.mesh.F).empty());
-  const GlobalInjectivity id = check_global_injectivity(m.cage, m.mesh, m.cage.identity_coefficients());
+  const double x_max = m.mesh.V.col(0).maxCoeff(), x_min = m.mesh.V.col(0).minCoeff();
+  Eigen::Index vmin = 0;
+  m.mesh.V.col(0).minCoeff(&vmin);
+  const Vec3 far = m.mesh.V.row(vmin).transpose();
+  const TriMesh crossed = with_largest_x_vertex_at(m.mesh, far - Vec3(0.05 * (x_max - x_min), 0, 0));
+  const auto pairs = find_self_intersections(crossed.V, crossed.F);
+  ASSERT_FALSE(pairs.empty());
+  const RestSolidBoundary b = rest_solid_boundary(crossed.V, crossed.F, pairs);
+  ASSERT_EQ(b.problem, "");
+  EXPECT_GT(b.split_triangles, 0);
+  EXPECT_LT(b.F.rows(), b.pieces);  // the tip's pieces outside the body (w = -1 beyond them) are not in ∂D
+  EXPECT_GT(check_boundary_sides(crossed, b), 0.9 * b.F.rows());
+  const GlobalInjectivityChecker checker(m.cage, crossed);
+  const GlobalInjectivity id = checker.check(m.cage.identity_coefficients());
   EXPECT_EQ(id.verdict, Verdict::kInjective) << id.reason;
-  // The vertex of largest x pushed through the body to beyond the smallest x: its triangles cross the
-  // surface, while the mesh stays one closed manifold. The identity must not be reported as an overlap.
-  TriMesh crossed = m.mesh;
-  Eigen::Index v = 0;
-  const double x_max = crossed.V.col(0).maxCoeff(&v), x_min = crossed.V.col(0).minCoeff();
-  crossed.V(v, 0) = x_min - 0.05 * (x_max - x_min);
-  ASSERT_FALSE(find_self_intersections(crossed.V, crossed.F).empty());
-  const GlobalInjectivity g = check_global_injectivity(m.cage, crossed, m.cage.identity_coefficients());
-  EXPECT_EQ(g.verdict, Verdict::kNotDecided) << g.reason;
-  EXPECT_NE(g.reason.find("rest-state mesh intersects itself"), std::string::npos) << g.reason;
+  EXPECT_EQ(id.rest_intersecting_pairs, static_cast<long>(pairs.size()));
+  // A shear (the cone's triangles span the body: a bend leaves them unproven at the depth limit, null).
+  Mat3 A;
+  A << 1, 0.3, 0, 0, 1, 0, 0.2, 0, 1.1;
+  const MatX3d y = coefficients_of(
+      m.cage, [&](const Vec3& p) { return Vec3(A * p); }, [&](const Vec3&) { return A; });
+  const GlobalInjectivity g = checker.check(y);
+  EXPECT_EQ(g.verdict, Verdict::kInjective) << g.reason;
+  EXPECT_LT(max_image_winding(m.cage, crossed, y, 0.05, 0.02), 1.5);
+
+  // The tip on a corner of the far side: two sheets of ∂D meet only at that point.
+  const TriMesh touching = with_largest_x_vertex_at(m.mesh, far);
+  const auto touching_pairs = find_self_intersections(touching.V, touching.F);
+  ASSERT_FALSE(touching_pairs.empty());
+  const GlobalInjectivity t = check_global_injectivity(m.cage, touching, m.cage.identity_coefficients());
+  EXPECT_EQ(t.verdict, Verdict::kNotDecided) << t.reason;
+  EXPECT_NE(t.reason.find("rest-state mesh intersects itself"), std::string::npos) << t.reason;
+  EXPECT_NE(t.reason.find("the boundary of its solid is not decided"), std::string::npos) << t.reason;
 }
 
 // The shared bar mesh intersects itself (exact predicates: its triangle 14036 crosses four triangles of the
-// side y = -0.17, two of them sharing no vertex with it), so it is never proven injective — not even by the
-// identity (only a crossing between triangles disjoint at rest could decide it, as false).
-TEST(GlobalInjectivity, SharedBarMeshIntersectsItselfSoItsVerdictsAreNotDecided) {
+// side y = -0.17, two of them sharing no vertex with it: a thin fold of its surface). Its solid's boundary is
+// one closed manifold, so the identity and a bend are decided — wherever the model is moved or scaled.
+TEST(GlobalInjectivity, SharedBarMeshIntersectsItselfAndIsDecidedOnTheBoundaryOfItsSolid) {
   LIDEF_REQUIRE_SHARED();
   const Model m = load_model(test::shared_model("bar"));
-  EXPECT_FALSE(find_self_intersections(m.mesh.V, m.mesh.F).empty());
-  const GlobalInjectivity g = check_global_injectivity(m.cage, m.mesh, m.cage.identity_coefficients());
-  EXPECT_EQ(g.verdict, Verdict::kNotDecided) << g.reason;
-  EXPECT_NE(g.reason.find("rest-state mesh intersects itself"), std::string::npos) << g.reason;
+  const auto pairs = find_self_intersections(m.mesh.V, m.mesh.F);
+  ASSERT_EQ(pairs.size(), 4u);
+  const RestSolidBoundary b = rest_solid_boundary(m.mesh.V, m.mesh.F, pairs);
+  ASSERT_EQ(b.problem, "");
+  EXPECT_EQ(b.split_triangles, 5);
+  EXPECT_LT(b.F.rows(), b.pieces);  // the pieces inside the fold (w = 2 behind them) are not in ∂D
+  EXPECT_GT(check_boundary_sides(m.mesh, b), 0.9 * b.F.rows());
+  const MatX3d y = bend_coefficients(m.cage, 0.8);
+  EXPECT_LT(max_image_winding(m.cage, m.mesh, y, 0.03, 0.02), 1.5);
+  for (const double s : {1e-2, 1.0, 40.0}) {
+    const MovedModel mm = moved_and_scaled(m, y, s, s == 1.0 ? Vec3::Zero() : Vec3(-250.0, 3.5, 1e2));
+    const GlobalInjectivityChecker checker(mm.cage, mm.mesh);
+    const GlobalInjectivity id = checker.check(mm.cage.identity_coefficients());
+    EXPECT_EQ(id.verdict, Verdict::kInjective) << "scale " << s << ": " << id.reason;
+    EXPECT_EQ(id.rest_intersecting_pairs, 4);
+    const GlobalInjectivity g = checker.check(mm.y);
+    EXPECT_EQ(g.verdict, Verdict::kInjective) << "scale " << s << ": " << g.reason;
+  }
 }
 
 TEST(GlobalInjectivity, VerdictIsInvariantUnderTranslationAndScale) {
@@ -148,17 +240,8 @@ TEST(GlobalInjectivity, VerdictIsInvariantUnderTranslationAndScale) {
   const Model m = load_model(test::shared_model("spot"));
   const MatX3d y = bend_coefficients(m.cage, 0.8);
   for (const double s : {1e-3, 250.0}) {
-    const Vec3 t(1e3, -37.5, 4.25);
-    TriMesh cm;
-    cm.V = (m.cage.V * s).rowwise() + t.transpose();
-    cm.F = m.cage.F;
-    const Cage cage(cm);
-    TriMesh mesh = m.mesh;
-    mesh.V = (m.mesh.V * s).rowwise() + t.transpose();
-    MatX3d ys = y;
-    const int nv = m.cage.num_vertices();
-    ys.topRows(nv) = (y.topRows(nv) * s).rowwise() + t.transpose();  // y_v = g(v): moved like the points
-    const GlobalInjectivity g = check_global_injectivity(cage, mesh, ys);
+    const MovedModel mm = moved_and_scaled(m, y, s, Vec3(1e3, -37.5, 4.25));
+    const GlobalInjectivity g = check_global_injectivity(mm.cage, mm.mesh, mm.y);
     EXPECT_EQ(g.verdict, Verdict::kInjective) << "scale " << s << ": " << g.reason;
   }
 }
@@ -172,8 +255,8 @@ MatX3d fold_coefficients(const Cage& cage) {
 
 // The fold passes through itself (the winding numbers below) and the verdict says so — proven by a crossing
 // of two triangles disjoint at rest (no common vertex, not among the bar mesh's own intersecting pairs), at a
-// point on both deformed triangles — wherever the model is moved or scaled. The bar's rest mesh intersects
-// itself, so "true" is never claimed on it, but a crossing between triangles disjoint at rest is still proof.
+// point on both deformed triangles — wherever the model is moved or scaled. (The bar's rest mesh intersects
+// itself; a crossing is proven only between triangles disjoint at rest.)
 TEST(GlobalInjectivity, BarFoldedOntoItselfIsProvenToOverlapWhereverTheModelIsMovedOrScaled) {
   LIDEF_REQUIRE_SHARED();
   const Model m = load_model(test::shared_model("bar"));
@@ -182,16 +265,10 @@ TEST(GlobalInjectivity, BarFoldedOntoItselfIsProvenToOverlapWhereverTheModelIsMo
   const auto rest_pairs = find_self_intersections(m.mesh.V, m.mesh.F);
   const double diag = (m.cage.bbox_max - m.cage.bbox_min).norm();
   for (const double s : {1e-2, 1.0, 40.0}) {
-    const Vec3 t = s == 1.0 ? Vec3::Zero() : Vec3(-250.0, 3.5, 1e2);
-    TriMesh cm;
-    cm.V = (m.cage.V * s).rowwise() + t.transpose();
-    cm.F = m.cage.F;
-    const Cage cage(cm);
-    TriMesh mesh = m.mesh;
-    mesh.V = (m.mesh.V * s).rowwise() + t.transpose();
-    MatX3d ys = y;
-    const int nv = m.cage.num_vertices();
-    ys.topRows(nv) = (y.topRows(nv) * s).rowwise() + t.transpose();
+    const MovedModel mm = moved_and_scaled(m, y, s, s == 1.0 ? Vec3::Zero() : Vec3(-250.0, 3.5, 1e2));
+    const Cage& cage = mm.cage;
+    const TriMesh& mesh = mm.mesh;
+    const MatX3d& ys = mm.y;
     const GlobalInjectivity g = check_global_injectivity(cage, mesh, ys);
     ASSERT_EQ(g.verdict, Verdict::kOverlap) << "scale " << s << ": " << g.reason;
     const int a = g.overlap_face_a, b = g.overlap_face_b;
@@ -698,16 +775,20 @@ TEST(GlobalInjectivityMode, IsAParameterWithTwoNamesAndLocalByDefault) {
   EXPECT_THROW(set_param_from_text(d, "injectivity", "globl", "--injectivity"), InputError);
 }
 
-// Global mode never acts as local: where the verdict cannot be decided (a rest mesh that intersects itself,
-// the voxel grid as domain), the first step says why and changes nothing; local mode steps as before.
+// Global mode never acts as local: where the verdict cannot be decided (a rest mesh that intersects itself
+// where the boundary of its solid is not one manifold, the voxel grid as domain), the first step says why and
+// changes nothing; local mode steps as before.
 TEST(GlobalInjectivityMode, RefusesToStartWhereGlobalInjectivityCannotBeDecided) {
   const Model& m = test::beam().model;
-  // A vertex of the end x = max pulled through the beam to just beyond its other end (still inside the cage):
-  // its triangles cross the end face x = min, and the mesh stays one closed manifold.
-  TriMesh crossed = m.mesh;
-  Eigen::Index v = 0;
-  const double x_max = crossed.V.col(0).maxCoeff(&v), x_min = crossed.V.col(0).minCoeff();
-  crossed.V.row(v) = Vec3(x_min - 0.005 * (x_max - x_min), 0, 0).transpose();
+  // A vertex of the end x = max moved through the beam onto the vertex of its other end (x = min) nearest to
+  // its axis: its triangles meet the end face x = min at that point, where ∂D is pinched.
+  const double x_min = m.mesh.V.col(0).minCoeff();
+  Eigen::Index vmin = -1;
+  for (Eigen::Index v = 0; v < m.mesh.V.rows(); ++v)
+    if (m.mesh.V(v, 0) == x_min &&
+        (vmin < 0 || m.mesh.V.row(v).tail<2>().norm() < m.mesh.V.row(vmin).tail<2>().norm()))
+      vmin = v;
+  const TriMesh crossed = with_largest_x_vertex_at(m.mesh, m.mesh.V.row(vmin).transpose());
   ASSERT_FALSE(find_self_intersections(crossed.V, crossed.F).empty());
   DeformParams p;
   p.samples = 3000;
@@ -721,7 +802,7 @@ TEST(GlobalInjectivityMode, RefusesToStartWhereGlobalInjectivityCannotBeDecided)
     DomainKind domain;
     const char* reason;
   };
-  for (const Case& c : {Case{&crossed, DomainKind::kMesh, "the rest-state mesh intersects itself"},
+  for (const Case& c : {Case{&crossed, DomainKind::kMesh, "the boundary of its solid is not decided"},
                         Case{&m.mesh, DomainKind::kVoxels, "the voxel grid"}}) {
     p.domain = c.domain;
     p.injectivity = InjectivityMode::kGlobal;

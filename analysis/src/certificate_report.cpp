@@ -322,11 +322,10 @@ std::string certificate_json(const CertificateReport& r) {
           ? ojson{{"point", {num(g.overlap_point.x()), num(g.overlap_point.y()), num(g.overlap_point.z())}},
                   {"faces", {g.overlap_face_a, g.overlap_face_b}}}
           : ojson();
-  j["global_check"] = {{"candidate_pairs", g.candidate_pairs},
-                       {"pair_tests", g.pair_tests},
-                       {"replayed_pairs", g.replayed_pairs},
-                       {"max_depth_used", g.max_depth_used},
-                       {"max_tube_radius", num(g.max_tube_radius)}};
+  j["global_check"] = {
+      {"candidate_pairs", g.candidate_pairs},      {"pair_tests", g.pair_tests},
+      {"replayed_pairs", g.replayed_pairs},        {"max_depth_used", g.max_depth_used},
+      {"max_tube_radius", num(g.max_tube_radius)}, {"rest_intersecting_pairs", g.rest_intersecting_pairs}};
   j["model"] = r.model;
   j["coefficients"] = r.coefficients;
   j["cage"] = {{"vertices", r.cage_vertices},

@@ -28,6 +28,7 @@
 #include "lidef/internal/edge_jet.h"
 #include "lidef/internal/float_rows.h"
 #include "lidef/internal/mesh_queries.h"
+#include "lidef/internal/rest_solid.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/lipschitz_bound.h"
 #include "lidef/number_format.h"
@@ -169,6 +170,14 @@ const char* to_json_literal(GlobalInjectivity::Verdict v) {
   }
 }
 
+std::string no_overlap_words(const GlobalInjectivity& g) {
+  std::string words = "the shape does not pass through itself";
+  if (g.rest_intersecting_pairs > 0)
+    words += "; the rest mesh's own intersections (" + std::to_string(g.rest_intersecting_pairs) +
+             " pairs of triangles) are mapped one-to-one";
+  return words;
+}
+
 GlobalInjectivity global_injectivity_not_decided(const std::string& reason) {
   GlobalInjectivity g;
   g.reason = reason;
@@ -240,18 +249,14 @@ struct GlobalInjectivityChecker::Impl {
     cage_diameter = (cage.bbox_max - cage.bbox_min).norm();
     if (mesh.V.rows() > 0) corner_unit = kCornerRel * mesh.V.cwiseAbs().maxCoeff() * (1 + 1e-9);
     reach = 2 * (kDepthCap * corner_unit);
-    vertex_faces.resize(mesh.V.rows());
-    for (int f = 0; f < mesh.F.rows(); ++f)
-      for (int k = 0; k < 3; ++k) vertex_faces[mesh.F(f, k)].push_back(f);
+    vertex_faces = faces_around_vertices(mesh.F, static_cast<int>(mesh.V.rows()));
     structure_problem = check_structure();
     group_edges();
     // Exact predicates on the model's own coordinates (normalizing them would round).
     if (structure_problem.empty()) {
       rest_intersections = find_self_intersections(m.V, m.F);
       if (!rest_intersections.empty())
-        rest_problem = "the rest-state mesh intersects itself (" + std::to_string(rest_intersections.size()) +
-                       " pairs of triangles, the first " + std::to_string(rest_intersections[0].first) +
-                       " and " + std::to_string(rest_intersections[0].second) + ")";
+        rest_problem = check_rest_solid(m.V);
       else if (component_faces.size() > 1)
         rest_nesting_problem = check_rest_nesting(m.V);
       cache_map_independent_parts(cache_bytes);
@@ -263,6 +268,33 @@ struct GlobalInjectivityChecker::Impl {
   // rest: they share no vertex and are not among these pairs (sorted, i < j), so x ≠ y with f(x) = f(y).
   std::vector<std::pair<int, int>> rest_intersections;
   std::string rest_problem;
+  int rest_split_triangles = 0;  // mesh triangles split along the rest intersection curves (∂D computed)
+
+  // A rest mesh that intersects itself (Step G1): "true" is still proven on D = closure{w ≥ 1} when ∂D,
+  // computed exactly, is one closed connected manifold — the pair stage then proves f injective on the whole
+  // mesh, ∂D included. Returns "" or why not.
+  std::string check_rest_solid(const MatX3d& V) {
+    std::string why;
+    if (component_faces.size() > 1) {
+      why = "the mesh has " + std::to_string(component_faces.size()) + " surface components";
+    } else {
+      const RestSolidBoundary b = rest_solid_boundary(V, mesh.F, rest_intersections);
+      why = b.problem;
+      if (why.empty()) {
+        const auto around = faces_around_vertices(b.F, b.num_points);
+        if (std::string problem = closed_manifold_problem(b.F, around); !problem.empty())
+          why = "its pieces do not form a manifold: " + problem + " (numbered among the pieces' corners)";
+        else if (const auto comps = face_components(b.F, around); comps.size() != 1)
+          why = "it has " + std::to_string(comps.size()) + " components";
+      }
+      if (why.empty()) rest_split_triangles = b.split_triangles;
+    }
+    if (why.empty()) return "";
+    return "the rest-state mesh intersects itself (" + std::to_string(rest_intersections.size()) +
+           " pairs of triangles, the first " + std::to_string(rest_intersections[0].first) + " and " +
+           std::to_string(rest_intersections[0].second) +
+           ") and the boundary of its solid is not decided: " + why;
+  }
   bool intersect_at_rest(int a, int b) const {
     const std::pair<int, int> key{std::min(a, b), std::max(a, b)};
     return std::binary_search(rest_intersections.begin(), rest_intersections.end(), key);
@@ -274,83 +306,13 @@ struct GlobalInjectivityChecker::Impl {
     return out;
   }
 
-  // Jordan–Brouwer needs a manifold: the triangles around every vertex must form one fan (joined through the
-  // edges at the vertex). Two sheets meeting only at a vertex are not one: two spheres touching at a point
-  // may be nested, winding number 2 inside the inner one, without any two triangles' images crossing (Step
-  // G1). Called after the edges are known to be manifold. Returns "" or why the argument does not apply.
-  std::string find_pinched_vertex() const {
-    std::vector<std::pair<int, int>> around;  // (other vertex of an edge at v, face)
-    std::vector<int> parent;
-    for (size_t v = 0; v < vertex_faces.size(); ++v) {
-      const std::vector<int>& faces = vertex_faces[v];
-      if (faces.size() < 2) continue;
-      around.clear();
-      for (size_t k = 0; k < faces.size(); ++k)
-        for (int c = 0; c < 3; ++c)
-          if (const int u = mesh.F(faces[k], c); u != static_cast<int>(v))
-            around.push_back({u, static_cast<int>(k)});
-      std::sort(around.begin(), around.end());
-      parent.resize(faces.size());
-      std::iota(parent.begin(), parent.end(), 0);
-      auto find = [&](int x) {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-      };
-      for (size_t i = 1; i < around.size(); ++i)  // faces sharing the edge (v, u) are neighbours in the fan
-        if (around[i].first == around[i - 1].first)
-          parent[find(around[i].second)] = find(around[i - 1].second);
-      int fans = 0;
-      for (size_t k = 0; k < faces.size(); ++k) fans += find(static_cast<int>(k)) == static_cast<int>(k);
-      if (fans > 1)
-        return "the mesh surface is pinched at vertex " + std::to_string(v) + " (its triangles there form " +
-               std::to_string(fans) + " fans that share only the vertex: not a manifold)";
-    }
-    return "";
-  }
-
   // The degree argument needs ∂D to be closed surfaces: every undirected edge used once in each direction,
-  // and every vertex one fan; several components go to the nesting stage (Step G5).
+  // and every vertex one fan (Jordan–Brouwer needs a manifold, Step G1); several components go to the
+  // nesting stage (Step G5).
   std::string check_structure() {
     const long nf = mesh.F.rows();
-    if (nf == 0) return "the mesh has no triangles";
-    std::vector<std::array<int, 3>> half;  // (min, max, +1/-1)
-    half.reserve(3 * nf);
-    for (long f = 0; f < nf; ++f)
-      for (int k = 0; k < 3; ++k) {
-        const int a = mesh.F(f, k), b = mesh.F(f, (k + 1) % 3);
-        half.push_back({std::min(a, b), std::max(a, b), a < b ? 1 : -1});
-      }
-    std::sort(half.begin(), half.end());
-    for (size_t i = 0; i < half.size();) {
-      size_t j = i;
-      while (j < half.size() && half[j][0] == half[i][0] && half[j][1] == half[i][1]) ++j;
-      if (j - i != 2 || half[i][2] == half[i + 1][2])
-        return "the mesh surface is not a closed manifold (edge " + std::to_string(half[i][0]) + "-" +
-               std::to_string(half[i][1]) + " is used by " + std::to_string(j - i) +
-               " triangles or twice in one direction)";
-      i = j;
-    }
-    if (std::string pinched = find_pinched_vertex(); !pinched.empty()) return pinched;
-    // Connected components of faces through shared vertices (union-find; with every vertex a single fan these
-    // are the components through shared edges).
-    std::vector<long> parent(nf);
-    std::iota(parent.begin(), parent.end(), 0L);
-    auto find = [&](long x) {
-      while (parent[x] != x) x = parent[x] = parent[parent[x]];
-      return x;
-    };
-    for (const auto& faces : vertex_faces)
-      for (size_t k = 1; k < faces.size(); ++k) parent[find(faces[k])] = find(faces[0]);
-    std::vector<int> label(nf, -1);
-    component_faces.clear();
-    for (long f = 0; f < nf; ++f) {
-      const long r = find(f);
-      if (label[r] < 0) {
-        label[r] = static_cast<int>(component_faces.size());
-        component_faces.emplace_back();
-      }
-      component_faces[label[r]].push_back(static_cast<int>(f));
-    }
+    if (std::string problem = closed_manifold_problem(mesh.F, vertex_faces); !problem.empty()) return problem;
+    component_faces = face_components(mesh.F, vertex_faces);
     // The nesting stage costs (#components) × #F triangle tests.
     const double nesting_work = static_cast<double>(component_faces.size()) * static_cast<double>(nf);
     if (component_faces.size() > 1 && nesting_work > kMaxNestingWork)
@@ -1566,7 +1528,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
                      std::to_string(pairs[k].first) + " and " + std::to_string(pairs[k].second) + ")";
         return out;
       }
-    if (!im.rest_problem.empty()) {  // no crossing proven, and "true" needs an embedded rest surface
+    if (!im.rest_problem.empty()) {  // no crossing proven, and "true" needs ∂D to be one closed manifold
       out.verdict = GlobalInjectivity::Verdict::kNotDecided;
       out.reason = im.rest_problem;
       return out;
@@ -1675,6 +1637,7 @@ GlobalInjectivity GlobalInjectivityChecker::check(const MatX3d& y_model,
   const auto t_start = Clock::now();
   const Impl& im = *impl_;
   auto finish = [&](GlobalInjectivity g) {
+    g.rest_intersecting_pairs = static_cast<long>(im.rest_intersections.size());
     g.ms = ms_since(t_start);
     return g;
   };

@@ -1,9 +1,11 @@
 #include "lidef/internal/mesh_queries.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <string>
 #include <utility>
 
 #include "lidef/geometry.h"
@@ -174,6 +176,95 @@ double WindingNumber::at(const Vec3& p) const {
     if (x > p(0)) w += area2 > 0 ? 1 : -1;                      // n_x > 0: the +x ray leaves the inside here
   }
   return w;
+}
+
+std::vector<std::vector<int>> faces_around_vertices(const MatX3i& F, int num_vertices) {
+  std::vector<std::vector<int>> out(std::max(num_vertices, 0));
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) out[F(f, k)].push_back(f);
+  return out;
+}
+
+namespace {
+
+// Union-find with path halving over 0..n-1.
+struct DisjointSets {
+  explicit DisjointSets(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
+  int find(int x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  }
+  void join(int a, int b) { parent[find(a)] = find(b); }
+  std::vector<int> parent;
+};
+
+// "" or the first vertex whose triangles form more than one fan (joined through the edges at the vertex).
+// Called once every edge is known to be used by exactly two triangles.
+std::string pinched_vertex_problem(const MatX3i& F, const std::vector<std::vector<int>>& vertex_faces) {
+  std::vector<std::pair<int, int>> around;  // (other vertex of an edge at v, face)
+  for (size_t v = 0; v < vertex_faces.size(); ++v) {
+    const std::vector<int>& faces = vertex_faces[v];
+    if (faces.size() < 2) continue;
+    around.clear();
+    for (size_t k = 0; k < faces.size(); ++k)
+      for (int c = 0; c < 3; ++c)
+        if (const int u = F(faces[k], c); u != static_cast<int>(v))
+          around.push_back({u, static_cast<int>(k)});
+    std::sort(around.begin(), around.end());
+    DisjointSets fans(faces.size());
+    for (size_t i = 1; i < around.size(); ++i)  // faces sharing the edge (v, u) are neighbours in the fan
+      if (around[i].first == around[i - 1].first) fans.join(around[i].second, around[i - 1].second);
+    int count = 0;
+    for (size_t k = 0; k < faces.size(); ++k) count += fans.find(static_cast<int>(k)) == static_cast<int>(k);
+    if (count > 1)
+      return "the mesh surface is pinched at vertex " + std::to_string(v) + " (its triangles there form " +
+             std::to_string(count) + " fans that share only the vertex: not a manifold)";
+  }
+  return "";
+}
+
+}  // namespace
+
+std::string closed_manifold_problem(const MatX3i& F, const std::vector<std::vector<int>>& vertex_faces) {
+  const long nf = F.rows();
+  if (nf == 0) return "the mesh has no triangles";
+  std::vector<std::array<int, 3>> half;  // (min, max, +1/-1)
+  half.reserve(3 * nf);
+  for (long f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = F(f, k), b = F(f, (k + 1) % 3);
+      half.push_back({std::min(a, b), std::max(a, b), a < b ? 1 : -1});
+    }
+  std::sort(half.begin(), half.end());
+  for (size_t i = 0; i < half.size();) {
+    size_t j = i;
+    while (j < half.size() && half[j][0] == half[i][0] && half[j][1] == half[i][1]) ++j;
+    if (j - i != 2 || half[i][2] == half[i + 1][2])
+      return "the mesh surface is not a closed manifold (edge " + std::to_string(half[i][0]) + "-" +
+             std::to_string(half[i][1]) + " is used by " + std::to_string(j - i) +
+             " triangles or twice in one direction)";
+    i = j;
+  }
+  return pinched_vertex_problem(F, vertex_faces);
+}
+
+std::vector<std::vector<int>> face_components(const MatX3i& F,
+                                              const std::vector<std::vector<int>>& vertex_faces) {
+  const auto nf = static_cast<size_t>(F.rows());
+  DisjointSets sets(nf);
+  for (const auto& faces : vertex_faces)
+    for (size_t k = 1; k < faces.size(); ++k) sets.join(faces[k], faces[0]);
+  std::vector<int> label(nf, -1);
+  std::vector<std::vector<int>> out;
+  for (size_t f = 0; f < nf; ++f) {
+    const int r = sets.find(static_cast<int>(f));
+    if (label[r] < 0) {
+      label[r] = static_cast<int>(out.size());
+      out.emplace_back();
+    }
+    out[label[r]].push_back(static_cast<int>(f));
+  }
+  return out;
 }
 
 }  // namespace lidef

@@ -1645,9 +1645,8 @@ void StudioWindow::update_badge(const SessionFrame& f, const std::string& name) 
   } else if (f.global->verdict == GlobalInjectivity::Verdict::kInjective) {
     text = "CERTIFIED injective";
     tip = "the local certificate of " + about +
-          " holds and the map is globally injective on the mesh's "
-          "solid (checked in " +
-          format_g(f.global->ms / 1000, 2) + " s)";
+          " holds and the map is globally injective on the mesh's solid: " + no_overlap_words(*f.global) +
+          " (checked in " + format_g(f.global->ms / 1000, 2) + " s)";
     style = green;
   } else if (f.global->verdict == GlobalInjectivity::Verdict::kOverlap) {
     text = "locally injective — overlaps itself";

@@ -52,11 +52,18 @@ struct GlobalInjectivity {
   long replayed_pairs = 0;   // pairs cleared by the margins of the last map proven injective (Step G6)
   int max_depth_used = 0;
   double max_tube_radius = 0;  // over the unsplit surface triangles
-  double ms = 0;               // wall-clock time of the check (not part of any deterministic report)
+  // Pairs of mesh triangles that intersect at rest. Where there are any, D = closure{w ≥ 1} and "true" needs
+  // its boundary, computed exactly, to be one closed manifold (docs/certificate.md, Step G1).
+  long rest_intersecting_pairs = 0;
+  double ms = 0;  // wall-clock time of the check (not part of any deterministic report)
 };
 
 // "true" / "false" / "null", as the reports write the verdict.
 const char* to_json_literal(GlobalInjectivity::Verdict v);
+
+// What a proven verdict (kInjective) says to a user: "the shape does not pass through itself", and where the
+// rest mesh already intersects itself, that its own intersections are mapped one-to-one.
+std::string no_overlap_words(const GlobalInjectivity& g);
 
 // A verdict left open for a stated reason (the local certificate failed, the domain is not the mesh's solid).
 GlobalInjectivity global_injectivity_not_decided(const std::string& reason);

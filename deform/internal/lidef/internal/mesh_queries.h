@@ -3,6 +3,7 @@
 // test, and the inside test (generalized winding number ≥ ½). docs/sampling-and-subspace.md explains them.
 #pragma once
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "lidef/types.h"
@@ -57,5 +58,18 @@ class WindingNumber {
   int dims_[2] = {1, 1};
   std::vector<int> start_, tris_;
 };
+
+// The structure of a triangle surface (F: #F by 3, indices into num_vertices vertices), as the degree
+// argument of the global injectivity check needs it (docs/certificate.md, Step G1). The triangles around each
+// vertex.
+std::vector<std::vector<int>> faces_around_vertices(const MatX3i& F, int num_vertices);
+// Why F is not a union of closed, consistently oriented 2-manifolds ("" when it is): an undirected edge not
+// used exactly once in each direction, or a vertex whose triangles form several fans joined only by the
+// vertex (two spheres touching at a point may be nested without any two triangles' images crossing).
+std::string closed_manifold_problem(const MatX3i& F, const std::vector<std::vector<int>>& vertex_faces);
+// The connected components of the faces through shared vertices, each listed in increasing face order and
+// numbered in the order of their first face.
+std::vector<std::vector<int>> face_components(const MatX3i& F,
+                                              const std::vector<std::vector<int>>& vertex_faces);
 
 }  // namespace lidef
