@@ -263,12 +263,12 @@ struct GlobalInjectivityChecker::Impl {
     }
   }
 
-  // The degree argument (true) needs an embedded rest surface; where the rest mesh's triangles already
-  // intersect, nothing is proven true. A crossing (false) still is, between triangles that are disjoint at
-  // rest: they share no vertex and are not among these pairs (sorted, i < j), so x ≠ y with f(x) = f(y).
+  // The degree argument (true) needs ∂D to be an embedded surface; where the rest mesh's triangles already
+  // intersect, ∂D is computed (check_rest_solid), and rest_problem says why it could not be. A crossing
+  // (false) is only proven between triangles that are disjoint at rest: they share no vertex and are not
+  // among these pairs (sorted, i < j), so x ≠ y with f(x) = f(y).
   std::vector<std::pair<int, int>> rest_intersections;
   std::string rest_problem;
-  int rest_split_triangles = 0;  // mesh triangles split along the rest intersection curves (∂D computed)
 
   // A rest mesh that intersects itself (Step G1): "true" is still proven on D = closure{w ≥ 1} when ∂D,
   // computed exactly, is one closed connected manifold — the pair stage then proves f injective on the whole
@@ -287,7 +287,6 @@ struct GlobalInjectivityChecker::Impl {
         else if (const auto comps = face_components(b.F, around); comps.size() != 1)
           why = "it has " + std::to_string(comps.size()) + " components";
       }
-      if (why.empty()) rest_split_triangles = b.split_triangles;
     }
     if (why.empty()) return "";
     return "the rest-state mesh intersects itself (" + std::to_string(rest_intersections.size()) +
