@@ -13,6 +13,7 @@
 #include <map>
 #include <numeric>
 
+#include "lidef/internal/exact_crossing.h"
 #include "lidef/internal/rest_solid.h"
 
 namespace lidef {
@@ -126,64 +127,40 @@ bool contains_coplanar(const EPoint& a, const EPoint& b, const EPoint& c, const 
          CGAL::coplanar_orientation(c, a, b, q) != CGAL::NEGATIVE;
 }
 
-enum class Ray { kCounted, kDegenerate, kOnAnotherTriangle };
-
-// The winding number of the mesh (P0, F) at points just beside p on the side `d` points to, p on triangle
-// `own` only: the signed crossings of the segment from p to q (beyond every triangle) with the other
-// triangles, each +1 when it leaves through a triangle's counter-clockwise side (exact_winding.cpp's rule).
-Ray count_crossings(const std::vector<EPoint>& P0, const MatX3i& F, int own, const EPoint& p, const EPoint& q,
-                    int* w) {
-  *w = 0;
-  for (int t = 0; t < F.rows(); ++t) {
-    if (t == own) continue;
-    const EPoint &a = P0[F(t, 0)], &b = P0[F(t, 1)], &c = P0[F(t, 2)];
-    if (CGAL::collinear(a, b, c)) continue;  // no area: no crossing changes the winding number
-    const CGAL::Orientation op = CGAL::orientation(a, b, c, p), oq = CGAL::orientation(a, b, c, q);
-    if (op == CGAL::ZERO) {
-      if (contains_coplanar(a, b, c, p)) return Ray::kOnAnotherTriangle;
-      if (oq == CGAL::ZERO) return Ray::kDegenerate;  // the segment lies in the plane
-      continue;                                       // it touches the plane only at p, outside the triangle
-    }
-    if (op == oq) continue;
-    if (oq == CGAL::ZERO) return Ray::kDegenerate;
-    const CGAL::Orientation s[3] = {CGAL::orientation(p, q, a, b), CGAL::orientation(p, q, b, c),
-                                    CGAL::orientation(p, q, c, a)};
-    const bool has_pos = s[0] == CGAL::POSITIVE || s[1] == CGAL::POSITIVE || s[2] == CGAL::POSITIVE;
-    const bool has_neg = s[0] == CGAL::NEGATIVE || s[1] == CGAL::NEGATIVE || s[2] == CGAL::NEGATIVE;
-    if (has_pos && has_neg) continue;
-    if (s[0] == CGAL::ZERO || s[1] == CGAL::ZERO || s[2] == CGAL::ZERO) return Ray::kDegenerate;
-    *w += op == CGAL::NEGATIVE ? 1 : -1;
-  }
-  return Ray::kCounted;
-}
-
-// A piece of the split mesh: its mesh triangle and its corners (indices into the distinct exact points).
+// A piece of the split mesh: its mesh triangle and its corners (indices into SplitMesh::points).
 struct Piece {
   int parent;
   std::array<int, 3> corner;
 };
 
-}  // namespace
+// The mesh split along its intersection curves: its pieces, their distinct exact corners, and the pieces of
+// each mesh triangle.
+struct SplitMesh {
+  std::vector<EPoint> points;
+  std::map<EPoint, int, bool (*)(const EPoint&, const EPoint&)> index_of{
+      [](const EPoint& a, const EPoint& b) { return CGAL::compare_xyz(a, b) == CGAL::SMALLER; }};
+  std::vector<Piece> pieces;
+  std::vector<std::vector<int>> pieces_of;
+  int point_index(const EPoint& p) {
+    const auto [it, fresh] = index_of.emplace(p, static_cast<int>(points.size()));
+    if (fresh) points.push_back(p);
+    return it->second;
+  }
+};
 
-RestSolidBoundary rest_solid_boundary(const MatX3d& V, const MatX3i& F,
-                                      const std::vector<std::pair<int, int>>& intersecting) {
-  RestSolidBoundary out;
+// Stage 1: CGAL's autorefinement (exact constructions) of the mesh (P0 #V points, F #F by 3), each new face
+// traced back to its mesh triangle. Returns "" or why it failed.
+std::string split_along_intersections(const std::vector<EPoint>& P0, const MatX3i& F, SplitMesh* s) {
   const int nf = static_cast<int>(F.rows());
-  std::vector<EPoint> P0(V.rows());
-  for (Eigen::Index v = 0; v < V.rows(); ++v) P0[v] = EPoint(V(v, 0), V(v, 1), V(v, 2));
-
-  // 1. Split the mesh along its intersection curves (CGAL's autorefinement, exact constructions).
   EMesh m;
-  std::vector<EMesh::Vertex_index> vi(V.rows());
-  for (Eigen::Index v = 0; v < V.rows(); ++v) vi[v] = m.add_vertex(P0[v]);
+  std::vector<EMesh::Vertex_index> vi(P0.size());
+  for (size_t v = 0; v < P0.size(); ++v) vi[v] = m.add_vertex(P0[v]);
   auto parent = m.add_property_map<EMesh::Face_index, int>("f:lidef_parent", -1).first;
   for (int f = 0; f < nf; ++f) {
     const EMesh::Face_index fi = m.add_face(vi[F(f, 0)], vi[F(f, 1)], vi[F(f, 2)]);
-    if (fi == EMesh::null_face()) {
-      out.problem = "the mesh could not be split along its intersections (triangle " + std::to_string(f) +
-                    " does not fit a halfedge structure)";
-      return out;
-    }
+    if (fi == EMesh::null_face())
+      return "the mesh could not be split along its intersections (triangle " + std::to_string(f) +
+             " does not fit a halfedge structure)";
     parent[fi] = f;
   }
   try {
@@ -191,199 +168,206 @@ RestSolidBoundary rest_solid_boundary(const MatX3d& V, const MatX3i& F,
     tracker.parent = &parent;
     CGAL::Polygon_mesh_processing::experimental::autorefine(m, CGAL::parameters::visitor(tracker));
   } catch (const std::exception& e) {
-    out.problem = std::string("the mesh could not be split along its intersections (") + e.what() + ")";
-    return out;
+    return std::string("the mesh could not be split along its intersections (") + e.what() + ")";
   }
-
-  // 2. The pieces, their corners identified by exact coordinates.
-  std::map<EPoint, int, bool (*)(const EPoint&, const EPoint&)> index_of(
-      [](const EPoint& a, const EPoint& b) { return CGAL::compare_xyz(a, b) == CGAL::SMALLER; });
-  std::vector<EPoint> points;
-  auto point_index = [&](const EPoint& p) {
-    const auto [it, fresh] = index_of.emplace(p, static_cast<int>(points.size()));
-    if (fresh) points.push_back(p);
-    return it->second;
-  };
-  std::vector<Piece> pieces;
-  std::vector<std::vector<int>> pieces_of(nf);
+  s->pieces_of.assign(nf, {});
   for (EMesh::Face_index f : m.faces()) {
     Piece pc{parent[f], {}};
-    if (pc.parent < 0 || pc.parent >= nf) {
-      out.problem = "the split left a piece without its mesh triangle";
-      return out;
-    }
+    if (pc.parent < 0 || pc.parent >= nf) return "the split left a piece without its mesh triangle";
     int k = 0;
     for (EMesh::Vertex_index v : CGAL::vertices_around_face(m.halfedge(f), m)) {
-      if (k == 3) break;
-      pc.corner[k++] = point_index(m.point(v));
+      if (k == 3) return "the split left a piece that is not a triangle";
+      pc.corner[k++] = s->point_index(m.point(v));
     }
-    if (k != 3) {
-      out.problem = "the split left a piece that is not a triangle";
-      return out;
-    }
-    pieces_of[pc.parent].push_back(static_cast<int>(pieces.size()));
-    pieces.push_back(pc);
+    if (k != 3) return "the split left a piece that is not a triangle";
+    s->pieces_of[pc.parent].push_back(static_cast<int>(s->pieces.size()));
+    s->pieces.push_back(pc);
   }
+  return "";
+}
 
-  // 3. Verify the split: a mesh triangle left whole is its own piece; the pieces of a split one lie in it,
-  // face its way (positive area along its normal) and their vector areas sum to its own — non-overlapping
-  // (step 4), they cover it.
-  std::vector<char> special(pieces.size(), 0);  // pieces whose neighbourhood the mesh alone does not describe
-  for (const auto& [a, b] : intersecting) {
-    for (int t : {a, b})
-      for (int k : pieces_of[t]) special[k] = 1;
-  }
+// Stage 2: the split verified on its own. A mesh triangle left whole is its only piece (the same corners in
+// the same cyclic order); the pieces of a split one lie in it, face its way (positive area along its normal),
+// and their vector areas sum to its own, so that — not overlapping (stage 3) — they cover it. Marks as
+// special the pieces of split triangles and of triangles in intersecting pairs, counts the split triangles.
+std::string verify_split(const std::vector<EPoint>& P0, const MatX3i& F, SplitMesh* s,
+                         std::vector<char>* special, int* split_triangles) {
+  const int nf = static_cast<int>(F.rows());
   for (int t = 0; t < nf; ++t) {
     const EPoint &A = P0[F(t, 0)], &B = P0[F(t, 1)], &C = P0[F(t, 2)];
-    const std::vector<int>& own = pieces_of[t];
-    if (own.empty()) {
-      out.problem = "the split lost mesh triangle " + std::to_string(t);
-      return out;
-    }
+    const std::vector<int>& own = s->pieces_of[t];
+    if (own.empty()) return "the split lost mesh triangle " + std::to_string(t);
     if (own.size() == 1) {
-      const Piece& pc = pieces[own[0]];
-      const std::array<int, 3> whole{point_index(A), point_index(B), point_index(C)};
-      bool same = false;  // the same corners in the same cyclic order
+      const Piece& pc = s->pieces[own[0]];
+      const std::array<int, 3> whole{s->point_index(A), s->point_index(B), s->point_index(C)};
+      bool same = false;
       for (int r = 0; r < 3; ++r)
         same = same || (pc.corner[0] == whole[r] && pc.corner[1] == whole[(r + 1) % 3] &&
                         pc.corner[2] == whole[(r + 2) % 3]);
-      if (!same) {
-        out.problem = "the split changed mesh triangle " + std::to_string(t) + " without cutting it";
-        return out;
-      }
+      if (!same) return "the split changed mesh triangle " + std::to_string(t) + " without cutting it";
       continue;
     }
-    ++out.split_triangles;
+    ++*split_triangles;
     const EVector normal = CGAL::cross_product(B - A, C - A);
     EVector sum = CGAL::NULL_VECTOR;
     for (int k : own) {
-      special[k] = 1;
-      const Piece& pc = pieces[k];
-      const EPoint &a = points[pc.corner[0]], &b = points[pc.corner[1]], &c = points[pc.corner[2]];
+      (*special)[k] = 1;
+      const Piece& pc = s->pieces[k];
+      const EPoint &a = s->points[pc.corner[0]], &b = s->points[pc.corner[1]], &c = s->points[pc.corner[2]];
       for (const EPoint* q : {&a, &b, &c})
-        if (CGAL::orientation(A, B, C, *q) != CGAL::COPLANAR || !contains_coplanar(A, B, C, *q)) {
-          out.problem = "a piece of mesh triangle " + std::to_string(t) + " does not lie in it";
-          return out;
-        }
+        if (CGAL::orientation(A, B, C, *q) != CGAL::COPLANAR || !contains_coplanar(A, B, C, *q))
+          return "a piece of mesh triangle " + std::to_string(t) + " does not lie in it";
       const EVector area = CGAL::cross_product(b - a, c - a);
-      if (!CGAL::is_positive(area * normal)) {
-        out.problem = "a piece of mesh triangle " + std::to_string(t) + " is flat or turned over";
-        return out;
-      }
+      if (!CGAL::is_positive(area * normal))
+        return "a piece of mesh triangle " + std::to_string(t) + " is flat or turned over";
       sum = sum + area;
     }
-    if (sum != normal) {
-      out.problem = "the pieces of mesh triangle " + std::to_string(t) + " do not cover it";
-      return out;
-    }
+    if (sum != normal) return "the pieces of mesh triangle " + std::to_string(t) + " do not cover it";
   }
+  return "";
+}
 
-  // 4. The pieces near the intersections meet only in common corners and edges (the same exact test as for
-  // the mesh; the other pieces are whole mesh triangles, which meet every triangle properly, so every piece
-  // of one they do not intersect at rest — up to a corner of a split triangle on an edge, which leaves that
-  // edge used an odd number of times in ∂D's structure check).
+// Stage 3: the special pieces meet only in common corners and edges (the exact test of
+// find_self_intersections on them). Every other piece is a whole mesh triangle in no intersecting pair: it
+// meets every triangle properly, hence every piece of one, except where a new corner of a split triangle lies
+// on their common edge — which leaves that edge used an odd number of times in ∂D's structure test.
+std::string check_special_pieces_meet_properly(const SplitMesh& s, const std::vector<char>& special) {
   std::vector<int> near;
-  for (size_t k = 0; k < pieces.size(); ++k)
+  for (size_t k = 0; k < s.pieces.size(); ++k)
     if (special[k]) near.push_back(static_cast<int>(k));
   MatX3i FN(near.size(), 3);
   for (size_t i = 0; i < near.size(); ++i)
-    for (int c = 0; c < 3; ++c) FN(i, c) = pieces[near[i]].corner[c];
-  if (const auto bad = intersecting_pairs(FN, points); !bad.empty()) {
-    out.problem = "the pieces of mesh triangles " + std::to_string(pieces[near[bad[0].first]].parent) +
-                  " and " + std::to_string(pieces[near[bad[0].second]].parent) +
-                  " still intersect after the split";
-    return out;
-  }
+    for (int c = 0; c < 3; ++c) FN(i, c) = s.pieces[near[i]].corner[c];
+  const auto bad = intersecting_pairs(FN, s.points);
+  if (bad.empty()) return "";
+  return "the pieces of mesh triangles " + std::to_string(s.pieces[near[bad[0].first]].parent) + " and " +
+         std::to_string(s.pieces[near[bad[0].second]].parent) + " still intersect after the split";
+}
 
-  // 5. The winding number on the outer (counter-clockwise) side of every piece, counted exactly from its
-  // centroid. Whole triangles joined by a mesh edge that no other triangle meets have the same cell of the
-  // complement on that side: one count per patch of such triangles.
-  std::vector<int> patch(pieces.size());
+enum class Ray { kCounted, kDegenerate, kOnAnotherTriangle };
+
+// The winding number of the mesh (P0, F) just beside p, a point of triangle `own` only, on the side of q: the
+// signed crossings of the segment [p, q] (q beyond every triangle) with the other triangles.
+Ray count_crossings(const std::vector<EPoint>& P0, const MatX3i& F, int own, const EPoint& p, const EPoint& q,
+                    int* w) {
+  *w = 0;
+  for (int t = 0; t < F.rows(); ++t) {
+    if (t == own) continue;
+    const EPoint &a = P0[F(t, 0)], &b = P0[F(t, 1)], &c = P0[F(t, 2)];
+    if (CGAL::collinear(a, b, c)) continue;  // no area: no crossing changes the winding number
+    if (CGAL::orientation(a, b, c, p) == CGAL::ZERO) {
+      if (contains_coplanar(a, b, c, p)) return Ray::kOnAnotherTriangle;
+      if (CGAL::orientation(a, b, c, q) == CGAL::ZERO) return Ray::kDegenerate;  // the segment in the plane
+      continue;  // it touches the plane only at p, outside the triangle
+    }
+    switch (segment_crossing(a, b, c, p, q)) {
+      case Crossing::kLeaves:
+        ++*w;
+        break;
+      case Crossing::kEnters:
+        --*w;
+        break;
+      case Crossing::kDegenerate:
+        return Ray::kDegenerate;
+      case Crossing::kNone:
+        break;
+    }
+  }
+  return Ray::kCounted;
+}
+
+// Stage 4: the winding number on the outer (counter-clockwise) side of every piece, counted exactly from its
+// centroid along the first of kRayDirections (turned to that side) that meets no edge or corner. Whole
+// non-special triangles joined by a mesh edge (which no other triangle meets) have their outer sides in one
+// cell of the complement: one count per patch of them.
+std::string outer_winding_numbers(const std::vector<EPoint>& P0, const MatX3i& F, const SplitMesh& s,
+                                  const std::vector<char>& special, std::vector<int>* outer) {
+  const int nf = static_cast<int>(F.rows());
+  std::vector<int> patch(s.pieces.size());
   std::iota(patch.begin(), patch.end(), 0);
   auto find = [&](int x) {
     while (patch[x] != x) x = patch[x] = patch[patch[x]];
     return x;
   };
-  {
-    std::map<std::pair<int, int>, int> first_at_edge;  // undirected mesh edge → a whole non-special piece
-    for (int t = 0; t < nf; ++t) {
-      if (pieces_of[t].size() != 1 || special[pieces_of[t][0]]) continue;
-      const int k = pieces_of[t][0];
-      for (int c = 0; c < 3; ++c) {
-        const int a = F(t, c), b = F(t, (c + 1) % 3);
-        const auto [it, fresh] = first_at_edge.emplace(std::make_pair(std::min(a, b), std::max(a, b)), k);
-        if (!fresh) patch[find(k)] = find(it->second);
-      }
+  std::map<std::pair<int, int>, int> first_at_edge;  // undirected mesh edge → a whole non-special piece
+  for (int t = 0; t < nf; ++t) {
+    if (s.pieces_of[t].size() != 1 || special[s.pieces_of[t][0]]) continue;
+    const int k = s.pieces_of[t][0];
+    for (int c = 0; c < 3; ++c) {
+      const int a = F(t, c), b = F(t, (c + 1) % 3);
+      const auto [it, fresh] = first_at_edge.emplace(std::make_pair(std::min(a, b), std::max(a, b)), k);
+      if (!fresh) patch[find(k)] = find(it->second);
     }
   }
+  // Segments longer than 4 diagonals of the mesh's box (the directions' lengths are within 1e-4 of 1) end
+  // beyond every triangle.
   CGAL::Bbox_3 box;
   for (const EPoint& p : P0) box += p.bbox();
   const double reach =
-      4 * std::sqrt(std::pow(box.xmax() - box.xmin(), 2) + std::pow(box.ymax() - box.ymin(), 2) +
-                    std::pow(box.zmax() - box.zmin(), 2)) +
-      1;
-  static const std::array<std::array<double, 3>, 12> kDirections{{{0.8113, 0.4127, 0.4143},
-                                                                  {-0.3171, 0.8893, 0.3297},
-                                                                  {0.2203, -0.3307, 0.9177},
-                                                                  {-0.6581, -0.5113, 0.5527},
-                                                                  {0.5839, -0.7717, -0.2521},
-                                                                  {-0.4379, 0.2293, -0.8693},
-                                                                  {0.9291, -0.1733, 0.3267},
-                                                                  {-0.1459, -0.9587, 0.2441},
-                                                                  {0.3461, 0.6277, -0.6971},
-                                                                  {-0.8867, 0.1039, -0.4507},
-                                                                  {0.1277, 0.2909, 0.9481},
-                                                                  {-0.5297, -0.6121, -0.5871}}};
-  std::vector<int> outer(pieces.size(), 0);
-  std::vector<char> counted(pieces.size(), 0);
-  for (size_t k = 0; k < pieces.size(); ++k) {
+      4 * std::hypot(box.xmax() - box.xmin(), box.ymax() - box.ymin(), box.zmax() - box.zmin()) + 1;
+  outer->assign(s.pieces.size(), 0);
+  std::vector<char> counted(s.pieces.size(), 0);
+  for (size_t k = 0; k < s.pieces.size(); ++k) {
     const int root = find(static_cast<int>(k));
-    if (counted[root]) {
-      outer[k] = outer[root];
-      continue;
-    }
-    const Piece& pc = pieces[root];
-    const EPoint p = CGAL::centroid(points[pc.corner[0]], points[pc.corner[1]], points[pc.corner[2]]);
-    const EPoint &A = P0[F(pc.parent, 0)], &B = P0[F(pc.parent, 1)], &C = P0[F(pc.parent, 2)];
-    const EVector normal = CGAL::cross_product(B - A, C - A);
-    Ray result = Ray::kDegenerate;
-    for (const auto& dd : kDirections) {
-      // |d| > 0.99, so q lies more than the box's diagonal away from p: beyond every triangle.
-      EVector d(dd[0] * reach, dd[1] * reach, dd[2] * reach);
-      if (CGAL::is_negative(d * normal)) d = -d;
-      if (CGAL::is_zero(d * normal)) continue;
-      int w = 0;
-      result = count_crossings(P0, F, pc.parent, p, p + d, &w);
-      if (result == Ray::kCounted) {
-        outer[root] = w;
-        break;
+    if (!counted[root]) {
+      const Piece& pc = s.pieces[root];
+      const EPoint p = CGAL::centroid(s.points[pc.corner[0]], s.points[pc.corner[1]], s.points[pc.corner[2]]);
+      const EPoint &A = P0[F(pc.parent, 0)], &B = P0[F(pc.parent, 1)], &C = P0[F(pc.parent, 2)];
+      const EVector normal = CGAL::cross_product(B - A, C - A);
+      Ray result = Ray::kDegenerate;
+      for (const auto& dd : kRayDirections) {
+        EVector d(dd[0] * reach, dd[1] * reach, dd[2] * reach);
+        if (CGAL::is_zero(d * normal)) continue;
+        if (CGAL::is_negative(d * normal)) d = -d;
+        int w = 0;
+        result = count_crossings(P0, F, pc.parent, p, p + d, &w);
+        if (result == Ray::kCounted) (*outer)[root] = w;
+        if (result != Ray::kDegenerate) break;
       }
-      if (result == Ray::kOnAnotherTriangle) break;
+      if (result == Ray::kOnAnotherTriangle)
+        return "a piece of mesh triangle " + std::to_string(pc.parent) + " lies on another triangle";
+      if (result == Ray::kDegenerate)
+        return "no ray from a piece of mesh triangle " + std::to_string(pc.parent) +
+               " avoids the others' edges";
+      counted[root] = 1;
     }
-    if (result != Ray::kCounted) {
-      out.problem =
-          result == Ray::kOnAnotherTriangle
-              ? "a piece of mesh triangle " + std::to_string(pc.parent) + " lies on another triangle"
-              : "no ray from a piece of mesh triangle " + std::to_string(pc.parent) +
-                    " avoids the edges of the others";
-      return out;
-    }
-    counted[root] = 1;
-    outer[k] = outer[root];
+    (*outer)[k] = (*outer)[root];
   }
+  return "";
+}
 
-  // 6. ∂D: the pieces with winding number 0 outside; crossing one piece of one triangle adds 1, so 1 inside.
+}  // namespace
+
+RestSolidBoundary rest_solid_boundary(const MatX3d& V, const MatX3i& F,
+                                      const std::vector<std::pair<int, int>>& intersecting) {
+  RestSolidBoundary out;
+  std::vector<EPoint> P0(V.rows());
+  for (Eigen::Index v = 0; v < V.rows(); ++v) P0[v] = EPoint(V(v, 0), V(v, 1), V(v, 2));
+  SplitMesh split;
+  out.problem = split_along_intersections(P0, F, &split);
+  if (!out.problem.empty()) return out;
+  std::vector<char> special(split.pieces.size(), 0);  // pieces near the intersections
+  for (const auto& [a, b] : intersecting)
+    for (int t : {a, b})
+      for (int k : split.pieces_of[t]) special[k] = 1;
+  out.problem = verify_split(P0, F, &split, &special, &out.split_triangles);
+  if (out.problem.empty()) out.problem = check_special_pieces_meet_properly(split, special);
+  std::vector<int> outer;
+  if (out.problem.empty()) out.problem = outer_winding_numbers(P0, F, split, special, &outer);
+  if (!out.problem.empty()) return out;
+
+  // ∂D: the pieces with winding number 0 outside; crossing a piece of one triangle adds 1, so 1 inside.
   std::vector<int> boundary;
-  for (size_t k = 0; k < pieces.size(); ++k)
+  for (size_t k = 0; k < split.pieces.size(); ++k)
     if (outer[k] == 0) boundary.push_back(static_cast<int>(k));
   out.F.resize(boundary.size(), 3);
   for (size_t i = 0; i < boundary.size(); ++i)
-    for (int c = 0; c < 3; ++c) out.F(i, c) = pieces[boundary[i]].corner[c];
-  out.num_points = static_cast<int>(points.size());
+    for (int c = 0; c < 3; ++c) out.F(i, c) = split.pieces[boundary[i]].corner[c];
+  out.num_points = static_cast<int>(split.points.size());
   out.points.resize(out.num_points, 3);
   for (int i = 0; i < out.num_points; ++i)
-    for (int c = 0; c < 3; ++c) out.points(i, c) = CGAL::to_double(points[i][c]);
-  out.pieces = static_cast<int>(pieces.size());
+    for (int c = 0; c < 3; ++c) out.points(i, c) = CGAL::to_double(split.points[i][c]);
+  out.pieces = static_cast<int>(split.pieces.size());
   if (boundary.empty()) out.problem = "no piece of the mesh has winding number 0 outside and 1 inside";
   return out;
 }
