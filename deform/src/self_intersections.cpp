@@ -72,22 +72,29 @@ std::vector<std::pair<int, int>> intersecting_pairs(const MatX3i& F, const std::
     if (a == b || b == c || a == c || CGAL::collinear(P[a], P[b], P[c])) usable[t] = 0;
     box[t] = P[a].bbox() + P[b].bbox() + P[c].bbox();  // the exact coordinates, or intervals around them
   }
-  // Sort-and-sweep along x. The boxes are closed and contain the exact faces, so no pair that touches is
-  // lost.
+  // Sort-and-sweep along the axis of the largest extent (the fewest boxes overlap along it: a long thin mesh
+  // swept across its length would compare most pairs). The boxes are closed and contain the exact faces, so
+  // no pair that touches is lost; the result, sorted, does not depend on the axis.
+  CGAL::Bbox_3 all;
+  for (const CGAL::Bbox_3& b : box) all += b;
+  int axis = 0;
+  for (int k = 1; k < 3; ++k)
+    if (all.max(k) - all.min(k) > all.max(axis) - all.min(axis)) axis = k;
+  const int o1 = (axis + 1) % 3, o2 = (axis + 2) % 3;
   std::vector<int> order(nf);
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(), [&](int p, int q) {
-    return box[p].xmin() < box[q].xmin() || (box[p].xmin() == box[q].xmin() && p < q);
+    return box[p].min(axis) < box[q].min(axis) || (box[p].min(axis) == box[q].min(axis) && p < q);
   });
   std::vector<std::pair<int, int>> hits;
   for (int oi = 0; oi < nf; ++oi) {
     const int i = order[oi];
     if (!usable[i]) continue;
-    for (int oj = oi + 1; oj < nf && box[order[oj]].xmin() <= box[i].xmax(); ++oj) {
+    for (int oj = oi + 1; oj < nf && box[order[oj]].min(axis) <= box[i].max(axis); ++oj) {
       const int j = order[oj];
       if (!usable[j]) continue;
-      if (box[j].ymin() > box[i].ymax() || box[i].ymin() > box[j].ymax() || box[j].zmin() > box[i].zmax() ||
-          box[i].zmin() > box[j].zmax())
+      if (box[j].min(o1) > box[i].max(o1) || box[i].min(o1) > box[j].max(o1) ||
+          box[j].min(o2) > box[i].max(o2) || box[i].min(o2) > box[j].max(o2))
         continue;
       if (faces_intersect(F, P, i, j)) hits.emplace_back(std::min(i, j), std::max(i, j));
     }
@@ -148,20 +155,45 @@ struct SplitMesh {
   }
 };
 
-// Stage 1: CGAL's autorefinement (exact constructions) of the mesh (P0 #V points, F #F by 3), each new face
-// traced back to its mesh triangle. Returns "" or why it failed.
-std::string split_along_intersections(const std::vector<EPoint>& P0, const MatX3i& F, SplitMesh* s) {
+// Stage 1: CGAL's autorefinement (exact constructions) of the mesh (P0 #V points, F #F by 3) near its
+// intersections, each new face traced back to its mesh triangle. Only the triangles of intersecting pairs and
+// those sharing a corner with one are refined together: every intersection point lies in two triangles of a
+// pair, so a new corner falls on an edge of a pair's triangle, whose other triangle shares its corners (the
+// other triangles stay whole; stage 2 verifies every one). Where those triangles do not form a halfedge
+// surface (two fans at a corner), the whole mesh is refined. Returns "" or why it failed.
+std::string split_along_intersections(const std::vector<EPoint>& P0, const MatX3i& F,
+                                      const std::vector<std::pair<int, int>>& intersecting, SplitMesh* s) {
   const int nf = static_cast<int>(F.rows());
+  std::vector<char> near_corner(P0.size(), 0), refined(nf, 0);
+  for (const auto& [a, b] : intersecting)
+    for (int t : {a, b})
+      for (int c = 0; c < 3; ++c) near_corner[F(t, c)] = 1;
+  for (int t = 0; t < nf; ++t)
+    refined[t] = near_corner[F(t, 0)] || near_corner[F(t, 1)] || near_corner[F(t, 2)];
+
   EMesh m;
-  std::vector<EMesh::Vertex_index> vi(P0.size());
-  for (size_t v = 0; v < P0.size(); ++v) vi[v] = m.add_vertex(P0[v]);
   auto parent = m.add_property_map<EMesh::Face_index, int>("f:lidef_parent", -1).first;
-  for (int f = 0; f < nf; ++f) {
-    const EMesh::Face_index fi = m.add_face(vi[F(f, 0)], vi[F(f, 1)], vi[F(f, 2)]);
-    if (fi == EMesh::null_face())
+  auto build = [&]() {
+    m.clear_without_removing_property_maps();
+    std::vector<EMesh::Vertex_index> vi(P0.size(), EMesh::null_vertex());
+    for (int f = 0; f < nf; ++f) {
+      if (!refined[f]) continue;
+      std::array<EMesh::Vertex_index, 3> corners;
+      for (int c = 0; c < 3; ++c) {
+        if (vi[F(f, c)] == EMesh::null_vertex()) vi[F(f, c)] = m.add_vertex(P0[F(f, c)]);
+        corners[c] = vi[F(f, c)];
+      }
+      const EMesh::Face_index fi = m.add_face(corners[0], corners[1], corners[2]);
+      if (fi == EMesh::null_face()) return f;
+      parent[fi] = f;
+    }
+    return -1;
+  };
+  if (build() >= 0) {  // not a halfedge surface near the intersections: refine the whole mesh
+    std::fill(refined.begin(), refined.end(), 1);
+    if (const int f = build(); f >= 0)
       return "the mesh could not be split along its intersections (triangle " + std::to_string(f) +
              " does not fit a halfedge structure)";
-    parent[fi] = f;
   }
   try {
     ParentTracker tracker;
@@ -171,18 +203,25 @@ std::string split_along_intersections(const std::vector<EPoint>& P0, const MatX3
     return std::string("the mesh could not be split along its intersections (") + e.what() + ")";
   }
   s->pieces_of.assign(nf, {});
+  auto add_piece = [&](const Piece& pc) {
+    s->pieces_of[pc.parent].push_back(static_cast<int>(s->pieces.size()));
+    s->pieces.push_back(pc);
+  };
   for (EMesh::Face_index f : m.faces()) {
     Piece pc{parent[f], {}};
-    if (pc.parent < 0 || pc.parent >= nf) return "the split left a piece without its mesh triangle";
+    if (pc.parent < 0 || pc.parent >= nf || !refined[pc.parent])
+      return "the split left a piece without its mesh triangle";
     int k = 0;
     for (EMesh::Vertex_index v : CGAL::vertices_around_face(m.halfedge(f), m)) {
       if (k == 3) return "the split left a piece that is not a triangle";
       pc.corner[k++] = s->point_index(m.point(v));
     }
     if (k != 3) return "the split left a piece that is not a triangle";
-    s->pieces_of[pc.parent].push_back(static_cast<int>(s->pieces.size()));
-    s->pieces.push_back(pc);
+    add_piece(pc);
   }
+  for (int t = 0; t < nf; ++t)
+    if (!refined[t])
+      add_piece({t, {s->point_index(P0[F(t, 0)]), s->point_index(P0[F(t, 1)]), s->point_index(P0[F(t, 2)])}});
   return "";
 }
 
@@ -277,27 +316,31 @@ Ray count_crossings(const std::vector<EPoint>& P0, const MatX3i& F, int own, con
 }
 
 // Stage 4: the winding number on the outer (counter-clockwise) side of every piece, counted exactly from its
-// centroid along the first of kRayDirections (turned to that side) that meets no edge or corner. Whole
-// non-special triangles joined by a mesh edge (which no other triangle meets) have their outer sides in one
-// cell of the complement: one count per patch of them.
+// centroid along the first of kRayDirections (turned to that side) that meets no edge or corner. Two pieces
+// that are the only ones along an edge (corners identified exactly) and traverse it in opposite directions
+// have their outer sides in one cell of the complement next to it (after stage 3 no other piece touches the
+// edge's interior): one count serves each set of pieces joined that way.
 std::string outer_winding_numbers(const std::vector<EPoint>& P0, const MatX3i& F, const SplitMesh& s,
-                                  const std::vector<char>& special, std::vector<int>* outer) {
-  const int nf = static_cast<int>(F.rows());
+                                  std::vector<int>* outer) {
   std::vector<int> patch(s.pieces.size());
   std::iota(patch.begin(), patch.end(), 0);
   auto find = [&](int x) {
     while (patch[x] != x) x = patch[x] = patch[patch[x]];
     return x;
   };
-  std::map<std::pair<int, int>, int> first_at_edge;  // undirected mesh edge → a whole non-special piece
-  for (int t = 0; t < nf; ++t) {
-    if (s.pieces_of[t].size() != 1 || special[s.pieces_of[t][0]]) continue;
-    const int k = s.pieces_of[t][0];
+  std::vector<std::array<int, 4>> edges;  // (smaller corner, larger corner, direction +1/-1, piece)
+  edges.reserve(3 * s.pieces.size());
+  for (size_t k = 0; k < s.pieces.size(); ++k)
     for (int c = 0; c < 3; ++c) {
-      const int a = F(t, c), b = F(t, (c + 1) % 3);
-      const auto [it, fresh] = first_at_edge.emplace(std::make_pair(std::min(a, b), std::max(a, b)), k);
-      if (!fresh) patch[find(k)] = find(it->second);
+      const int a = s.pieces[k].corner[c], b = s.pieces[k].corner[(c + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), a < b ? 1 : -1, static_cast<int>(k)});
     }
+  std::sort(edges.begin(), edges.end());
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j][0] == edges[i][0] && edges[j][1] == edges[i][1]) ++j;
+    if (j - i == 2 && edges[i][2] != edges[i + 1][2]) patch[find(edges[i][3])] = find(edges[i + 1][3]);
+    i = j;
   }
   // Segments longer than 4 diagonals of the mesh's box (the directions' lengths are within 1e-4 of 1) end
   // beyond every triangle.
@@ -344,7 +387,7 @@ RestSolidBoundary rest_solid_boundary(const MatX3d& V, const MatX3i& F,
   std::vector<EPoint> P0(V.rows());
   for (Eigen::Index v = 0; v < V.rows(); ++v) P0[v] = EPoint(V(v, 0), V(v, 1), V(v, 2));
   SplitMesh split;
-  out.problem = split_along_intersections(P0, F, &split);
+  out.problem = split_along_intersections(P0, F, intersecting, &split);
   if (!out.problem.empty()) return out;
   std::vector<char> special(split.pieces.size(), 0);  // pieces near the intersections
   for (const auto& [a, b] : intersecting)
@@ -353,7 +396,7 @@ RestSolidBoundary rest_solid_boundary(const MatX3d& V, const MatX3i& F,
   out.problem = verify_split(P0, F, &split, &special, &out.split_triangles);
   if (out.problem.empty()) out.problem = check_special_pieces_meet_properly(split, special);
   std::vector<int> outer;
-  if (out.problem.empty()) out.problem = outer_winding_numbers(P0, F, split, special, &outer);
+  if (out.problem.empty()) out.problem = outer_winding_numbers(P0, F, split, &outer);
   if (!out.problem.empty()) return out;
 
   // ∂D: the pieces with winding number 0 outside; crossing a piece of one triangle adds 1, so 1 inside.
