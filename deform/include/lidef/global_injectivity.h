@@ -55,7 +55,9 @@ struct GlobalInjectivity {
   // Pairs of mesh triangles that intersect at rest. Where there are any, D = closure{w ≥ 1} and "true" needs
   // its boundary, computed exactly, to be one closed manifold (docs/certificate.md, Step G1).
   long rest_intersecting_pairs = 0;
-  double ms = 0;  // wall-clock time of the check (not part of any deterministic report)
+  // Wall-clock time of the check (not part of any deterministic report), with the checker's set-up where the
+  // check made it (check_global_injectivity, a solver's first check).
+  double ms = 0;
 };
 
 // "true" / "false" / "null", as the reports write the verdict.
