@@ -342,7 +342,7 @@ std::string outer_winding_numbers(const std::vector<EPoint>& P0, const MatX3i& F
     if (j - i == 2 && edges[i][2] != edges[i + 1][2]) patch[find(edges[i][3])] = find(edges[i + 1][3]);
     i = j;
   }
-  // Segments longer than 4 diagonals of the mesh's box (the directions' lengths are within 1e-4 of 1) end
+  // Segments longer than 4 diagonals of the mesh's box (the directions' lengths are within 2e-4 of 1) end
   // beyond every triangle.
   CGAL::Bbox_3 box;
   for (const EPoint& p : P0) box += p.bbox();

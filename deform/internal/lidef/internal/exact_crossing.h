@@ -10,7 +10,7 @@
 namespace lidef {
 
 // Fixed directions (deterministic), none along a coordinate axis or diagonal, where mesh edges often lie;
-// each of length 1 within 1e-4.
+// each of length 1 within 2e-4.
 inline constexpr std::array<std::array<double, 3>, 12> kRayDirections{{{0.8113, 0.4127, 0.4143},
                                                                        {-0.3171, 0.8893, 0.3297},
                                                                        {0.2203, -0.3307, 0.9177},
