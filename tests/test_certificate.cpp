@@ -81,17 +81,64 @@ TEST(CertificateBounds, VoxelBoundsHoldOnSampledPointsOfRandomBalls) {
     const Vec3 p = u + (w - u) * (U(rng) * 1.6 - 0.3) + random_unit(rng) * (0.1 + 1.5 * U(rng));
     const double r = 0.02 + 0.3 * U(rng);
     const double f1 = first_order_edge_factor(u, w, p, r), f3 = third_order_edge_factor(u, w, p, r);
+    const double fs = sharp_first_order_edge_factor(u, w, p, r);
     if (!std::isfinite(f3)) continue;
     ++finite;
+    ASSERT_LE(fs, f1);
     for (int k = 0; k < 400; ++k) {
       // Points in the ball, half of them on its boundary sphere where the maxima tend to sit.
       const Vec3 q = p + random_unit(rng) * r * (k % 2 ? 1.0 : std::cbrt(U(rng)));
       ASSERT_LE(alpha_beta_norm2(u, w, q), f1 * f1 * (1 + 1e-12));
+      ASSERT_LE(alpha_beta_norm2(u, w, q), fs * fs * (1 + 1e-12));
       ASSERT_LE(grad_alpha_norm2_closed_form(u, w, q) + grad_beta_norm2_closed_form(u, w, q),
                 f3 * f3 * (1 + 1e-12));
     }
   }
   EXPECT_GT(finite, 100);
+}
+
+TEST(CertificateBounds, SharpFirstOrderFactorHoldsNearTheEdgeAndIsTightThere) {
+  // The sharp first-order factor against sampled maxima of sqrt(|α|² + |β|²) in balls close to an edge (its
+  // interior, near an endpoint, beyond an endpoint on the edge's line) and far from it: never below the
+  // sampled maximum, never above (17), and near the edge's interior many times below (17), which ignores
+  // that α and β vanish with the angle at q. (Near an endpoint both stay loose: a and h take their lower
+  // bounds at different points of the ball.)
+  auto rng = rng_for(31);
+  std::uniform_real_distribution<double> U(0, 1);
+  double max_over_sampled = 0, min_over_sampled = std::numeric_limits<double>::infinity(), best_gain = 0;
+  int balls = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const Vec3 u = random_unit(rng), w = u + random_unit(rng) * (0.2 + U(rng));
+    const double d = (w - u).norm();
+    const int kind = trial % 4;  // 0 interior, 1 near u, 2 beyond u on the line, 3 far
+    const double t = kind == 0   ? 0.1 + 0.8 * U(rng)
+                     : kind == 1 ? 0.02 * U(rng)
+                     : kind == 2 ? -0.2 * U(rng)
+                                 : U(rng);
+    const double dist = kind == 3 ? d * (2 + 10 * U(rng)) : d * std::pow(10.0, -3 * U(rng));
+    Vec3 off = random_unit(rng);
+    off -= off.dot((w - u) / d) * (w - u) / d;
+    const Vec3 p = u + t * (w - u) + (kind == 2 ? 0.1 * dist : dist) * off.normalized();
+    const double r = dist * (0.05 + 0.5 * U(rng));
+    const double fs = sharp_first_order_edge_factor(u, w, p, r), f1 = first_order_edge_factor(u, w, p, r);
+    if (!std::isfinite(fs)) continue;
+    ++balls;
+    double sampled = 0;
+    for (int k = 0; k < 2000; ++k) {
+      const Vec3 q = p + random_unit(rng) * r * (k % 2 ? 1.0 : std::cbrt(U(rng)));
+      sampled = std::max(sampled, std::sqrt(alpha_beta_norm2(u, w, q)));
+    }
+    ASSERT_LE(sampled, fs * (1 + 1e-9)) << "trial " << trial;
+    ASSERT_LE(fs, f1);
+    max_over_sampled = std::max(max_over_sampled, fs / sampled);
+    min_over_sampled = std::min(min_over_sampled, fs / sampled);
+    if (kind == 0) best_gain = std::max(best_gain, f1 / fs);
+  }
+  std::printf(
+      "sharp first-order factor / sampled maximum: %.3f .. %.3f over %d balls; (17) / sharp up to %.1f\n",
+      min_over_sampled, max_over_sampled, balls, best_gain);
+  EXPECT_GT(balls, 300);
+  EXPECT_GT(best_gain, 50.0);  // balls ~1e-3 d from the edge's interior: (17) is ~d / dist too large
 }
 
 TEST(CertificateBounds, FactorRowIsTheEdgeFactorsRoundedUpToFloat) {
@@ -113,12 +160,13 @@ TEST(CertificateBounds, FactorRowIsTheEdgeFactorsRoundedUpToFloat) {
   for (int trial = 0; trial < 400; ++trial) {
     const Vec3 p = 1.3 * U(rng) * random_unit(rng);
     const double r = 0.01 + 0.3 * U(rng);
-    for (bool third : {true, false}) {
-      const bool all_finite = factor_row(edges, third, p, r, row.data());
+    for (EdgeFactor kind : {EdgeFactor::kThirdOrder, EdgeFactor::kFirstOrder, EdgeFactor::kSharpFirstOrder}) {
+      const bool all_finite = factor_row(edges, kind, p, r, row.data());
       bool expect_all = true;
       for (long e = 0; e < edges.size(); ++e) {
-        const double f =
-            third ? third_order_edge_factor(u[e], w[e], p, r) : first_order_edge_factor(u[e], w[e], p, r);
+        const double f = kind == EdgeFactor::kThirdOrder   ? third_order_edge_factor(u[e], w[e], p, r)
+                         : kind == EdgeFactor::kFirstOrder ? first_order_edge_factor(u[e], w[e], p, r)
+                                                           : sharp_first_order_edge_factor(u[e], w[e], p, r);
         if (!std::isfinite(f)) {
           EXPECT_EQ(row[e], std::numeric_limits<float>::infinity());
           expect_all = false;

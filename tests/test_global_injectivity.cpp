@@ -740,7 +740,7 @@ TEST(GlobalInjectivity, TubeRadiiBoundTheSampledDistanceOfTriangleImagesFromThei
     }
     worst_deviation = std::max(worst_deviation, deviation);
     const bool clear = !cage_grid.any_within(center, R) && std::abs(cage_winding.at(center) - 1) < 1e-6;
-    if (!clear || !factor_row(edges, false, center, R, row.data())) continue;
+    if (!clear || !factor_row(edges, EdgeFactor::kSharpFirstOrder, center, R, row.data())) continue;
     double L1 = 0;
     for (size_t e = 0; e < delta.size(); ++e) L1 += delta[e] * row[e];
     const double r = triangle_enclosing_radius(p[0], p[1], p[2]);

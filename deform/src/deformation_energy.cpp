@@ -383,7 +383,16 @@ MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samp
       }
     gemm_parallel(false, true, s, 6 * s, 3 * m, Gd.data(), s, W.data(), 6 * s, Ball.data(), s);
   } else {
-    MatXfR W(3 * static_cast<Eigen::Index>(m), 6 * s);  // row-major: the rows written below are contiguous
+    // Row-major: the rows written below are contiguous. W (3m x 6s, ~30 MB at the defaults) and Bf are kept
+    // per calling thread and overwritten in full each time: a fresh allocation of that size costs page faults
+    // in every iteration until malloc's mmap threshold has grown (and, with huge pages, at times a compaction
+    // stall), which was most of the first iterations' Hessian time.
+    // (References: inside the parallel loop a thread_local name would be each worker's own.)
+    thread_local MatXfR kept_W;
+    thread_local Eigen::MatrixXf kept_Bf;
+    MatXfR& W = kept_W;
+    Eigen::MatrixXf& Bf = kept_Bf;
+    W.resize(3 * static_cast<Eigen::Index>(m), 6 * s);
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < m; ++k)
       for (int q = 0; q < 6; ++q) {
@@ -395,7 +404,7 @@ MatXd DeformationEnergy::products(const std::vector<Mat9>& blocks, bool all_samp
                                             static_cast<float>(Ht(b, 1)) * GH_.row(3 * k + 1) +
                                             static_cast<float>(Ht(b, 2)) * GH_.row(3 * k + 2);
       }
-    Eigen::MatrixXf Bf(s, 6 * s);
+    Bf.resize(s, 6 * s);
     // Row-major GH (3m x s) is column-major GHᵀ (s x 3m); row-major W is column-major Wᵀ.
     gemm_parallel(false, true, s, 6 * s, 3 * m, GH_.data(), s, W.data(), 6 * s, Bf.data(), s);
     Ball = Bf.cast<double>();

@@ -8,8 +8,6 @@
 //   6. for a map proven injective, the margins a later check reuses (Step G6).
 #include "lidef/global_injectivity.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -56,20 +54,18 @@ constexpr int kDepthCap = 32;
 // points of magnitude M carry errors of a few 1e-16 M; 1e-12 M is far above them).
 constexpr double kGeomRel = 1e-12;
 
-// Sorts v (elements distinct, so the order is unique) in one chunk per thread, then merges the chunks.
-template <class T>
-void sort_in_parallel(std::vector<T>& v) {
-  const long n = static_cast<long>(v.size());
-  const int chunks = std::max(1, std::min<int>(omp_get_max_threads(), static_cast<int>(n / 4096)));
-  std::vector<long> at(chunks + 1);
-  for (int c = 0; c <= chunks; ++c) at[c] = n * c / chunks;
-#pragma omp parallel for schedule(static, 1)
-  for (int c = 0; c < chunks; ++c) std::sort(v.begin() + at[c], v.begin() + at[c + 1]);
-  for (int width = 1; width < chunks; width *= 2)
-#pragma omp parallel for schedule(static, 1)
-    for (int c = 0; c < chunks - width; c += 2 * width)
-      std::inplace_merge(v.begin() + at[c], v.begin() + at[c + width],
-                         v.begin() + at[std::min(c + 2 * width, chunks)]);
+// Sorts entries key · 2³² + index (key < 2³⁰), made in increasing index, by key: a stable LSD radix sort on
+// the key's two 15-bit halves, which leaves them as sorting the whole 64-bit values would.
+void sort_by_key(std::vector<std::uint64_t>& v) {
+  std::vector<std::uint64_t> tmp(v.size());
+  std::vector<size_t> count;
+  for (const int shift : {32, 47}) {
+    count.assign((size_t{1} << 15) + 1, 0);
+    for (const std::uint64_t e : v) ++count[((e >> shift) & 0x7fff) + 1];
+    for (size_t i = 1; i < count.size(); ++i) count[i] += count[i - 1];
+    for (const std::uint64_t e : v) tmp[count[(e >> shift) & 0x7fff]++] = e;
+    v.swap(tmp);
+  }
 }
 
 // A triangle piece of the rest surface: corners p, their computed images q, the ball (c, R) ⊇ piece, the
@@ -382,18 +378,23 @@ struct GlobalInjectivityChecker::Impl {
     return out;
   }
 
-  // The factors Γ_e(B) of every cage edge for the ball B(c, R) (factor_row, first order), or false when the
-  // ball is not clear of the cage (then no L1). They depend on the ball only, not on the map.
+  // The factors Γ_e(B) of every cage edge for the ball B(c, R) (factor_row, sharp first order), or false when
+  // the ball is not clear of the cage (then no L1). They depend on the ball only, not on the map.
   bool ball_factors(const Vec3& c, double R, float* row) const {
     if (!c.allFinite() || !(R >= 0)) return false;
     if (cage_grid.any_within(c, R * (1 + 1e-9)) || std::abs(cage_winding.at(c) - 1.0) > 1e-6) return false;
-    return factor_row(edges, false, c, R, row);
+    return factor_row(edges, EdgeFactor::kSharpFirstOrder, c, R, row);
   }
   // L1 ≥ max over the ball of the full Hessian tensor norm (docs/certificate.md Steps 1–3, first order):
   // Σ_e ‖δ_e‖ Γ_e(B) for the ball's factors `row`.
   double lipschitz_from(const VecXd& delta, const float* row) const {
+    const double* dl = delta.data();
+    const long n = edges.size();
     double L = 0;
-    for (long e = 0; e < edges.size(); ++e) L += delta(e) * static_cast<double>(row[e]);
+    // In SIMD lanes (partial sums added at the end): another order of the same nonnegative terms, whose
+    // rounding (n·2⁻⁵³ relative) the factor 1 + kRoundingRel covers as before.
+#pragma omp simd reduction(+ : L)
+    for (long e = 0; e < n; ++e) L += dl[e] * static_cast<double>(row[e]);
     return L * (1 + kRoundingRel);
   }
   // L1 of B(c, R); +∞ when the ball is not clear of the cage.
@@ -1195,7 +1196,7 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
           for (long k = r[2]; k <= r[5]; ++k)
             entries[at++] = key(i, j, k) << 32 | static_cast<std::uint64_t>(f);
     }
-    sort_in_parallel(entries);
+    sort_by_key(entries);  // the entries are in piece order
     // Pairs of two triangles in the star ball of a common vertex where f is injective are cleared (step 4's
     // first test); they are counted and not kept: the verdict and the counts are those of examining them,
     // without the memory of millions of cleared pairs (a tight cage's wide tubes).
@@ -1208,8 +1209,8 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
       return false;
     };
     // Two overlapping boxes share the cells of the corner max(lo_a, lo_b) of their intersection: the pair is
-    // taken there only, once. The cells are scanned in parallel; the pairs are sorted afterwards, so the
-    // result does not depend on the threads.
+    // taken there only, once. The cells are scanned in parallel, each from a copy of its boxes side by side;
+    // the pairs are sorted afterwards, so the result does not depend on the threads.
     std::vector<size_t> cells;
     for (size_t i = 0; i < entries.size(); ++i)
       if (i == 0 || entry_key(entries[i]) != entry_key(entries[i - 1])) cells.push_back(i);
@@ -1218,19 +1219,30 @@ struct GlobalInjectivityChecker::Impl::MapCheck {
 #pragma omp parallel reduction(+ : candidates)
     {
       std::vector<std::pair<int, int>> mine;
+      std::vector<int> piece;  // the cell's pieces, and their boxes side by side (lo, hi)
+      std::vector<std::array<double, 6>> box;
 #pragma omp for schedule(dynamic, 256) nowait
       for (long c = 0; c < static_cast<long>(cells.size()) - 1; ++c) {
         const size_t i = cells[c], j = cells[c + 1];
-        for (size_t a = i; a < j; ++a)
-          for (size_t b = a + 1; b < j; ++b) {
-            const int fa = entry_piece(entries[a]), fb = entry_piece(entries[b]);
-            if (!((blo[fa].array() <= bhi[fb].array()) && (blo[fb].array() <= bhi[fa].array())).all())
+        piece.clear(), box.clear();
+        for (size_t a = i; a < j; ++a) {
+          const int f = entry_piece(entries[a]);
+          piece.push_back(f);
+          box.push_back({blo[f](0), blo[f](1), blo[f](2), bhi[f](0), bhi[f](1), bhi[f](2)});
+        }
+        const int n = static_cast<int>(piece.size());
+        for (int a = 0; a < n; ++a)
+          for (int b = a + 1; b < n; ++b) {
+            const std::array<double, 6>& A = box[a];
+            const std::array<double, 6>& B = box[b];
+            if (!((A[0] <= B[3]) & (A[1] <= B[4]) & (A[2] <= B[5]) & (B[0] <= A[3]) & (B[1] <= A[4]) &
+                  (B[2] <= A[5])))
               continue;
-            const Vec3 corner = blo[fa].cwiseMax(blo[fb]);
-            if (key(cell_of(corner(0), 0), cell_of(corner(1), 1), cell_of(corner(2), 2)) !=
-                entry_key(entries[i]))
+            if (key(cell_of(std::max(A[0], B[0]), 0), cell_of(std::max(A[1], B[1]), 1),
+                    cell_of(std::max(A[2], B[2]), 2)) != entry_key(entries[i]))
               continue;
             ++candidates;
+            const int fa = piece[a], fb = piece[b];
             if (!in_common_star(fa, fb)) mine.emplace_back(std::min(fa, fb), std::max(fa, fb));
           }
       }

@@ -37,20 +37,26 @@ inline BallBounds ball_bounds(double ux, double uy, double uz, double wx, double
 
 // The factor of one edge; +∞ when the ball nears the edge (h ≤ d, or it contains u or w). Both factors are
 // computed and the result selected, so that the loop over the edges has no branch.
-template <bool Third>
+template <EdgeFactor Kind>
 inline double edge_factor(double ux, double uy, double uz, double wx, double wy, double wz, double ex,
                           double ey, double ez, double d, double px, double py, double pz, double r) {
   const BallBounds bb = ball_bounds(ux, uy, uz, wx, wy, wz, ex, ey, ez, d, px, py, pz, r);
   const bool ok = (bb.h > d) & (bb.a > 0) & (bb.b > 0);
-  const double f = Third ? third_order_factor(bb.h, d, bb.a, bb.b) : first_order_factor(bb.h, d);
+  double f;
+  if constexpr (Kind == EdgeFactor::kThirdOrder)
+    f = third_order_factor(bb.h, d, bb.a, bb.b);
+  else if constexpr (Kind == EdgeFactor::kSharpFirstOrder)
+    f = sharp_first_order_factor(bb.h, d, bb.a, bb.b);
+  else
+    f = first_order_factor(bb.h, d);
   return ok ? f : kInf;
 }
 
-template <bool Third>
+template <EdgeFactor Kind>
 double edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r) {
   const Vec3 e = w - u;
-  return edge_factor<Third>(u.x(), u.y(), u.z(), w.x(), w.y(), w.z(), e.x(), e.y(), e.z(), e.norm(), p.x(),
-                            p.y(), p.z(), r);
+  return edge_factor<Kind>(u.x(), u.y(), u.z(), w.x(), w.y(), w.z(), e.x(), e.y(), e.z(), e.norm(), p.x(),
+                           p.y(), p.z(), r);
 }
 
 // The smallest float ≥ x for x ≥ 0 (+∞ stays +∞): the next float up is the next bit pattern.
@@ -63,15 +69,15 @@ inline float round_up_nonneg(double x) {
   return f;
 }
 
-template <bool Third>
+template <EdgeFactor Kind>
 bool factor_row_impl(const EdgeArrays& E, const Vec3& p, double r, float* out) {
   const long n = E.size();
   const double px = p.x(), py = p.y(), pz = p.z();
   int infinite = 0;
 #pragma omp simd reduction(| : infinite)
   for (long e = 0; e < n; ++e) {
-    const float f = round_up_nonneg(edge_factor<Third>(E.ux[e], E.uy[e], E.uz[e], E.wx[e], E.wy[e], E.wz[e],
-                                                       E.ex[e], E.ey[e], E.ez[e], E.d[e], px, py, pz, r));
+    const float f = round_up_nonneg(edge_factor<Kind>(E.ux[e], E.uy[e], E.uz[e], E.wx[e], E.wy[e], E.wz[e],
+                                                      E.ex[e], E.ey[e], E.ez[e], E.d[e], px, py, pz, r));
     out[e] = f;
     infinite |= f < std::numeric_limits<float>::infinity() ? 0 : 1;
   }
@@ -88,11 +94,15 @@ double edge_sum_lower_bound(const Vec3& u, const Vec3& w, const Vec3& p, double 
 
 double first_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r) {
   // |α| ≤ m / (2π(m²−d²)),  |β| ≤ 2d / (2π(m²−d²)), both decreasing in m.
-  return edge_factor<false>(u, w, p, r);
+  return edge_factor<EdgeFactor::kFirstOrder>(u, w, p, r);
+}
+
+double sharp_first_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r) {
+  return edge_factor<EdgeFactor::kSharpFirstOrder>(u, w, p, r);
 }
 
 double third_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r) {
-  return edge_factor<true>(u, w, p, r);
+  return edge_factor<EdgeFactor::kThirdOrder>(u, w, p, r);
 }
 
 EdgeArrays::EdgeArrays(const std::vector<Vec3>& u, const std::vector<Vec3>& w) {
@@ -111,8 +121,16 @@ EdgeArrays::EdgeArrays(const std::vector<Vec3>& u, const std::vector<Vec3>& w) {
   }
 }
 
-bool factor_row(const EdgeArrays& edges, bool third, const Vec3& p, double r, float* out) {
-  return third ? factor_row_impl<true>(edges, p, r, out) : factor_row_impl<false>(edges, p, r, out);
+bool factor_row(const EdgeArrays& edges, EdgeFactor kind, const Vec3& p, double r, float* out) {
+  switch (kind) {
+    case EdgeFactor::kThirdOrder:
+      return factor_row_impl<EdgeFactor::kThirdOrder>(edges, p, r, out);
+    case EdgeFactor::kSharpFirstOrder:
+      return factor_row_impl<EdgeFactor::kSharpFirstOrder>(edges, p, r, out);
+    case EdgeFactor::kFirstOrder:
+      break;
+  }
+  return factor_row_impl<EdgeFactor::kFirstOrder>(edges, p, r, out);
 }
 
 // sup_{|v|=1} ‖Σ_k v_k H_k‖_F² = sup vᵀ G v = λmax(G), G_kl = Σ_ab H[a](b,k) H[a](b,l) = Σ_a (H[a]ᵀ H[a])_kl.

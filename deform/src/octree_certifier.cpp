@@ -899,7 +899,8 @@ struct OctreeCertifier::Run {
       finite.assign(N, 1);
 #pragma omp parallel for schedule(static)
       for (long i = 0; i < N; ++i)
-        finite[i] = factor_row(edges, third, oc.sampling_.centers.row(i).transpose(),
+        finite[i] = factor_row(edges, third ? EdgeFactor::kThirdOrder : EdgeFactor::kFirstOrder,
+                               oc.sampling_.centers.row(i).transpose(),
                                oc.sampling_.radius_of(static_cast<int>(i)), mat.row(i).data());
     };
     if (third_kind) {

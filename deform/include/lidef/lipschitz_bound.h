@@ -4,10 +4,15 @@
 // For an undirected cage edge (u, w) of length d and the ball B(p, r), with m(q) = |q−u| + |q−w|:
 //   h_e   = a lower bound of m over the ball (> d is required for any finite bound),
 //   first order  (16)-(17):  max_B sqrt(|α_e|² + |β_e|²) ≤ sqrt(h² + 4d²) / (2π (h² − d²)),
-//   third order  (66)-(67):  max_B sqrt(‖∇α_e‖² + ‖∇β_e‖²) ≤ sqrt(bound66 + bound67).
-// Both use that m/(m²−d²) and 1/(m²−d²) decrease in m > d, so the worst case is the smallest m.
+//   third order  (66)-(67):  max_B sqrt(‖∇α_e‖² + ‖∇β_e‖²) ≤ sqrt(bound66 + bound67),
+//   sharp first order:       the smaller of (17) and d sqrt((a+b)² + 4ab) / (4π ab sqrt(h² − d²)), a, b the
+//                            lower bounds of |q−u|, |q−w| (docs/certificate.md, Step 3: (17) ignores that
+//                            α and β vanish with the angle at q, which is what makes m² − d² small near the
+//                            edge; there the sharp form is smaller by about d / dist(q, edge)).
+// All use that m/(m²−d²) and 1/(m²−d²) decrease in m > d, so the worst case is the smallest m.
 // A ball that touches the edge (h ≤ d, or |p−u| ≤ r, or |p−w| ≤ r) gets +∞: never certifiable.
 #pragma once
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <string>
@@ -45,6 +50,14 @@ const char* to_string(RefinementEval r);  // "per-face" / "per-edge" / "batched"
 // a, b = lower bounds of |q−u|, |q−w| over the ball (> 0). Callers check h > d (and a, b > 0) first.
 inline double first_order_factor(double h, double d) {
   return std::sqrt(h * h + 4 * d * d) / (2 * M_PI * (h * h - d * d));
+}
+// |α|² + |β|² ≤ d² ((1/a + 1/b)² + 4/(ab)) / (16π² (m² − d²)) pointwise (a = |q−u|, b = |q−w|, m = a + b;
+// from m² − d² = 4ab cos²(θ/2), θ the angle at q), decreasing in a, b and m: at the lower bounds it bounds
+// the ball. The smaller of it and (17).
+inline double sharp_first_order_factor(double h, double d, double a, double b) {
+  const double ab = a * b;
+  const double near = d * std::sqrt(((a + b) * (a + b) + 4 * ab) / (h * h - d * d)) / (4 * M_PI * ab);
+  return std::min(first_order_factor(h, d), near);
 }
 // (66) + (67) = (1 + h²d²/n²)/(π²(h²−d²)²) + 3h²d²/(2π²n²(h²−d²)²)
 //             = (n² + 2.5 h²d²)/(π² n² (h²−d²)²),  n = ab.
@@ -97,6 +110,9 @@ double edge_sum_lower_bound(const Vec3& u, const Vec3& w, const Vec3& p, double 
 // max over B(p, r) of sqrt(|α_e|² + |β_e|²) (upper bound); +∞ when the ball nears the edge.
 double first_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r);
 
+// The same maximum, bounded by sharp_first_order_factor (never above first_order_edge_factor).
+double sharp_first_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r);
+
 // max over B(p, r) of sqrt(‖∇α_e‖_F² + ‖∇β_e‖_F²) (upper bound, (66)+(67)); +∞ when the ball nears the edge.
 double third_order_edge_factor(const Vec3& u, const Vec3& w, const Vec3& p, double r);
 
@@ -106,11 +122,14 @@ struct EdgeArrays {
   long size() const { return static_cast<long>(d.size()); }
   std::vector<double> ux, uy, uz, wx, wy, wz, ex, ey, ez, d;
 };
-// One voxel's row of a factor matrix: out[e] = third_order_edge_factor (or first_order_edge_factor when
-// !third) of edge e for the ball B(p, r), rounded up to the next float (an upper bound stays one), for every
-// edge; a loop over the edges that vectorizes (the same arithmetic as the functions above). Returns whether
-// every factor is finite.
-bool factor_row(const EdgeArrays& edges, bool third, const Vec3& p, double r, float* out);
+// Which per-edge factor a row holds: the paper's first order (17) and third order (66)+(67) (the local
+// certificate's `bound`), or the sharp first order (the global injectivity check's L₁, global_injectivity.h).
+enum class EdgeFactor { kFirstOrder, kThirdOrder, kSharpFirstOrder };
+// One ball's row of a factor matrix: out[e] = the factor `kind` of edge e for the ball B(p, r)
+// (first_order_edge_factor, third_order_edge_factor, sharp_first_order_edge_factor), rounded up to the next
+// float (an upper bound stays one), for every edge; a loop over the edges that vectorizes (the same
+// arithmetic as the functions above). Returns whether every factor is finite.
+bool factor_row(const EdgeArrays& edges, EdgeFactor kind, const Vec3& p, double r, float* out);
 
 // The exact pointwise quantities the factors bound, for tests: |α|²+|β|² and ‖∇α‖²+‖∇β‖² at q,
 // the latter from the closed forms (64) and (65) (with the MATH-NOTES erratum of (65)).
