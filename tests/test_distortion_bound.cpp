@@ -376,6 +376,16 @@ TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
   ASSERT_EQ(quick.failing.size(), 1u);
   EXPECT_EQ(quick.failing.front().center, hi->center);
   EXPECT_EQ(quick.num_leaves, 0) << "the probe refused before evaluating the voxels";
+  // The probes after the first are evaluated together: the refusal still names the first in order that
+  // proves a violation (a point next to `hi` before `hi` itself), and skips the one outside every voxel.
+  const Vec3 near_hi = hi->center + Vec3(1e-7, -1e-7, 1e-7);
+  q.distortion_probes = {lo->center, Vec3(100, 100, 100), near_hi, hi->center, lo->center};
+  const Certificate ordered = cert.certify(y, q);
+  EXPECT_FALSE(ordered.certified);
+  ASSERT_EQ(ordered.failing.size(), 1u);
+  EXPECT_EQ(ordered.failing.front().center, near_hi);
+  EXPECT_EQ(ordered.reason, q.targets().reason(DistortionTarget::kDistortion, near_hi));
+  EXPECT_EQ(ordered.num_leaves, 0);
 
   // Target above every leaf's bound: certified with or without probes, identical bounds.
   q.max_distortion = 2 * c0.max_distortion_upper_bound;

@@ -31,6 +31,15 @@ struct DefaultInitAllocator : Base {
 // Float rows kept for later checks, filled after each resize.
 using FloatRows = std::vector<float, DefaultInitAllocator<float>>;
 
+// Σ_k a[k] · b[k] for two float rows of m entries, widened to double, summed in SIMD lanes (the order of the
+// sum is the compiler's: callers bound its rounding by (m − 1) u Σ_k |a[k] b[k]|, which holds for any order).
+inline double float_dot(const float* a, const float* b, long m) {
+  double acc = 0;
+#pragma omp simd reduction(+ : acc)
+  for (long k = 0; k < m; ++k) acc += static_cast<double>(a[k]) * b[k];
+  return acc;
+}
+
 // out[a] = Σ_k g[k] · cols[a · m + k] for the 3 contiguous coefficient columns `cols` (m entries each), the
 // float row g widened to double; one pass over g for all three columns.
 inline void float_row_times_columns(const float* g, const double* cols, long m, double out[3]) {
