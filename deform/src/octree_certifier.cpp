@@ -629,6 +629,11 @@ struct OctreeCertifier::Run {
       const auto& factors = factor_matrix(true);
       const long m = im.m;
       constexpr double kStored = 1 + 0x1p-23;
+      // The sums below run in SIMD lanes, in the compiler's order; float × float products are exact in
+      // double, so only the sums round: ≤ 3 m u relative for the Gram row sums (each entry within m u of
+      // Σ|products| ≤ √(G_aa G_bb) ≤ gj), ≤ (m + 6) u for the non-negative Hessian and diagonal sums, ≤ (E + 1) u
+      // for Σ_e W_e Θ_e (each product rounded once). kSums covers all of them for any s and cage.
+      const double kSums = 1 + 1e-12 + 3.0 * static_cast<double>(m + E + 16) * 0x1p-53;
       Impl::PerturbationConstants out;
       out.g2.resize(N), out.rest.resize(N), out.gF.resize(N);
 #pragma omp parallel for schedule(static)
@@ -636,15 +641,13 @@ struct OctreeCertifier::Run {
         const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
         // ‖G‖₂² = λ_max(G Gᵀ) ≤ the largest absolute row sum of the 3×3 Gram matrix (Gershgorin), up to √3
         // below ‖G‖_F² where the three gradient rows are nearly orthogonal and of equal length.
-        // The sums in SIMD lanes: their rounding, in any order, is within m u of Σ|products| (≤ m u of a
-        // diagonal entry, ≤ m u √(G_aa G_bb) ≤ m u gj off it), well inside the 1e-12 below.
         double gram[3][3] = {};
         for (int a = 0; a < 3; ++a)
           for (int b = a; b < 3; ++b) gram[a][b] = gram[b][a] = float_dot(blk + a * m, blk + b * m, m);
         double gj = 0;
         for (int a = 0; a < 3; ++a)
           gj = std::max(gj, std::abs(gram[a][0]) + std::abs(gram[a][1]) + std::abs(gram[a][2]));
-        gj *= 1 + 1e-12;  // the rounding of the m-term sums (≤ m u relative)
+        gj *= kSums;
         double gh = 0;
         for (int row = 3; row < 9; ++row) {  // 3 xx, 4 xy, 5 xz, 6 yy, 7 yz, 8 zz: off-diagonals twice
           const float* h = blk + row * m;
@@ -654,7 +657,6 @@ struct OctreeCertifier::Run {
         if (im.third_finite[i]) {
           const float* f = factors.row(i).data();
           const double* w = W.data();
-          // Non-negative terms: any order's rounding is within E u of the sum, inside the 1e-12 below.
 #pragma omp simd reduction(+ : t)
           for (long e = 0; e < E; ++e) t += w[e] * static_cast<double>(f[e]);
         } else {
@@ -662,8 +664,8 @@ struct OctreeCertifier::Run {
         }
         const double r = oc.sampling_.radius_of(static_cast<int>(i));
         out.g2(i) = std::sqrt(gj) * kStored;
-        out.rest(i) = r * (std::sqrt(gh) * kStored + 0.5 * r * t) * (1 + 1e-12);
-        out.gF(i) = std::sqrt(gram[0][0] + gram[1][1] + gram[2][2]) * (1 + 1e-12);
+        out.rest(i) = r * (std::sqrt(gh) * kStored + 0.5 * r * t) * kSums;
+        out.gF(i) = std::sqrt(gram[0][0] + gram[1][1] + gram[2][2]) * kSums;
       }
       im.pert = std::move(out);
     });
