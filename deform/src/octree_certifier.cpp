@@ -631,8 +631,8 @@ struct OctreeCertifier::Run {
       constexpr double kStored = 1 + 0x1p-23;
       // The sums below run in SIMD lanes, in the compiler's order; float × float products are exact in
       // double, so only the sums round: ≤ 3 m u relative for the Gram row sums (each entry within m u of
-      // Σ|products| ≤ √(G_aa G_bb) ≤ gj), ≤ (m + 6) u for the non-negative Hessian and diagonal sums, ≤ (E + 1) u
-      // for Σ_e W_e Θ_e (each product rounded once). kSums covers all of them for any s and cage.
+      // Σ|products| ≤ √(G_aa G_bb) ≤ gj), ≤ (m + 6) u for the non-negative Hessian and diagonal sums,
+      // ≤ (E + 1) u for Σ_e W_e Θ_e (each product rounded once). kSums covers all of them for any s and cage.
       const double kSums = 1 + 1e-12 + 3.0 * static_cast<double>(m + E + 16) * 0x1p-53;
       Impl::PerturbationConstants out;
       out.g2.resize(N), out.rest.resize(N), out.gF.resize(N);
