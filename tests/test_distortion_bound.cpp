@@ -23,6 +23,7 @@
 #include "lidef/octree_certifier.h"
 #include "lidef/procedural_models.h"
 #include "lidef/sampling.h"
+#include "lidef/signed_svd.h"
 #include "lidef/subspace.h"
 #include "test_cages.h"
 #include "test_support.h"
@@ -406,6 +407,85 @@ TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
   const Certificate report = cert.certify(y, q);
   EXPECT_FALSE(report.certified);
   EXPECT_GT(report.num_leaves, 0);
+}
+
+// When no probe proves a violation but one comes within 2% of the target, a short pattern search around it
+// looks for a point that does: a proven violation there refuses the map before any voxel is evaluated, and
+// the full certificate refuses it too; sampled independently, σ1/σ3 at that point is above the target.
+TEST(DistortionBound, SearchNearAProbeRefusesOnlyProvenViolations) {
+  const Sphere& s = sphere();
+  const BentMap& b = bent_map();
+  ASSERT_TRUE(b.c0.certified) << b.c0.reason;
+  const CertLeaf* hi = nullptr;
+  for (const CertLeaf& l : b.c0.leaves)
+    if (l.sigma3 > 0 && std::isfinite(l.sigma1) && (!hi || l.sigma1 / l.sigma3 > hi->sigma1 / hi->sigma3))
+      hi = &l;
+  ASSERT_TRUE(hi);
+  auto K = [&](const Vec3& x) {
+    const Vec3 sv = signed_singular_values(b.cert.basis().map_jet(b.y, x, 1).J);
+    return sv(0) / sv(2);
+  };
+  const double k_hi = K(hi->center);
+  // A probe a quarter of a voxel side from `hi` along an axis (the search's first step from it reaches
+  // `hi`), inside the voxels, with σ1/σ3 below k_hi: the largest such.
+  const VoxelLocator locate(s.sampling);
+  const VecXi vhi = locate.find(hi->center.transpose());
+  ASSERT_GE(vhi(0), 0);
+  const double h = s.sampling.side_of(vhi(0)) / 4;
+  Vec3 probe = hi->center;
+  double k_probe = 0;
+  for (int j = 0; j < 6; ++j) {
+    Vec3 x = hi->center;
+    x(j / 2) += j % 2 ? -h : h;
+    const VecXi vx = locate.find(x.transpose());
+    if (vx(0) >= 0 && s.sampling.side_of(vx(0)) == 4 * h && K(x) < k_hi && K(x) > k_probe)
+      probe = x, k_probe = K(x);
+  }
+  ASSERT_GT(k_probe, 0) << "no probe position next to the largest distortion";
+  CertifyParams q = b.p;
+  q.stop_on_failure = true;
+  q.max_distortion = std::max(1.0, 0.5 * (k_probe + k_hi));
+  ASSERT_GT(k_probe, 0.98 * q.max_distortion) << "the probe is not within 2% of the target";
+  q.distortion_probes = {probe};
+  const Certificate quick = b.cert.certify(b.y, q);
+  EXPECT_FALSE(quick.certified);
+  EXPECT_EQ(quick.distortion_failed_on, DistortionTarget::kDistortion);
+  EXPECT_EQ(quick.num_leaves, 0) << "the search refused before evaluating the voxels";
+  ASSERT_EQ(quick.failing.size(), 1u);
+  const Vec3 at = quick.failing.front().center;
+  EXPECT_NE(at, probe) << "the probe itself proves nothing";
+  EXPECT_LE((at - probe).norm(), 4 * h) << "found near the probe";
+  EXPECT_GT(K(at), q.max_distortion) << "the refusal names a point beyond the target";
+  EXPECT_GE(locate.find(at.transpose())(0), 0) << "a point of the domain";
+  EXPECT_EQ(quick.reason, q.targets().reason(DistortionTarget::kDistortion, at));
+  q.distortion_probes.clear();
+  const Certificate full = b.cert.certify(b.y, q);
+  EXPECT_FALSE(full.certified) << "the full certificate refuses it too";
+  EXPECT_TRUE(full.distortion_failed);
+
+  // A target above the sampled maximum (leaves up to depth 6), with a probe at the largest σ1/σ3 sampled on a
+  // grid in the cells of the leaves near it: the search runs, finds nothing, and the verdict and leaves are
+  // those of the certificate without probes.
+  const double sampled = check_against_sampling(b.cert.basis(), b.y, b.c0);
+  Vec3 top = hi->center;
+  double k_top = k_hi;
+  for (const CertLeaf& l : b.c0.leaves) {
+    if (!(l.sigma3 > 0) || l.sigma1 / l.sigma3 < 0.9 * k_hi) continue;
+    for (int g = 0; g < 64; ++g) {
+      const Vec3 x = l.center + l.side * (Vec3(g % 4, g / 4 % 4, g / 16) / 3 - Vec3::Constant(0.5));
+      if (K(x) > k_top && locate.find(x.transpose())(0) >= 0) top = x, k_top = K(x);
+    }
+  }
+  q.max_distortion = std::max(1.015 * k_top, 1.005 * sampled);
+  q.max_depth = 6;
+  ASSERT_GT(k_top, 0.98 * q.max_distortion) << "the probe is within 2% of the target: the search runs";
+  const Certificate plain = b.cert.certify(b.y, q);
+  q.distortion_probes = {top};
+  const Certificate searched = b.cert.certify(b.y, q);
+  ASSERT_TRUE(plain.certified) << plain.reason;
+  ASSERT_TRUE(searched.certified) << searched.reason;
+  EXPECT_EQ(searched.max_distortion_upper_bound, plain.max_distortion_upper_bound);
+  EXPECT_EQ(searched.num_leaves, plain.num_leaves);
 }
 
 // The line search's distortion stage refines the voxels most likely to fail first (priority voxels, probes,
