@@ -13,6 +13,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <utility>
 
 #include "lidef/analysis/certificate_report.h"
 #include "lidef/analysis/certificate_verification.h"
@@ -68,6 +69,18 @@ double check_against_sampling(const HarmonicBasis& basis, const MatX3d& y, const
     EXPECT_GE(v.max_distortion, 1.0);
   }
   return v.max_distortion;
+}
+
+// The leaves of largest and of smallest center σ1/σ3 (null when no leaf has σ3 > 0 and a finite σ1).
+std::pair<const CertLeaf*, const CertLeaf*> extreme_leaves(const Certificate& c) {
+  const CertLeaf* hi = nullptr;
+  const CertLeaf* lo = nullptr;
+  for (const CertLeaf& l : c.leaves) {
+    if (!(l.sigma3 > 0) || !std::isfinite(l.sigma1)) continue;
+    if (!hi || l.sigma1 / l.sigma3 > hi->sigma1 / hi->sigma3) hi = &l;
+    if (!lo || l.sigma1 / l.sigma3 < lo->sigma1 / lo->sigma3) lo = &l;
+  }
+  return {hi, lo};
 }
 
 // The bent map of the target tests (a smooth map of the icosphere's cage), certified at depth 3 without a
@@ -351,13 +364,7 @@ TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
   const Certificate c0 = cert.certify(y, p);
   ASSERT_TRUE(c0.certified) << c0.reason;
   // The leaf center of largest σ1/σ3, and one of the smallest.
-  const CertLeaf* hi = nullptr;
-  const CertLeaf* lo = nullptr;
-  for (const CertLeaf& l : c0.leaves) {
-    if (!(l.sigma3 > 0) || !std::isfinite(l.sigma1)) continue;
-    if (!hi || l.sigma1 / l.sigma3 > hi->sigma1 / hi->sigma3) hi = &l;
-    if (!lo || l.sigma1 / l.sigma3 < lo->sigma1 / lo->sigma3) lo = &l;
-  }
+  const auto [hi, lo] = extreme_leaves(c0);
   ASSERT_TRUE(hi && lo);
   const double k_hi = hi->sigma1 / hi->sigma3, k_lo = lo->sigma1 / lo->sigma3;
   ASSERT_GT(k_hi, 1.01 * k_lo);
@@ -416,10 +423,7 @@ TEST(DistortionBound, SearchNearAProbeRefusesOnlyProvenViolations) {
   const Sphere& s = sphere();
   const BentMap& b = bent_map();
   ASSERT_TRUE(b.c0.certified) << b.c0.reason;
-  const CertLeaf* hi = nullptr;
-  for (const CertLeaf& l : b.c0.leaves)
-    if (l.sigma3 > 0 && std::isfinite(l.sigma1) && (!hi || l.sigma1 / l.sigma3 > hi->sigma1 / hi->sigma3))
-      hi = &l;
+  const CertLeaf* hi = extreme_leaves(b.c0).first;
   ASSERT_TRUE(hi);
   auto K = [&](const Vec3& x) {
     const Vec3 sv = signed_singular_values(b.cert.basis().map_jet(b.y, x, 1).J);
@@ -486,6 +490,59 @@ TEST(DistortionBound, SearchNearAProbeRefusesOnlyProvenViolations) {
   ASSERT_TRUE(searched.certified) << searched.reason;
   EXPECT_EQ(searched.max_distortion_upper_bound, plain.max_distortion_upper_bound);
   EXPECT_EQ(searched.num_leaves, plain.num_leaves);
+}
+
+// distortion_refuted: the probes alone, as certify_reduced judges them, and nothing else — a refusal only
+// with a proof (the same refusal as certify_reduced's), no search near the probes, no voxel, no answer
+// otherwise.
+TEST(DistortionBound, ProbesAloneRefuteOnlyWithAProof) {
+  const Sphere& s = sphere();
+  const OctreeCertifier red(s.cage, s.sampling, &s.sub.basis);
+  const Eigen::Matrix<double, Eigen::Dynamic, 3> yr =
+      s.sub.basis.transpose() * lidef::test::smooth_map(s.cage, s.sub, 0.9, 12);
+  CertifyParams p;
+  p.max_depth = 3;
+  const Certificate c0 = red.certify_reduced(yr, p);
+  ASSERT_TRUE(c0.certified) << c0.reason;
+  const auto [hi, lo] = extreme_leaves(c0);
+  ASSERT_TRUE(hi && lo);
+  CertifyParams q = p;
+  q.stop_on_failure = true;
+  q.max_distortion = std::max(1.0, 0.99 * hi->sigma1 / hi->sigma3);
+  ASSERT_LT(lo->sigma1 / lo->sigma3, 0.9 * q.max_distortion);
+  q.distortion_probes = {lo->center, hi->center};
+  Certificate refusal;
+  ASSERT_TRUE(red.distortion_refuted(yr, q, refusal));
+  const Certificate full = red.certify_reduced(yr, q);
+  EXPECT_FALSE(refusal.certified);
+  EXPECT_EQ(refusal.reason, full.reason);
+  EXPECT_EQ(refusal.reason, q.targets().reason(DistortionTarget::kDistortion, hi->center));
+  EXPECT_EQ(refusal.distortion_failed_on, full.distortion_failed_on);
+  ASSERT_EQ(refusal.failing.size(), 1u);
+  EXPECT_EQ(refusal.failing.front().center, hi->center);
+  EXPECT_EQ(refusal.failed_voxels, full.failed_voxels);
+  EXPECT_EQ(refusal.num_leaves, 0);
+
+  // A probe below the target decides nothing, although the map is refused (the full certificate fails).
+  q.distortion_probes = {lo->center};
+  Certificate untouched;
+  untouched.reason = "unchanged";
+  EXPECT_FALSE(red.distortion_refuted(yr, q, untouched));
+  EXPECT_EQ(untouched.reason, "unchanged");
+  EXPECT_FALSE(red.certify_reduced(yr, q).certified);
+  // Outside a line search, without probes or without a target: nothing to judge.
+  q.distortion_probes = {hi->center};
+  q.stop_on_failure = false;
+  EXPECT_FALSE(red.distortion_refuted(yr, q, untouched));
+  q.stop_on_failure = true;
+  q.max_distortion = 0;
+  EXPECT_FALSE(red.distortion_refuted(yr, q, untouched));
+  q.max_distortion = 1.01;
+  q.distortion_probes.clear();
+  EXPECT_FALSE(red.distortion_refuted(yr, q, untouched));
+  // Reduced coefficients of another size are refused with a clear error.
+  q.distortion_probes = {hi->center};
+  EXPECT_THROW(red.distortion_refuted(yr.topRows(yr.rows() - 1), q, untouched), InputError);
 }
 
 // The line search's distortion stage refines the voxels most likely to fail first (priority voxels, probes,

@@ -245,14 +245,19 @@ Certificate OctreeCertifier::certify(const MatX3d& y, const CertifyParams& param
   return run(y, nullptr, 0, params);
 }
 
-Certificate OctreeCertifier::certify_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& yr,
-                                             const CertifyParams& params) const {
-  if (!impl_->reduction) throw Error("certify_reduced needs a certifier built with a reduction basis");
+MatX3d OctreeCertifier::expand_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& yr,
+                                       const char* caller) const {
+  if (!impl_->reduction) throw Error(std::string(caller) + " needs a certifier built with a reduction basis");
   if (yr.rows() != impl_->reduction->cols())
     throw InputError("", "reduced coefficients have " + std::to_string(yr.rows()) + " rows, expected " +
                              std::to_string(impl_->reduction->cols()));
   if (!yr.allFinite()) throw InputError("", "reduced coefficients contain NaN or Inf");
-  const MatX3d y = (*impl_->reduction) * yr;
+  return (*impl_->reduction) * yr;
+}
+
+Certificate OctreeCertifier::certify_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& yr,
+                                             const CertifyParams& params) const {
+  const MatX3d y = expand_reduced(yr, "certify_reduced");
   return run(y, yr.data(), yr.rows(), params);
 }
 
@@ -466,7 +471,8 @@ struct OctreeCertifier::Run {
   // σ1 > S, σ̃3 + τ3 < s proves σ3 < s), and the leaf holding q can never prove the target (its bounds cover
   // a ball containing q). Returns true with `out` filled (not certified, the distortion reason at q) when a
   // probe fails.
-  bool distortion_probe(Certificate& out) const {
+  // With `search`, the search near the probes follows when none proves a violation (−1b).
+  bool distortion_probe(Certificate& out, bool search = true) const {
     if (!p.stop_on_failure || !targets.any() || p.distortion_probes.empty()) return false;
     const std::vector<long> voxel = probe_voxels();
     // The first probe (the trial's own worst sample) proves most refusals alone; the others are evaluated
@@ -484,7 +490,7 @@ struct OctreeCertifier::Run {
         refuse_at(out, p.distortion_probes[k], voxel[k], v[k]);
         return true;
       }
-    return violation_search(out, v, voxel);
+    return search && violation_search(out, v, voxel);
   }
   // The refusal of a trial by a violation proven at q (in base voxel `voxel`): not certified, the
   // distortion reason at q, q as the failing leaf (the next trials probe it first).
@@ -1867,6 +1873,19 @@ struct OctreeCertifier::Run {
            " leaf voxel(s) at maximum depth " + std::to_string(p.max_depth);
   }
 };
+
+bool OctreeCertifier::distortion_refuted(const Eigen::Matrix<double, Eigen::Dynamic, 3>& yr,
+                                         const CertifyParams& params, Certificate& refusal) const {
+  const auto t_start = Clock::now();
+  if (!params.stop_on_failure || !params.targets().any() || params.distortion_probes.empty()) return false;
+  const MatX3d y = expand_reduced(yr, "distortion_refuted");
+  Run run(*this, y, yr.data(), yr.rows(), params);
+  Certificate out;
+  if (!run.distortion_probe(out, false)) return false;
+  out.ms_total = ms_since(t_start);
+  refusal = std::move(out);
+  return true;
+}
 
 Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_rows,
                                  const CertifyParams& p) const {

@@ -757,20 +757,26 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
   cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
   cp.distortion_probes = distortion_probes_;
-  screen_distortion(t, cp);
-  if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
-    cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
-    cp.previous_lower = &perturb_lower_;
-    cp.previous_upper = &perturb_upper_;
-    cp.perturbation_floor = params_.epsilon;                  // condition (36) then decides as without them
-    if (const MatJT* dJ = kernels_->direction_jacobians()) {  // the center term from G d (Step 4e)
-      cp.direction = &delta;
-      cp.direction_jacobians = dJ;
-      cp.direction_step = t;
-      cp.direction_scale = direction_scale_;
+  Certificate c;
+  // The points where earlier trials failed first: when one of them still proves a violation, the trial is
+  // refused without screening the samples for a new probe (the screen is most of a probe-refused trial's
+  // time). Only a proof refuses, so the verdict is the certificate's.
+  if (!certifier_->distortion_refuted(yt, cp, c)) {
+    screen_distortion(t, cp);
+    if (!perturb_lower_.empty() && perturb_y_.rows() == y_.rows() && perturb_y_ == y_) {
+      cp.previous_y = &perturb_y_;  // y_ is the map certified with these bounds: Step 4e applies
+      cp.previous_lower = &perturb_lower_;
+      cp.previous_upper = &perturb_upper_;
+      cp.perturbation_floor = params_.epsilon;                  // condition (36) then decides as without them
+      if (const MatJT* dJ = kernels_->direction_jacobians()) {  // the center term from G d (Step 4e)
+        cp.direction = &delta;
+        cp.direction_jacobians = dJ;
+        cp.direction_step = t;
+        cp.direction_scale = direction_scale_;
+      }
     }
+    c = certifier_->certify_reduced(yt, cp);
   }
-  Certificate c = certifier_->certify_reduced(yt, cp);
   if (!c.certified) {
     line_search_failed_ = c.failed_voxels;
     // The last rejection by the distortion bound, named in the model's frame (the stop message says it).

@@ -241,6 +241,14 @@ class OctreeCertifier {
   // Same map given in the reduced space (ỹ: s by 3, y = Ξ ỹ); uses the precomputed reduced matrices.
   Certificate certify_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& y_reduced,
                               const CertifyParams& params = {}) const;
+  // Only the distortion probes of `params` (CertifyParams::distortion_probes, with stop_on_failure and a
+  // target) at the map ỹ (s by 3), evaluated and judged as certify_reduced() judges them
+  // (docs/certificate.md, "Probes"), without the search near them or any voxel: true, with `refusal` filled
+  // as certify_reduced() fills it, when one of them proves a target violated; false decides nothing. The line
+  // search asks this with the points where earlier trials failed before screening its samples for a new
+  // probe.
+  bool distortion_refuted(const Eigen::Matrix<double, Eigen::Dynamic, 3>& y_reduced,
+                          const CertifyParams& params, Certificate& refusal) const;
 
   // Runs the base stage and the evaluation of octree nodes on `backend` from now on (a CPU backend restores
   // the built-in code). Verdicts do not depend on the backend: every decision is taken here, on the host.
@@ -265,6 +273,8 @@ class OctreeCertifier {
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,
                   const CertifyParams& p) const;
+  // Ξ ỹ (#V+#F by 3) after checking ỹ (s by 3): its size, finite entries, a certifier with a reduction.
+  MatX3d expand_reduced(const Eigen::Matrix<double, Eigen::Dynamic, 3>& y_reduced, const char* caller) const;
 
   const Cage& cage_;
   VoxelSampling sampling_;
