@@ -542,8 +542,7 @@ struct OctreeCertifier::Run {
         q(j / 2) += j % 2 ? -h : h;
         Q.row(j) = q.transpose();
       }
-      std::call_once(im.locator_once, [&] { im.locator = std::make_unique<VoxelLocator>(oc.sampling_); });
-      const VecXi vq = im.locator->find(Q);
+      const VecXi vq = locator().find(Q);
 #pragma omp parallel for schedule(static, 1)
       for (int j = 0; j < 6; ++j) pv[j] = probe_value(Q.row(j).transpose(), vq(j));
       int move = -1;
@@ -586,9 +585,13 @@ struct OctreeCertifier::Run {
     MatX3d Q(static_cast<Eigen::Index>(p.distortion_probes.size()), 3);
     for (size_t k = 0; k < p.distortion_probes.size(); ++k)
       Q.row(static_cast<Eigen::Index>(k)) = p.distortion_probes[k].transpose();
-    std::call_once(im.locator_once, [&] { im.locator = std::make_unique<VoxelLocator>(oc.sampling_); });
-    const VecXi v = im.locator->find(Q);
+    const VecXi v = locator().find(Q);
     return std::vector<long>(v.data(), v.data() + v.size());
+  }
+  // The voxel lookup of the probes and the search, built once per certifier.
+  const VoxelLocator& locator() const {
+    std::call_once(im.locator_once, [&] { im.locator = std::make_unique<VoxelLocator>(oc.sampling_); });
+    return *im.locator;
   }
 
   // --- 0. Certifying by perturbation (Step 4e): base voxels whose bound at the previous certified map ỹ₀
