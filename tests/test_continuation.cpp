@@ -171,6 +171,7 @@ struct PathRun {
   PathSolveReport report;
   int accepted = 0, fully_certified = 0;
   int local_global_accepted = 0, local_global_certified = 0;  // maps the local/global strategy set
+  double newton_seconds = 0;  // the iterations' own times (IterationRecord::ms_total)
 };
 
 // solve_to_targets from the identity; every accepted iterate certified again in the callback by a full-space
@@ -187,6 +188,7 @@ std::unique_ptr<PathRun> path_run(const DeformParams& p, const MatX3d& sources,
   r->result = solve_to_targets(
       s, waypoints, targets, {},
       [&](const IterationRecord& rec) {
+        r->newton_seconds += rec.ms_total / 1000;
         if (rec.accepted) {
           ++r->accepted;
           if (full.certify(s.coefficients(), s.certify_params(false, false)).certified) ++r->fully_certified;
@@ -313,4 +315,8 @@ TEST(DeformSlow, ContinuationPullThroughAFixedHandleIsReachedByALocalGlobalMap) 
   EXPECT_TRUE(run->result.targets_met()) << to_string(run->result.reason) << ": " << run->result.message;
   // The moved handle really went through: from z = 0.1 to z = -0.1, past the fixed centre.
   EXPECT_LT(s.handle_positions()(11, 2), -0.099);
+  // The solve's time is the whole path's: the Newton iterations and the local/global maps (disjoint wall
+  // intervals, so their sum cannot exceed it).
+  EXPECT_GT(run->report.local_global_seconds, 0);
+  EXPECT_GE(run->result.seconds, run->newton_seconds + run->report.local_global_seconds);
 }

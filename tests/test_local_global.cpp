@@ -7,6 +7,8 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/QR>
+#include <Eigen/SVD>
+#include <random>
 
 #include "lidef/local_global.h"
 #include "lidef/model_check.h"
@@ -40,6 +42,24 @@ Mat3 rotation(double deg, const Vec3& axis) {
   return Eigen::AngleAxisd(deg * 3.14159265358979323846 / 180, axis.normalized()).toRotationMatrix();
 }
 
+// The far end face turned by 150° about the beam's axis: a solver at the identity, its local/global solver
+// (λ1 = 1e5, λ2 = 0.1) and the targets in the normalized frame.
+struct Twist150 {
+  static MatX3d targets() {
+    MatX3d tgt = ends();
+    for (int i = 5; i < 10; ++i)
+      tgt.row(i) = (rotation(150, Vec3(1, 0, 0)) * ends().row(i).transpose()).transpose();
+    return tgt;
+  }
+  static DeformationSolver& with_handles(DeformationSolver& s) {
+    s.set_handles(ends(), targets());
+    return s;
+  }
+  DeformationSolver solver{beam().model.cage, small(), beam().cache.str()};
+  LocalGlobalSolver lg{with_handles(solver).energy_function(), {1e5, 0.1}};
+  MatX3d Q = solver.frame().points_to_normalized(targets());
+};
+
 }  // namespace
 
 TEST(LocalGlobal, ClosestRotationIsThePolarFactor) {
@@ -52,6 +72,36 @@ TEST(LocalGlobal, ClosestRotationIsThePolarFactor) {
   const Mat3 Q = closest_rotation(M);
   EXPECT_NEAR(Q.determinant(), 1, 1e-12);
   EXPECT_LT((Q - R).norm(), 1e-12);
+}
+
+TEST(LocalGlobal, ClosestRotationAgreesWithTheSvdOnRandomMatrices) {
+  // Near rotations (the Newton polar iteration), general and nearly singular matrices with det > 0 (Newton or
+  // its SVD fallback) and reflections (the SVD): the polar factor U Vᵀ with the weakest direction flipped
+  // where det < 0, computed here from Eigen's SVD independently.
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal;
+  auto random = [&] {
+    Mat3 A;
+    for (int k = 0; k < 9; ++k) A(k) = normal(rng);
+    return A;
+  };
+  auto reference = [](const Mat3& M) {
+    Eigen::JacobiSVD<Mat3> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Mat3 U = svd.matrixU();
+    if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) *= -1;
+    return Mat3(U * svd.matrixV().transpose());
+  };
+  const double scales[] = {1e-3, 0.02, 0.1, 0.3, 1.0, 3.0};
+  for (int i = 0; i < 6000; ++i) {
+    const Mat3 R = reference(random());
+    Mat3 M = 1.7 * R * (Mat3::Identity() + scales[i % 6] * random());
+    if (i % 50 == 0) M.col(2) = M.col(0) + 1e-9 * M.col(2);      // nearly singular: the SVD
+    if (i % 50 == 1) M = R * Vec3(2.0, 1.0, 0.05).asDiagonal();  // σ3/σ1 = 0.025: Newton
+    const Mat3 Q = closest_rotation(M);
+    ASSERT_LT((Q - reference(M)).norm(), 1e-11) << i << "\n" << M;
+    ASSERT_LT((Q.transpose() * Q - Mat3::Identity()).norm(), 1e-13) << i;
+    ASSERT_NEAR(Q.determinant(), 1, 1e-13) << i;
+  }
 }
 
 TEST(LocalGlobal, WithoutRotationsItIsTheSmoothedLeastSquaresFit) {
@@ -111,14 +161,10 @@ TEST(LocalGlobal, ReproducesARigidMotionOfTheTargets) {
 }
 
 TEST(LocalGlobal, EnergyNeverIncreases) {
-  DeformationSolver s(beam().model.cage, small(), beam().cache.str());
-  MatX3d tgt = ends();
-  for (int i = 5; i < 10; ++i)
-    tgt.row(i) = (rotation(150, Vec3(1, 0, 0)) * ends().row(i).transpose()).transpose();
-  s.set_handles(ends(), tgt);
-  const LocalGlobalSolver lg(s.energy_function(), {1e5, 0.1});
-  const MatX3d Q = s.frame().points_to_normalized(tgt);
-  MatS3 y = s.reduced_coefficients();
+  const Twist150 t;
+  const LocalGlobalSolver& lg = t.lg;
+  const MatX3d& Q = t.Q;
+  MatS3 y = t.solver.reduced_coefficients();
   double prev = lg.energy(y, Q);
   for (int k = 0; k < 20; ++k) {
     y = lg.solve(y, Q, 1, 0).y;
@@ -126,6 +172,23 @@ TEST(LocalGlobal, EnergyNeverIncreases) {
     EXPECT_LE(e, prev * (1 + 1e-10)) << k;
     prev = e;
   }
+}
+
+TEST(LocalGlobal, AStopRequestEndsTheSolveAtTheLastIterate) {
+  const Twist150 t;
+  const LocalGlobalSolver& lg = t.lg;
+  const MatX3d& Q = t.Q;
+  const MatS3 y0 = t.solver.reduced_coefficients();
+  std::atomic<bool> stop{true};
+  const LocalGlobalResult stopped = lg.solve(y0, Q, 50, 0, &stop);
+  EXPECT_TRUE(stopped.interrupted);
+  EXPECT_EQ(stopped.iterations, 0);
+  EXPECT_EQ(stopped.y, y0);
+  stop = false;
+  const LocalGlobalResult ran = lg.solve(y0, Q, 50, 0, &stop);
+  EXPECT_FALSE(ran.interrupted);
+  EXPECT_GT(ran.iterations, 0);
+  EXPECT_LT(ran.energy, lg.energy(y0, Q));
 }
 
 TEST(LocalGlobal, SetReducedMapAcceptsOnlyCertifiedMaps) {

@@ -169,6 +169,7 @@ nlohmann::ordered_json summary_json(const Scenario& sc, const DeformResult& r,
   const double global_seconds = report.global.ms / 1000;
   sj["time_s"] = {{"preprocess", r.preprocess_seconds},
                   {"solve", r.solve.seconds},
+                  {"local_global", r.path.local_global_seconds},
                   {"final_certificate_and_fields", r.finish_seconds},
                   {"global_injectivity", global_seconds},
                   {"total", (total_seconds >= 0 ? total_seconds

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "lidef/internal/stopwatch.h"
 #include "lidef/internal/target_path.h"
 #include "lidef/local_global.h"
 #include "lidef/number_format.h"
@@ -131,11 +132,16 @@ struct Runner {
         "certified";
     for (int round = 0; round < kLocalGlobalRounds; ++round) {
       const double before = max_error();
-      bool accepted = false;
+      const auto t_maps = Clock::now();
+      bool accepted = false, interrupted = false;
       std::vector<MatS3> starts{solver.reduced_coefficients()};
       if (round == 0 && (entry - solver.reduced_coefficients()).norm() > 0) starts.push_back(entry);
-      for (size_t k = 0; k < starts.size() && !accepted; ++k) {
-        const LocalGlobalResult c = lg.solve(starts[k], Q, kLocalGlobalIterations);
+      for (size_t k = 0; k < starts.size() && !accepted && !interrupted; ++k) {
+        const LocalGlobalResult c = lg.solve(starts[k], Q, kLocalGlobalIterations, 1e-8, stop);
+        if (c.interrupted) {  // the map stays the last certified one; nothing of this solve is used
+          interrupted = true;
+          break;
+        }
         const double err = (solver.energy_function().handle_matrix() * c.y - Q).rowwise().norm().maxCoeff() *
                            solver.frame().scale;
         const std::string from = k == 0 ? "the current map" : "the starting map";
@@ -150,7 +156,7 @@ struct Runner {
             " iterations, max handle error " + format_g(err, 3) + ") is not certified (" + why +
             "): trying blends");
         const MatS3 y0 = solver.reduced_coefficients();
-        for (int h = 1; h <= kMaxBlendHalvings && !accepted; ++h) {
+        for (int h = 1; h <= kMaxBlendHalvings && !accepted && !(stop && stop->load()); ++h) {
           const double t = std::ldexp(1.0, -h);
           if (solver.set_reduced_map(y0 + t * (c.y - y0))) {
             accepted = true;
@@ -158,6 +164,12 @@ struct Runner {
                 " (max handle error " + format_g(max_error(), 3) + "), certified");
           }
         }
+      }
+      report.local_global_seconds += seconds_since(t_maps);
+      if (interrupted || (!accepted && stop && stop->load())) {
+        r.reason = StopReason::kInterrupted;
+        r.message = "interrupted during a local/global solve";
+        break;
       }
       if (!accepted) break;
       // Newton polish, briefly: a local/global map lies close to the boundary of what the line search's
@@ -252,6 +264,7 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
                              const std::atomic<bool>* stop,
                              const std::function<void(const std::string&)>& on_stage,
                              PathSolveReport* report_out) {
+  const auto t_start = Clock::now();
   PathSolveReport report;
   Runner runner{solver, on_iteration, stop, on_stage, report};
   const DeformParams& params = solver.params();
@@ -353,6 +366,7 @@ SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d
                      result.message;
     result.reason = StopReason::kReached;
   }
+  result.seconds = seconds_since(t_start);
   if (report_out) *report_out = report;
   return result;
 }

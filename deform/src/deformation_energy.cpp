@@ -259,6 +259,10 @@ MatS3 DeformationEnergy::distortion_gradient_sum(const MatJT& JT) const {
   return weighted_transpose_sum([&](int i) { return sd_gradient(jacobian_at(JT, i)); });
 }
 
+MatS3 DeformationEnergy::weighted_transpose_times(const MatJT& T) const {
+  return weighted_transpose_sum([&](int i) { return jacobian_at(T, i); });
+}
+
 MatS3 DeformationEnergy::distortion_hessian_times_sum(const MatJT& JT, const MatJT& dJ) const {
   return weighted_transpose_sum(
       [&](int i) { return sd_hessian_times(jacobian_at(JT, i), jacobian_at(dJ, i)); });

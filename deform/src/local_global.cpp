@@ -13,9 +13,51 @@ namespace {
 constexpr int kBlock = 512;
 // E_LG below this counts as converged (rounding noise of a map that meets everything exactly).
 constexpr double kEnergyFloor = 1e-14;
+// The Newton polar iteration (closest_rotation) runs on matrices with det M > kPolarMinDet ‖M‖_F³, so that
+// σ3 > 1e-3 σ1 (det M ≤ σ1² σ3 and ‖M‖_F ≥ σ1) and the inverses it takes lose at most ~3 digits; the
+// local/global solve's Jacobians are near rotations. It stops once a step changes X by less than kPolarStep
+// (relative, Frobenius): the convergence is quadratic (error e → ~e²/2), so after a step of 1e-6 X is ~1e-12
+// from the polar factor and one more step leaves it at rounding level.
+constexpr double kPolarMinDet = 1e-3;
+constexpr double kPolarStep = 1e-6;
+constexpr int kPolarMaxSteps = 20;
+
+// X⁻ᵀ of a 3 by 3 matrix with determinant d: the columns' cross products over d.
+Mat3 inverse_transpose(const Mat3& X, double d) {
+  Mat3 C;
+  C.col(0) = X.col(1).cross(X.col(2));
+  C.col(1) = X.col(2).cross(X.col(0));
+  C.col(2) = X.col(0).cross(X.col(1));
+  return C / d;
+}
+
+// The polar factor of M (det M > 0) by Higham's scaled Newton iteration X ← (γX + X⁻ᵀ/γ)/2, γ the Frobenius
+// scaling (‖X⁻¹‖_F / ‖X‖_F)^½; false when it does not converge within kPolarMaxSteps.
+bool polar_newton(const Mat3& M, Mat3& X) {
+  X = M;
+  bool small = false;
+  for (int k = 0; k < kPolarMaxSteps; ++k) {
+    const double d = X.determinant();
+    if (!(d > 0)) return false;
+    const Mat3 Y = inverse_transpose(X, d);
+    // Scaling speeds up the first steps; near convergence it is 1 up to rounding and is left out.
+    const double g = small ? 1.0 : std::sqrt(std::sqrt(Y.squaredNorm() / X.squaredNorm()));
+    const Mat3 next = 0.5 * (g * X + Y / g);
+    const double change2 = (next - X).squaredNorm();
+    X = next;
+    if (small) return true;
+    small = change2 <= kPolarStep * kPolarStep * X.squaredNorm();
+  }
+  return false;
+}
 }  // namespace
 
 Mat3 closest_rotation(const Mat3& M) {
+  // Near rotations (the local/global solve's Jacobians, millions of calls per solve) the Newton iteration
+  // costs a few 3 by 3 products; a reflection, a near-singular M or no convergence takes the SVD.
+  const double f = M.norm();
+  Mat3 X;
+  if (M.determinant() > kPolarMinDet * f * f * f && polar_newton(M, X)) return X;
   Eigen::JacobiSVD<Mat3> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 U = svd.matrixU();
   const Mat3 V = svd.matrixV();
@@ -71,21 +113,8 @@ MatJT LocalGlobalSolver::rotation_targets(const MatS3& y, double* rigid) const {
 }
 
 MatS3 LocalGlobalSolver::global_step(const MatJT& T, const MatX3d& Q) const {
-  const int s = energy_.reduced_size();
-  const int n = energy_.num_samples();
-  const VecXd& sw = energy_.sample_weights();
-  MatS3 rhs = MatS3::Zero(s, 3);
-  if (rigidity_ > 0) {
-    const MatXfR& G = energy_.gradient_matrix();
-    for (int i0 = 0; i0 < n; i0 += kBlock) {
-      const int m = std::min(kBlock, n - i0);
-      MatJT Tb = T.middleRows(3 * static_cast<Eigen::Index>(i0), 3 * m);
-      if (sw.size())
-        for (int k = 0; k < m; ++k) Tb.middleRows<3>(3 * k) *= sw(i0 + k);
-      rhs.noalias() += G.middleRows(3 * static_cast<Eigen::Index>(i0), 3 * m).cast<double>().transpose() * Tb;
-    }
-    rhs *= rigidity_ / n;
-  }
+  MatS3 rhs = MatS3::Zero(energy_.reduced_size(), 3);
+  if (rigidity_ > 0) rhs = (rigidity_ / energy_.num_samples()) * energy_.weighted_transpose_times(T);
   rhs.noalias() += w_.p2p * (energy_.handle_matrix().transpose() * Q);
   return llt_.solve(rhs);
 }
@@ -105,7 +134,7 @@ double LocalGlobalSolver::rest_energy(const MatS3& y, const MatX3d& Q) const {
 }
 
 LocalGlobalResult LocalGlobalSolver::solve(const MatS3& y0, const MatX3d& Q, int max_iterations,
-                                           double tolerance) const {
+                                           double tolerance, const std::atomic<bool>* stop) const {
   if (y0.rows() != energy_.reduced_size() || Q.rows() != energy_.num_handles())
     throw Error("LocalGlobalSolver::solve: y0 must be s by 3 and Q #h by 3");
   LocalGlobalResult r;
@@ -116,6 +145,10 @@ LocalGlobalResult LocalGlobalSolver::solve(const MatS3& y0, const MatX3d& Q, int
   double prev = rigid + rest_energy(r.y, Q);
   r.energy = prev;
   for (int it = 0; it < max_iterations; ++it) {
+    if (stop && stop->load()) {
+      r.interrupted = true;
+      break;
+    }
     r.y = global_step(T, Q);
     ++r.iterations;
     if (rigidity_ > 0) T = rotation_targets(r.y, &rigid);

@@ -46,6 +46,8 @@ struct PathSolveReport {
   double path_reached = 0;              // how far along the path the handles got, in segments (0..K)
   int segments = 0;                     // K: path segments (waypoints + 1)
   UnreachabilityProof unreachable;      // of the final targets, checked before the strategies ran
+  double local_global_seconds = 0;      // strategy 4's local/global solves and the certificates of their maps
+                                    // and blends (its Newton polish not counted): part of the solve's time
 };
 
 // Solves from the solver's current map to `targets` (#h by 3) through `waypoints` (each #h by 3, in order).
@@ -53,7 +55,8 @@ struct PathSolveReport {
 // says which handles move as one rigid body. `on_iteration` and `stop` as in DeformationSolver::solve;
 // `on_stage` (optional) hears one line per stage. Each strategy (the direct solve, then the continuation)
 // may use max_iterations iterations; every stage starts from the user's weights (reset_weights). Afterwards
-// the solver's targets are `targets`, whichever stage the run stopped in.
+// the solver's targets are `targets`, whichever stage the run stopped in. The result's `seconds` is the wall
+// time of the whole call: every strategy, the unreachability check and the local/global maps included.
 SolveResult solve_to_targets(DeformationSolver& solver, const std::vector<MatX3d>& waypoints,
                              const MatX3d& targets, const std::vector<int>& groups,
                              const std::function<bool(const IterationRecord&)>& on_iteration = {},

@@ -102,6 +102,9 @@ class DeformationEnergy {
   double distortion_sum(const MatJT& JT) const;
   // Σ_i G_iᵀ ∂E_iso/∂J_i (s by 3, not divided by |I|).
   MatS3 distortion_gradient_sum(const MatJT& JT) const;
+  // Σ_i w_i G_iᵀ T_i (s by 3) for T stacked like JT (3|I| by 3, rows 3i..3i+2 = T_i), w the sample weights:
+  // the adjoint of jacobians() (the local/global solve's right side), in the same fixed chunk order.
+  MatS3 weighted_transpose_times(const MatJT& T) const;
   // Exact (all samples, unprojected) second derivatives along a direction whose Jacobians are dJ (= G d,
   // 3|I| by 3), for the conjugate-gradient correction of the subset Hessian (docs/solver.md): Σ_i w_i G_iᵀ
   // ∇²E_iso(J_i)[dJ_i] (s by 3) and Σ_i w_i ⟨dJ_i, ∇²E_iso(J_i)[dJ_i]⟩, neither divided by |I|. Deterministic

@@ -14,6 +14,7 @@
 // certificate (DeformationSolver::set_reduced_map).
 #pragma once
 #include <Eigen/Cholesky>
+#include <atomic>
 #include <vector>
 
 #include "lidef/deformation_energy.h"
@@ -26,10 +27,11 @@ namespace lidef {
 Mat3 closest_rotation(const Mat3& M);
 
 struct LocalGlobalResult {
-  MatS3 y;                 // s by 3 reduced coefficients (normalized frame)
-  int iterations = 0;      // local/global iterations run
-  double energy = 0;       // E_LG at y with its best rotations
-  bool converged = false;  // relative energy decrease below the tolerance
+  MatS3 y;                   // s by 3 reduced coefficients (normalized frame)
+  int iterations = 0;        // local/global iterations run
+  double energy = 0;         // E_LG at y with its best rotations
+  bool converged = false;    // relative energy decrease below the tolerance
+  bool interrupted = false;  // `stop` was set: y is the last iterate (E_LG no higher than at y0)
 };
 
 class LocalGlobalSolver {
@@ -40,9 +42,10 @@ class LocalGlobalSolver {
   LocalGlobalSolver(const DeformationEnergy& energy, const EnergyWeights& w, double rigidity = 4.0);
 
   // Local/global iterations from y0 (s by 3) toward the handle targets Q (#h by 3, normalized frame), until
-  // the relative decrease of E_LG is below `tolerance` or after `max_iterations`.
-  LocalGlobalResult solve(const MatS3& y0, const MatX3d& Q, int max_iterations = 200,
-                          double tolerance = 1e-8) const;
+  // the relative decrease of E_LG is below `tolerance` or after `max_iterations`; `stop` (optional) is
+  // checked before every iteration (a solve of hundreds of iterations takes seconds on the shared models).
+  LocalGlobalResult solve(const MatS3& y0, const MatX3d& Q, int max_iterations = 200, double tolerance = 1e-8,
+                          const std::atomic<bool>* stop = nullptr) const;
   // E_LG(y, R) with the rotations closest to y's Jacobians.
   double energy(const MatS3& y, const MatX3d& Q) const;
   // The best rotations of y's Jacobians, stacked as the targets of G y: 3|I| by 3, rows 3i..3i+2 = R_iᵀ.
