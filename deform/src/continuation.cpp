@@ -136,7 +136,7 @@ struct Runner {
       bool accepted = false, interrupted = false;
       std::vector<MatS3> starts{solver.reduced_coefficients()};
       if (round == 0 && (entry - solver.reduced_coefficients()).norm() > 0) starts.push_back(entry);
-      for (size_t k = 0; k < starts.size() && !accepted && !interrupted; ++k) {
+      for (size_t k = 0; k < starts.size() && !accepted; ++k) {
         const LocalGlobalResult c = lg.solve(starts[k], Q, kLocalGlobalIterations, 1e-8, stop);
         if (c.interrupted) {  // the map stays the last certified one; nothing of this solve is used
           interrupted = true;

@@ -46,8 +46,9 @@ struct PathSolveReport {
   double path_reached = 0;              // how far along the path the handles got, in segments (0..K)
   int segments = 0;                     // K: path segments (waypoints + 1)
   UnreachabilityProof unreachable;      // of the final targets, checked before the strategies ran
-  double local_global_seconds = 0;      // strategy 4's local/global solves and the certificates of their maps
-                                    // and blends (its Newton polish not counted): part of the solve's time
+  // Strategy 4's local/global solves and the certificates of their maps and blends (its Newton polish not
+  // counted): part of the solve's time.
+  double local_global_seconds = 0;
 };
 
 // Solves from the solver's current map to `targets` (#h by 3) through `waypoints` (each #h by 3, in order).
