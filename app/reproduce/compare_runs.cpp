@@ -223,7 +223,7 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
          "set terminal pngcairo enhanced size 1000,500 font 'sans,10'\nset output 'table1.png'\n"
          "set style data histogram\nset style histogram clustered gap 1\nset style fill solid 0.8 border -1\n"
          "set xtics noenhanced\nset logscale y\nset ylabel 'Newton / local-global iterations'\nset grid "
-         "ytics\nset key top left\n"
+         "ytics\nset key below\n"
          "set title 'iterations to convergence (or to the limit)'\n"
          "plot 'table1.dat' using 2:xtic(1) title 'lidef', '' using 3 title 'PWL(Tet) at the paper''s DOF', "
          "'' using 4 title 'PWL(Tet) model mesh (coarser)', '' using 5 title 'PWL(Tet) fine', '' using 6 "

@@ -76,7 +76,7 @@ void run_fig13(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
          "set terminal pngcairo enhanced size 1000,500 font 'sans,10'\n"
          "set output 'fig13.png'\n"
          "set style data histogram\nset style histogram clustered gap 1\nset style fill solid 0.8 border -1\n"
-         "set ylabel 'ms per iteration'\nset grid ytics\nset key top left\nset xtics rotate by -15 "
+         "set ylabel 'ms per iteration'\nset grid ytics\nset key below\nset xtics rotate by -15 "
          "noenhanced\n"
          "set title 'time of one Newton iteration by stage'\n"
          "plot 'fig13.dat' using 2:xtic(1) title 'gradient', '' using 3 title 'Hessian (assembly + "
