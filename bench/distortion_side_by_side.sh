@@ -6,12 +6,8 @@
 # sigma1/sigma3 (`lidef verify`, 4 samples per leaf, first round only).
 # Usage, from the repository root after building: bash bench/distortion_side_by_side.sh OLD_BINARY NEW_BINARY
 set -u
-OLD=$1
-NEW=$2
-SHARED=${SHARED:-../shared/data}
-OUT=${OUT:-/tmp/distortion-sbs}
-ROUNDS=${ROUNDS:-2}
-mkdir -p "$OUT"
+# shellcheck source=bench/side_by_side_common.sh
+source "$(dirname "$0")/side_by_side_common.sh"
 # scenario and target arguments, one run configuration per line
 CONFIGS="spot_head_turn|--max-distortion 1.169
 bar_bend|--max-distortion 1.477
@@ -41,22 +37,17 @@ sampled() {  # binary dir scenario: the sampled max sigma1/sigma3 of the written
     --out "$2/verify" > "$2/verify.log" 2>&1
   sed -n 's/.*sampled max sigma1\/sigma3 \([0-9.e+-]*\).*/\1/p' "$2/verify.log" | head -1
 }
+run() {  # binary dir which round
+  local extra=""
+  # shellcheck disable=SC2086 # the arguments are words
+  "$1" deform "$SHARED/scenarios/$n.json" $args --max-iterations 8 --threads 2 --quiet --out "$2" > "$2.log" 2>&1
+  [ "$4" = 1 ] && extra=" | sampled K $(sampled "$1" "$2")"
+  echo "$n $args | $3 | $(stats "$2")$extra"
+}
 i=0
 while IFS='|' read -r n args; do
   i=$((i + 1))
-  for round in $(seq 1 "$ROUNDS"); do
-    for which in old new; do
-      bin=$OLD
-      [ $which = new ] && bin=$NEW
-      d=$OUT/$i-$n-$which-$round
-      rm -rf "$d"
-      $bin deform "$SHARED/scenarios/$n.json" $args --max-iterations 8 --threads 2 --quiet --out "$d" \
-        > "$d.log" 2>&1
-      extra=""
-      [ "$round" = 1 ] && extra=" | sampled K $(sampled "$bin" "$d")"
-      echo "$n $args | $which | $(stats "$d")$extra"
-    done
-  done
+  alternate "$i-$n" run
 done <<< "$CONFIGS"
 for n in spot_head_turn bar_bend horse_leg_lift animal_tail_lift bar_twist90 bar_twist180; do
   for round in $(seq 1 "$ROUNDS"); do

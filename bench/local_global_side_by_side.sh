@@ -6,29 +6,18 @@
 # energy, the certified bounds and summary.json's solve / local_global / total seconds.
 # Usage, from the repository root after building: bash bench/local_global_side_by_side.sh OLD_BINARY NEW_BINARY
 set -u
-OLD=$1
-NEW=$2
-SHARED=${SHARED:-../shared/data}
-OUT=${OUT:-/tmp/local-global-sbs}
-ROUNDS=${ROUNDS:-2}
-mkdir -p "$OUT"
+# shellcheck source=bench/side_by_side_common.sh
+source "$(dirname "$0")/side_by_side_common.sh"
 CONFIGS="$SHARED/scenarios/horse_leg_lift.json|--max-distortion 1.1 --max-iterations 8
 $SHARED/scenarios/bar_twist180.json|--max-distortion 1.486 --max-iterations 8
 data/scenarios/beam_pull_through.json|
 $SHARED/scenarios/spot_head_turn.json|--max-distortion 1.169 --max-iterations 8"
-i=0
-while IFS='|' read -r sc args; do
-  i=$((i + 1))
-  for round in $(seq 1 "$ROUNDS"); do
-    for which in old new; do
-      bin=$OLD
-      [ $which = new ] && bin=$NEW
-      d=$OUT/$i-$which-$round
-      rm -rf "$d"
-      start=$(date +%s.%N)
-      # shellcheck disable=SC2086 # the arguments are words
-      "$bin" deform "$sc" $args --threads 2 --quiet --out "$d" > "$d.log" 2>&1
-      python3 - "$d" "$(basename "$sc" .json)" "$which" "$start" "$(date +%s.%N)" <<'PY'
+run() {  # binary dir which round
+  local start
+  start=$(date +%s.%N)
+  # shellcheck disable=SC2086 # the arguments are words
+  "$1" deform "$sc" $args --threads 2 --quiet --out "$2" > "$2.log" 2>&1
+  python3 - "$2" "$(basename "$sc" .json)" "$3" "$start" "$(date +%s.%N)" <<'PY'
 import json, sys
 d, name, which, start, end = sys.argv[1:6]
 wall = float(end) - float(start)
@@ -40,6 +29,9 @@ print("%s | %s | wall %.1f s | %d it %s | err %.4g | E %.10g | K <= %.6g | s3 >=
       j["max_handle_error"], j["energy"]["total"], j["max_distortion_upper_bound"],
       j["min_sigma3_lower_bound"], t["solve"], lg, t["total"]))
 PY
-    done
-  done
+}
+i=0
+while IFS='|' read -r sc args; do
+  i=$((i + 1))
+  alternate "$i" run
 done <<< "$CONFIGS"
