@@ -158,6 +158,39 @@ TEST_P(OpenCLEnergy, KernelsMatchCpu) {
     const MatXd Bcf = cpu->distortion_pair_blocks(false), Bgf = gpu->distortion_pair_blocks(false);
     EXPECT_LT((Bcf - Bgf).norm(), 1e-5 * Bcf.norm());  // single precision products, different order
     EXPECT_LT((Bcf - Bc).norm(), 1e-5 * Bc.norm());
+    // The exact Hessian along the direction (the conjugate-gradient correction's products): equal on both
+    // backends, and against the device's own energy and gradient by central differences (an independent
+    // check: a kernel that agreed with a wrong CPU formula would fail here).
+    ASSERT_TRUE(gpu->has_hessian_products());
+    const MatS3 hc = cpu->distortion_hessian_direction_sum(), hg = gpu->distortion_hessian_direction_sum();
+    EXPECT_LT((hc - hg).norm(), 1e-11 * hc.norm());
+    const double cc = cpu->distortion_curvature(), cg = gpu->distortion_curvature();
+    EXPECT_LT(rel(cc, cg), 1e-11) << cc << " vs " << cg;
+    const double h = 1e-4;
+    const double second =
+        (gpu->distortion_sum(h) - 2 * gpu->distortion_sum(0) + gpu->distortion_sum(-h)) / (h * h);
+    EXPECT_LT(rel(cg, second), 1e-5) << cg << " vs " << second;
+    auto shifted = backend->energy_kernels(*r.energy);
+    shifted->set_current(r.y + h * r.d);
+    const MatS3 plus = shifted->distortion_gradient_sum();
+    shifted->set_current(r.y - h * r.d);
+    const MatS3 minus = shifted->distortion_gradient_sum();
+    EXPECT_LT(((plus - minus) / (2 * h) - hg).norm(), 1e-6 * hg.norm());
+    // The direction combined on the device from two directions equals the direction set at once.
+    const MatS3 d2 = r.d.reverse();
+    auto direct = backend->energy_kernels(*r.energy);
+    direct->set_current(r.y);
+    direct->set_direction(0.3 * r.d - 0.2 * d2);
+    for (auto* k : {cpu.get(), gpu.get()}) {
+      k->accumulate_direction(0.3, true);
+      k->set_direction(d2);
+      k->accumulate_direction(-0.2, false);
+      k->use_accumulated_direction();
+    }
+    EXPECT_LT(rel(gpu->distortion_sum(0.6), direct->distortion_sum(0.6)), 1e-11);
+    EXPECT_LT(rel(cpu->distortion_sum(0.6), gpu->distortion_sum(0.6)), 1e-11);
+    EXPECT_GT(rel(gpu->distortion_sum(0.6), gpu->distortion_sum(0)), 1e-6);  // the direction matters
+    for (auto* k : {cpu.get(), gpu.get()}) k->set_direction(r.d);
     // The accepted step.
     cpu->accept(0.5);
     gpu->accept(0.5);

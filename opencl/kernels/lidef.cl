@@ -214,18 +214,9 @@ __kernel void jacobians_rows(__global const float* G, long R, int s, __global co
   Jout[3 * r + 2] = o[2];
 }
 
-// Work-group sums of w_i (E_iso(J_i + t dJ_i) − 6) (fixed tree order: deterministic); partial[group]. w: the
-// per-sample volume weights (all 1 when the sampling is uniform: the products are then exact).
-__kernel void sd_sum(__global const double* Jc, __global const double* dJ, double t, int use_dJ, long n,
-                     __global const double* w, __global double* partial, __local double* scratch) {
-  const long i = get_global_id(0);
+// partial[group] = the work-group's sum of e, by a fixed tree (deterministic). Every work-item calls it.
+inline void group_tree_sum(double e, __local double* scratch, __global double* partial) {
   const int lid = get_local_id(0), ls = get_local_size(0);
-  double e = 0;
-  if (i < n) {
-    double J[9], Jinv[9];
-    load_J(Jc, use_dJ ? dJ : 0, t, i, J);
-    e = w[i] * (sd_energy(J, Jinv) - 6.0);
-  }
   scratch[lid] = e;
   barrier(CLK_LOCAL_MEM_FENCE);
   for (int h = ls / 2; h > 0; h /= 2) {
@@ -233,6 +224,20 @@ __kernel void sd_sum(__global const double* Jc, __global const double* dJ, doubl
     barrier(CLK_LOCAL_MEM_FENCE);
   }
   if (lid == 0) partial[get_group_id(0)] = scratch[0];
+}
+
+// Work-group sums of w_i (E_iso(J_i + t dJ_i) − 6) (fixed tree order: deterministic); partial[group]. w: the
+// per-sample volume weights (all 1 when the sampling is uniform: the products are then exact).
+__kernel void sd_sum(__global const double* Jc, __global const double* dJ, double t, int use_dJ, long n,
+                     __global const double* w, __global double* partial, __local double* scratch) {
+  const long i = get_global_id(0);
+  double e = 0;
+  if (i < n) {
+    double J[9], Jinv[9];
+    load_J(Jc, use_dJ ? dJ : 0, t, i, J);
+    e = w[i] * (sd_energy(J, Jinv) - 6.0);
+  }
+  group_tree_sum(e, scratch, partial);
 }
 
 // P_i = w_i ∂E_iso/∂J_i = w_i (2J − 2 J⁻ᵀ J⁻¹ J⁻ᵀ), stored in the JT layout. NaN where det J ≤ 0 (as the CPU).
@@ -263,6 +268,78 @@ __kernel void sd_gradient(__global const double* Jc, long n, __global const doub
   const double wi = w[i];
   for (int b = 0; b < 3; ++b)
     for (int a = 0; a < 3; ++a) P[9 * i + 3 * b + a] = wi * (2.0 * J[3 * a + b] - 2.0 * M[3 * a + b]);
+}
+
+// C = A B for row-major 3x3 matrices.
+inline void mul33(const double* A, const double* B, double* C) {
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) C[3 * a + b] = A[3 * a] * B[b] + A[3 * a + 1] * B[3 + b] + A[3 * a + 2] * B[6 + b];
+}
+
+// The exact SD Hessian at J applied to D (sd_hessian_times in symmetric_dirichlet.cpp, the same products in the
+// same order), row-major; Ji = J⁻¹. With B = J⁻ᵀ, X = Dᵀ: 2D + 2(B X B Bᵀ B + B Bᵀ D Bᵀ B + B Bᵀ B X B).
+inline void sd_hessian_times3(const double* Ji, const double* D, double* out) {
+  double B[9], Bt[9], X[9];
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      B[3 * a + b] = Ji[3 * b + a];
+      Bt[3 * a + b] = Ji[3 * a + b];
+      X[3 * a + b] = D[3 * b + a];
+    }
+  double BBt[9], BtB[9], XB[9], T[9], U[9], t1[9], t2[9], t3[9];
+  mul33(B, Bt, BBt);
+  mul33(Bt, B, BtB);
+  mul33(X, B, XB);
+  mul33(B, XB, T);  // ((B XB) Bᵀ) B
+  mul33(T, Bt, U);
+  mul33(U, B, t1);
+  mul33(BBt, D, T);  // (B Bᵀ D) BᵀB
+  mul33(T, BtB, t2);
+  mul33(BBt, B, T);  // (B Bᵀ B) XB
+  mul33(T, XB, t3);
+  for (int q = 0; q < 9; ++q) out[q] = 2.0 * D[q] + 2.0 * ((t1[q] + t2[q]) + t3[q]);
+}
+
+// P_i = w_i H(J_i)[dJ_i] (the exact Hessian along the direction's Jacobians), stored in the JT layout for
+// gradient_reduce / gradient_rows_partial; NaN where det J ≤ 0 (as the CPU).
+__kernel void sd_hessian_times(__global const double* Jc, __global const double* dJ, long n,
+                               __global const double* w, __global double* P) {
+  const long i = get_global_id(0);
+  if (i >= n) return;
+  double J[9], Ji[9], D[9], M[9];
+  load_J(Jc, 0, 0.0, i, J);
+  if (!(det3(J) > 0)) {
+    for (int q = 0; q < 9; ++q) P[9 * i + q] = NAN;
+    return;
+  }
+  sd_energy(J, Ji);
+  load_J(dJ, 0, 0.0, i, D);
+  sd_hessian_times3(Ji, D, M);
+  const double wi = w[i];
+  for (int b = 0; b < 3; ++b)
+    for (int a = 0; a < 3; ++a) P[9 * i + 3 * b + a] = wi * M[3 * a + b];
+}
+
+// Work-group sums of w_i dJ_i : H(J_i)[dJ_i] (the curvature along the direction; fixed tree order, as sd_sum).
+__kernel void sd_curvature(__global const double* Jc, __global const double* dJ, long n,
+                           __global const double* w, __global double* partial, __local double* scratch) {
+  const long i = get_global_id(0);
+  double e = 0;
+  if (i < n) {
+    double J[9], Ji[9], D[9], M[9];
+    load_J(Jc, 0, 0.0, i, J);
+    if (!(det3(J) > 0)) {
+      e = NAN;
+    } else {
+      sd_energy(J, Ji);
+      load_J(dJ, 0, 0.0, i, D);
+      sd_hessian_times3(Ji, D, M);
+      double c = 0;
+      for (int q = 0; q < 9; ++q) c += D[q] * M[q];
+      e = w[i] * c;
+    }
+  }
+  group_tree_sum(e, scratch, partial);
 }
 
 // out(k, a) = Σ_r G(r, k) P(r, a): one work-group per k, fixed-order tree reduction (deterministic).
@@ -325,6 +402,12 @@ __kernel void sum_partials(__global const double* partial, int chunks, int len, 
   double acc = 0;
   for (int c = 0; c < chunks; ++c) acc += partial[(long)c * len + j];
   out[j] = acc;
+}
+
+// S ← α dJ (start) or S + α dJ: the conjugate-gradient direction's Jacobians, combined on the device.
+__kernel void scale_add_J(__global double* S, __global const double* dJ, double alpha, int start, long len) {
+  const long q = get_global_id(0);
+  if (q < len) S[q] = start ? alpha * dJ[q] : S[q] + alpha * dJ[q];
 }
 
 // Jc ← Jc + t dJ.

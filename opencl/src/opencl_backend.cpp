@@ -16,6 +16,8 @@
 #include <iterator>
 #include <mutex>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "lidef/atomic_file.h"
 #include "lidef/hash.h"
@@ -274,6 +276,9 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_psd_ = cl::Kernel(d_->program, "psd_blocks");
       k_wf_ = cl::Kernel(d_->program, "fill_w_float");
       k_wd_ = cl::Kernel(d_->program, "fill_w_double");
+      k_htimes_ = cl::Kernel(d_->program, "sd_hessian_times");
+      k_curv_ = cl::Kernel(d_->program, "sd_curvature");
+      k_scale_add_ = cl::Kernel(d_->program, "scale_add_J");
       return 0;
     });
     if (!d_->cpu_device) warm_up();
@@ -310,23 +315,15 @@ class OpenCLEnergyKernels final : public EnergyKernels {
 
   double distortion_sum(double t) override {
     std::lock_guard<std::mutex> lock(d_->mutex);
-    std::vector<double> part(groups_);
-    guarded(d_->label, "symmetric Dirichlet energy", [&] {
+    return summed_over_groups(k_sum_, "symmetric Dirichlet energy", [&] {
       k_sum_.setArg(0, J_);
       k_sum_.setArg(1, dJ_);
       k_sum_.setArg(2, t);
       k_sum_.setArg(3, t != 0 ? 1 : 0);
       k_sum_.setArg(4, static_cast<cl_long>(n_));
       k_sum_.setArg(5, w_);
-      k_sum_.setArg(6, partial_);
-      k_sum_.setArg(7, cl::Local(ls_ * sizeof(double)));
-      d_->queue.enqueueNDRangeKernel(k_sum_, cl::NullRange, cl::NDRange(groups_ * ls_), cl::NDRange(ls_));
-      d_->queue.enqueueReadBuffer(partial_, CL_TRUE, 0, groups_ * sizeof(double), part.data());
-      return 0;
+      return 6;
     });
-    double sum = 0;  // in group order: deterministic
-    for (double p : part) sum += p;
-    return sum;
   }
 
   void accept(double t) override {
@@ -352,34 +349,63 @@ class OpenCLEnergyKernels final : public EnergyKernels {
       k_grad_.setArg(2, w_);
       k_grad_.setArg(3, P_);
       d_->queue.enqueueNDRangeKernel(k_grad_, cl::NullRange, cl::NDRange(round_up(n_, 64)), cl::NDRange(64));
-      if (d_->cpu_device) {
-        k_gpart_.setArg(0, Grow_);
-        k_gpart_.setArg(1, static_cast<cl_long>(R_));
-        k_gpart_.setArg(2, s_);
-        k_gpart_.setArg(3, P_);
-        k_gpart_.setArg(4, kRowsPerChunk);
-        k_gpart_.setArg(5, partial_g_);
-        d_->queue.enqueueNDRangeKernel(k_gpart_, cl::NullRange, cl::NDRange(round_up(chunks_, 8)),
-                                       cl::NDRange(8));
-        k_gsum_.setArg(0, partial_g_);
-        k_gsum_.setArg(1, static_cast<int>(chunks_));
-        k_gsum_.setArg(2, 3 * s_);
-        k_gsum_.setArg(3, g_);
-        d_->queue.enqueueNDRangeKernel(k_gsum_, cl::NullRange, cl::NDRange(round_up(3 * s_, 64)),
-                                       cl::NDRange(64));
-      } else {
-        k_red_.setArg(0, Gt_);
-        k_red_.setArg(1, static_cast<cl_long>(R_));
-        k_red_.setArg(2, s_);
-        k_red_.setArg(3, P_);
-        k_red_.setArg(4, g_);
-        k_red_.setArg(5, cl::Local(3 * ls_ * sizeof(double)));
-        d_->queue.enqueueNDRangeKernel(k_red_, cl::NullRange, cl::NDRange(s_ * ls_), cl::NDRange(ls_));
-      }
-      d_->queue.enqueueReadBuffer(g_, CL_TRUE, 0, 3 * s_ * sizeof(double), g.data());  // column-major s by 3
+      transpose_sum_of_P(g);
       return 0;
     });
     return g;
+  }
+
+  // The exact Hessian's products along dJ_ at J_, on the device: the conjugate-gradient correction then
+  // needs no pass over G and no Jacobians on the host.
+  bool has_hessian_products() const override { return true; }
+
+  MatS3 distortion_hessian_direction_sum() override {
+    std::lock_guard<std::mutex> lock(d_->mutex);
+    MatS3 h(s_, 3);
+    guarded(d_->label, "Hessian times the direction", [&] {
+      k_htimes_.setArg(0, J_);
+      k_htimes_.setArg(1, dJ_);
+      k_htimes_.setArg(2, static_cast<cl_long>(n_));
+      k_htimes_.setArg(3, w_);
+      k_htimes_.setArg(4, P_);
+      d_->queue.enqueueNDRangeKernel(k_htimes_, cl::NullRange, cl::NDRange(round_up(n_, 64)),
+                                     cl::NDRange(64));
+      transpose_sum_of_P(h);
+      return 0;
+    });
+    return h;
+  }
+
+  double distortion_curvature() override {
+    std::lock_guard<std::mutex> lock(d_->mutex);
+    return summed_over_groups(k_curv_, "curvature along the direction", [&] {
+      k_curv_.setArg(0, J_);
+      k_curv_.setArg(1, dJ_);
+      k_curv_.setArg(2, static_cast<cl_long>(n_));
+      k_curv_.setArg(3, w_);
+      return 4;
+    });
+  }
+
+  void accumulate_direction(double alpha, bool start) override {
+    std::lock_guard<std::mutex> lock(d_->mutex);
+    if (!sum_()) sum_ = make_buffer<double>(*d_, 3 * R_, "allocating Jacobians");
+    guarded(d_->label, "combining the direction", [&] {
+      k_scale_add_.setArg(0, sum_);
+      k_scale_add_.setArg(1, dJ_);
+      k_scale_add_.setArg(2, alpha);
+      k_scale_add_.setArg(3, start ? 1 : 0);
+      k_scale_add_.setArg(4, static_cast<cl_long>(3 * R_));
+      d_->queue.enqueueNDRangeKernel(k_scale_add_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)),
+                                     cl::NDRange(64));
+      return 0;
+    });
+  }
+
+  // Every kernel takes its buffers as arguments at each call, so swapping the handles is enough.
+  void use_accumulated_direction() override {
+    std::lock_guard<std::mutex> lock(d_->mutex);
+    std::swap(dJ_, sum_);
   }
 
   MatXd distortion_pair_blocks(bool double_precision) override {
@@ -459,6 +485,56 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   }
 
  private:
+  // Runs k, a kernel of one work-item per sample that writes its work-groups' tree sums: set_args sets the
+  // arguments before the sums' buffer and scratch and returns the index of the buffer's. The groups' sums are
+  // added on the host in group order (deterministic). The caller holds the lock.
+  template <class SetArgs>
+  double summed_over_groups(cl::Kernel& k, const char* what, const SetArgs& set_args) {
+    std::vector<double> part(groups_);
+    guarded(d_->label, what, [&] {
+      const int at = set_args();
+      k.setArg(at, partial_);
+      k.setArg(at + 1, cl::Local(ls_ * sizeof(double)));
+      d_->queue.enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(groups_ * ls_), cl::NDRange(ls_));
+      d_->queue.enqueueReadBuffer(partial_, CL_TRUE, 0, groups_ * sizeof(double), part.data());
+      return 0;
+    });
+    double sum = 0;
+    for (double p : part) sum += p;
+    return sum;
+  }
+
+  // out (s by 3) = Gᵀ P_ (P_ in the JT layout, filled by the caller's kernel): on a GPU one work-group per
+  // basis function over Gt_; on a CPU device row chunks of G's host layout, their partial sums added in
+  // order. The caller holds the lock and runs this inside `guarded`.
+  void transpose_sum_of_P(MatS3& out) {
+    if (d_->cpu_device) {
+      k_gpart_.setArg(0, Grow_);
+      k_gpart_.setArg(1, static_cast<cl_long>(R_));
+      k_gpart_.setArg(2, s_);
+      k_gpart_.setArg(3, P_);
+      k_gpart_.setArg(4, kRowsPerChunk);
+      k_gpart_.setArg(5, partial_g_);
+      d_->queue.enqueueNDRangeKernel(k_gpart_, cl::NullRange, cl::NDRange(round_up(chunks_, 8)),
+                                     cl::NDRange(8));
+      k_gsum_.setArg(0, partial_g_);
+      k_gsum_.setArg(1, static_cast<int>(chunks_));
+      k_gsum_.setArg(2, 3 * s_);
+      k_gsum_.setArg(3, g_);
+      d_->queue.enqueueNDRangeKernel(k_gsum_, cl::NullRange, cl::NDRange(round_up(3 * s_, 64)),
+                                     cl::NDRange(64));
+    } else {
+      k_red_.setArg(0, Gt_);
+      k_red_.setArg(1, static_cast<cl_long>(R_));
+      k_red_.setArg(2, s_);
+      k_red_.setArg(3, P_);
+      k_red_.setArg(4, g_);
+      k_red_.setArg(5, cl::Local(3 * ls_ * sizeof(double)));
+      d_->queue.enqueueNDRangeKernel(k_red_, cl::NullRange, cl::NDRange(s_ * ls_), cl::NDRange(ls_));
+    }
+    d_->queue.enqueueReadBuffer(g_, CL_TRUE, 0, 3 * s_ * sizeof(double), out.data());  // column-major s by 3
+  }
+
   void jacobians(const MatS3& y, cl::Buffer& out, const char* stage) {
     std::lock_guard<std::mutex> lock(d_->mutex);
     guarded(d_->label, stage, [&] {
@@ -484,8 +560,9 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   cl::Buffer partial_g_;
   cl::Buffer Gt_, Grow_, GHf_, GHd_, subset_, y_, J_, dJ_, P_, g_, partial_, blocks_, w_, bw_, Wf_, Wd_, Bf_,
       Bd_;
+  cl::Buffer sum_;  // the combined conjugate-gradient direction's Jacobians (allocated at first use)
   cl::Kernel k_gpart_, k_gsum_;
-  cl::Kernel k_jac_, k_sum_, k_grad_, k_red_, k_axpy_, k_psd_, k_wf_, k_wd_;
+  cl::Kernel k_jac_, k_sum_, k_grad_, k_red_, k_axpy_, k_psd_, k_wf_, k_wd_, k_htimes_, k_curv_, k_scale_add_;
 };
 
 // ------------------------------------------------------------------------------------------------
