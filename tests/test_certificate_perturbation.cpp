@@ -4,12 +4,14 @@
 // verdict), and for large changes (nothing is taken over).
 #include <gtest/gtest.h>
 
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <memory>
 #include <random>
 
 #include "lidef/analysis/certificate_verification.h"
+#include "lidef/errors.h"
 #include "lidef/octree_certifier.h"
 #include "lidef/sampling.h"
 #include "lidef/subspace.h"
@@ -41,6 +43,20 @@ struct BentCase {
     sub = compute_subspace(cage, 40);
     cert = std::make_unique<OctreeCertifier>(cage, sampling, &sub.basis);
     y0 = bent_reduced(cage, sub, 0.6, 14);
+  }
+};
+
+// A coarse icosphere's ~300 voxels and 20 basis functions.
+struct SmallCase {
+  Cage cage{lidef::test::icosphere(1, 0.1, 3)};
+  VoxelSampling sampling;
+  SpectralSubspace sub;
+  SmallCase() {
+    SamplingParams sp;
+    sp.target_count = 300;
+    sp.count_tolerance = 0.2;
+    sampling = sample_voxels(cage, sp);
+    sub = compute_subspace(cage, 20);
   }
 };
 
@@ -129,12 +145,10 @@ TEST(CertificatePerturbation, VoxelsTakenOverHoldUnderDenseSamplingAndTheVerdict
 
 // A previous map of another shape (wrong row count) or bounds of another sampling are ignored, not trusted.
 TEST(CertificatePerturbation, MismatchedPreviousDataIsIgnored) {
-  const Cage cage(lidef::test::icosphere(1, 0.1, 3));
-  SamplingParams sp;
-  sp.target_count = 300;
-  sp.count_tolerance = 0.2;
-  const VoxelSampling sampling = sample_voxels(cage, sp);
-  const SpectralSubspace sub = compute_subspace(cage, 20);
+  const SmallCase small;
+  const Cage& cage = small.cage;
+  const VoxelSampling& sampling = small.sampling;
+  const SpectralSubspace& sub = small.sub;
   const OctreeCertifier cert(cage, sampling, &sub.basis);
   const MatR y0 = bent_reduced(cage, sub, 0.2, 5);
   const Certificate c0 = cert.certify_reduced(y0);
@@ -231,4 +245,59 @@ TEST(CertificatePerturbation, TheDirectionsJacobiansTakeOverMoreAndStaySound) {
   std::cout << checked << " voxels taken over checked by dense sampling\n";
   EXPECT_GE(more, 2) << "the direction's center term takes over more voxels at some steps";
   EXPECT_GT(checked, 500);
+}
+
+// The per-voxel constants of Step 4e: built once, bounded by the stored rows' true norms (Eigen's SVD in
+// double), and adopted by another certifier (what the precomputation cache does) with the same certificates.
+TEST(CertificatePerturbation, ConstantsBoundTheStoredRowsAndAdoptingThemChangesNothing) {
+  const SmallCase small;
+  const Cage& cage = small.cage;
+  const VoxelSampling& sampling = small.sampling;
+  const SpectralSubspace& sub = small.sub;
+  const OctreeCertifier built(cage, sampling, &sub.basis);
+  EXPECT_EQ(built.perturbation_constants_if_built(), nullptr);
+  const OctreeCertifier::PerturbationConstants pc = built.perturbation_constants();
+  ASSERT_NE(built.perturbation_constants_if_built(), nullptr);
+  const long N = sampling.size();
+  ASSERT_EQ(pc.g2.size(), N);
+  const OctreeCertifier::ReducedDerivativesRef r = built.reduced_derivatives();
+  for (long i = 0; i < N; ++i) {
+    Eigen::MatrixXd G(3, r.m);
+    for (int row = 0; row < 3; ++row)
+      for (long k = 0; k < r.m; ++k) G(row, k) = (*r.GH)[(9 * i + row) * r.m + k];
+    const double two = Eigen::JacobiSVD<Eigen::MatrixXd>(G).singularValues()(0);
+    EXPECT_GE(pc.g2(i), two) << "voxel " << i;
+    EXPECT_LE(pc.g2(i), std::pow(3.0, 0.25) * two * (1 + 1e-9)) << "Gershgorin is within 3^(1/4)";
+    EXPECT_GE(pc.gF(i), G.norm());
+    EXPECT_LE(pc.gF(i), G.norm() * (1 + 1e-9));
+    EXPECT_GT(pc.rest(i), 0);
+  }
+
+  OctreeCertifier fresh(cage, sampling, &sub.basis);
+  OctreeCertifier::PerturbationConstants wrong = pc;
+  wrong.rest.conservativeResize(N - 1);
+  EXPECT_THROW(fresh.adopt_perturbation_constants(wrong), Error);
+  fresh.adopt_perturbation_constants(pc);
+  const OctreeCertifier::PerturbationConstants* got = fresh.perturbation_constants_if_built();
+  ASSERT_NE(got, nullptr);
+  EXPECT_EQ(got->g2, pc.g2);
+  EXPECT_EQ(got->rest, pc.rest);
+  EXPECT_EQ(got->gF, pc.gF);
+
+  const MatR y0 = bent_reduced(cage, sub, 0.2, 5);
+  const Certificate c0 = built.certify_reduced(y0);
+  ASSERT_TRUE(c0.certified);
+  const MatR y1 = bent_reduced(cage, sub, 0.201, 5);
+  CertifyParams q;
+  q.previous_y = &y0;
+  q.previous_lower = &c0.base_lower;
+  const Certificate a = built.certify_reduced(y1, q), b = fresh.certify_reduced(y1, q);
+  EXPECT_GT(a.perturbed_voxels, 0);
+  EXPECT_EQ(a.perturbed_voxels, b.perturbed_voxels);
+  EXPECT_EQ(a.min_lower_bound, b.min_lower_bound);
+  EXPECT_EQ(a.base_lower, b.base_lower);
+
+  // A certifier without a reduction has none.
+  const OctreeCertifier full(cage, sampling);
+  EXPECT_THROW(full.perturbation_constants(), Error);
 }

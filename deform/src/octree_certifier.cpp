@@ -69,11 +69,8 @@ struct OctreeCertifier::Impl {
   // Certifying by perturbation (Step 4e), per voxel (built on first use; reduced mode only): Γ_i = g2 + rest
   // ≥ sup over its ball of the norm of the map ỹ ↦ J, with its center part g2 ≥ ‖G_i‖₂; and ‖G̃_i‖_F of the
   // stored rows.
-  struct PerturbationConstants {
-    VecXd g2, rest, gF;
-  };
   mutable std::once_flag gamma_once;
-  mutable PerturbationConstants pert;
+  mutable OctreeCertifier::PerturbationConstants pert;
   // The voxel lookup of the distortion probes (built on first use: every line-search trial asks it).
   mutable std::once_flag locator_once;
   mutable std::unique_ptr<VoxelLocator> locator;
@@ -259,6 +256,112 @@ Certificate OctreeCertifier::certify_reduced(const Eigen::Matrix<double, Eigen::
                                              const CertifyParams& params) const {
   const MatX3d y = expand_reduced(yr, "certify_reduced");
   return run(y, yr.data(), yr.rows(), params);
+}
+
+// The factor matrix of one bound (third order, or first order), built on first use (it depends only on the
+// cage and the voxels).
+const OctreeCertifier::FactorMatrix& OctreeCertifier::factor_matrix(bool third_kind) const {
+  const Impl& im = *impl_;
+  const long N = sampling_.size(), E = cage_.num_edges();
+  // One row per voxel, vectorized over the edges (lipschitz_bound.h, factor_row).
+  auto build = [&](FactorMatrix& mat, std::vector<char>& finite, bool third) {
+    const EdgeArrays edges(im.eu, im.ew);
+    mat.resize(N, E);
+    finite.assign(N, 1);
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i)
+      finite[i] = factor_row(edges, third ? EdgeFactor::kThirdOrder : EdgeFactor::kFirstOrder,
+                             sampling_.centers.row(i).transpose(), sampling_.radius_of(static_cast<int>(i)),
+                             mat.row(i).data());
+  };
+  if (third_kind) {
+    std::call_once(im.third_once, [&] { build(im.third, im.third_finite, true); });
+    return im.third;
+  }
+  std::call_once(im.first_once, [&] { build(im.first, im.first_finite, false); });
+  return im.first;
+}
+
+// Γ_i = ‖G(c)‖₂ + r (‖H(c)‖_F + ½ r Σ_e W_e Θ_e(B_i)), the reduced basis' gradients G (3 by s) and
+// Hessians H (27 by s) at the center from the stored rows (each within 2⁻²⁴ of its value: × (1 + 2⁻²³)),
+// W_e = sqrt(Σ_k ‖δ_e(ψ_k)‖²) over the reduced basis functions ψ_k (Step 2's δ of a scalar function, a
+// 3-vector), Θ the third-order factors (Step 3). Then ‖J(ỹ) − J(ỹ₀)‖_F ≤ Γ_i ‖ỹ − ỹ₀‖_F on the ball (Step
+// 4e).
+const OctreeCertifier::PerturbationConstants& OctreeCertifier::perturbation_constants() const {
+  const Impl& im = *impl_;
+  if (im.mode != Impl::Mode::kReduced || !im.reduction)
+    throw Error("OctreeCertifier: perturbation constants need a certifier with a reduction");
+  const long N = sampling_.size(), E = cage_.num_edges();
+  std::call_once(im.gamma_once, [&] {
+    const MatXd& xi = *im.reduction;
+    const long s = xi.cols();
+    VecXd W2 = VecXd::Zero(E);
+    for (long k0 = 0; k0 < s; k0 += 3) {
+      MatX3d Y = MatX3d::Zero(xi.rows(), 3);
+      for (int a = 0; a < 3 && k0 + a < s; ++a) Y.col(a) = xi.col(k0 + a);
+      const HarmonicBasis::FaceMatrices f = basis_.face_matrices(Y);
+      for (long e = 0; e < E; ++e) {
+        const CageEdge& ce = cage_.edges[e];
+        W2(e) += (f.A[ce.f0] - f.A[ce.f1]).squaredNorm();  // the 3 rows: 3 basis functions
+      }
+    }
+    const VecXd W = W2.cwiseSqrt() * (1 + 1e-12);
+    const auto& factors = factor_matrix(true);
+    const long m = im.m;
+    constexpr double kStored = 1 + 0x1p-23;
+    // The sums below run in SIMD lanes, in the compiler's order; float × float products are exact in
+    // double, so only the sums round: ≤ 3 m u relative for the Gram row sums (each entry within m u of
+    // Σ|products| ≤ √(G_aa G_bb) ≤ gj), ≤ (m + 6) u for the non-negative Hessian and diagonal sums,
+    // ≤ (E + 1) u for Σ_e W_e Θ_e (each product rounded once). kSums covers all of them for any s and cage.
+    const double kSums = 1 + 1e-12 + 3.0 * static_cast<double>(m + E + 16) * 0x1p-53;
+    PerturbationConstants out;
+    out.g2.resize(N), out.rest.resize(N), out.gF.resize(N);
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < N; ++i) {
+      const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
+      // ‖G‖₂² = λ_max(G Gᵀ) ≤ the largest absolute row sum of the 3×3 Gram matrix (Gershgorin), up to √3
+      // below ‖G‖_F² where the three gradient rows are nearly orthogonal and of equal length.
+      double gram[3][3] = {};
+      for (int a = 0; a < 3; ++a)
+        for (int b = a; b < 3; ++b) gram[a][b] = gram[b][a] = float_dot(blk + a * m, blk + b * m, m);
+      double gj = 0;
+      for (int a = 0; a < 3; ++a)
+        gj = std::max(gj, std::abs(gram[a][0]) + std::abs(gram[a][1]) + std::abs(gram[a][2]));
+      gj *= kSums;
+      double gh = 0;
+      for (int row = 3; row < 9; ++row) {  // 3 xx, 4 xy, 5 xz, 6 yy, 7 yz, 8 zz: off-diagonals twice
+        const float* h = blk + row * m;
+        gh += (row == 4 || row == 5 || row == 7 ? 2 : 1) * float_dot(h, h, m);
+      }
+      double t = 0;
+      if (im.third_finite[i]) {
+        const float* f = factors.row(i).data();
+        const double* w = W.data();
+#pragma omp simd reduction(+ : t)
+        for (long e = 0; e < E; ++e) t += w[e] * static_cast<double>(f[e]);
+      } else {
+        t = kInf;
+      }
+      const double r = sampling_.radius_of(static_cast<int>(i));
+      out.g2(i) = std::sqrt(gj) * kStored;
+      out.rest(i) = r * (std::sqrt(gh) * kStored + 0.5 * r * t) * kSums;
+      out.gF(i) = std::sqrt(gram[0][0] + gram[1][1] + gram[2][2]) * kSums;
+    }
+    im.pert = std::move(out);
+  });
+  return im.pert;
+}
+
+void OctreeCertifier::adopt_perturbation_constants(PerturbationConstants constants) {
+  Impl& im = *impl_;
+  const long N = sampling_.size();
+  if (constants.g2.size() != N || constants.rest.size() != N || constants.gF.size() != N)
+    throw Error("OctreeCertifier: perturbation constants of another shape");
+  std::call_once(im.gamma_once, [&] { im.pert = std::move(constants); });
+}
+
+const OctreeCertifier::PerturbationConstants* OctreeCertifier::perturbation_constants_if_built() const {
+  return impl_->pert.g2.size() > 0 ? &impl_->pert : nullptr;
 }
 
 // One certification, as the list of its stages (run() below). Every decision is taken here, on the host, in
@@ -609,7 +712,7 @@ struct OctreeCertifier::Run {
         d2 += d * d;
       }
     const double dn = std::sqrt(d2);
-    const Impl::PerturbationConstants& pc = perturbation_constants();
+    const PerturbationConstants& pc = oc.perturbation_constants();
     const double rho = direction_residual(y0);  // ≥ ‖ỹ − ỹ₀ − t d‖_F; < 0: no usable direction
     const MatS3* D = rho >= 0 ? p.direction_jacobians : nullptr;
     const double t = p.direction_step, kDir = 0x1p-30 * t * p.direction_scale + 0x1p-23 * dn;
@@ -669,72 +772,6 @@ struct OctreeCertifier::Run {
     const Mat3 gram = A.transpose() * A;
     const double gersh = gram.cwiseAbs().rowwise().sum().maxCoeff();
     return std::sqrt(std::min(A.squaredNorm(), gersh));
-  }
-
-  // Γ_i = ‖G(c)‖₂ + r (‖H(c)‖_F + ½ r Σ_e W_e Θ_e(B_i)), the reduced basis' gradients G (3 by s) and
-  // Hessians H (27 by s) at the center from the stored rows (each within 2⁻²⁴ of its value: × (1 + 2⁻²³)),
-  // W_e = sqrt(Σ_k ‖δ_e(ψ_k)‖²) over the reduced basis functions ψ_k (Step 2's δ of a scalar function, a
-  // 3-vector), Θ the third-order factors (Step 3). Then ‖J(ỹ) − J(ỹ₀)‖_F ≤ Γ_i ‖ỹ − ỹ₀‖_F on the ball (Step
-  // 4e).
-  const Impl::PerturbationConstants& perturbation_constants() const {
-    std::call_once(im.gamma_once, [&] {
-      const MatXd& xi = *im.reduction;
-      const long s = xi.cols();
-      VecXd W2 = VecXd::Zero(E);
-      for (long k0 = 0; k0 < s; k0 += 3) {
-        MatX3d Y = MatX3d::Zero(xi.rows(), 3);
-        for (int a = 0; a < 3 && k0 + a < s; ++a) Y.col(a) = xi.col(k0 + a);
-        const HarmonicBasis::FaceMatrices f = oc.basis_.face_matrices(Y);
-        for (long e = 0; e < E; ++e) {
-          const CageEdge& ce = oc.cage_.edges[e];
-          W2(e) += (f.A[ce.f0] - f.A[ce.f1]).squaredNorm();  // the 3 rows: 3 basis functions
-        }
-      }
-      const VecXd W = W2.cwiseSqrt() * (1 + 1e-12);
-      const auto& factors = factor_matrix(true);
-      const long m = im.m;
-      constexpr double kStored = 1 + 0x1p-23;
-      // The sums below run in SIMD lanes, in the compiler's order; float × float products are exact in
-      // double, so only the sums round: ≤ 3 m u relative for the Gram row sums (each entry within m u of
-      // Σ|products| ≤ √(G_aa G_bb) ≤ gj), ≤ (m + 6) u for the non-negative Hessian and diagonal sums,
-      // ≤ (E + 1) u for Σ_e W_e Θ_e (each product rounded once). kSums covers all of them for any s and cage.
-      const double kSums = 1 + 1e-12 + 3.0 * static_cast<double>(m + E + 16) * 0x1p-53;
-      Impl::PerturbationConstants out;
-      out.g2.resize(N), out.rest.resize(N), out.gF.resize(N);
-#pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i) {
-        const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
-        // ‖G‖₂² = λ_max(G Gᵀ) ≤ the largest absolute row sum of the 3×3 Gram matrix (Gershgorin), up to √3
-        // below ‖G‖_F² where the three gradient rows are nearly orthogonal and of equal length.
-        double gram[3][3] = {};
-        for (int a = 0; a < 3; ++a)
-          for (int b = a; b < 3; ++b) gram[a][b] = gram[b][a] = float_dot(blk + a * m, blk + b * m, m);
-        double gj = 0;
-        for (int a = 0; a < 3; ++a)
-          gj = std::max(gj, std::abs(gram[a][0]) + std::abs(gram[a][1]) + std::abs(gram[a][2]));
-        gj *= kSums;
-        double gh = 0;
-        for (int row = 3; row < 9; ++row) {  // 3 xx, 4 xy, 5 xz, 6 yy, 7 yz, 8 zz: off-diagonals twice
-          const float* h = blk + row * m;
-          gh += (row == 4 || row == 5 || row == 7 ? 2 : 1) * float_dot(h, h, m);
-        }
-        double t = 0;
-        if (im.third_finite[i]) {
-          const float* f = factors.row(i).data();
-          const double* w = W.data();
-#pragma omp simd reduction(+ : t)
-          for (long e = 0; e < E; ++e) t += w[e] * static_cast<double>(f[e]);
-        } else {
-          t = kInf;
-        }
-        const double r = oc.sampling_.radius_of(static_cast<int>(i));
-        out.g2(i) = std::sqrt(gj) * kStored;
-        out.rest(i) = r * (std::sqrt(gh) * kStored + 0.5 * r * t) * kSums;
-        out.gF(i) = std::sqrt(gram[0][0] + gram[1][1] + gram[2][2]) * kSums;
-      }
-      im.pert = std::move(out);
-    });
-    return im.pert;
   }
 
   // --- 1. J and H at the base centers: from the stored derivatives (CPU, or left to the backend's base
@@ -880,7 +917,7 @@ struct OctreeCertifier::Run {
   void base_bounds() {
     const auto t0 = Clock::now();
     delta = oc.delta_norms(fm);
-    const auto& factors = factor_matrix(third);
+    const auto& factors = oc.factor_matrix(third);
     T.resize(N);
     double device_ms = 0;
     const bool on_device = !device_Y.empty();
@@ -897,7 +934,7 @@ struct OctreeCertifier::Run {
       cert.ms_jacobian += device_ms;
     }
     if (!on_device) factor_sums(factors, third ? im.third_finite : im.first_finite, T);
-    if (combined) factor_sums(factor_matrix(false), im.first_finite, T1);
+    if (combined) factor_sums(oc.factor_matrix(false), im.first_finite, T1);
     const VecXd& Tf = combined ? T1 : T;  // first-order sums (first, combined)
     cert.min_sigma3_center = kInf;
     for (long i = 0; i < N; ++i)
@@ -976,29 +1013,6 @@ struct OctreeCertifier::Run {
       out(i) = s;
     }
   }
-  // The factor matrix of one bound (third order, or first order), built on first use (it depends only on the
-  // cage and the voxels).
-  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factor_matrix(
-      bool third_kind) const {
-    // One row per voxel, vectorized over the edges (lipschitz_bound.h, factor_row).
-    auto build = [&](auto& mat, std::vector<char>& finite, bool third) {
-      const EdgeArrays edges(im.eu, im.ew);
-      mat.resize(N, E);
-      finite.assign(N, 1);
-#pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i)
-        finite[i] = factor_row(edges, third ? EdgeFactor::kThirdOrder : EdgeFactor::kFirstOrder,
-                               oc.sampling_.centers.row(i).transpose(),
-                               oc.sampling_.radius_of(static_cast<int>(i)), mat.row(i).data());
-    };
-    if (third_kind) {
-      std::call_once(im.third_once, [&] { build(im.third, im.third_finite, true); });
-      return im.third;
-    }
-    std::call_once(im.first_once, [&] { build(im.first, im.first_finite, false); });
-    return im.first;
-  }
-
   // --- 4. Adaptive refinement of the failing voxels, one octree level at a time: all nodes of a level are
   // evaluated in one batch (on the backend when it has kernels), then the decisions are taken here in
   // base-voxel order, so the result does not depend on the thread schedule or the backend. Every child keeps

@@ -179,12 +179,17 @@ struct DeformationSolver::Precompute {
       OctreeCertifier::FactorMatrix third;
       r.matrix(third);
       std::vector<char> third_finite = r.array<char>();
+      OctreeCertifier::PerturbationConstants pert;  // none (0 rows) when the storing run had not built them
+      r.matrix(pert.g2);
+      r.matrix(pert.rest);
+      r.matrix(pert.gF);
       if (!r.at_end() || n == 0) throw CacheReader::Bad{};
       S.sampling_ = std::move(vs);
       S.nsampling_ = S.frame_.to_normalized(S.sampling_);
       S.certifier_ =
           std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, std::move(d));
       if (third.size() > 0) S.certifier_->adopt_third_factors(std::move(third), std::move(third_finite));
+      if (pert.g2.size() > 0) S.certifier_->adopt_perturbation_constants(std::move(pert));
       S.perturb_lower_.clear();  // bounds of another certifier's voxels
       S.perturb_upper_.clear();
     } catch (const CacheReader::Bad&) {
@@ -193,7 +198,8 @@ struct DeformationSolver::Precompute {
       return rejected(k, e.what());
     }
     S.cache_outcome_ = "hit";
-    say("precomputation (sampling, certificate derivatives and bound factors) " + describe(ev));
+    say("precomputation (sampling, certificate derivatives, bound factors and perturbation constants) " +
+        describe(ev));
     return true;
   }
   bool rejected(const CacheKey& k, const std::string& why) {
@@ -228,6 +234,11 @@ struct DeformationSolver::Precompute {
     w.matrix(third ? *third : none);
     const std::vector<char>& f = third ? *finite : no_finite;
     w.array(f.data(), f.size());
+    const OctreeCertifier::PerturbationConstants* pert = certifier.perturbation_constants_if_built();
+    const VecXd none_built;
+    w.matrix(pert ? pert->g2 : none_built);
+    w.matrix(pert ? pert->rest : none_built);
+    w.matrix(pert ? pert->gF : none_built);
     CacheEvent ev;
     cache.store(k, w, &ev);
     return ev;
@@ -300,6 +311,13 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   t0 = Clock::now();
   reset();
   pc.say("certificate of the identity: " + format_g(ms_since(t0), 4) + " ms");
+  if (backend_->is_cpu() && !certifier_->perturbation_constants_if_built()) {
+    // Map-independent (Step 4e; the CPU's certificates only): built here rather than in the first line search
+    // after an accepted step, and stored in the cache entry.
+    t0 = Clock::now();
+    certifier_->perturbation_constants();
+    pc.say("certificate by perturbation, per-voxel constants: " + format_g(ms_since(t0), 4) + " ms");
+  }
   if (!cached && pc.cache.enabled() && !setup.background_store) {
     pc.enter("writing the cache", pc.end, 1.0);
     pc.store(key);

@@ -234,6 +234,18 @@ class OctreeCertifier {
   using FactorMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   const FactorMatrix* third_factors(const std::vector<char>** finite) const;
   void adopt_third_factors(FactorMatrix factors, std::vector<char> finite);
+  // Certifying by perturbation's per-voxel constants (docs/certificate.md, Step 4e; a certifier with a
+  // reduction only): g2 ≥ ‖G(c_i)‖₂, rest = the H and third-order part of Γ_i, gF = ‖G̃(c_i)‖_F, each |I|.
+  // They depend on the cage, the voxels and the reduction alone. perturbation_constants() builds them at its
+  // first call (with the third-order factors, if those are not built yet) and throws without a reduction;
+  // perturbation_constants_if_built() is nullptr before; adopt_perturbation_constants takes constants built
+  // earlier for the same cage, sampling and reduction (shapes checked) instead of building them.
+  struct PerturbationConstants {
+    VecXd g2, rest, gF;
+  };
+  const PerturbationConstants& perturbation_constants() const;
+  const PerturbationConstants* perturbation_constants_if_built() const;
+  void adopt_perturbation_constants(PerturbationConstants constants);
   ~OctreeCertifier();
 
   // Certifies the map with full coefficients y (#V+#F by 3).
@@ -270,6 +282,7 @@ class OctreeCertifier {
   struct Impl;
   struct Run;                                // the stages of one certification (octree_certifier.cpp)
   void init_common(const MatXd* reduction);  // checks the sampling, edge endpoints
+  const FactorMatrix& factor_matrix(bool third_kind) const;  // built on first use
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,
                   const CertifyParams& p) const;
