@@ -6,9 +6,12 @@
 # Usage:
 #   bench/gpu-bundle.sh pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz   # here: BUILD_DIR is a Release build with benchmarks
 #   bench/gpu-bundle.sh run ARCHIVE.tar.xz RESULT_DIR            # there: unpacks to /tmp/lidef-bundle, runs gpu.sh
-# `run` passes REPS, SCENARIOS, DEVICE, DRAG, DRAG_SCENARIOS, CACHE, TESTS, QUICK on to gpu.sh. Without an OpenCL ICD registered on the host it registers
-# the NVIDIA driver's libnvidia-opencl.so.1 where it finds one (OCL_ICD_VENDORS). The programs are built for the
-# packing machine's CPU (LIDEF_NATIVE): pack on a machine whose instruction set the host has.
+#   bench/gpu-bundle.sh compare OLD.tar.xz NEW.tar.xz RESULT_DIR # there: NEW with the OpenCL tests, then OLD, NEW,
+#                                                                # OLD, NEW without; one RESULT_DIR/N-old|new.md each
+# `run` and `compare` pass REPS, SCENARIOS, DEVICE, DRAG, DRAG_SCENARIOS, CACHE, TESTS, QUICK on to gpu.sh.
+# Without an OpenCL ICD registered on the host it registers the NVIDIA driver's libnvidia-opencl.so.1 where it
+# finds one (OCL_ICD_VENDORS). The programs are built for the packing machine's CPU (LIDEF_NATIVE): pack on a
+# machine whose instruction set the host has.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 programs=(app/lidef bench/bench_opencl bench/bench_cholesky tests/lidef_opencl_tests)
@@ -68,8 +71,48 @@ run() {
   BUILD=$dir "$ROOT/bench/gpu.sh" "$dir/data" "$result"
 }
 
+# Two bundles side by side in one session on one device (a change measured against the code before it): the new
+# bundle's OpenCL tests and first run also fill the subspace cache both use, then old and new alternate. Each
+# run's table, drag rows and bench_opencl report go to one markdown file (RESULT_DIR/N-old.md, N-new.md; the tests'
+# log to RESULT_DIR/opencl_tests.log): few files, for hosts that return only a few. RUN_TIMEOUT (seconds, default
+# 300) bounds each run; TESTS=0 skips the tests.
+compare() {
+  local old=$1 new=$2 result=$3 i=0 which archive rc
+  mkdir -p "$result"
+  export CACHE=${CACHE:-/tmp/lidef-bundle-cache}
+  for which in new old new old new; do
+    i=$((i + 1))
+    archive=$new
+    [ "$which" = old ] && archive=$old
+    local start
+    start=$(date -u +%H:%M:%S)
+    rc=0
+    TESTS=$([ $i = 1 ] && echo "${TESTS:-1}" || echo 0) timeout "${RUN_TIMEOUT:-300}" bash "$0" run "$archive" "/tmp/lidef-compare-$i" \
+      > "/tmp/lidef-compare-$i.out" 2> "/tmp/lidef-compare-$i.err" || rc=$?
+    {
+      echo "# run $i: $which ($archive), $start-$(date -u +%H:%M:%S) UTC, exit $rc"
+      cat "/tmp/lidef-compare-$i.out"
+      echo
+      tail -5 "/tmp/lidef-compare-$i.err"
+      echo
+      cat "/tmp/lidef-compare-$i/bench_opencl.md" 2> /dev/null || true
+    } > "$result/$i-$which.md"
+    [ $i = 1 ] && cp "/tmp/lidef-compare-1/opencl_tests.log" "$result/" 2> /dev/null
+    [ $i = 1 ] && [ "$rc" != 0 ] && { echo "gpu-bundle.sh: the new bundle's run failed (exit $rc)" >&2; return 1; }
+  done
+  return 0
+}
+
 case "${1:-}" in
   pack) [ $# -eq 4 ] || { echo "usage: $0 pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz" >&2; exit 2; }; pack "$2" "$3" "$4" ;;
   run) [ $# -eq 3 ] || { echo "usage: $0 run ARCHIVE.tar.xz RESULT_DIR" >&2; exit 2; }; run "$2" "$3" ;;
-  *) echo "usage: $0 pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz | run ARCHIVE.tar.xz RESULT_DIR" >&2; exit 2 ;;
+  compare)
+    [ $# -eq 4 ] || { echo "usage: $0 compare OLD.tar.xz NEW.tar.xz RESULT_DIR" >&2; exit 2; }
+    compare "$2" "$3" "$4"
+    ;;
+  *)
+    echo "usage: $0 pack BUILD_DIR DATA_DIR ARCHIVE.tar.xz | run ARCHIVE.tar.xz RESULT_DIR |" \
+      "compare OLD.tar.xz NEW.tar.xz RESULT_DIR" >&2
+    exit 2
+    ;;
 esac

@@ -70,6 +70,8 @@ struct OctreeCertifier::Impl {
   // ≥ sup over its ball of the norm of the map ỹ ↦ J, with its center part g2 ≥ ‖G_i‖₂; and ‖G̃_i‖_F of the
   // stored rows.
   mutable std::once_flag gamma_once;
+  // Set once pert is complete: a cache store asks for it from its own thread.
+  mutable std::atomic<bool> pert_built{false};
   mutable OctreeCertifier::PerturbationConstants pert;
   // The voxel lookup of the distortion probes (built on first use: every line-search trial asks it).
   mutable std::once_flag locator_once;
@@ -348,6 +350,7 @@ const OctreeCertifier::PerturbationConstants& OctreeCertifier::perturbation_cons
       out.gF(i) = std::sqrt(gram[0][0] + gram[1][1] + gram[2][2]) * kSums;
     }
     im.pert = std::move(out);
+    im.pert_built.store(true, std::memory_order_release);
   });
   return im.pert;
 }
@@ -357,11 +360,14 @@ void OctreeCertifier::adopt_perturbation_constants(PerturbationConstants constan
   const long N = sampling_.size();
   if (constants.g2.size() != N || constants.rest.size() != N || constants.gF.size() != N)
     throw Error("OctreeCertifier: perturbation constants of another shape");
-  std::call_once(im.gamma_once, [&] { im.pert = std::move(constants); });
+  std::call_once(im.gamma_once, [&] {
+    im.pert = std::move(constants);
+    im.pert_built.store(true, std::memory_order_release);
+  });
 }
 
 const OctreeCertifier::PerturbationConstants* OctreeCertifier::perturbation_constants_if_built() const {
-  return impl_->pert.g2.size() > 0 ? &impl_->pert : nullptr;
+  return impl_->pert_built.load(std::memory_order_acquire) ? &impl_->pert : nullptr;
 }
 
 // One certification, as the list of its stages (run() below). Every decision is taken here, on the host, in
