@@ -405,6 +405,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   // Every kernel takes its buffers as arguments at each call, so swapping the handles is enough.
   void use_accumulated_direction() override {
     std::lock_guard<std::mutex> lock(d_->mutex);
+    if (!sum_()) throw OpenCLError("OpenCL (" + d_->label + "): no direction was accumulated before use");
     std::swap(dJ_, sum_);
   }
 
