@@ -190,6 +190,13 @@ cl::Program build_program(Device& d, const std::string& dir, bool broken, std::s
   return p;
 }
 
+// Sets a kernel's arguments 0, 1, 2, ... to args, in order.
+template <class... Args>
+void set_args(cl::Kernel& k, const Args&... args) {
+  cl_uint index = 0;
+  (k.setArg(index++, args), ...);
+}
+
 size_t round_up(size_t x, size_t m) {
   return (x + m - 1) / m * m;
 }
@@ -302,11 +309,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   }
 
   void run_psd_blocks() {
-    k_psd_.setArg(0, J_);
-    k_psd_.setArg(1, subset_);
-    k_psd_.setArg(2, m_);
-    k_psd_.setArg(3, bw_);
-    k_psd_.setArg(4, blocks_);
+    set_args(k_psd_, J_, subset_, m_, bw_, blocks_);
     d_->queue.enqueueNDRangeKernel(k_psd_, cl::NullRange, cl::NDRange(round_up(m_, 64)), cl::NDRange(64));
   }
 
@@ -316,12 +319,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   double distortion_sum(double t) override {
     std::lock_guard<std::mutex> lock(d_->mutex);
     return summed_over_groups(k_sum_, "symmetric Dirichlet energy", [&] {
-      k_sum_.setArg(0, J_);
-      k_sum_.setArg(1, dJ_);
-      k_sum_.setArg(2, t);
-      k_sum_.setArg(3, t != 0 ? 1 : 0);
-      k_sum_.setArg(4, static_cast<cl_long>(n_));
-      k_sum_.setArg(5, w_);
+      set_args(k_sum_, J_, dJ_, t, t != 0 ? 1 : 0, static_cast<cl_long>(n_), w_);
       return 6;
     });
   }
@@ -329,10 +327,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   void accept(double t) override {
     std::lock_guard<std::mutex> lock(d_->mutex);
     guarded(d_->label, "accepting the step", [&] {
-      k_axpy_.setArg(0, J_);
-      k_axpy_.setArg(1, dJ_);
-      k_axpy_.setArg(2, t);
-      k_axpy_.setArg(3, static_cast<cl_long>(3 * R_));
+      set_args(k_axpy_, J_, dJ_, t, static_cast<cl_long>(3 * R_));
       d_->queue.enqueueNDRangeKernel(k_axpy_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)),
                                      cl::NDRange(64));
       d_->queue.finish();
@@ -344,10 +339,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     std::lock_guard<std::mutex> lock(d_->mutex);
     MatS3 g(s_, 3);
     guarded(d_->label, "energy gradient", [&] {
-      k_grad_.setArg(0, J_);
-      k_grad_.setArg(1, static_cast<cl_long>(n_));
-      k_grad_.setArg(2, w_);
-      k_grad_.setArg(3, P_);
+      set_args(k_grad_, J_, static_cast<cl_long>(n_), w_, P_);
       d_->queue.enqueueNDRangeKernel(k_grad_, cl::NullRange, cl::NDRange(round_up(n_, 64)), cl::NDRange(64));
       transpose_sum_of_P(g);
       return 0;
@@ -363,11 +355,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     std::lock_guard<std::mutex> lock(d_->mutex);
     MatS3 h(s_, 3);
     guarded(d_->label, "Hessian times the direction", [&] {
-      k_htimes_.setArg(0, J_);
-      k_htimes_.setArg(1, dJ_);
-      k_htimes_.setArg(2, static_cast<cl_long>(n_));
-      k_htimes_.setArg(3, w_);
-      k_htimes_.setArg(4, P_);
+      set_args(k_htimes_, J_, dJ_, static_cast<cl_long>(n_), w_, P_);
       d_->queue.enqueueNDRangeKernel(k_htimes_, cl::NullRange, cl::NDRange(round_up(n_, 64)),
                                      cl::NDRange(64));
       transpose_sum_of_P(h);
@@ -379,10 +367,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   double distortion_curvature() override {
     std::lock_guard<std::mutex> lock(d_->mutex);
     return summed_over_groups(k_curv_, "curvature along the direction", [&] {
-      k_curv_.setArg(0, J_);
-      k_curv_.setArg(1, dJ_);
-      k_curv_.setArg(2, static_cast<cl_long>(n_));
-      k_curv_.setArg(3, w_);
+      set_args(k_curv_, J_, dJ_, static_cast<cl_long>(n_), w_);
       return 4;
     });
   }
@@ -391,11 +376,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     std::lock_guard<std::mutex> lock(d_->mutex);
     if (!sum_()) sum_ = make_buffer<double>(*d_, 3 * R_, "allocating Jacobians");
     guarded(d_->label, "combining the direction", [&] {
-      k_scale_add_.setArg(0, sum_);
-      k_scale_add_.setArg(1, dJ_);
-      k_scale_add_.setArg(2, alpha);
-      k_scale_add_.setArg(3, start ? 1 : 0);
-      k_scale_add_.setArg(4, static_cast<cl_long>(3 * R_));
+      set_args(k_scale_add_, sum_, dJ_, alpha, start ? 1 : 0, static_cast<cl_long>(3 * R_));
       d_->queue.enqueueNDRangeKernel(k_scale_add_, cl::NullRange, cl::NDRange(round_up(3 * R_, 64)),
                                      cl::NDRange(64));
       return 0;
@@ -445,11 +426,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     guarded(d_->label, "Hessian blocks", [&] {
       run_psd_blocks();
       cl::Kernel& kw = double_precision ? k_wd_ : k_wf_;
-      kw.setArg(0, blocks_);
-      kw.setArg(1, double_precision ? GHd_ : GHf_);
-      kw.setArg(2, m_);
-      kw.setArg(3, s_);
-      kw.setArg(4, double_precision ? Wd_ : Wf_);
+      set_args(kw, blocks_, double_precision ? GHd_ : GHf_, m_, s_, double_precision ? Wd_ : Wf_);
       d_->queue.enqueueNDRangeKernel(
           kw, cl::NullRange, cl::NDRange(round_up(3 * m_, 16), round_up(6 * s_, 16)), cl::NDRange(16, 16));
       cl_command_queue q = d_->queue();
@@ -510,27 +487,14 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   // order. The caller holds the lock and runs this inside `guarded`.
   void transpose_sum_of_P(MatS3& out) {
     if (d_->cpu_device) {
-      k_gpart_.setArg(0, Grow_);
-      k_gpart_.setArg(1, static_cast<cl_long>(R_));
-      k_gpart_.setArg(2, s_);
-      k_gpart_.setArg(3, P_);
-      k_gpart_.setArg(4, kRowsPerChunk);
-      k_gpart_.setArg(5, partial_g_);
+      set_args(k_gpart_, Grow_, static_cast<cl_long>(R_), s_, P_, kRowsPerChunk, partial_g_);
       d_->queue.enqueueNDRangeKernel(k_gpart_, cl::NullRange, cl::NDRange(round_up(chunks_, 8)),
                                      cl::NDRange(8));
-      k_gsum_.setArg(0, partial_g_);
-      k_gsum_.setArg(1, static_cast<int>(chunks_));
-      k_gsum_.setArg(2, 3 * s_);
-      k_gsum_.setArg(3, g_);
+      set_args(k_gsum_, partial_g_, static_cast<int>(chunks_), 3 * s_, g_);
       d_->queue.enqueueNDRangeKernel(k_gsum_, cl::NullRange, cl::NDRange(round_up(3 * s_, 64)),
                                      cl::NDRange(64));
     } else {
-      k_red_.setArg(0, Gt_);
-      k_red_.setArg(1, static_cast<cl_long>(R_));
-      k_red_.setArg(2, s_);
-      k_red_.setArg(3, P_);
-      k_red_.setArg(4, g_);
-      k_red_.setArg(5, cl::Local(3 * ls_ * sizeof(double)));
+      set_args(k_red_, Gt_, static_cast<cl_long>(R_), s_, P_, g_, cl::Local(3 * ls_ * sizeof(double)));
       d_->queue.enqueueNDRangeKernel(k_red_, cl::NullRange, cl::NDRange(s_ * ls_), cl::NDRange(ls_));
     }
     d_->queue.enqueueReadBuffer(g_, CL_TRUE, 0, 3 * s_ * sizeof(double), out.data());  // column-major s by 3
@@ -540,11 +504,7 @@ class OpenCLEnergyKernels final : public EnergyKernels {
     std::lock_guard<std::mutex> lock(d_->mutex);
     guarded(d_->label, stage, [&] {
       d_->queue.enqueueWriteBuffer(y_, CL_FALSE, 0, 3 * s_ * sizeof(double), y.data());
-      k_jac_.setArg(0, d_->cpu_device ? Grow_ : Gt_);
-      k_jac_.setArg(1, static_cast<cl_long>(R_));
-      k_jac_.setArg(2, s_);
-      k_jac_.setArg(3, y_);
-      k_jac_.setArg(4, out);
+      set_args(k_jac_, d_->cpu_device ? Grow_ : Gt_, static_cast<cl_long>(R_), s_, y_, out);
       d_->queue.enqueueNDRangeKernel(k_jac_, cl::NullRange, cl::NDRange(round_up(R_, 64)), cl::NDRange(64));
       d_->queue.finish();
       return 0;
@@ -651,24 +611,10 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       d_->queue.enqueueWriteBuffer(Y_, CL_FALSE, 0, 3 * m_ * sizeof(double), Y);
       d_->queue.enqueueWriteBuffer(delta_, CL_FALSE, 0, E_ * sizeof(double), delta.data());
       const int rows = third ? 9 : 3;  // the first-order bound needs no Hessian
-      k_rows_.setArg(0, GHt_);
-      k_rows_.setArg(1, static_cast<cl_long>(N_));
-      k_rows_.setArg(2, static_cast<int>(m_));
-      k_rows_.setArg(3, Y_);
-      k_rows_.setArg(4, rows);
-      k_rows_.setArg(5, JH_);
+      set_args(k_rows_, GHt_, static_cast<cl_long>(N_), static_cast<int>(m_), Y_, rows, JH_);
       d_->queue.enqueueNDRangeKernel(k_rows_, cl::NullRange, cl::NDRange(round_up(N_, 64)), cl::NDRange(64));
-      k_finish_.setArg(0, JH_);
-      k_finish_.setArg(1, static_cast<cl_long>(N_));
-      k_finish_.setArg(2, third ? 1 : 0);
-      k_finish_.setArg(3, third ? F3_ : F1_);
-      k_finish_.setArg(4, E_);
-      k_finish_.setArg(5, delta_);
-      k_finish_.setArg(6, s3_);
-      k_finish_.setArg(7, hn_);
-      k_finish_.setArg(8, T_);
-      k_finish_.setArg(9, unres_);
-      k_finish_.setArg(10, s1_);
+      set_args(k_finish_, JH_, static_cast<cl_long>(N_), third ? 1 : 0, third ? F3_ : F1_, E_, delta_, s3_,
+               hn_, T_, unres_, s1_);
       d_->queue.enqueueNDRangeKernel(k_finish_, cl::NullRange, cl::NDRange(round_up(N_, 64)),
                                      cl::NDRange(64));
       d_->queue.enqueueReadBuffer(s3_, CL_FALSE, 0, N_ * sizeof(double), sigma3.data());
@@ -713,17 +659,8 @@ class OpenCLCertifierKernels final : public CertifierKernels {
       d_->queue.enqueueWriteBuffer(delta_, CL_FALSE, 0, E_ * sizeof(double), delta.data());
       d_->queue.enqueueWriteBuffer(centers_, CL_FALSE, 0, c.size() * sizeof(double), c.data());
       d_->queue.enqueueWriteBuffer(radii_, CL_FALSE, 0, count * sizeof(double), radii.data());
-      k_nodes_.setArg(0, centers_);
-      k_nodes_.setArg(1, radii_);
-      k_nodes_.setArg(2, static_cast<cl_long>(count));
-      k_nodes_.setArg(3, faces_);
-      k_nodes_.setArg(4, fm_);
-      k_nodes_.setArg(5, nf_);
-      k_nodes_.setArg(6, third ? 1 : 0);
-      k_nodes_.setArg(7, edges_);
-      k_nodes_.setArg(8, delta_);
-      k_nodes_.setArg(9, E_);
-      k_nodes_.setArg(10, out_);
+      set_args(k_nodes_, centers_, radii_, static_cast<cl_long>(count), faces_, fm_, nf_, third ? 1 : 0,
+               edges_, delta_, E_, out_);
       d_->queue.enqueueNDRangeKernel(k_nodes_, cl::NullRange, cl::NDRange(round_up(count, 32)),
                                      cl::NDRange(32));
       d_->queue.enqueueReadBuffer(out_, CL_TRUE, 0, res.size() * sizeof(double), res.data());
