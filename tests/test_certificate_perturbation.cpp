@@ -28,36 +28,34 @@ MatR bent_reduced(const Cage& cage, const SpectralSubspace& sub, double amp, uns
   return sub.basis.transpose() * lidef::test::smooth_map(cage, sub, amp, seed);
 }
 
-// The subdivided icosphere's ~1,460 voxels, 40 basis functions and a certified bent map y0.
-struct BentCase {
-  Cage cage{lidef::test::icosphere(2, 0.15, 8)};
+// An icosphere cage (subdivisions, noise, seed), about `voxels` voxels and `dof` basis functions.
+struct SphereCase {
+  Cage cage;
   VoxelSampling sampling;
   SpectralSubspace sub;
+  SphereCase(int subdivisions, double noise, unsigned seed, int voxels, double tolerance, int dof)
+      : cage(lidef::test::icosphere(subdivisions, noise, seed)) {
+    SamplingParams sp;
+    sp.target_count = voxels;
+    sp.count_tolerance = tolerance;
+    sampling = sample_voxels(cage, sp);
+    sub = compute_subspace(cage, dof);
+  }
+};
+
+// The subdivided icosphere's ~1,460 voxels, 40 basis functions and a certified bent map y0.
+struct BentCase : SphereCase {
   std::unique_ptr<OctreeCertifier> cert;
   MatR y0;
-  BentCase() {
-    SamplingParams sp;
-    sp.target_count = 1500;
-    sp.count_tolerance = 0.1;
-    sampling = sample_voxels(cage, sp);
-    sub = compute_subspace(cage, 40);
+  BentCase() : SphereCase(2, 0.15, 8, 1500, 0.1, 40) {
     cert = std::make_unique<OctreeCertifier>(cage, sampling, &sub.basis);
     y0 = bent_reduced(cage, sub, 0.6, 14);
   }
 };
 
 // A coarse icosphere's ~300 voxels and 20 basis functions.
-struct SmallCase {
-  Cage cage{lidef::test::icosphere(1, 0.1, 3)};
-  VoxelSampling sampling;
-  SpectralSubspace sub;
-  SmallCase() {
-    SamplingParams sp;
-    sp.target_count = 300;
-    sp.count_tolerance = 0.2;
-    sampling = sample_voxels(cage, sp);
-    sub = compute_subspace(cage, 20);
-  }
+struct SmallCase : SphereCase {
+  SmallCase() : SphereCase(1, 0.1, 3, 300, 0.2, 20) {}
 };
 
 // Checks every voxel of c taken over (σ3 = NaN, certified) by dense sampling of the map y: none has a sampled

@@ -311,9 +311,10 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   t0 = Clock::now();
   reset();
   pc.say("certificate of the identity: " + format_g(ms_since(t0), 4) + " ms");
-  if (backend_->is_cpu() && !certifier_->perturbation_constants_if_built()) {
-    // Map-independent (Step 4e; the CPU's certificates only): built here rather than in the first line search
-    // after an accepted step, and stored in the cache entry.
+  if (!certifier_->perturbation_constants_if_built()) {
+    // Map-independent (Step 4e): built here rather than in the first line search after an accepted step, and
+    // stored in the cache entry. Also under a device backend (whose certificates do not use them), so that
+    // every entry holds them for a later CPU solve of the same model.
     t0 = Clock::now();
     certifier_->perturbation_constants();
     pc.say("certificate by perturbation, per-voxel constants: " + format_g(ms_since(t0), 4) + " ms");

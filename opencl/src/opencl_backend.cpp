@@ -463,14 +463,14 @@ class OpenCLEnergyKernels final : public EnergyKernels {
   }
 
  private:
-  // Runs k, a kernel of one work-item per sample that writes its work-groups' tree sums: set_args sets the
-  // arguments before the sums' buffer and scratch and returns the index of the buffer's. The groups' sums are
-  // added on the host in group order (deterministic). The caller holds the lock.
-  template <class SetArgs>
-  double summed_over_groups(cl::Kernel& k, const char* what, const SetArgs& set_args) {
+  // Runs k, a kernel of one work-item per sample that writes its work-groups' tree sums: set_leading_args
+  // sets the arguments before the sums' buffer and scratch and returns the index of the buffer's. The groups'
+  // sums are added on the host in group order (deterministic). The caller holds the lock.
+  template <class SetLeadingArgs>
+  double summed_over_groups(cl::Kernel& k, const char* what, const SetLeadingArgs& set_leading_args) {
     std::vector<double> part(groups_);
     guarded(d_->label, what, [&] {
-      const int at = set_args();
+      const int at = set_leading_args();
       k.setArg(at, partial_);
       k.setArg(at + 1, cl::Local(ls_ * sizeof(double)));
       d_->queue.enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(groups_ * ls_), cl::NDRange(ls_));

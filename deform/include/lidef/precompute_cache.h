@@ -25,12 +25,10 @@
 namespace lidef {
 
 // Bump whenever the content or meaning of any entry changes (a new stage, other numerics): older entries
-// then miss instead of being trusted.
-constexpr std::uint32_t kPrecomputeFormatVersion =
-    5;  // 2: samplings carry level, domain, uncleared;
-        // 3: SIMD basis kernel and OpenBLAS products;
-        // 4: the word-wise payload checksum;
-        // 5: the solver's entry holds the perturbation constants
+// then miss instead of being trusted. 2: samplings carry level, domain, uncleared; 3: SIMD basis kernel and
+// OpenBLAS products; 4: the word-wise payload checksum; 5: the solver's entry holds the perturbation
+// constants.
+constexpr std::uint32_t kPrecomputeFormatVersion = 5;
 
 // $LIDEF_CACHE_MAX_MB (MiB) when set, else 4096 MiB.
 std::uint64_t default_cache_max_bytes();
