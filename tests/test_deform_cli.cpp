@@ -42,7 +42,7 @@ const char* const kIterationsHeader =
     "norm,"
     "armijo_rejections,certificate_rejections,accepted,certified,min_sigma3_sampled,min_lower_bound,refined,"
     "max_handle_error,weight_action,ms_gradient,ms_hessian,ms_solve,ms_line_search,ms_certificate,ms_total,"
-    "cg_steps,cg_scale,global_rejections,ms_global";
+    "cg_steps,cg_scale,global_rejections,ms_global,hessian_reused,kept_factor_steps";
 
 const std::vector<std::string> kOutputs = {
     "cage.obj",       "certificate.json", "coefficients.txt", "deformed.obj", "deformed.vtp",

@@ -117,3 +117,69 @@ TEST(NewtonCg, StopsAtNonPositiveCurvatureWithADescentDirection) {
   EXPECT_EQ(none.steps, 0);
   EXPECT_EQ((none.d - p0).norm(), 0.0);
 }
+
+// preconditioned_cg (the kept factor's solve): it stops as soon as the residual (in the preconditioner's
+// norm) meets the tolerance, and the residual it reports is the true one; an exact preconditioner solves in
+// one step; with too few steps for a poor preconditioner it gives up early and says so.
+TEST(PreconditionedCg, MeetsTheToleranceWithATrueResidual) {
+  for (const double perturbation : {0.05, 0.3, 1.0}) {
+    Problem P = make_problem(40, perturbation, 21);
+    int products = 0;
+    const auto A = [&](const VecXd& p) {
+      ++products;
+      return VecXd(P.H * p);
+    };
+    const auto M = [&](VecXd& r) {
+      r = P.M.llt().solve(r);
+      return true;
+    };
+    const VecXd b = -P.g;
+    // Room enough that the early give-up (a geometric rate; CG's end is faster) does not stop it.
+    const PcgResult r = preconditioned_cg(b, A, M, 400, 1e-6);
+    ASSERT_TRUE(r.converged) << perturbation;
+    EXPECT_EQ(r.steps, products);
+    const auto m_norm = [&](const VecXd& v) { return std::sqrt(v.dot(P.M.llt().solve(v))); };
+    const double true_residual = m_norm(b - P.H * r.x) / m_norm(b);
+    EXPECT_LE(true_residual, 1.01e-6) << perturbation;
+    EXPECT_NEAR(true_residual, r.relative_residual, 1e-9) << perturbation;
+    // A tolerance met one step earlier would have stopped there.
+    const PcgResult one_less = preconditioned_cg(b, A, M, r.steps - 1, 1e-6);
+    EXPECT_FALSE(one_less.converged) << perturbation;
+    EXPECT_LE(one_less.steps, r.steps - 1) << perturbation;
+  }
+}
+
+TEST(PreconditionedCg, ExactPreconditionerSolvesInOneStep) {
+  Problem P = make_problem(30, 0.0, 5);
+  const auto A = [&](const VecXd& p) { return VecXd(P.H * p); };
+  const auto M = [&](VecXd& r) {
+    r = P.H.llt().solve(r);
+    return true;
+  };
+  const PcgResult r = preconditioned_cg(-P.g, A, M, 10, 1e-9);
+  EXPECT_TRUE(r.converged);
+  EXPECT_EQ(r.steps, 1);
+  EXPECT_LT((r.x - P.H.llt().solve(-P.g)).norm(), 1e-9 * r.x.norm());
+}
+
+TEST(PreconditionedCg, GivesUpEarlyWhenTheStepsCannotReachTheTolerance) {
+  // The identity as the preconditioner of a badly conditioned operator: 12 steps cannot reach 1e-10.
+  std::mt19937 rng(3);
+  const MatXd H = random_spd(60, 1e6, rng);
+  const VecXd b = VecXd::Ones(60);
+  int products = 0;
+  const auto A = [&](const VecXd& p) {
+    ++products;
+    return VecXd(H * p);
+  };
+  const auto M = [](VecXd&) { return true; };
+  const PcgResult r = preconditioned_cg(b, A, M, 12, 1e-10);
+  EXPECT_FALSE(r.converged);
+  EXPECT_LT(r.steps, 12) << "the rate after four steps predicts the failure";
+  EXPECT_GE(r.steps, 4);
+  EXPECT_GT(r.relative_residual, 1e-10);
+  // A zero right side is solved by x = 0 at once.
+  const PcgResult zero = preconditioned_cg(VecXd::Zero(60), A, M, 12, 1e-10);
+  EXPECT_TRUE(zero.converged);
+  EXPECT_EQ(zero.steps, 0);
+}

@@ -524,6 +524,7 @@ TEST(ProjectedNewton, DraggingReusesTheHessianFactorAndKeepsEveryMapCertified) {
     p.dynamic_weighting = false;
     p.max_iterations = 40;
     p.drag_hessian_reuse = reuse;
+    p.kept_factor_cg_steps = 0;  // the drag's reuse alone (a kept factor's CG steps also count as reused)
     auto s = make_solver(p);
     s->set_handles(beam().sources, beam().sources, "drag");
     s->set_dragging(dragging);
@@ -579,35 +580,88 @@ TEST(ProjectedNewton, DraggingReusesTheHessianFactorAndKeepsEveryMapCertified) {
       n_reused, reused.final_energy.total, fresh.final_energy.total, reused.rest.size(), fresh.rest.size());
 }
 
+namespace {
+// A beam_bend solve with every accepted map certified by an independent full-space certifier (no reduction):
+// the records, the final energy and how many accepted maps that certifier certified.
+struct FullyCertifiedRun {
+  std::vector<IterationRecord> records;
+  EnergyTerms energy;
+  int full_certified = 0, accepted = 0;
+};
+FullyCertifiedRun fully_certified_run(const DeformParams& p) {
+  FullyCertifiedRun r;
+  auto s = make_solver(p);
+  s->set_handles(beam().sources, beam().targets, "fully certified run");
+  const OctreeCertifier full(beam().model.cage, s->sampling());
+  s->solve([&](const IterationRecord& rec) {
+    r.records.push_back(rec);
+    if (rec.accepted) {
+      ++r.accepted;
+      r.full_certified += full.certify(s->coefficients(), s->certify_params(false, false)).certified;
+    }
+    return true;
+  });
+  r.energy = s->energy();
+  return r;
+}
+}  // namespace
+
+// The kept factor (kept_factor_cg_steps): after the first iteration the subset Hessian's system is solved by
+// CG steps preconditioned with an earlier factor, to the relative residual kept_factor_tolerance, instead of
+// being assembled. The solve must end where the assembling solve ends (energy within its own stopping
+// tolerance, iterations within one), every accepted map certified by an independent full-space certifier; the
+// records say which iterations took the kept factor and how many steps they needed.
+TEST(ProjectedNewton, KeptFactorReachesTheAssemblingSolvesMinimumWithEveryMapCertified) {
+  using Run = FullyCertifiedRun;
+  auto run = [](int steps) {
+    DeformParams p = fast_params();
+    p.max_iterations = 40;
+    p.kept_factor_cg_steps = steps;
+    return fully_certified_run(p);
+  };
+  const Run assembling = run(0), kept = run(DeformParams().kept_factor_cg_steps);
+  ASSERT_GT(DeformParams().kept_factor_cg_steps, 0) << "the default keeps the factor";
+  for (const Run* r : {&assembling, &kept}) {
+    EXPECT_EQ(r->full_certified, r->accepted);
+    EXPECT_TRUE(r->records.back().certified);
+  }
+  for (const IterationRecord& rec : assembling.records) {
+    EXPECT_FALSE(rec.hessian_reused) << "iteration " << rec.iteration;
+    EXPECT_EQ(rec.kept_factor_steps, 0) << "iteration " << rec.iteration;
+  }
+  int took = 0;
+  for (const IterationRecord& rec : kept.records) {
+    if (rec.iteration == 1) {
+      EXPECT_EQ(rec.kept_factor_steps, 0) << "no factor before the first iteration";
+    }
+    if (rec.hessian_reused) {
+      ++took;
+      EXPECT_GE(rec.kept_factor_steps, 1) << "iteration " << rec.iteration;
+      EXPECT_LE(rec.kept_factor_steps, DeformParams().kept_factor_cg_steps) << "iteration " << rec.iteration;
+    }
+    EXPECT_GT(rec.newton_decrement, 0) << "a descent direction, iteration " << rec.iteration;
+  }
+  EXPECT_GE(took, 1) << "some iteration solved with the kept factor";
+  EXPECT_LE(std::abs(static_cast<int>(kept.records.size()) - static_cast<int>(assembling.records.size())), 1);
+  EXPECT_NEAR(kept.energy.total, assembling.energy.total, 1e-5 * assembling.energy.total);
+  std::printf(
+      "kept factor: %d of %zu iterations took it; iterations %zu (assembling %zu); E %.10e vs %.10e\n", took,
+      kept.records.size(), kept.records.size(), assembling.records.size(), kept.energy.total,
+      assembling.energy.total);
+}
+
 // The conjugate-gradient correction (newton_cg_steps, newton_cg.h): with a deliberately poor Hessian subset
 // (20 of 4,000 samples) the plain subset direction converges slowly; CG iterates on the exact Hessian take
 // fewer iterations to a minimum at least as low, and every accepted map stays certified (independent
 // full-space certifier). The records say what CG did.
 TEST(ProjectedNewton, ConjugateGradientCorrectionNeedsFewerIterationsWithAPoorSubset) {
-  struct Run {
-    std::vector<IterationRecord> records;
-    EnergyTerms energy;
-    int full_certified = 0, accepted = 0;
-  };
+  using Run = FullyCertifiedRun;
   auto run = [](int cg) {
-    Run r;
     DeformParams p = fast_params();
     p.hessian_fraction = 0.005;
     p.max_iterations = 40;
     p.newton_cg_steps = cg;
-    auto s = make_solver(p);
-    s->set_handles(beam().sources, beam().targets, "cg");
-    const OctreeCertifier full(beam().model.cage, s->sampling());
-    s->solve([&](const IterationRecord& rec) {
-      r.records.push_back(rec);
-      if (rec.accepted) {
-        ++r.accepted;
-        r.full_certified += full.certify(s->coefficients(), s->certify_params(false, false)).certified;
-      }
-      return true;
-    });
-    r.energy = s->energy();
-    return r;
+    return fully_certified_run(p);
   };
   const Run plain = run(0), one = run(1), three = run(3);
   for (const Run* r : {&plain, &one, &three}) {

@@ -36,9 +36,9 @@ std::string input_error(F&& f) {
 // --- Parameter table
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
-  // Counted by hand in deform_params.h: 6 sampling + 2 energy + 13 newton (3 of them continuation) +
+  // Counted by hand in deform_params.h: 6 sampling + 2 energy + 15 newton (3 of them continuation) +
   // 11 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 49;
+  const int kFields = 51;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -68,6 +68,8 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "diagonal_shift",
                                              "drag_hessian_reuse",
                                              "newton_cg_steps",
+                                             "kept_factor_cg_steps",
+                                             "kept_factor_tolerance",
                                              "hessian_precision",
                                              "handle_tolerance",
                                              "continuation",

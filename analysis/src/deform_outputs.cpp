@@ -73,6 +73,8 @@ const IterationColumn kIterationColumns[] = {
     {"cg_scale", [](const IterationRecord& r) { return num(r.cg_scale); }},
     {"global_rejections", [](const IterationRecord& r) { return std::to_string(r.global_rejections); }},
     {"ms_global", [](const IterationRecord& r) { return ms(r.ms_global); }},
+    {"hessian_reused", [](const IterationRecord& r) { return std::string(r.hessian_reused ? "1" : "0"); }},
+    {"kept_factor_steps", [](const IterationRecord& r) { return std::to_string(r.kept_factor_steps); }},
 };
 
 }  // namespace

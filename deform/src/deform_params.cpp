@@ -61,6 +61,13 @@ std::vector<ParamInfo> make_table() {
       {"newton_cg_steps", "newton", &D::newton_cg_steps, 0, 20,
        "conjugate-gradient iterates on the exact Hessian after the subset Hessian's solve (1 = scale the "
        "direction to the exact model's minimum; 0 = off)"},
+      {"kept_factor_cg_steps", "newton", &D::kept_factor_cg_steps, 0, 1000,
+       "a Newton system may be solved by at most this many CG steps on the subset Hessian, preconditioned by "
+       "an earlier iteration's factor, before the Hessian is assembled and factored anew (0 = assemble every "
+       "iteration)"},
+      {"kept_factor_tolerance", "newton", &D::kept_factor_tolerance, 1e-12, 1,
+       "relative residual of those CG steps, in the kept factor's norm, at which the system counts as "
+       "solved"},
       {"hessian_precision", "newton", &D::hessian_precision, 0, 0,
        "products of the reduced Hessian: \"single\" (fast) or \"double\" (for backend parity checks)"},
       {"handle_tolerance", "newton", &D::handle_tolerance, 0, 1e6,

@@ -328,6 +328,56 @@ VecXd DeformationEnergy::all_block_weights() const {
   return w_ / w_.sum();
 }
 
+std::vector<Mat9> DeformationEnergy::sample_blocks(const MatJT& JT, const std::vector<int>& idx,
+                                                   const VecXd& weight, bool projected) const {
+  const int m = static_cast<int>(idx.size());
+  std::vector<Mat9> blocks(m);
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < m; ++k) {
+    const Mat3 J = jacobian_at(JT, idx[k]);
+    blocks[k] = weight(k) * (projected ? sd_hessian_psd(J) : sd_hessian(J));
+  }
+  return blocks;
+}
+
+std::vector<Mat9> DeformationEnergy::subset_hessian_blocks(const MatJT& JT) const {
+  return sample_blocks(JT, subset_, subset_block_weights(), true);
+}
+
+MatS3 DeformationEnergy::subset_hessian_times(const std::vector<Mat9>& blocks, const MatS3& d) const {
+  const int m = static_cast<int>(subset_.size()), s = reduced_size();
+  if (static_cast<int>(blocks.size()) != m)
+    throw Error("subset_hessian_times: one block per subset sample needed");
+  using Rows = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>;
+  using RowsF = Eigen::Matrix<float, 3, Eigen::Dynamic, Eigen::RowMajor>;
+  const Rows dT = d.transpose();  // row a: column a of d
+  // One pass over G_H: per sample k its three rows G_k (3 by s, widened to double) give dJ_k = dᵀ G_kᵀ
+  // (dJ_k(a, b) = G_k.row(b) · d.col(a)), then B_k vec(dJ_k) (vec order a + 3b) is added back as G_kᵀ P_k.
+  // All arithmetic in double: the CG steps need an operator that is linear to working precision (single-
+  // precision sums round differently for every direction, and CG amplifies that). Fixed chunks summed in
+  // order: the same bits for every thread count.
+  const int chunks = (m + kChunk - 1) / kChunk;
+  std::vector<Rows> partial(chunks);
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < chunks; ++c) {
+    Rows acc = Rows::Zero(3, s);
+    Rows Gk(3, s);
+    for (int k = c * kChunk; k < std::min(m, (c + 1) * kChunk); ++k) {
+      Gk = Eigen::Map<const RowsF>(GH_.data() + 3 * static_cast<Eigen::Index>(k) * s, 3, s).cast<double>();
+      Eigen::Matrix<double, 9, 1> v;
+      for (int b = 0; b < 3; ++b)
+        for (int a = 0; a < 3; ++a) v(a + 3 * b) = Gk.row(b).dot(dT.row(a));
+      const Eigen::Matrix<double, 9, 1> hv = blocks[k] * v;
+      for (int a = 0; a < 3; ++a)
+        acc.row(a) += hv(a) * Gk.row(0) + hv(a + 3) * Gk.row(1) + hv(a + 6) * Gk.row(2);
+    }
+    partial[c] = std::move(acc);
+  }
+  MatS3 out = MatS3::Zero(s, 3);
+  for (const Rows& p : partial) out += p.transpose();
+  return out;
+}
+
 MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_samples,
                                      bool double_precision) const {
   const std::vector<int>* idx = &subset_;
@@ -337,16 +387,9 @@ MatXd DeformationEnergy::pair_blocks(const MatJT& JT, bool projected, bool all_s
     for (int i = 0; i < num_samples(); ++i) all[i] = i;
     idx = &all;
   }
-  const int m = static_cast<int>(idx->size());
-  const VecXd weight = all_samples ? all_block_weights() : subset_block_weights();
   // Per-sample 9x9 blocks (weighted), in vec(J) order a + 3b.
-  std::vector<Mat9> blocks(m);
-#pragma omp parallel for schedule(static)
-  for (int k = 0; k < m; ++k) {
-    const Mat3 J = jacobian_at(JT, (*idx)[k]);
-    blocks[k] = weight(k) * (projected ? sd_hessian_psd(J) : sd_hessian(J));
-  }
-  return products(blocks, all_samples, double_precision);
+  const VecXd weight = all_samples ? all_block_weights() : subset_block_weights();
+  return products(sample_blocks(JT, *idx, weight, projected), all_samples, double_precision);
 }
 
 MatXd DeformationEnergy::distortion_pair_blocks_from(const std::vector<Mat9>& blocks,

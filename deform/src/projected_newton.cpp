@@ -183,7 +183,12 @@ struct DeformationSolver::Precompute {
       r.matrix(pert.g2);
       r.matrix(pert.rest);
       r.matrix(pert.gF);
+      MatXd rest;
+      r.matrix(rest);
       if (!r.at_end() || n == 0) throw CacheReader::Bad{};
+      const long s = S.subspace_.size();
+      if (rest.size() > 0 && (rest.rows() != s || rest.cols() != 6 * s)) throw CacheReader::Bad{};
+      S.rest_hessian_blocks_ = std::move(rest);
       S.sampling_ = std::move(vs);
       S.nsampling_ = S.frame_.to_normalized(S.sampling_);
       S.certifier_ =
@@ -215,11 +220,12 @@ struct DeformationSolver::Precompute {
   // first-order one: then the entry has none).
   void store(const CacheKey& k) {
     if (!cache.enabled()) return;
-    const CacheEvent ev = store_entry(cache, k, S.sampling_, *S.certifier_);
+    const CacheEvent ev = store_entry(cache, k, S.sampling_, *S.certifier_, S.rest_hessian_blocks_);
     say("precomputation " + describe(ev) + "; " + describe(cache.usage()));
   }
   static CacheEvent store_entry(const PrecomputeCache& cache, const CacheKey& k,
-                                const VoxelSampling& sampling, const OctreeCertifier& certifier) {
+                                const VoxelSampling& sampling, const OctreeCertifier& certifier,
+                                const MatXd& rest_hessian_blocks) {
     const auto d = certifier.reduced_derivatives();
     const std::vector<char>* finite = nullptr;
     const OctreeCertifier::FactorMatrix* third = certifier.third_factors(&finite);
@@ -239,6 +245,7 @@ struct DeformationSolver::Precompute {
     w.matrix(pert ? pert->g2 : none_built);
     w.matrix(pert ? pert->rest : none_built);
     w.matrix(pert ? pert->gF : none_built);
+    w.matrix(rest_hessian_blocks);
     CacheEvent ev;
     cache.store(k, w, &ev);
     return ev;
@@ -303,6 +310,7 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   auto t0 = Clock::now();
   kernels_ = backend_->energy_kernels(*energy_);
   hessian_blocks_ = MatXd();
+  subset_blocks_.clear();
   certifier_->set_backend(*backend_);
   if (!backend_->is_cpu())
     pc.say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
@@ -311,6 +319,15 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   t0 = Clock::now();
   reset();
   pc.say("certificate of the identity: " + format_g(ms_since(t0), 4) + " ms");
+  rest_y_ = y_;
+  if (rest_hessian_blocks_.size() == 0) {
+    // The first Newton iteration from rest assembles this (the same bits: CpuEnergyKernels computes the
+    // blocks from the same Jacobians); like the constants below it depends on the model alone, so it is built
+    // once here and kept in the cache entry. On the host under every backend, so that every entry holds it.
+    t0 = Clock::now();
+    rest_hessian_blocks_ = energy_->distortion_pair_blocks(energy_->jacobians(y_), false);
+    pc.say("the reduced Hessian at rest: " + format_g(ms_since(t0), 4) + " ms");
+  }
   if (!certifier_->perturbation_constants_if_built()) {
     // Map-independent (Step 4e): built here rather than in the first line search after an accepted step, and
     // stored in the cache entry. Also under a device backend (whose certificates do not use them), so that
@@ -327,11 +344,12 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   preprocess_seconds_ = ms_since(t_all) / 1000;
   if (!cached && pc.cache.enabled() && setup.background_store) {
     // One thread for the checksum too: the caller goes on computing on all cores meanwhile.
-    cache_store_ = std::async(std::launch::async, [this, key, cache = pc.cache] {
-                     omp_set_num_threads(1);
-                     lower_calling_thread_priority();
-                     return describe(Precompute::store_entry(cache, key, sampling_, *certifier_));
-                   }).share();
+    cache_store_ =
+        std::async(std::launch::async, [this, key, cache = pc.cache] {
+          omp_set_num_threads(1);
+          lower_calling_thread_priority();
+          return describe(Precompute::store_entry(cache, key, sampling_, *certifier_, rest_hessian_blocks_));
+        }).share();
   }
 }
 
@@ -425,11 +443,18 @@ void DeformationSolver::reset() {
        yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
   kernels_->set_current(y_);
   hessian_blocks_ = MatXd();
+  subset_blocks_.clear();
   factor_ = {};
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
   history_.clear();
-  cert_ = frame_.from_normalized(certifier_->certify_reduced(y_, certify_params(false, false)));
+  Certificate c = certifier_->certify_reduced(y_, certify_params(false, false));
+  if (c.certified) {  // the first line search certifies by perturbation from rest (Step 4e)
+    perturb_y_ = y_;
+    perturb_lower_ = c.base_lower;
+    perturb_upper_ = c.base_upper;
+  }
+  cert_ = frame_.from_normalized(std::move(c));
   if (!cert_.certified)
     throw NumericalError("the identity map is not certified on this sampling (" + cert_.reason +
                          "); the voxels are too close to the cage — raise 'safety' or use smaller voxels");
@@ -482,6 +507,7 @@ bool DeformationSolver::set_reduced_map(const MatS3& y, std::string* reason) {
   y_ = y;
   kernels_->set_current(y_);
   hessian_blocks_ = MatXd();
+  subset_blocks_.clear();
   factor_ = {};  // the map jumped
   cert_ = frame_.from_normalized(c);
   return true;
@@ -611,8 +637,9 @@ IterationRecord DeformationSolver::step(const std::atomic<bool>* stop) {
     const LineSearchEnd end = certified_line_search(d, may_retry, rec, stop);
     interrupted = end == LineSearchEnd::kInterrupted;
     const bool retry = end == LineSearchEnd::kRetry;
-    if (reuse && !rec.accepted && !retry && !interrupted) {
-      // The kept factor's direction found no certified decrease: this iteration assembles its own.
+    if (rec.hessian_reused && !rec.accepted && !retry && !interrupted) {
+      // A kept factor's direction (as it is, or the CG steps' solution) found no certified decrease: this
+      // iteration assembles its own, so that "no certified step" and "blocked" mean what they always meant.
       may_reuse = false;
       factor_ = {};
       --attempt;
@@ -658,6 +685,8 @@ DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reus
       throw NumericalError("projected Newton: solving with the kept Hessian factor failed");
     ++factor_.reuses;
     rec.ms_solve += ms_since(t0);
+  } else if (kept_factor_direction(d.gvec, dvec, rec)) {
+    rec.hessian_reused = true;
   } else {
     // The reduced Hessian is factored in place (no 3s x 3s copy per iteration) and rebuilt from the kept
     // blocks only when its factorization fails.
@@ -684,7 +713,7 @@ DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reus
       ok = cholesky_solve(F, dvec);
     }
     if (!ok) throw NumericalError("projected Newton: the reduced Hessian is not positive definite");
-    if (dragging_ && params_.drag_hessian_reuse > 0) {
+    if ((dragging_ && params_.drag_hessian_reuse > 0) || params_.kept_factor_cg_steps > 0) {
       factor_ = {std::move(F), weights_, 0};
       L = &factor_.L;
     } else {
@@ -708,10 +737,57 @@ DeformationSolver::NewtonDirection DeformationSolver::newton_direction(bool reus
 const MatXd& DeformationSolver::distortion_hessian_blocks() {
   const bool dbl = params_.hessian_precision == HessianPrecision::kDouble;
   if (hessian_blocks_.size() == 0 || hessian_blocks_double_ != dbl) {
-    hessian_blocks_ = kernels_->distortion_pair_blocks(dbl);
+    // At rest: built at construction from this very map. Where the kept factor's CG steps computed the
+    // per-sample blocks already, the CPU kernels would compute the same ones again (the same bits either way).
+    if (!dbl && backend_->is_cpu() && rest_hessian_blocks_.size() > 0 && rest_y_.rows() == y_.rows() &&
+        y_ == rest_y_)
+      hessian_blocks_ = rest_hessian_blocks_;
+    else
+      hessian_blocks_ = !subset_blocks_.empty() && backend_->is_cpu()
+                            ? energy_->distortion_pair_blocks_from(subset_blocks_, dbl)
+                            : kernels_->distortion_pair_blocks(dbl);
     hessian_blocks_double_ = dbl;
   }
   return hessian_blocks_;
+}
+
+const std::vector<Mat9>& DeformationSolver::distortion_subset_blocks() {
+  if (subset_blocks_.empty()) subset_blocks_ = energy_->subset_hessian_blocks(kernels_->current_jacobians());
+  return subset_blocks_;
+}
+
+bool DeformationSolver::kept_factor_direction(const VecXd& gvec, VecXd& dvec, IterationRecord& rec) {
+  // CPU only: a device assembles the Hessian in a few milliseconds, less than these host steps would take.
+  if (params_.kept_factor_cg_steps <= 0 || factor_.L.size() == 0 || !backend_->is_cpu()) return false;
+  const int s = subspace_.size();
+  auto t0 = Clock::now();
+  const std::vector<Mat9>& blocks = distortion_subset_blocks();
+  rec.ms_hessian += ms_since(t0);
+  t0 = Clock::now();
+  // The operator the assembly would factor (shifted_hessian in newton_direction, without the extra shifts
+  // of a failed factorization), through the per-sample blocks: one pass over the subset's rows of G per
+  // product instead of the 36 s²|H| flops of the assembly and the factorization.
+  const auto A = [&](const VecXd& p) -> VecXd {
+    const Eigen::Map<const MatS3> pm(p.data(), s, 3);
+    const MatS3 h =
+        energy_->subset_hessian_times(blocks, pm) + energy_->quadratic_hessian_times(pm, weights_);
+    return Eigen::Map<const VecXd>(h.data(), 3 * s) + params_.diagonal_shift * p;
+  };
+  // The preconditioner: the kept factor, in double precision like the operator. CG amplifies rounding that
+  // differs from one direction to the next: with single-precision products or a single-precision factor a
+  // copy of bar_bend scaled by 1e-6 ended 2e-3 away from the original (model size 1), in double 5.1e-7.
+  const auto M = [&](VecXd& r) { return cholesky_solve_factored(factor_.L, r); };
+  const PcgResult r =
+      preconditioned_cg(-gvec, A, M, params_.kept_factor_cg_steps, params_.kept_factor_tolerance);
+  rec.kept_factor_steps = r.steps;
+  rec.ms_solve += ms_since(t0);
+  if (params_.trace_line_search)
+    std::fprintf(stderr, "  kept factor: %d CG steps, relative residual %.3g%s, %.1f ms\n", r.steps,
+                 r.relative_residual, r.converged ? "" : " (assembling)", ms_since(t0));
+  if (!r.converged) return false;
+  dvec = r.x;
+  ++factor_.reuses;
+  return true;
 }
 
 DeformationSolver::LineSearchEnd DeformationSolver::certified_line_search(const NewtonDirection& d,
@@ -875,6 +951,7 @@ void DeformationSolver::accept_trial(const MatS3& yt, double t, const MatS3& del
   y_ = yt;
   kernels_->accept(t);
   hessian_blocks_ = MatXd();
+  subset_blocks_.clear();
   perturb_y_ = yt;
   perturb_lower_ = c.base_lower;
   perturb_upper_ = c.base_upper;

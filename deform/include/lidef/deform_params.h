@@ -54,6 +54,14 @@ struct DeformParams {
   // solve: 1 = scale the direction to the exact quadratic model's minimum along it, each more = one exact
   // Hessian-vector product (0 = off). docs/solver.md, "Correcting the subset Hessian".
   int newton_cg_steps = 1;
+  // A Newton iteration after the first may solve its subset-Hessian system with the factor of an earlier
+  // iteration's Hessian as the preconditioner of at most this many conjugate-gradient steps, the Hessian
+  // applied through its per-sample blocks (no assembly), to the relative residual kept_factor_tolerance (in
+  // the factor's norm, sqrt(rᵀ(LLᵀ)⁻¹r): about the error's in the Hessian's norm); only
+  // where they do not get there is the Hessian assembled and factored anew (0 = every iteration assembles).
+  // docs/solver.md, "The kept factor".
+  int kept_factor_cg_steps = 20;
+  double kept_factor_tolerance = 1e-3;
   HessianPrecision hessian_precision = HessianPrecision::kSingle;  // products of the reduced Hessian
   // Handle error reported as "reached", as a fraction of the model size (Frame::scale, normalization.h: half
   // the largest extent of the cage's bounding box), so that it means the same for a scaled model.

@@ -119,6 +119,13 @@ class DeformationEnergy {
   // The same from given per-subset-sample 9x9 blocks (PSD-projected, weighted by 1/|H|): the host product for
   // backends whose device is the CPU itself (docs/opencl.md).
   MatXd distortion_pair_blocks_from(const std::vector<Mat9>& blocks, bool double_precision) const;
+  // The PSD-projected distortion Hessians at the subset's samples (#H 9x9 blocks, vec(J) order a + 3b),
+  // weighted by 1/|H|: the blocks whose products distortion_pair_blocks assembles.
+  std::vector<Mat9> subset_hessian_blocks(const MatJT& JT) const;
+  // That assembled distortion part (hessian_from without the quadratic terms) times d (s by 3), from the
+  // blocks and the subset's rows of G without assembling it: one pass over the 3|H| by s stored rows, the
+  // arithmetic in double (linear to working precision, as conjugate gradients need).
+  MatS3 subset_hessian_times(const std::vector<Mat9>& blocks, const MatS3& d) const;
   // All terms from Σ_i (E_iso − 6) and ỹ.
   EnergyTerms terms(double distortion_sum, const MatS3& y, const EnergyWeights& w) const;
   // ∇E from Σ_i G_iᵀ ∂E_iso/∂J_i (adds the handle and smoothness terms).
@@ -129,6 +136,9 @@ class DeformationEnergy {
 
  private:
   MatXd pair_blocks(const MatJT& JT, bool projected, bool all_samples, bool double_precision) const;
+  // weight(k) times the (projected) 9x9 Hessian of E_iso at sample idx[k].
+  std::vector<Mat9> sample_blocks(const MatJT& JT, const std::vector<int>& idx, const VecXd& weight,
+                                  bool projected) const;
   MatXd products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const;
   void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
   // Σ_i w_i per_sample(i) in fixed chunks added in order (the same bits for every thread count).

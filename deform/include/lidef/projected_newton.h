@@ -101,9 +101,12 @@ struct IterationRecord {
   long refined = 0;             // voxels the certificate subdivided
   double max_handle_error = 0;  // max ‖f(p_h) − q_h‖ at the current map
   std::string weight_action;    // what dynamic weighting did after this step ("", "smooth*", "p2p*", "reset")
-  bool hessian_reused = false;  // the direction came from an earlier step's factor (set_dragging)
-  int cg_steps = 0;             // conjugate-gradient iterates taken (newton_cg_steps; 0: the plain direction)
-  double cg_scale = 0;          // the first iterate's scale of the plain direction (1: the subset Hessian's)
+  // The direction came from an earlier step's factor: as it is (set_dragging) or as the preconditioner of
+  // kept_factor_steps conjugate-gradient steps on this iteration's subset Hessian (kept_factor_cg_steps).
+  bool hessian_reused = false;
+  int kept_factor_steps = 0;  // CG steps with the kept factor (also those of a try that then assembled)
+  int cg_steps = 0;           // conjugate-gradient iterates taken (newton_cg_steps; 0: the plain direction)
+  double cg_scale = 0;        // the first iterate's scale of the plain direction (1: the subset Hessian's)
   // ms_solve: the Cholesky solve and the direction (its Jacobians G δ and the CG iterates, newton_cg_steps);
   // before 2026-11-24 the Jacobian pass was counted in ms_line_search.
   double ms_gradient = 0, ms_hessian = 0, ms_solve = 0, ms_line_search = 0, ms_certificate = 0, ms_total = 0;
@@ -312,7 +315,8 @@ class DeformationSolver {
   double preprocess_seconds_ = 0;
   std::string cache_outcome_;
   std::shared_future<std::string> cache_store_;  // the background store, if any
-  // The last assembled Newton system's Cholesky factor, kept only while dragging (set_dragging).
+  // The last assembled Newton system's Cholesky factor, kept while dragging (set_dragging) or for the next
+  // iterations' CG steps (kept_factor_cg_steps).
   struct HessianFactor {
     MatXd L;                // dpotrf's lower factor of H + shift (3s by 3s); empty: none
     EnergyWeights weights;  // the weights it was assembled with
@@ -324,7 +328,19 @@ class DeformationSolver {
   // map, and only the weighted quadratic terms of DeformationEnergy::hessian_from differ.
   MatXd hessian_blocks_;
   bool hessian_blocks_double_ = false;
+  // Those blocks at rest (the map rest_y_ that reset() sets), single precision: built once per model (at
+  // construction or read from the precomputation cache) and taken for every first iteration from rest on the
+  // CPU backend.
+  MatXd rest_hessian_blocks_;
+  MatS3 rest_y_;
   const MatXd& distortion_hessian_blocks();
+  // The per-sample blocks of that part (DeformationEnergy::subset_hessian_blocks), kept likewise: the kept
+  // factor's CG steps apply the subset Hessian through them.
+  std::vector<Mat9> subset_blocks_;
+  const std::vector<Mat9>& distortion_subset_blocks();
+  // The subset Hessian's system solved with the kept factor as preconditioner (kept_factor_cg_steps); false
+  // when there is none or the CG steps did not reach kept_factor_tolerance (dvec is then unchanged).
+  bool kept_factor_direction(const VecXd& gvec, VecXd& dvec, IterationRecord& rec);
   bool dragging_ = false;
   // Base voxels whose proof failed in the last rejected line-search trial: the next trial refines them first
   // (CertifyParams::priority_voxels), so a trial failing at the same place is rejected early.

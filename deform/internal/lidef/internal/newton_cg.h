@@ -34,4 +34,22 @@ struct NewtonCgResult {
 // g: ∇E (n); p0: −M⁻¹ g (n); steps ≥ 1: iterates at most.
 NewtonCgResult truncated_newton_cg(const VecXd& g, const VecXd& p0, int steps, const NewtonCgOperators& ops);
 
+// Solves A x = b (A symmetric positive definite, given through products) by conjugate gradients
+// preconditioned with M (symmetric positive definite), from x = 0 (so the first iterate is M⁻¹b scaled to the
+// minimum of ½xᵀAx − bᵀx along it), until the residual r = b − A x in the preconditioner's norm,
+// ‖r‖_{M⁻¹} = sqrt(rᵀM⁻¹r), is at most tolerance ‖b‖_{M⁻¹} (converged), or max_steps products — or earlier,
+// from the fourth step on, when that relative residual's mean rate of decrease so far predicts more than 4 ×
+// tolerance after max_steps (not converged). With M ≈ A the M⁻¹-norm of r is about the A-norm of the error,
+// so the tolerance bounds the error where the quadratic model measures it; the Euclidean residual would be
+// dominated by the stiffest terms (the handles' λ1 = 1e5) and leave the soft directions loose. The solver's
+// direction with a kept factor (DeformParams::kept_factor_cg_steps; docs/solver.md, "The kept factor").
+struct PcgResult {
+  VecXd x;
+  int steps = 0;                 // products of A taken
+  double relative_residual = 1;  // ‖b − A x‖_{M⁻¹} / ‖b‖_{M⁻¹} of the last iterate
+  bool converged = false;        // relative_residual ≤ tolerance
+};
+PcgResult preconditioned_cg(const VecXd& b, const std::function<VecXd(const VecXd&)>& A,
+                            const std::function<bool(VecXd&)>& M, int max_steps, double tolerance);
+
 }  // namespace lidef
