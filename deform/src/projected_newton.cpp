@@ -24,6 +24,13 @@ namespace lidef {
 
 namespace {
 
+// The distortion Hessian kept for the current map in both forms (DeformationSolver::hessian_blocks_ and
+// subset_blocks_), forgotten together wherever the kernels' map changes.
+void forget_map_hessian(MatXd& pair_blocks, std::vector<Mat9>& subset_blocks) {
+  pair_blocks = MatXd();
+  subset_blocks.clear();
+}
+
 bool stop_requested(const std::atomic<bool>* stop) {
   return stop && stop->load(std::memory_order_relaxed);
 }
@@ -309,8 +316,7 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
   pc.enter("certificate of the identity", pc.end, cached || !pc.cache.enabled() ? 1.0 : 0.93);
   auto t0 = Clock::now();
   kernels_ = backend_->energy_kernels(*energy_);
-  hessian_blocks_ = MatXd();
-  subset_blocks_.clear();
+  forget_map_hessian(hessian_blocks_, subset_blocks_);
   certifier_->set_backend(*backend_);
   if (!backend_->is_cpu())
     pc.say("backend " + backend_->name() + ": device buffers " + format_g(ms_since(t0), 4) + " ms");
@@ -442,8 +448,7 @@ void DeformationSolver::reset() {
   y_ = subspace_.basis.transpose() *
        yid;  // exact: the affine maps lie in span Ξ, whose columns are orthonormal
   kernels_->set_current(y_);
-  hessian_blocks_ = MatXd();
-  subset_blocks_.clear();
+  forget_map_hessian(hessian_blocks_, subset_blocks_);
   factor_ = {};
   weights_ = {params_.lambda_p2p, params_.lambda_smooth};
   weight_resets_ = 0;
@@ -506,8 +511,7 @@ bool DeformationSolver::set_reduced_map(const MatS3& y, std::string* reason) {
   }
   y_ = y;
   kernels_->set_current(y_);
-  hessian_blocks_ = MatXd();
-  subset_blocks_.clear();
+  forget_map_hessian(hessian_blocks_, subset_blocks_);
   factor_ = {};  // the map jumped
   cert_ = frame_.from_normalized(c);
   return true;
@@ -738,7 +742,8 @@ const MatXd& DeformationSolver::distortion_hessian_blocks() {
   const bool dbl = params_.hessian_precision == HessianPrecision::kDouble;
   if (hessian_blocks_.size() == 0 || hessian_blocks_double_ != dbl) {
     // At rest: built at construction from this very map. Where the kept factor's CG steps computed the
-    // per-sample blocks already, the CPU kernels would compute the same ones again (the same bits either way).
+    // per-sample blocks already, the CPU kernels would compute the same ones again (the same bits either
+    // way).
     if (!dbl && backend_->is_cpu() && rest_hessian_blocks_.size() > 0 && rest_y_.rows() == y_.rows() &&
         y_ == rest_y_)
       hessian_blocks_ = rest_hessian_blocks_;
@@ -950,8 +955,7 @@ void DeformationSolver::accept_trial(const MatS3& yt, double t, const MatS3& del
   rec.terms = et;
   y_ = yt;
   kernels_->accept(t);
-  hessian_blocks_ = MatXd();
-  subset_blocks_.clear();
+  forget_map_hessian(hessian_blocks_, subset_blocks_);
   perturb_y_ = yt;
   perturb_lower_ = c.base_lower;
   perturb_upper_ = c.base_upper;
