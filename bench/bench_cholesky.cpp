@@ -3,7 +3,10 @@
 // dpotrf in the calling thread (what the solver used before) and, for reference only, OpenBLAS's own threaded
 // dpotrf (not used by lidef: its pthread workers spin after each call, blas_kernel.h). Median and minimum ms
 // of --reps factorizations of a random SPD matrix per size, and the largest difference of each factor from
-// dpotrf's relative to its largest entry.
+// dpotrf's relative to its largest entry. A second table times the solve with the factor (the kept factor's
+// preconditioner at every CG step): LAPACK's dpotrs in the calling thread against cholesky_solve_factored
+// (two dtrsv) with OpenMP set to 1 and T threads (median and minimum µs per solve over --reps batches of 100
+// solves), and the largest difference of the solutions from dpotrs's relative to its largest entry.
 //
 // Usage: bench_cholesky [DATA_DIR (not read)] [--sizes 300,600,900] [--reps 30] [--threads T] (--help)
 #include <omp.h>
@@ -19,6 +22,8 @@
 
 extern "C" {
 void dpotrf_(const char* uplo, const int* n, double* a, const int* lda, int* info);
+void dpotrs_(const char* uplo, const int* n, const int* nrhs, const double* a, const int* lda, double* b,
+             const int* ldb, int* info);
 void openblas_set_num_threads(int);
 }
 
@@ -62,6 +67,32 @@ bool lapack_factor(MatXd& A) {
   const int n = static_cast<int>(A.rows());
   int info = 0;
   dpotrf_("L", &n, A.data(), &n, &info);
+  return info == 0;
+}
+
+// µs per solve with the factor L: --reps batches of 100 solves of the same right-hand side.
+template <class F>
+Timing time_solve(const MatXd& L, const VecXd& b, const VecXd& reference, int reps, F solve) {
+  std::vector<double> us;
+  VecXd x;
+  for (int r = 0; r <= reps; ++r) {
+    const auto t0 = Clock::now();
+    for (int k = 0; k < 100; ++k) {
+      x = b;
+      if (!solve(L, x)) std::fprintf(stderr, "bench_cholesky: a solve failed\n");
+    }
+    if (r > 0) us.push_back(ms_since(t0) * 10);  // 1000 µs per ms over 100 solves
+  }
+  Timing t{bench::median(us), bench::minimum(us), 0};
+  if (reference.size())
+    t.difference = (x - reference).cwiseAbs().maxCoeff() / reference.cwiseAbs().maxCoeff();
+  return t;
+}
+
+bool lapack_solve(const MatXd& L, VecXd& x) {
+  const int n = static_cast<int>(L.rows()), one = 1;
+  int info = 0;
+  dpotrs_("L", &n, &one, L.data(), &n, x.data(), &n, &info);
   return info == 0;
 }
 
@@ -109,6 +140,31 @@ int main(int argc, char** argv) {
     std::printf("| %d | %s | %s | %s | %s | %s |\n", n, cell(lapack).c_str(), cell(one).c_str(),
                 cell(many).c_str(), cell(threaded).c_str(),
                 bench::sci(std::max(one.difference, many.difference), 1).c_str());
+  }
+  std::printf(
+      "\n| n | solve, dpotrs, calling thread: median / min µs | blocked, 1 thread | blocked, %d threads | "
+      "blocked vs dpotrs (max rel. diff.) |\n|---:|---:|---:|---:|---:|\n",
+      threads);
+  for (const std::string& s : bench::split_list(sizes_text)) {
+    const int n = std::stoi(s);
+    MatXd L = random_spd(n);
+    lapack_factor(L);
+    std::mt19937 rng(7);
+    std::normal_distribution<double> N(0, 1);
+    VecXd b(n);
+    for (int i = 0; i < n; ++i) b(i) = N(rng);
+    VecXd x0 = b;
+    lapack_solve(L, x0);
+    const Timing lapack = time_solve(L, b, x0, reps, lapack_solve);
+    omp_set_num_threads(1);
+    const Timing one = time_solve(L, b, x0, reps, cholesky_solve_factored);
+    omp_set_num_threads(threads);
+    const Timing many = time_solve(L, b, x0, reps, cholesky_solve_factored);
+    const auto cell = [](const Timing& t) {
+      return bench::fixed(t.median, 0) + " / " + bench::fixed(t.min, 0);
+    };
+    std::printf("| %d | %s | %s | %s | %s |\n", n, cell(lapack).c_str(), cell(one).c_str(),
+                cell(many).c_str(), bench::sci(std::max(one.difference, many.difference), 1).c_str());
   }
   return 0;
 }

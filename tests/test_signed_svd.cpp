@@ -13,6 +13,7 @@
 #include <sstream>
 #include <vector>
 
+#include "lidef/internal/jacobi_singular_values.h"
 #include "lidef/signed_svd.h"
 
 using namespace lidef;
@@ -188,6 +189,51 @@ TEST(SignedSvd, ExtremeScales) {
   std::mt19937 rng(41);
   for (const double scale : {1e-80, 1e-20, 1e20, 1e80})
     for (const double s3 : {0.3, -0.3}) check_known(scale * Vec3(1.7, 0.9, s3), rng);
+}
+
+TEST(SignedSvd, LanesGiveEachMatrixTheValuesOfTheSingleCall) {
+  // The certificate computes its base centers' singular values kSvdLanes at a time: a matrix's values must
+  // be bit-identical whatever its lane, its company (including matrices that converge later, singular ones,
+  // NaN) and the number of lanes in use, so that a certificate does not depend on how its centers are
+  // grouped; and they must be the known σ to within 1e-13 σ1 (an independent truth: J = R1 diag(σ) R2ᵀ).
+  std::mt19937 rng(43);
+  std::uniform_real_distribution<double> E(-14, 0), S(0, 1);
+  std::vector<Mat3> J;
+  std::vector<Vec3> known;
+  for (int k = 0; k < 4000; ++k) {
+    std::vector<double> v = {1.0, std::pow(10.0, E(rng)), std::pow(10.0, E(rng))};
+    if (k % 5 == 0) v[2] = v[1] * (1 + 1e-9 * S(rng));  // nearly repeated
+    if (k % 7 == 0) v = {1 + 1e-8 * S(rng), 1 + 1e-8 * S(rng), 1 + 1e-8 * S(rng)};
+    std::sort(v.rbegin(), v.rend());
+    Vec3 sigma(v[0], v[1], v[2]);
+    const double scale = std::pow(10.0, 10 * E(rng) / 14 + 5);
+    if (S(rng) < 0.5) sigma(2) = -sigma(2);
+    J.push_back(scale * random_rotation(rng) * sigma.asDiagonal() * random_rotation(rng).transpose());
+    known.push_back(scale * sigma);
+  }
+  Mat3 odd[3] = {Mat3::Zero(), Mat3::Identity(), Mat3::Constant(std::nan(""))};
+  for (size_t k = 0; k < J.size(); ++k) {
+    bool r1 = false;
+    const Vec3 single = signed_singular_values(J[k], &r1);
+    // Unsigned against the known values and Eigen's JacobiSVD (the sign of a σ3 below ~1e-11 σ1 may be
+    // unresolved: σ3 is then reported as 0, SignedSvd.NearSingularMatrices).
+    Vec3 unsigned_sv;
+    jacobi_singular_values(&J[k], 1, &unsigned_sv);
+    EXPECT_LE((unsigned_sv - known[k].cwiseAbs()).cwiseAbs().maxCoeff(), 1e-13 * known[k](0)) << show(J[k]);
+    EXPECT_LE((unsigned_sv - Eigen::JacobiSVD<Mat3>(J[k]).singularValues()).cwiseAbs().maxCoeff(),
+              1e-13 * known[k](0));
+    if (r1 && single(2) != 0) EXPECT_EQ(single(2) < 0, known[k](2) < 0) << show(J[k]);
+    // Every lane, with random company and a random number of lanes.
+    const int n = 1 + static_cast<int>(k % kSvdLanes), lane = static_cast<int>((k / kSvdLanes) % n);
+    Mat3 group[kSvdLanes];
+    for (int l = 0; l < n; ++l)
+      group[l] = l == lane ? J[k] : (l % 4 == 3 ? odd[l % 3] : J[(k * 7 + l) % J.size()]);
+    Vec3 out[kSvdLanes];
+    bool res[kSvdLanes];
+    signed_singular_values_lanes(group, n, out, res);
+    EXPECT_EQ(out[lane], single) << "lane " << lane << " of " << n << show(J[k]);
+    EXPECT_EQ(res[lane], r1);
+  }
 }
 
 // ---------------------------------------------------------------- the error-bounded sign of det J

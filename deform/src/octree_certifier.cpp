@@ -13,6 +13,7 @@
 #include "lidef/internal/edge_jet.h"
 #include "lidef/internal/enum_names.h"
 #include "lidef/internal/float_rows.h"
+#include "lidef/internal/jacobi_singular_values.h"
 #include "lidef/internal/mesh_queries.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/lipschitz_bound.h"
@@ -895,17 +896,29 @@ struct OctreeCertifier::Run {
     sigma1.setConstant(N, std::numeric_limits<double>::quiet_NaN());
     sign_unresolved.assign(N, 0);
     if (device_Y.empty()) {
+      // kSvdLanes centers at a time (SIMD lanes; a center's values do not depend on its lane's company).
+      const long groups = (N + kSvdLanes - 1) / kSvdLanes;
 #pragma omp parallel for schedule(static)
-      for (long i = 0; i < N; ++i) {
-        if (!evaluated(i)) {
-          sigma3(i) = std::numeric_limits<double>::quiet_NaN();
-          continue;
+      for (long g = 0; g < groups; ++g) {
+        long idx[kSvdLanes];
+        Mat3 J[kSvdLanes];
+        int n = 0;
+        for (long i = g * kSvdLanes; i < std::min(N, (g + 1) * kSvdLanes); ++i) {
+          if (!evaluated(i)) {
+            sigma3(i) = std::numeric_limits<double>::quiet_NaN();
+            continue;
+          }
+          idx[n] = i;
+          J[n++] = Jc[i];
         }
-        bool resolved = true;
-        const Vec3 sv = signed_singular_values(Jc[i], &resolved);
-        sigma3(i) = sv(2);
-        sigma1(i) = sv(0);
-        sign_unresolved[i] = !resolved;
+        Vec3 sv[kSvdLanes];
+        bool resolved[kSvdLanes];
+        signed_singular_values_lanes(J, n, sv, resolved);
+        for (int k = 0; k < n; ++k) {
+          sigma3(idx[k]) = sv[k](2);
+          sigma1(idx[k]) = sv[k](0);
+          sign_unresolved[idx[k]] = !resolved[k];
+        }
       }
     }
     cert.ms_sigma = ms_since(t0);

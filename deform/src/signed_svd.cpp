@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "lidef/internal/jacobi_singular_values.h"
+
 namespace lidef {
 
 // The bound (docs/certificate.md, "Step 5"): each of the 6 Leibniz products J0j·J1a·J2b reaches fl(det)
@@ -68,15 +70,28 @@ SignedSvd signed_svd(const Mat3& J) {
   return out;
 }
 
-Vec3 signed_singular_values(const Mat3& J, bool* sign_resolved) {
-  Vec3 s = Eigen::JacobiSVD<Mat3>(J).singularValues();
+namespace {
+// σ3 takes the proven sign of det J (0 when unresolved or det J = 0 exactly).
+void apply_det_sign(const Mat3& J, Vec3& s, bool* sign_resolved) {
   const DetSign d = det_sign_bounded(J);
   if (sign_resolved) *sign_resolved = d.resolved;
   if (d.sign == 0)
     s(2) = 0;
   else if (d.sign < 0)
     s(2) = -s(2);
+}
+}  // namespace
+
+Vec3 signed_singular_values(const Mat3& J, bool* sign_resolved) {
+  Vec3 s;
+  jacobi_singular_values(&J, 1, &s);
+  apply_det_sign(J, s, sign_resolved);
   return s;
+}
+
+void signed_singular_values_lanes(const Mat3* J, int n, Vec3* out, bool* resolved) {
+  jacobi_singular_values(J, n, out);
+  for (int k = 0; k < n; ++k) apply_det_sign(J[k], out[k], resolved + k);
 }
 
 }  // namespace lidef

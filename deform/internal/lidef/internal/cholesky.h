@@ -18,7 +18,8 @@ namespace lidef {
 // H is not positive definite (to working precision): H then holds a partial factorization.
 bool cholesky_factor(MatXd& H);
 
-// b <- L⁻ᵀ L⁻¹ b for a factor from cholesky_factor (n by n; b of length n). false on a zero pivot.
+// b <- L⁻ᵀ L⁻¹ b for a factor from cholesky_factor (n by n; b of length n), in the calling thread. false when
+// the sizes differ or the result is not finite (a zero pivot).
 bool cholesky_solve_factored(const MatXd& L, VecXd& b);
 
 // Both: H is overwritten by its factor and b by the solution of H x = b. false when H is not positive
