@@ -47,12 +47,14 @@ void fix_blas_kernel();
 std::vector<std::pair<std::string, std::string>> blas_environment();
 
 // What every lidef program re-executes itself with (reexec_with_environment, first thing in main()):
-// blas_environment(), and GLIBC_TUNABLES=glibc.malloc.hugetlb=1 (unless the user set GLIBC_TUNABLES) so that
-// malloc backs its large blocks with transparent huge pages. Why: touching fresh memory costs one page fault
-// per 4 KiB, and on a virtual machine each is slow — reopening the animal from the cache (781 MB read into
-// new buffers) took several times as long without the tunable (docs/benchmarks.md, "Opening a model"). It changes
-// where memory comes from, never a result. A library cannot set it for its host (glibc reads it at startup):
-// the Python module's users set it themselves.
+// blas_environment(), and GLIBC_TUNABLES (unless the user set it) with glibc.malloc.hugetlb=1, so that malloc
+// backs its large blocks with transparent huge pages, and mmap_threshold 32 MiB, trim_threshold 1 GiB, so that
+// the blocks below 32 MiB come from the heap and freed ones are reused rather than returned. Why: touching fresh
+// memory costs one page fault per 4 KiB, and on a virtual machine each is slow — reopening the animal from the
+// cache (781 MB read into new buffers) took several times as long without huge pages, and a solve's
+// per-iteration arrays faulted in anew each time (docs/benchmarks.md, "Opening a model"). It changes where
+// memory comes from, never a result. A library cannot set it for its host (glibc reads it at startup): the
+// Python module's users set it themselves.
 std::vector<std::pair<std::string, std::string>> process_environment();
 
 // Sets each variable of `env` that is not already set and, when one was set, re-executes /proc/self/exe with
