@@ -222,12 +222,14 @@ TEST(SignedSvd, LanesGiveEachMatrixTheValuesOfTheSingleCall) {
     EXPECT_LE((unsigned_sv - known[k].cwiseAbs()).cwiseAbs().maxCoeff(), 1e-13 * known[k](0)) << show(J[k]);
     EXPECT_LE((unsigned_sv - Eigen::JacobiSVD<Mat3>(J[k]).singularValues()).cwiseAbs().maxCoeff(),
               1e-13 * known[k](0));
-    if (r1 && single(2) != 0) EXPECT_EQ(single(2) < 0, known[k](2) < 0) << show(J[k]);
+    if (r1 && single(2) != 0) {
+      EXPECT_EQ(single(2) < 0, known[k](2) < 0) << show(J[k]);
+    }
     // Every lane, with random company and a random number of lanes.
     const int n = 1 + static_cast<int>(k % kSvdLanes), lane = static_cast<int>((k / kSvdLanes) % n);
     Mat3 group[kSvdLanes];
     for (int l = 0; l < n; ++l)
-      group[l] = l == lane ? J[k] : (l % 4 == 3 ? odd[l % 3] : J[(k * 7 + l) % J.size()]);
+      group[l] = l == lane ? J[k] : (l % 4 == 3 ? odd[(k + l) % 3] : J[(k * 7 + l) % J.size()]);
     Vec3 out[kSvdLanes];
     bool res[kSvdLanes];
     signed_singular_values_lanes(group, n, out, res);

@@ -24,7 +24,7 @@ void jacobi_lanes(const Mat3* J, Vec3* out) {
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) A[3 * r + c][l] = J[l](r, c) * inv;
   }
-  // 40 sweeps: a 3x3 converges quadratically in 3–6; a matrix with NaN never rotates.
+  // At most 40 sweeps (the iteration converges quadratically); a matrix with NaN never rotates.
   for (int sweep = 0; sweep < 40; ++sweep) {
     bool rotated = false;
     for (int pair = 0; pair < 3; ++pair) {

@@ -1,6 +1,6 @@
 // Singular values of 3x3 Jacobians by one-sided (Hestenes) Jacobi, several matrices in SIMD lanes: the
-// certificate's σ1 and σ3 at every base center (tens of thousands of Jacobians per certificate) cost a fifth
-// of Eigen's JacobiSVD this way (docs/certificate.md, Step 5, "The singular values").
+// certificate's σ1 and σ3 at every base center (tens of thousands of Jacobians per certificate) cost about a
+// quarter of Eigen's JacobiSVD this way (docs/certificate.md, Step 5, "The singular values").
 //
 // Each lane's arithmetic is that lane's alone (a converged lane only takes exact identity rotations while the
 // others converge), and the source is compiled without floating-point contraction, so a matrix's singular
