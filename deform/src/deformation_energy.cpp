@@ -9,6 +9,7 @@
 
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
+#include "lidef/internal/float_rows.h"
 #include "lidef/symmetric_dirichlet.h"
 
 namespace lidef {
@@ -23,132 +24,26 @@ Mat3 jacobian_at(const MatJT& JT, int i) {
   return JT.middleRows<3>(3 * i).transpose();
 }
 
-// The two passes over the stored float rows of G, the per-iteration stages that read the most memory. Each
-// float is widened to double and every product and sum is double (G's rounding is the only one; the class
-// comment). GCC's vector extensions give 4 doubles per operation; the summation order is fixed by the code,
-// not by the thread count or a BLAS (deterministic). The Eigen product with a 3-column right side they
-// replace took 13-17 ms per pass on the bar at 2 threads, these 5-11 (bench_opencl; docs/benchmarks.md,
-// "Per-iteration stage split").
-using V4d = double __attribute__((vector_size(32)));
-using V4f = float __attribute__((vector_size(16)));
-
-inline V4d widen4(const float* g) {
-  V4f f;
-  std::memcpy(&f, g, sizeof f);
-  return __builtin_convertvector(f, V4d);
-}
-inline V4d load4(const double* p) {
-  V4d v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-inline void store4(double* p, V4d v) {
-  std::memcpy(p, &v, sizeof v);
-}
-inline double sum4(V4d v) {
-  return (v[0] + v[1]) + (v[2] + v[3]);
-}
+// The two passes over the stored float rows of G, the per-iteration stages that read the most memory: each
+// float widened to double, every product and sum in double (G's rounding is the only one; the class comment),
+// in SIMD lanes (float_rows.h); the summation order is fixed by the code, not by the thread count or a BLAS
+// (deterministic).
 
 // out(r, a) = Σ_j G(r, j) y(j, a) for rows [r0, r1) of G (row-major float, s columns), y: s by 3
-// column-major; out: column-major with leading dimension ld (JT's layout). Four rows at a time: twelve
-// independent sums; the next four rows are prefetched while they lie in [r0, r1) (no pointer past the range
-// is formed).
+// column-major (3 contiguous columns); out: column-major with leading dimension ld (JT's layout).
 void rows_times(const MatXfR& G, int r0, int r1, const MatS3& y, double* out, Eigen::Index ld) {
-  const int s = static_cast<int>(G.cols());
-  const double* y0 = y.col(0).data();
-  const double* y1 = y.col(1).data();
-  const double* y2 = y.col(2).data();
-  const int s4 = s - s % 4;
-  auto tail = [&](const float* g, int j, double& a0, double& a1, double& a2) {
-    for (; j < s; ++j) {
-      const double gj = g[j];
-      a0 += gj * y0[j];
-      a1 += gj * y1[j];
-      a2 += gj * y2[j];
-    }
-  };
-  int r = r0;
-  for (; r + 4 <= r1; r += 4) {
-    const float* g[4] = {G.row(r).data(), G.row(r + 1).data(), G.row(r + 2).data(), G.row(r + 3).data()};
-    V4d acc[4][3] = {};
-    const bool ahead = r + 8 <= r1;  // the next group lies in the range
-    for (int j = 0; j < s4; j += 4) {
-      const V4d c0 = load4(y0 + j), c1 = load4(y1 + j), c2 = load4(y2 + j);
-      if (ahead) {  // the same columns 4 rows ahead (the next group)
-        __builtin_prefetch(g[0] + 4 * s + j);
-        __builtin_prefetch(g[2] + 4 * s + j);
-      }
-      for (int k = 0; k < 4; ++k) {
-        const V4d gk = widen4(g[k] + j);
-        acc[k][0] += gk * c0;
-        acc[k][1] += gk * c1;
-        acc[k][2] += gk * c2;
-      }
-    }
-    for (int k = 0; k < 4; ++k) {
-      double s0 = sum4(acc[k][0]), s1 = sum4(acc[k][1]), s2 = sum4(acc[k][2]);
-      tail(g[k], s4, s0, s1, s2);
-      out[r + k] = s0, out[ld + r + k] = s1, out[2 * ld + r + k] = s2;
-    }
-  }
-  for (; r < r1; ++r) {
-    const float* g = G.row(r).data();
-    V4d a0{}, a1{}, a2{};
-    for (int j = 0; j < s4; j += 4) {
-      const V4d gj = widen4(g + j);
-      a0 += gj * load4(y0 + j);
-      a1 += gj * load4(y1 + j);
-      a2 += gj * load4(y2 + j);
-    }
-    double s0 = sum4(a0), s1 = sum4(a1), s2 = sum4(a2);
-    tail(g, s4, s0, s1, s2);
-    out[r] = s0, out[ld + r] = s1, out[2 * ld + r] = s2;
-  }
+  float_rows_times_columns(G.row(r0).data(), r1 - r0, y.data(), G.cols(),
+                           [&](long k, double s0, double s1, double s2) {
+                             const long r = r0 + k;
+                             out[r] = s0, out[ld + r] = s1, out[2 * ld + r] = s2;
+                           });
 }
 
 // acc(j, a) += Σ_r G(r, j) P(r − r0, a) for rows [r0, r1) of G; P: (r1 − r0) by 3 column-major with leading
-// dimension ldp; acc: s by 3 column-major. Four rows at a time: one load and store of acc per four rows.
+// dimension ldp; acc: s by 3 column-major.
 void rows_transpose_times(const MatXfR& G, int r0, int r1, const double* P, Eigen::Index ldp, MatS3& acc) {
-  const int s = static_cast<int>(G.cols());
-  double* c0 = acc.col(0).data();
-  double* c1 = acc.col(1).data();
-  double* c2 = acc.col(2).data();
-  const int s4 = s - s % 4;
-  int r = r0;
-  for (; r + 4 <= r1; r += 4) {
-    const float* g[4] = {G.row(r).data(), G.row(r + 1).data(), G.row(r + 2).data(), G.row(r + 3).data()};
-    double p[4][3];
-    for (int k = 0; k < 4; ++k)
-      for (int a = 0; a < 3; ++a) p[k][a] = P[a * ldp + (r - r0) + k];
-    V4d q[4][3];
-    for (int k = 0; k < 4; ++k)
-      for (int a = 0; a < 3; ++a) q[k][a] = V4d{p[k][a], p[k][a], p[k][a], p[k][a]};
-    const bool ahead = r + 8 <= r1;  // as in rows_times
-    for (int j = 0; j < s4; j += 4) {
-      if (ahead) {
-        __builtin_prefetch(g[0] + 4 * s + j);
-        __builtin_prefetch(g[2] + 4 * s + j);
-      }
-      const V4d w0 = widen4(g[0] + j), w1 = widen4(g[1] + j), w2 = widen4(g[2] + j), w3 = widen4(g[3] + j);
-      store4(c0 + j, load4(c0 + j) + ((w0 * q[0][0] + w1 * q[1][0]) + (w2 * q[2][0] + w3 * q[3][0])));
-      store4(c1 + j, load4(c1 + j) + ((w0 * q[0][1] + w1 * q[1][1]) + (w2 * q[2][1] + w3 * q[3][1])));
-      store4(c2 + j, load4(c2 + j) + ((w0 * q[0][2] + w1 * q[1][2]) + (w2 * q[2][2] + w3 * q[3][2])));
-    }
-    for (int j = s4; j < s; ++j)
-      for (int a = 0; a < 3; ++a) {
-        double* c = a == 0 ? c0 : a == 1 ? c1 : c2;
-        c[j] += (double(g[0][j]) * p[0][a] + double(g[1][j]) * p[1][a]) +
-                (double(g[2][j]) * p[2][a] + double(g[3][j]) * p[3][a]);
-      }
-  }
-  for (; r < r1; ++r) {
-    const float* g = G.row(r).data();
-    for (int a = 0; a < 3; ++a) {
-      const double pa = P[a * ldp + (r - r0)];
-      double* c = a == 0 ? c0 : a == 1 ? c1 : c2;
-      for (int j = 0; j < s; ++j) c[j] += double(g[j]) * pa;
-    }
-  }
+  float_rows_transpose_times(
+      G.row(r0).data(), r1 - r0, G.cols(), [&](long r, int a) { return P[a * ldp + r]; }, acc.data());
 }
 
 }  // namespace
@@ -348,33 +243,30 @@ MatS3 DeformationEnergy::subset_hessian_times(const std::vector<Mat9>& blocks, c
   const int m = static_cast<int>(subset_.size()), s = reduced_size();
   if (static_cast<int>(blocks.size()) != m)
     throw Error("subset_hessian_times: one block per subset sample needed");
-  using Rows = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>;
-  using RowsF = Eigen::Matrix<float, 3, Eigen::Dynamic, Eigen::RowMajor>;
-  const Rows dT = d.transpose();  // row a: column a of d
-  // One pass over G_H: per sample k its three rows G_k (3 by s, widened to double) give dJ_k = dᵀ G_kᵀ
-  // (dJ_k(a, b) = G_k.row(b) · d.col(a)), then B_k vec(dJ_k) (vec order a + 3b) is added back as G_kᵀ P_k.
-  // All arithmetic in double: the CG steps need an operator that is linear to working precision (single-
-  // precision sums round differently for every direction, and CG amplifies that). Fixed chunks summed in
-  // order: the same bits for every thread count.
+  // One pass over G_H: per sample k its three float rows G_k give dJ_k = dᵀ G_kᵀ (dJ_k(a, b) = G_k.row(b) ·
+  // d.col(a)), then B_k vec(dJ_k) (vec order a + 3b) is added back as G_kᵀ P_k while the rows are in cache
+  // (float_rows.h). All arithmetic in double: the CG steps need an operator that is linear to working
+  // precision (single-precision sums round differently for every direction, and CG amplifies that). Fixed
+  // chunks summed in order: the same bits for every thread count.
   const int chunks = (m + kChunk - 1) / kChunk;
-  std::vector<Rows> partial(chunks);
+  std::vector<MatS3> partial(chunks);
 #pragma omp parallel for schedule(static)
   for (int c = 0; c < chunks; ++c) {
-    Rows acc = Rows::Zero(3, s);
-    Rows Gk(3, s);
+    MatS3 acc = MatS3::Zero(s, 3);
     for (int k = c * kChunk; k < std::min(m, (c + 1) * kChunk); ++k) {
-      Gk = Eigen::Map<const RowsF>(GH_.data() + 3 * static_cast<Eigen::Index>(k) * s, 3, s).cast<double>();
+      const float* Gk = GH_.data() + 3 * static_cast<Eigen::Index>(k) * s;
       Eigen::Matrix<double, 9, 1> v;
-      for (int b = 0; b < 3; ++b)
-        for (int a = 0; a < 3; ++a) v(a + 3 * b) = Gk.row(b).dot(dT.row(a));
+      float_rows_times_columns(Gk, 3, d.data(), s, [&v](long b, double s0, double s1, double s2) {
+        v(3 * b) = s0, v(1 + 3 * b) = s1, v(2 + 3 * b) = s2;
+      });
       const Eigen::Matrix<double, 9, 1> hv = blocks[k] * v;
-      for (int a = 0; a < 3; ++a)
-        acc.row(a) += hv(a) * Gk.row(0) + hv(a + 3) * Gk.row(1) + hv(a + 6) * Gk.row(2);
+      const double q[3][3] = {{hv(0), hv(1), hv(2)}, {hv(3), hv(4), hv(5)}, {hv(6), hv(7), hv(8)}};
+      float_rows_transpose_times_group<3>(Gk, q, s, acc.data());
     }
     partial[c] = std::move(acc);
   }
   MatS3 out = MatS3::Zero(s, 3);
-  for (const Rows& p : partial) out += p.transpose();
+  for (const MatS3& p : partial) out += p;
   return out;
 }
 

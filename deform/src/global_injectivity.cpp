@@ -492,11 +492,10 @@ struct GlobalInjectivityChecker::Impl {
     if (vertex_gradients.empty()) return false;
     const long nb = basis.size();
     const float* blk = &vertex_gradients[static_cast<size_t>(v) * 3 * nb];
-    for (int b = 0; b < 3; ++b) {
-      double col[3];
-      float_row_times_columns(blk + b * nb, ycols.data(), nb, col);
-      for (int a = 0; a < 3; ++a) (*J)(a, b) = col[a];
-    }
+    double cols[3][3];
+    float_rows_times_columns(blk, 3, ycols.data(), nb, cols);
+    for (int b = 0; b < 3; ++b)
+      for (int a = 0; a < 3; ++a) (*J)(a, b) = cols[b][a];
     *sJ = 3 * cmax * vertex_gradient_abs[v] * (1 + 0x1p-23 / kRoundingRel) * (1 + 1e-12);
     return true;
   }

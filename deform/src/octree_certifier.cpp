@@ -454,6 +454,16 @@ struct OctreeCertifier::Run {
   std::vector<char> perturbed;
   VecXd perturbed_lower, perturbed_upper;
   bool evaluated(long i) const { return perturbed.empty() || !perturbed[i]; }
+  // The evaluated base voxels in order (all of them unless the perturbation stage took some over). The
+  // per-voxel stages loop over this list: voxels taken over cluster in space, so a static split of 0..N−1
+  // left one thread most of the work.
+  std::vector<long> eval_list;
+  void list_evaluated() {
+    eval_list.clear();
+    eval_list.reserve(N);
+    for (long i = 0; i < N; ++i)
+      if (evaluated(i)) eval_list.push_back(i);
+  }
   // Refinement.
   std::vector<VoxelState> vs;
   std::vector<Node> tree;
@@ -831,17 +841,8 @@ struct OctreeCertifier::Run {
   // Hessian's xx, xy, xz, yy, yz, zz) times the coefficient columns: out[q][a].
   void stored_rows(long i, int first, int count, double (*out)[3]) const {
     const long m = im.m;
-    const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m) + first * m;
-    for (int q = 0; q < count; ++q) {
-      const float* g = blk + q * m;
-      for (int a = 0; a < 3; ++a) {
-        const double* ya = stored_cols.data() + a * m;
-        double acc = 0;
-#pragma omp simd reduction(+ : acc)
-        for (long k = 0; k < m; ++k) acc += static_cast<double>(g[k]) * ya[k];
-        out[q][a] = acc;
-      }
-    }
+    float_rows_times_columns(im.GH.data() + static_cast<size_t>(i * 9 * m) + first * m, count,
+                             stored_cols.data(), m, out);
   }
   // J at base center i (as stored_derivatives forms it), for the far fields when the backend's base stage
   // kept J on the device.
@@ -864,12 +865,13 @@ struct OctreeCertifier::Run {
   void stored_derivatives(const std::vector<double>& Ycols) {
     const long m = im.m;
     if (taylor) Hbase.assign(N, {});
+    const long ne = static_cast<long>(eval_list.size());
 #pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) {
-      if (!evaluated(i)) continue;
+    for (long k = 0; k < ne; ++k) {
+      const long i = eval_list[k];
       const float* blk = im.GH.data() + static_cast<size_t>(i * 9 * m);
       double out[9][3];
-      for (int row = 0; row < 9; ++row) float_row_times_columns(blk + row * m, Ycols.data(), m, out[row]);
+      float_rows_times_columns(blk, 9, Ycols.data(), m, out);
       Mat3& J = Jc[i];
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) J(a, b) = out[b][a];
@@ -896,20 +898,21 @@ struct OctreeCertifier::Run {
     sigma1.setConstant(N, std::numeric_limits<double>::quiet_NaN());
     sign_unresolved.assign(N, 0);
     if (device_Y.empty()) {
-      // kSvdLanes centers at a time (SIMD lanes; a center's values do not depend on its lane's company).
-      const long groups = (N + kSvdLanes - 1) / kSvdLanes;
+      // kSvdLanes evaluated centers at a time (SIMD lanes; a center's values do not depend on its lane's
+      // company).
+      for (long i = 0; i < N; ++i)
+        if (!evaluated(i)) sigma3(i) = std::numeric_limits<double>::quiet_NaN();
+      const long ne = static_cast<long>(eval_list.size());
+      const long groups = (ne + kSvdLanes - 1) / kSvdLanes;
 #pragma omp parallel for schedule(static)
       for (long g = 0; g < groups; ++g) {
         long idx[kSvdLanes];
         Mat3 J[kSvdLanes];
         int n = 0;
-        for (long i = g * kSvdLanes; i < std::min(N, (g + 1) * kSvdLanes); ++i) {
-          if (!evaluated(i)) {
-            sigma3(i) = std::numeric_limits<double>::quiet_NaN();
-            continue;
-          }
-          idx[n] = i;
-          J[n++] = Jc[i];
+        for (long k = g * kSvdLanes; k < std::min(ne, (g + 1) * kSvdLanes); ++k) {
+          idx[n] = eval_list[k];
+          J[n] = Jc[idx[n]];
+          ++n;
         }
         Vec3 sv[kSvdLanes];
         bool resolved[kSvdLanes];
@@ -960,6 +963,11 @@ struct OctreeCertifier::Run {
       if (evaluated(i)) cert.min_sigma3_center = std::min(cert.min_sigma3_center, sigma3(i));
     const double base_storage = use_stored ? kFloatStorageRel : 0.0;
     base.resize(N);
+    // Each voxel's leaf in parallel (dynamic chunks: the evaluated voxels cluster), then the lists in voxel
+    // order.
+    enum : char { kFails = 1, kTaylor = 2 };
+    std::vector<char> flags(N, 0);
+#pragma omp parallel for schedule(dynamic, 512)
     for (long i = 0; i < N; ++i) {
       if (!evaluated(i)) {
         const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -990,8 +998,12 @@ struct OctreeCertifier::Run {
       // J's Lipschitz constant: L without the spectral bound's σ3-specific Taylor term (hop(i) is ‖H‖_op).
       const double L1 = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
       set_distortion(base[i], sigma1(i), 0.0, L1, r, scaleJ(i), scaleH(i), base_storage);
-      if (taylor && unproven(base[i]) != DistortionTarget::kNone) taylor_base.push_back(i);
-      if (!(margin > 0)) failing_base.push_back(i);
+      if (taylor && unproven(base[i]) != DistortionTarget::kNone) flags[i] |= kTaylor;
+      if (!(margin > 0)) flags[i] |= kFails;
+    }
+    for (long i = 0; i < N; ++i) {
+      if (flags[i] & kTaylor) taylor_base.push_back(i);
+      if (flags[i] & kFails) failing_base.push_back(i);
     }
     // Step 3d where the Lipschitz bounds do not prove a target (a few percent of the voxels near a binding
     // target): forming the bounds at every center would cost more than the refinement they save.
@@ -1012,16 +1024,14 @@ struct OctreeCertifier::Run {
   // take a branch-free, vectorized dot product.
   void factor_sums(const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factors,
                    const std::vector<char>& row_finite, VecXd& out) const {
-    out.resize(N);
+    out.setZero(N);
     const double* dl = delta.data();
+    const long ne = static_cast<long>(eval_list.size());
 #pragma omp parallel for schedule(static)
-    for (long i = 0; i < N; ++i) {
+    for (long k = 0; k < ne; ++k) {
+      const long i = eval_list[k];
       double s = 0;
       const float* f = factors.row(i).data();
-      if (!evaluated(i)) {
-        out(i) = 0;
-        continue;
-      }
       if (row_finite[i]) {
 #pragma omp simd reduction(+ : s)
         for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
@@ -1933,6 +1943,7 @@ Certificate OctreeCertifier::run(const MatX3d& y, const double* yr_ptr, long yr_
     return quick;
   }
   run.perturbation();
+  run.list_evaluated();
   run.base_derivatives();
   run.base_sigma3();
   run.base_bounds();

@@ -2,6 +2,7 @@
 // the global check's mesh vertices): docs/certificate.md, Step 5, bounds the float storage's error.
 #pragma once
 
+#include <cstring>
 #include <memory>
 #include <new>
 #include <utility>
@@ -40,23 +41,130 @@ inline double float_dot(const float* a, const float* b, long m) {
   return acc;
 }
 
-// out[a] = Σ_k g[k] · cols[a · m + k] for the 3 contiguous coefficient columns `cols` (m entries each), the
-// float row g widened to double; one pass over g for all three columns.
-inline void float_row_times_columns(const float* g, const double* cols, long m, double out[3]) {
+// GCC's vector extensions, 4 doubles per operation: the loops below are vectorized by construction, not by
+// the compiler's judgement in each translation unit that inlines them (an `omp simd` reduction of the same
+// loop was vectorized in one caller and left scalar, 5x slower, in another).
+using V4d = double __attribute__((vector_size(32)));
+using V4f = float __attribute__((vector_size(16)));
+inline V4d widen4(const float* g) {
+  V4f f;
+  std::memcpy(&f, g, sizeof f);
+  return __builtin_convertvector(f, V4d);
+}
+inline V4d load4(const double* p) {
+  V4d v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+inline void store4(double* p, V4d v) {
+  std::memcpy(p, &v, sizeof v);
+}
+inline double sum4(V4d v) {
+  return (v[0] + v[1]) + (v[2] + v[3]);
+}
+
+// Rows [0, rows) of a row-major float matrix (m entries per row, row r at g + r·m) times 3 contiguous double
+// columns (column a at cols + a·m): emit(r, c0, c1, c2) with c_a = Σ_k g_r[k] cols_a[k] for every row, each
+// float widened to double, every product and sum in double. One row at a time, two 4-lane sums per column
+// (entries 8j..8j+3 and 8j+4..8j+7), added lane-wise, lanes added pairwise, then the m mod 4 tail in order.
+// Measured against four rows at a time with twelve vector sums (which share the column loads but spill
+// registers): 10.8 against 18.1 ms on the certificate's 9 rows per center, 3.7 against 3.8–4.9 ms on the
+// energy's 3|I| rows (30,000 centers, 300 columns, 2 threads; the project's 2-core AMD EPYC, 2026-11-30). A
+// row's values do not depend on the other rows, the range or the thread count. Callers bound the rounding by
+// γ_m = m·u/(1 − m·u) of Σ_k |g_r[k] cols_a[k]|, which holds for any order, with or without fused
+// multiply-adds.
+template <class Emit>
+inline void float_rows_times_columns(const float* g, long rows, const double* cols, long m, Emit&& emit) {
   const double* y0 = cols;
   const double* y1 = y0 + m;
   const double* y2 = y1 + m;
-  double a0 = 0, a1 = 0, a2 = 0;
-#pragma omp simd reduction(+ : a0, a1, a2)
-  for (long k = 0; k < m; ++k) {
-    const double gk = g[k];
-    a0 += gk * y0[k];
-    a1 += gk * y1[k];
-    a2 += gk * y2[k];
+  for (long r = 0; r < rows; ++r) {
+    const float* gr = g + r * m;
+    V4d a[2][3] = {};
+    long j = 0;
+    for (; j + 8 <= m; j += 8)
+      for (int h = 0; h < 2; ++h) {
+        const long k = j + 4 * h;
+        const V4d gk = widen4(gr + k);
+        a[h][0] += gk * load4(y0 + k);
+        a[h][1] += gk * load4(y1 + k);
+        a[h][2] += gk * load4(y2 + k);
+      }
+    for (; j + 4 <= m; j += 4) {
+      const V4d gk = widen4(gr + j);
+      a[0][0] += gk * load4(y0 + j);
+      a[0][1] += gk * load4(y1 + j);
+      a[0][2] += gk * load4(y2 + j);
+    }
+    double c[3];
+    for (int q = 0; q < 3; ++q) c[q] = sum4(a[0][q] + a[1][q]);
+    for (; j < m; ++j) {
+      const double gj = gr[j];
+      c[0] += gj * y0[j];
+      c[1] += gj * y1[j];
+      c[2] += gj * y2[j];
+    }
+    emit(r, c[0], c[1], c[2]);
   }
-  out[0] = a0;
-  out[1] = a1;
-  out[2] = a2;
+}
+
+// acc_a[j] += Σ_r g_r[j] · q[r][a] for K rows g_r = g + r·m of a row-major float matrix (m entries per row),
+// their coefficients q (K by 3) and 3 contiguous double columns acc_a = acc + a·m; each float widened to
+// double, every product and sum in double, the K terms of an entry added in row order before the entry.
+// Several rows per pass over acc: one load and store of it per K rows.
+template <int K>
+inline void float_rows_transpose_times_group(const float* g, const double (*q)[3], long m, double* acc) {
+  const float* gr[K];
+  V4d qv[K][3];
+  for (int k = 0; k < K; ++k) {
+    gr[k] = g + k * m;
+    for (int a = 0; a < 3; ++a) qv[k][a] = V4d{q[k][a], q[k][a], q[k][a], q[k][a]};
+  }
+  double* c[3] = {acc, acc + m, acc + 2 * m};
+  long j = 0;
+  for (; j + 4 <= m; j += 4) {
+    V4d x[K];
+    for (int k = 0; k < K; ++k) x[k] = widen4(gr[k] + j);
+    for (int a = 0; a < 3; ++a) {
+      V4d t = x[0] * qv[0][a];
+      for (int k = 1; k < K; ++k) t += x[k] * qv[k][a];
+      store4(c[a] + j, load4(c[a] + j) + t);
+    }
+  }
+  for (; j < m; ++j)
+    for (int a = 0; a < 3; ++a) {
+      double t = double(gr[0][j]) * q[0][a];
+      for (int k = 1; k < K; ++k) t += double(gr[k][j]) * q[k][a];
+      c[a][j] += t;
+    }
+}
+
+// The same for rows [0, rows) with coefficients coef(r, a): four rows at a time, then the remaining ones
+// alone. The order of the sums is fixed by the code and the rows' grouping, which depends only on `rows`: the
+// same bits for every thread count when the caller's ranges do not depend on it.
+template <class Coef>
+inline void float_rows_transpose_times(const float* g, long rows, long m, const Coef& coef, double* acc) {
+  long r = 0;
+  double q[4][3];
+  for (; r + 4 <= rows; r += 4) {
+    for (int k = 0; k < 4; ++k)
+      for (int a = 0; a < 3; ++a) q[k][a] = coef(r + k, a);
+    float_rows_transpose_times_group<4>(g + r * m, q, m, acc);
+  }
+  for (; r < rows; ++r) {
+    for (int a = 0; a < 3; ++a) q[0][a] = coef(r, a);
+    float_rows_transpose_times_group<1>(g + r * m, q, m, acc);
+  }
+}
+
+// The same into out[r][a] (rows by 3).
+inline void float_rows_times_columns(const float* g, long rows, const double* cols, long m,
+                                     double (*out)[3]) {
+  float_rows_times_columns(g, rows, cols, m, [out](long r, double c0, double c1, double c2) {
+    out[r][0] = c0;
+    out[r][1] = c1;
+    out[r][2] = c2;
+  });
 }
 
 }  // namespace lidef
