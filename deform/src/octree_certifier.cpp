@@ -738,6 +738,7 @@ struct OctreeCertifier::Run {
     perturbed_upper.setConstant(N, kInf);
     const std::vector<double>* upper =
         p.previous_upper && static_cast<long>(p.previous_upper->size()) == N ? p.previous_upper : nullptr;
+#pragma omp parallel for schedule(static)
     for (long i = 0; i < N; ++i) {
       double center = pc.g2(i) * dn;
       if (D) {
