@@ -1,5 +1,6 @@
-// Stored float rows of basis derivatives times the map's coefficients (the local certificate's base centers,
-// the global check's mesh vertices): docs/certificate.md, Step 5, bounds the float storage's error.
+// Stored float rows of basis derivatives times the map's coefficients (the energy's samples, the local
+// certificate's base centers, the global check's mesh vertices) and the transposed products (the energy's
+// gradient and Hessian products): docs/certificate.md, Step 5, bounds the float storage's error.
 #pragma once
 
 #include <cstring>
