@@ -109,12 +109,24 @@ inline void float_rows_times_columns(const float* g, long rows, const double* co
   }
 }
 
+// term(0) + … + term(K − 1) added pairwise, ((t0 + t1) + (t2 + t3)) for K = 4: independent additions instead
+// of a chain of dependent ones (K ≤ 4, written out so that the terms stay in registers).
+template <int K, class Term>
+inline auto pairwise_sum(const Term& term) {
+  static_assert(K >= 1 && K <= 4, "pairwise_sum: 1 to 4 terms");
+  if constexpr (K == 1) return term(0);
+  if constexpr (K == 2) return term(0) + term(1);
+  if constexpr (K == 3) return (term(0) + term(1)) + term(2);
+  if constexpr (K == 4) return (term(0) + term(1)) + (term(2) + term(3));
+}
+
 // acc_a[j] += Σ_r g_r[j] · q[r][a] for K rows g_r = g + r·m of a row-major float matrix (m entries per row),
 // their coefficients q (K by 3) and 3 contiguous double columns acc_a = acc + a·m; each float widened to
-// double, every product and sum in double, the K terms of an entry added in row order before the entry.
+// double, every product and sum in double, the K terms of an entry added pairwise before the entry.
 // Several rows per pass over acc: one load and store of it per K rows.
 template <int K>
-inline void float_rows_transpose_times_group(const float* g, const double (*q)[3], long m, double* acc) {
+inline void float_rows_transpose_times_group(const float* g, const double (*q)[3], long m, double* acc,
+                                             const float* next = nullptr) {
   const float* gr[K];
   V4d qv[K][3];
   for (int k = 0; k < K; ++k) {
@@ -124,19 +136,19 @@ inline void float_rows_transpose_times_group(const float* g, const double (*q)[3
   double* c[3] = {acc, acc + m, acc + 2 * m};
   long j = 0;
   for (; j + 4 <= m; j += 4) {
+    if (next) {  // the same columns of the next group's first and third rows
+      __builtin_prefetch(next + j);
+      __builtin_prefetch(next + 2 * m + j);
+    }
     V4d x[K];
     for (int k = 0; k < K; ++k) x[k] = widen4(gr[k] + j);
     for (int a = 0; a < 3; ++a) {
-      V4d t = x[0] * qv[0][a];
-      for (int k = 1; k < K; ++k) t += x[k] * qv[k][a];
-      store4(c[a] + j, load4(c[a] + j) + t);
+      store4(c[a] + j, load4(c[a] + j) + pairwise_sum<K>([&](int k) { return x[k] * qv[k][a]; }));
     }
   }
   for (; j < m; ++j)
     for (int a = 0; a < 3; ++a) {
-      double t = double(gr[0][j]) * q[0][a];
-      for (int k = 1; k < K; ++k) t += double(gr[k][j]) * q[k][a];
-      c[a][j] += t;
+      c[a][j] += pairwise_sum<K>([&](int k) { return double(gr[k][j]) * q[k][a]; });
     }
 }
 
@@ -150,7 +162,7 @@ inline void float_rows_transpose_times(const float* g, long rows, long m, const 
   for (; r + 4 <= rows; r += 4) {
     for (int k = 0; k < 4; ++k)
       for (int a = 0; a < 3; ++a) q[k][a] = coef(r + k, a);
-    float_rows_transpose_times_group<4>(g + r * m, q, m, acc);
+    float_rows_transpose_times_group<4>(g + r * m, q, m, acc, r + 8 <= rows ? g + (r + 4) * m : nullptr);
   }
   for (; r < rows; ++r) {
     for (int a = 0; a < 3; ++a) q[0][a] = coef(r, a);
