@@ -78,6 +78,44 @@ long check_taken_over(const BentCase& b, const MatR& y, const Certificate& c, si
   return static_cast<long>(pick.size());
 }
 
+// The change a certificate subtracted from each voxel it took over, b_i(ỹ₀) − b_i(ỹ), against the sampled
+// ‖J(ỹ)(q) − J(ỹ₀)(q)‖₂ on a 3×3×3 grid of the voxel (corners included): never below it. This checks the
+// perturbation bound itself (a sound bound on loose base bounds can hide a wrong change). Returns how many
+// voxels were checked.
+long check_changes(const BentCase& b, const MatR& y0, const MatR& y, const Certificate& c0,
+                   const Certificate& c) {
+  std::vector<long> taken;
+  for (const CertLeaf& l : c.leaves)
+    if (std::isnan(l.sigma3) && l.certified) taken.push_back(l.base);
+  MatX3d P(27 * taken.size(), 3);
+  for (size_t k = 0; k < taken.size(); ++k) {
+    const long i = taken[k];
+    const double h = 0.5 * b.sampling.side_of(static_cast<int>(i));
+    int q = 0;
+    for (int x = -1; x <= 1; ++x)
+      for (int yy = -1; yy <= 1; ++yy)
+        for (int z = -1; z <= 1; ++z)
+          P.row(27 * k + q++) = b.sampling.centers.row(i) + h * Eigen::RowVector3d(x, yy, z);
+  }
+  MatX3d f;
+  MatXd JT;  // rows 3q..3q+2: J(δ)(p_q)ᵀ of the change δ = ỹ − ỹ₀ (J is linear in the map)
+  b.cert->basis().map_jets(b.sub.basis * (y - y0), P, f, JT);
+  double tightest = 0;
+  for (size_t k = 0; k < taken.size(); ++k) {
+    const long i = taken[k];
+    const double change = c0.base_lower[i] - c.base_lower[i];
+    double worst = 0;
+    for (int q = 0; q < 27; ++q) {
+      const Mat3 dJ = JT.middleRows(3 * (27 * k + q), 3);
+      worst = std::max(worst, Eigen::JacobiSVD<Mat3>(dJ).singularValues()(0));
+    }
+    EXPECT_GE(change, worst) << "voxel " << i << " at " << b.sampling.centers.row(i);
+    tightest = std::max(tightest, worst / change);
+  }
+  if (!taken.empty()) std::cout << "  largest sampled change / bound: " << tightest << "\n";
+  return static_cast<long>(taken.size());
+}
+
 }  // namespace
 
 TEST(CertificatePerturbation, VoxelsTakenOverHoldUnderDenseSamplingAndTheVerdictIsUnchanged) {
@@ -191,6 +229,20 @@ MatR direction_jacobians(const OctreeCertifier& cert, long voxels, const MatR& d
   return D;
 }
 
+// p with the previous map y0 and its certificate c0, and the trial y0 + t·dir with the direction's Jacobians
+// D.
+CertifyParams along_direction(const CertifyParams& p, const MatR& y0, const Certificate& c0, const MatR& dir,
+                              const MatR& D, double t) {
+  CertifyParams q = p;
+  q.previous_y = &y0;
+  q.previous_lower = &c0.base_lower;
+  q.direction = &dir;
+  q.direction_jacobians = &D;
+  q.direction_step = t;
+  q.direction_scale = dir.norm();
+  return q;
+}
+
 }  // namespace
 
 // With the direction's Jacobians (CertifyParams::direction_jacobians, Step 4e's center term t ‖G d‖ instead
@@ -243,6 +295,79 @@ TEST(CertificatePerturbation, TheDirectionsJacobiansTakeOverMoreAndStaySound) {
   std::cout << checked << " voxels taken over checked by dense sampling\n";
   EXPECT_GE(more, 2) << "the direction's center term takes over more voxels at some steps";
   EXPECT_GT(checked, 500);
+}
+
+// The rest from a direction (Step 4e): with the first-order factors built, the H and third-order parts of Γ_i
+// (Cauchy–Schwarz over the basis) are replaced where that helps by t r Σ_e Θ¹_e ‖δ_e(Ξ d)‖ + rest_i ‖ρ‖: more
+// voxels taken over at large steps, each holding under dense sampling of the new map, also with a wrong step
+// or a direction unrelated to the change; the verdict unchanged; the per-direction cache gives the same bits
+// as a fresh certifier, also after another direction replaced it.
+TEST(CertificatePerturbation, TheRestFromADirectionTakesOverMoreAndStaysSound) {
+  const BentCase b;
+  const long N = b.sampling.size();
+  const OctreeCertifier& plain_cert = *b.cert;
+  const OctreeCertifier along(b.cage, b.sampling, &b.sub.basis);
+  const std::vector<char>* finite = nullptr;
+  EXPECT_EQ(along.built_factors(false, &finite), nullptr);
+  along.factor_matrix(false);
+  ASSERT_NE(along.built_factors(false, &finite), nullptr);
+  const MatR& y0 = b.y0;
+  CertifyParams p;
+  p.max_depth = 4;
+  const Certificate c0 = plain_cert.certify_reduced(y0, p);
+  ASSERT_TRUE(c0.certified) << c0.reason;
+  const MatR dir = bent_reduced(b.cage, b.sub, 0.6, 15) - y0;
+  const MatR D = direction_jacobians(plain_cert, N, dir);
+  // Another smooth direction, unrelated to the change.
+  const MatR other = bent_reduced(b.cage, b.sub, 0.6, 16) - y0;
+  const MatR D_other = direction_jacobians(plain_cert, N, other);
+  long more = 0, checked = 0, changes = 0;
+  for (double t : {1e-2, 0.05, 0.2, 0.5}) {
+    SCOPED_TRACE("t " + std::to_string(t));
+    const MatR y = y0 + t * dir;
+    const Certificate plain = plain_cert.certify_reduced(y, p);
+    const CertifyParams q = along_direction(p, y0, c0, dir, D, t);
+    const Certificate center_only = plain_cert.certify_reduced(y, q);
+    const Certificate c = along.certify_reduced(y, q);
+    std::cout << "step " << t << ": " << c.perturbed_voxels
+              << " taken over with the rest from the direction, " << center_only.perturbed_voxels
+              << " with its center term alone, of " << N << "\n";
+    EXPECT_EQ(c.certified, plain.certified);
+    EXPECT_GE(c.perturbed_voxels, center_only.perturbed_voxels);
+    if (c.perturbed_voxels > center_only.perturbed_voxels) ++more;
+    // The cache: the same direction again, then another direction, then this one again: the same bits as
+    // the first time.
+    EXPECT_EQ(along.certify_reduced(y, q).base_lower, c.base_lower);
+    CertifyParams wrong_direction = q;  // the change is t·dir, the direction says `other`: ρ is large
+    wrong_direction.direction = &other;
+    wrong_direction.direction_jacobians = &D_other;
+    wrong_direction.direction_scale = other.norm();
+    const Certificate co = along.certify_reduced(y, wrong_direction);
+    EXPECT_EQ(co.certified, plain.certified);
+    EXPECT_EQ(along.certify_reduced(y, q).base_lower, c.base_lower);
+    CertifyParams wrong_step = q;  // the step says 2t
+    wrong_step.direction_step = 2 * t;
+    const Certificate cw = along.certify_reduced(y, wrong_step);
+    EXPECT_EQ(cw.certified, plain.certified);
+    for (const Certificate* cc : {&c, &co, &cw}) {
+      checked += check_taken_over(b, y, *cc, 250);
+      changes += check_changes(b, y0, y, c0, *cc);
+    }
+  }
+  std::cout << checked << " voxels taken over checked by dense sampling, " << changes
+            << " changes checked against the sampled change of J\n";
+  EXPECT_GE(more, 2) << "the rest from the direction takes over more voxels at some steps";
+  EXPECT_GT(checked, 800);
+  EXPECT_GT(changes, 2000);
+
+  // Adopted factors (what the precomputation cache does) give the same certificates; other shapes throw.
+  OctreeCertifier adopted(b.cage, b.sampling, &b.sub.basis);
+  OctreeCertifier::FactorMatrix f = *along.built_factors(false, &finite);
+  EXPECT_THROW(adopted.adopt_factors(false, f.topRows(N - 1), *finite), Error);
+  adopted.adopt_factors(false, f, *finite);
+  const MatR y = y0 + 0.2 * dir;
+  const CertifyParams q = along_direction(p, y0, c0, dir, D, 0.2);
+  EXPECT_EQ(adopted.certify_reduced(y, q).base_lower, along.certify_reduced(y, q).base_lower);
 }
 
 // The per-voxel constants of Step 4e: built once, bounded by the stored rows' true norms (Eigen's SVD in

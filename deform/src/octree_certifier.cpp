@@ -67,6 +67,7 @@ struct OctreeCertifier::Impl {
   std::vector<Vec3> eu, ew;  // endpoints of each undirected edge
   // Lazily computed per-voxel per-edge bound factors (|I| by #E, row-major).
   mutable std::once_flag first_once, third_once;
+  mutable std::atomic<bool> first_built{false};  // set once `first` below is complete
   // Certifying by perturbation (Step 4e), per voxel (built on first use; reduced mode only): Γ_i = g2 + rest
   // ≥ sup over its ball of the norm of the map ỹ ↦ J, with its center part g2 ≥ ‖G_i‖₂; and ‖G̃_i‖_F of the
   // stored rows.
@@ -74,6 +75,13 @@ struct OctreeCertifier::Impl {
   // Set once pert is complete: a cache store asks for it from its own thread.
   mutable std::atomic<bool> pert_built{false};
   mutable OctreeCertifier::PerturbationConstants pert;
+  // Certifying by perturbation, the rest from a direction (Step 4e): for the direction d of the last line
+  // search, ‖δ_e(Ξ d)‖_F per cage edge and per voxel r_i Σ_e Θ¹_e(B_i) ‖δ_e(Ξ d)‖ (NaN: not computed yet:
+  // only voxels the Cauchy–Schwarz rest does not take over need it). Kept while d is the same, so the later
+  // trials of a line search reuse it; each value depends on d and its voxel only.
+  mutable std::mutex direction_mutex;
+  mutable Eigen::Matrix<double, Eigen::Dynamic, 3> direction;
+  mutable VecXd direction_delta, direction_rest;
   // The voxel lookup of the distortion probes (built on first use: every line-search trial asks it).
   mutable std::once_flag locator_once;
   mutable std::unique_ptr<VoxelLocator> locator;
@@ -173,21 +181,31 @@ void OctreeCertifier::init_common(const MatXd* reduction) {
   }
 }
 
-const OctreeCertifier::FactorMatrix* OctreeCertifier::third_factors(const std::vector<char>** finite) const {
+const OctreeCertifier::FactorMatrix* OctreeCertifier::built_factors(bool third_kind,
+                                                                    const std::vector<char>** finite) const {
   const Impl& im = *impl_;
-  if (im.third.size() == 0) return nullptr;
-  *finite = &im.third_finite;
-  return &im.third;
+  if (third_kind ? im.third.size() == 0 : !im.first_built.load(std::memory_order_acquire)) return nullptr;
+  *finite = third_kind ? &im.third_finite : &im.first_finite;
+  return third_kind ? &im.third : &im.first;
 }
 
-void OctreeCertifier::adopt_third_factors(FactorMatrix factors, std::vector<char> finite) {
+void OctreeCertifier::adopt_factors(bool third_kind, FactorMatrix factors, std::vector<char> finite) {
   Impl& im = *impl_;
   if (factors.rows() != sampling_.size() || factors.cols() != cage_.num_edges() ||
       finite.size() != static_cast<size_t>(sampling_.size()))
-    throw Error("OctreeCertifier: third-order factors of another shape");
-  std::call_once(im.third_once, [&] {
-    im.third = std::move(factors);
-    im.third_finite = std::move(finite);
+    throw Error(std::string("OctreeCertifier: ") + (third_kind ? "third" : "first") +
+                "-order factors of another shape");
+  if (third_kind) {
+    std::call_once(im.third_once, [&] {
+      im.third = std::move(factors);
+      im.third_finite = std::move(finite);
+    });
+    return;
+  }
+  std::call_once(im.first_once, [&] {
+    im.first = std::move(factors);
+    im.first_finite = std::move(finite);
+    im.first_built.store(true, std::memory_order_release);
   });
 }
 
@@ -200,6 +218,11 @@ OctreeCertifier::ReducedDerivativesRef OctreeCertifier::reduced_derivatives() co
   d.scale_J = &im.scale_J;
   d.scale_H = &im.scale_H;
   return d;
+}
+
+bool OctreeCertifier::direction_rest_pays() const {
+  const Impl& im = *impl_;
+  return im.mode == Impl::Mode::kReduced && cage_.num_edges() <= 3 * im.m;
 }
 
 OctreeCertifier::~OctreeCertifier() = default;
@@ -281,7 +304,10 @@ const OctreeCertifier::FactorMatrix& OctreeCertifier::factor_matrix(bool third_k
     std::call_once(im.third_once, [&] { build(im.third, im.third_finite, true); });
     return im.third;
   }
-  std::call_once(im.first_once, [&] { build(im.first, im.first_finite, false); });
+  std::call_once(im.first_once, [&] {
+    build(im.first, im.first_finite, false);
+    im.first_built.store(true, std::memory_order_release);
+  });
   return im.first;
 }
 
@@ -738,8 +764,16 @@ struct OctreeCertifier::Run {
     perturbed_upper.setConstant(N, kInf);
     const std::vector<double>* upper =
         p.previous_upper && static_cast<long>(p.previous_upper->size()) == N ? p.previous_upper : nullptr;
-#pragma omp parallel for schedule(static)
+    // The rest from the direction (below), for the voxels the Cauchy–Schwarz rest leaves in question. The
+    // lock is held for the whole stage: the cache is the certifier's, and a concurrent certification with
+    // another direction must not replace it meanwhile.
+    std::unique_lock<std::mutex> direction_lock;
+    const bool along = D && prepare_direction_rest(direction_lock);
+    const double floor = std::max(0.0, p.perturbation_floor);
+    // Dynamic chunks: the voxels that need the rest from the direction cluster in space.
+#pragma omp parallel for schedule(dynamic, 256)
     for (long i = 0; i < N; ++i) {
+      if (!im.clear[i]) continue;
       double center = pc.g2(i) * dn;
       if (D) {
         // ‖ΔJ(c_i)‖₂ ≤ t ‖D_i‖₂ + t ‖G̃_i d − D_i‖ + ‖G̃_i‖₂ ‖ρ‖ + ‖(G_i − G̃_i) δ‖ (Step 4e).
@@ -748,17 +782,57 @@ struct OctreeCertifier::Run {
       }
       // The factor 1 + 1e-9 covers the rounding of dn, Γ_i, ‖D_i‖ and these products (each ≤ ~1e-13
       // relative).
-      const double change = (center + pc.rest(i) * dn) * (1 + 1e-9);
-      const double lb = lower[i] - change;
-      // σ1 moves by at most the same ‖ΔJ‖₂ (Weyl), so σ1 ≤ base_upper + change on the voxel.
-      const double ub = upper ? (*upper)[i] + change : kInf;
-      const bool distortion_ok = targets.unproven(ub, lb, distortion_of(ub, lb)) == DistortionTarget::kNone;
-      if (im.clear[i] && lb > 0 && lb > p.perturbation_floor && distortion_ok) {
-        perturbed[i] = 1;
-        perturbed_lower(i) = lb;
-        perturbed_upper(i) = ub;
-      }
+      if (take_over(i, (center + pc.rest(i) * dn) * (1 + 1e-9), lower, upper)) continue;
+      // With ỹ − ỹ₀ = t d + ρ: sup_q ‖J(δ)(q) − J(δ)(c)‖ ≤ t R_i(d) + rest_i ‖ρ‖ (Step 4e, "the rest from a
+      // direction"; R_i's rounding: the certificate's own relative allowance, 10⁻⁹). Not computed where even
+      // ‖ρ‖'s share leaves no bound.
+      if (!along || lower[i] - (center + pc.rest(i) * rho) * (1 + 1e-9) <= floor) continue;
+      const double rest = t * direction_rest(i) * (1 + 1e-9) + pc.rest(i) * rho;
+      take_over(i, (center + rest) * (1 + 1e-9), lower, upper);
     }
+  }
+  // Takes base voxel i over when its bound at the previous map minus `change` (≥ sup over the voxel of
+  // ‖J(ỹ) − J(ỹ₀)‖₂) stays above 0 and the floor and proves the distortion targets.
+  bool take_over(long i, double change, const std::vector<double>& lower, const std::vector<double>* upper) {
+    const double lb = lower[i] - change;
+    // σ1 moves by at most the same ‖ΔJ‖₂ (Weyl), so σ1 ≤ base_upper + change on the voxel.
+    const double ub = upper ? (*upper)[i] + change : kInf;
+    const bool distortion_ok = targets.unproven(ub, lb, distortion_of(ub, lb)) == DistortionTarget::kNone;
+    if (!(lb > 0 && lb > p.perturbation_floor && distortion_ok)) return false;
+    perturbed[i] = 1;
+    perturbed_lower(i) = lb;
+    perturbed_upper(i) = ub;
+    return true;
+  }
+  // Locks the certifier's direction cache and makes it that of p.direction: ‖δ_e(Ξ d)‖ per edge, and no
+  // voxel's rest computed yet when d changed. False when the first-order factors are not built (the solver
+  // builds them where that pays: OctreeCertifier::direction_rest_pays).
+  bool prepare_direction_rest(std::unique_lock<std::mutex>& lock) const {
+    if (!im.first_built.load(std::memory_order_acquire)) return false;
+    const MatS3& d = *p.direction;
+    lock = std::unique_lock<std::mutex>(im.direction_mutex);
+    if (im.direction.rows() == d.rows() && im.direction == d && im.direction_rest.size() == N) return true;
+    im.direction = d;
+    im.direction_delta = oc.delta_norms(oc.basis_.face_matrices(*im.reduction * d));
+    im.direction_rest.setConstant(N, std::numeric_limits<double>::quiet_NaN());
+    return true;
+  }
+  // r_i Σ_e Θ¹_e(B_i) ‖δ_e(Ξ d)‖_F ≥ sup over B_i of ‖J(Ξ d)(q) − J(Ξ d)(c_i)‖_F (Step 2's (15) with the
+  // first-order factors: a bound of the Hessian on the whole ball) for the cached direction d, computed on
+  // first use (+∞ where a factor is). Rounding: docs/certificate.md, Step 4e.
+  double direction_rest(long i) const {
+    double& v = im.direction_rest(i);
+    if (!std::isnan(v)) return v;
+    double sum = kInf;
+    if (im.first_finite[i]) {
+      const float* f = im.first.row(i).data();
+      const double* w = im.direction_delta.data();
+      sum = 0;
+#pragma omp simd reduction(+ : sum)
+      for (long e = 0; e < E; ++e) sum += w[e] * static_cast<double>(f[e]);
+    }
+    v = oc.sampling_.radius_of(static_cast<int>(i)) * sum;
+    return v;
   }
   // ≥ ‖ỹ − ỹ₀ − t d‖_F for the direction of CertifyParams (computed entrywise, each entry's rounding, ≤ 3u
   // of the magnitudes, added); −1 when no direction was passed or its sizes do not match (then only Γ_i ‖δ‖

@@ -183,9 +183,11 @@ struct DeformationSolver::Precompute {
       d.m = r.scalar<long>();
       r.matrix(d.scale_J, n, 1);
       r.matrix(d.scale_H, n, 1);
-      OctreeCertifier::FactorMatrix third;
+      OctreeCertifier::FactorMatrix third, first;  // none (0 rows) when the storing run had not built them
       r.matrix(third);
       std::vector<char> third_finite = r.array<char>();
+      r.matrix(first);
+      std::vector<char> first_finite = r.array<char>();
       OctreeCertifier::PerturbationConstants pert;  // none (0 rows) when the storing run had not built them
       r.matrix(pert.g2);
       r.matrix(pert.rest);
@@ -200,7 +202,8 @@ struct DeformationSolver::Precompute {
       S.nsampling_ = S.frame_.to_normalized(S.sampling_);
       S.certifier_ =
           std::make_unique<OctreeCertifier>(S.ncage_, S.nsampling_, &S.subspace_.basis, std::move(d));
-      if (third.size() > 0) S.certifier_->adopt_third_factors(std::move(third), std::move(third_finite));
+      if (third.size() > 0) S.certifier_->adopt_factors(true, std::move(third), std::move(third_finite));
+      if (first.size() > 0) S.certifier_->adopt_factors(false, std::move(first), std::move(first_finite));
       if (pert.g2.size() > 0) S.certifier_->adopt_perturbation_constants(std::move(pert));
       S.perturb_lower_.clear();  // bounds of another certifier's voxels
       S.perturb_upper_.clear();
@@ -234,9 +237,7 @@ struct DeformationSolver::Precompute {
                                 const VoxelSampling& sampling, const OctreeCertifier& certifier,
                                 const MatXd& rest_hessian_blocks) {
     const auto d = certifier.reduced_derivatives();
-    const std::vector<char>* finite = nullptr;
-    const OctreeCertifier::FactorMatrix* third = certifier.third_factors(&finite);
-    const OctreeCertifier::FactorMatrix none;
+    const OctreeCertifier::FactorMatrix none;  // the writer keeps pointers: these outlive it
     const std::vector<char> no_finite;
     CacheWriter w;
     write_sampling(w, sampling);
@@ -244,9 +245,13 @@ struct DeformationSolver::Precompute {
     w.scalar(d.m);
     w.matrix(*d.scale_J);
     w.matrix(*d.scale_H);
-    w.matrix(third ? *third : none);
-    const std::vector<char>& f = third ? *finite : no_finite;
-    w.array(f.data(), f.size());
+    for (const bool third_kind : {true, false}) {  // each bound's factors, or an empty matrix and array
+      const std::vector<char>* finite = nullptr;
+      const OctreeCertifier::FactorMatrix* factors = certifier.built_factors(third_kind, &finite);
+      w.matrix(factors ? *factors : none);
+      const std::vector<char>& f = factors ? *finite : no_finite;
+      w.array(f.data(), f.size());
+    }
     const OctreeCertifier::PerturbationConstants* pert = certifier.perturbation_constants_if_built();
     const VecXd none_built;
     w.matrix(pert ? pert->g2 : none_built);
@@ -341,6 +346,13 @@ DeformationSolver::DeformationSolver(const Cage& cage, const DeformParams& param
     t0 = Clock::now();
     certifier_->perturbation_constants();
     pc.say("certificate by perturbation, per-voxel constants: " + format_g(ms_since(t0), 4) + " ms");
+  }
+  const std::vector<char>* first_finite = nullptr;
+  if (certifier_->direction_rest_pays() && !certifier_->built_factors(false, &first_finite)) {
+    // The rest from a direction (Step 4e): like the constants above, built once and kept in the cache entry.
+    t0 = Clock::now();
+    certifier_->factor_matrix(false);
+    pc.say("certificate by perturbation, first-order factors: " + format_g(ms_since(t0), 4) + " ms");
   }
   if (!cached && pc.cache.enabled() && !setup.background_store) {
     pc.enter("writing the cache", pc.end, 1.0);

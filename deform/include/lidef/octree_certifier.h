@@ -228,12 +228,19 @@ class OctreeCertifier {
     const VecXd* scale_H = nullptr;
   };
   ReducedDerivativesRef reduced_derivatives() const;
-  // The third-order bound's per-voxel per-edge factors Θ (|I| by #E, floats rounded up), built by the first
-  // certification that needs them, and per voxel whether all are finite; nullptr before. adopt_third_factors
-  // takes factors built earlier for the same cage and sampling (shapes checked) instead of building them.
+  // A bound's per-voxel per-edge factors Θ (|I| by #E, floats rounded up; third order: built by the first
+  // certification that needs them; first order: by the first that needs them, or factor_matrix(false)), and
+  // per voxel whether all are finite; nullptr before. adopt_factors takes factors built earlier for the same
+  // cage and sampling (shapes checked) instead of building them.
   using FactorMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  const FactorMatrix* third_factors(const std::vector<char>** finite) const;
-  void adopt_third_factors(FactorMatrix factors, std::vector<char> finite);
+  const FactorMatrix* built_factors(bool third_kind, const std::vector<char>** finite) const;
+  const FactorMatrix& factor_matrix(bool third_kind) const;  // built on first use
+  void adopt_factors(bool third_kind, FactorMatrix factors, std::vector<char> finite);
+  // Whether certifying by perturbation should keep the first-order factors for the rest from a direction
+  // (docs/certificate.md, Step 4e): reduced mode, and a factor row (#E floats) at most a third of
+  // the voxel's stored Hessian rows (6 s floats), so that bounding a voxel that way costs well below
+  // evaluating it. The certifier uses them whenever they are built; the solver builds them when this holds.
+  bool direction_rest_pays() const;
   // Certifying by perturbation's per-voxel constants (docs/certificate.md, Step 4e; a certifier with a
   // reduction only): g2 ≥ ‖G(c_i)‖₂, rest = the H and third-order part of Γ_i, gF = ‖G̃(c_i)‖_F, each |I|.
   // They depend on the cage, the voxels and the reduction alone. perturbation_constants() builds them at its
@@ -282,7 +289,6 @@ class OctreeCertifier {
   struct Impl;
   struct Run;                                // the stages of one certification (octree_certifier.cpp)
   void init_common(const MatXd* reduction);  // checks the sampling, edge endpoints
-  const FactorMatrix& factor_matrix(bool third_kind) const;  // built on first use
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,
                   const CertifyParams& p) const;

@@ -27,8 +27,8 @@ namespace lidef {
 // Bump whenever the content or meaning of any entry changes (a new stage, other numerics): older entries
 // then miss instead of being trusted. 2: samplings carry level, domain, uncleared; 3: SIMD basis kernel and
 // OpenBLAS products; 4: the word-wise payload checksum; 5: the solver's entry holds the perturbation
-// constants; 6: and the reduced Hessian's pair blocks at rest.
-constexpr std::uint32_t kPrecomputeFormatVersion = 6;
+// constants; 6: and the reduced Hessian's pair blocks at rest; 7: and the first-order bound factors.
+constexpr std::uint32_t kPrecomputeFormatVersion = 7;
 
 // $LIDEF_CACHE_MAX_MB (MiB) when set, else 4096 MiB.
 std::uint64_t default_cache_max_bytes();
