@@ -813,7 +813,7 @@ struct OctreeCertifier::Run {
     lock = std::unique_lock<std::mutex>(im.direction_mutex);
     if (im.direction.rows() == d.rows() && im.direction == d && im.direction_rest.size() == N) return true;
     im.direction = d;
-    im.direction_delta = oc.delta_norms(oc.basis_.face_matrices(*im.reduction * d));
+    im.direction_delta = oc.edge_delta_norms(*im.reduction * d);
     im.direction_rest.setConstant(N, std::numeric_limits<double>::quiet_NaN());
     return true;
   }
