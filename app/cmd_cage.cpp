@@ -51,7 +51,9 @@ int make_cage_command(const CageCommandOptions& o) {
     std::error_code ec;
     if (fs::exists(o.out, ec)) {
       if (!fs::is_directory(o.out, ec)) throw InputError(o.out, "exists and is not a folder");
-      // A folder holding only what a killed run left behind (a staging folder) counts as empty.
+      // A folder holding only what a killed run left behind (a staging folder) counts as empty; a killed
+      // run's interrupted commit is completed first (then the folder holds its model).
+      finish_interrupted_commit(o.out);
       if (!holds_only_leftovers(o.out) && !o.force)
         throw InputError(o.out,
                          "the folder exists and is not empty (use --force to replace its model files)");
@@ -90,7 +92,8 @@ void add_cage_command(CLI::App& app, Action& action) {
   auto* sub = app.add_subcommand("cage", "Make a model folder from a mesh file: an automatic cage around it");
   sub->footer(
       "Reads MESH (.obj, .off, .ply or .stl, ASCII or binary; polygons fan-triangulated), or a point\n"
-      "cloud (.ply without faces, Gaussian splats included, .xyz, an .obj with vertices only), wraps it with\n"
+      "cloud (.ply without faces, Gaussian splats included, .xyz, an .obj with vertices only), wraps it "
+      "with\n"
       "CGAL's 3D alpha wrapping (alpha and offset are fractions of the bounding-box diagonal), simplifies\n"
       "the wrap by edge collapses to about --faces triangles, refusing every collapse that would bring the\n"
       "cage closer than --clearance to the mesh, and keeps the cage only when lidef's model checks pass\n"

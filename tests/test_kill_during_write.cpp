@@ -1,6 +1,7 @@
 // Killed runs leave no partial file a later run would trust: `lidef deform` killed
-// (SIGKILL) at several moments while it writes into a folder that holds a previous result, the subspace cache
-// killed while it is first filled or corrupted by hand, and `lidef cage --out` killed mid-run.
+// (SIGKILL) at several moments while it writes into a folder that holds a previous result, its commit stopped
+// after every one of its file operations, the subspace cache killed while it is first filled or corrupted by
+// hand, and `lidef cage --out` killed mid-run.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -17,6 +18,8 @@
 #include <thread>
 #include <vector>
 
+#include "lidef/analysis/certificate_report.h"
+#include "lidef/staged_outputs.h"
 #include "test_cli_outputs.h"
 #include "test_support.h"
 
@@ -37,12 +40,15 @@ bool is_leftover(const std::string& name) {
   return name.rfind(".lidef-staging-", 0) == 0 || name.find(".tmp.") != std::string::npos;
 }
 
-// The files of `dir` at final names (not leftovers), name -> bytes.
+// The files of `dir` at final names (not leftovers, not the journal of an interrupted commit), name -> bytes.
 Files final_files(const std::string& dir) {
   Files f;
   for (const std::string& n : dir_entries(dir))
-    if (!is_leftover(n)) f[n] = read_text((fs::path(dir) / n).string());
+    if (!is_leftover(n) && n != lidef::kCommitJournal) f[n] = read_text((fs::path(dir) / n).string());
   return f;
+}
+bool commit_interrupted(const std::string& dir) {
+  return fs::exists(fs::path(dir) / lidef::kCommitJournal);
 }
 std::vector<std::string> leftovers(const std::string& dir) {
   std::vector<std::string> l;
@@ -161,6 +167,12 @@ TEST(KillDuringWrite, DeformLeavesThePreviousOrTheNewResultNeverAMixture) {
     const std::string out = tmp / ("out_" + std::to_string(i++));
     fs::copy(previous, out);
     const bool killed = run_and_kill(deform_args(out, cache, {"--quiet"}), k.when(out), k.after);
+    // Killed between two of the commit's renames: the journal is there, and finishing it gives the new set
+    // (every kill point of a commit is walked through below).
+    const bool interrupted = commit_interrupted(out);
+    if (interrupted) {
+      EXPECT_TRUE(lidef::finish_interrupted_commit(out));
+    }
     const Files now = without_cage(final_files(out));
     if (ref.empty()) {
       ASSERT_FALSE(killed);
@@ -185,6 +197,7 @@ TEST(KillDuringWrite, DeformLeavesThePreviousOrTheNewResultNeverAMixture) {
     }
     std::printf("  deform %s: %s, %zu leftover(s)\n", k.label.c_str(),
                 !killed            ? "had finished, new result"
+                : interrupted      ? "commit interrupted, finished: new result"
                 : same_as_old == 0 ? "new result"
                                    : "previous result intact",
                 leftovers(out).size());
@@ -197,6 +210,78 @@ TEST(KillDuringWrite, DeformLeavesThePreviousOrTheNewResultNeverAMixture) {
   EXPECT_EQ(final_files(rerun_in).at("coefficients.txt"), ref.at("coefficients.txt"));
   for (const std::string& l : leftovers(rerun_in))
     EXPECT_NE(std::find(before.begin(), before.end(), l), before.end()) << "the rerun left " << l;
+
+  // Every kill point of a commit, without timing: the full run's files staged over the previous result, the
+  // journal written, then the commit stopped after 0, 1, 2, ... of its file operations (a copy of the folder
+  // per point, made while the staging object is alive, as a kill leaves it).
+  const Files old_all = final_files(previous), new_all = final_files(tmp / "out_0");
+  const std::string prepared = tmp / "prepared";
+  fs::copy(previous, prepared);
+  std::vector<std::string> points;
+  {
+    lidef::StagedOutputs staged(prepared);
+    for (const auto& [name, bytes] : new_all) write_text(staged.path(name), bytes);
+    staged.write_journal({"field.vti"});
+    for (int k = 0; k < 20; ++k) {
+      points.push_back(tmp / ("point_" + std::to_string(k)));
+      fs::copy(prepared, points.back(), fs::copy_options::recursive);
+    }
+  }
+  int complete_at = -1;
+  for (int k = 0; k < static_cast<int>(points.size()) && complete_at < 0; ++k) {
+    SCOPED_TRACE("commit stopped after " + std::to_string(k) + " file operations");
+    const std::string dir = points[k];
+    EXPECT_TRUE(lidef::finish_interrupted_commit(dir, k));
+    if (!commit_interrupted(dir)) complete_at = k;
+    // A describing output present vouches for its run: every other file is of the same run.
+    const Files now = final_files(dir);
+    for (const char* d : lidef::kDescribingOutputs) {
+      if (!now.count(d)) continue;
+      const Files& run = now.at(d) == new_all.at(d) ? new_all : old_all;
+      EXPECT_TRUE(now.at(d) == run.at(d)) << d << " of neither run";
+      for (const auto& [name, bytes] : now) EXPECT_EQ(bytes, run.at(name)) << name << " beside " << d;
+    }
+    // Finished by a reader of its certificate, a writer into the folder, or directly.
+    if (k % 3 == 0) {
+      EXPECT_NO_THROW(lidef::read_certificate_json(dir + "/certificate.json"));
+    } else if (k % 3 == 1) {
+      const lidef::StagedOutputs next(dir);
+    } else {
+      lidef::finish_interrupted_commit(dir);
+    }
+    EXPECT_FALSE(commit_interrupted(dir));
+    EXPECT_TRUE(final_files(dir) == new_all) << "not the new result after finishing";
+    EXPECT_TRUE(leftovers(dir).empty()) << ::testing::PrintToString(leftovers(dir));
+  }
+  // 2 withdrawals, 8 moves, 2 publications, then the journal's removal: the 13th operation completes it.
+  EXPECT_EQ(complete_at, 13);
+}
+
+TEST(KillDuringWrite, AJournalThatCannotBeFinishedIsAnErrorNamingIt) {
+  TempDir tmp;
+  auto expect_error = [](const std::string& dir, const std::string& what) {
+    try {
+      lidef::finish_interrupted_commit(dir);
+      ADD_FAILURE() << "no error for " << what;
+    } catch (const lidef::InputError& e) {
+      EXPECT_EQ(e.file(), dir + "/" + lidef::kCommitJournal) << what;
+      EXPECT_NE(e.message().find(what), std::string::npos) << e.message();
+    }
+    EXPECT_THROW(lidef::StagedOutputs next(dir), lidef::InputError);
+    EXPECT_TRUE(commit_interrupted(dir)) << "the journal must stay";
+  };
+  const std::string garbled = tmp / "garbled";
+  fs::create_directories(garbled);
+  write_text(garbled + "/" + lidef::kCommitJournal, "lidef-commit 1\nstaging .lidef-staging-x\nmove ../a\n");
+  expect_error(garbled, "not a valid journal");
+  const std::string gone = tmp / "gone";
+  fs::create_directories(gone);
+  write_text(gone + "/coefficients.txt", "old");
+  write_text(gone + "/" + lidef::kCommitJournal,
+             "lidef-commit 1\nstaging .lidef-staging-x\nmove coefficients.txt\n");
+  expect_error(gone, "is gone");
+  // Without a journal there is nothing to finish.
+  EXPECT_FALSE(lidef::finish_interrupted_commit(tmp / "garbled_not"));
 }
 
 // The subspace line of a deform log says where the subspace came from: "(cache, ..." or "(dense, ...".
@@ -271,7 +356,13 @@ TEST(KillDuringWrite, CageOutNeverLeavesAHalfModelFolder) {
     SCOPED_TRACE(t < 0 ? "killed when the folder appears" : "killed after " + std::to_string(t) + " s");
     const std::string out = tmp / ("model_" + std::to_string(static_cast<int>(t * 10)));
     run_and_kill({"cage", mesh, "--out", out, "--faces", "100", "--quiet"}, t < 0 ? exists(out) : elapsed(t));
-    // Nothing, or the complete model (with at most a staging folder left by a kill during the move).
+    // Nothing, or the complete model (with at most a staging folder left by a kill during the move); a kill
+    // between the renames left a journal, which the next reader of the model (`lidef check`) finishes.
+    if (commit_interrupted(out)) {
+      std::string check;
+      EXPECT_EQ(run_lidef_cli("check " + shell_quote(out), &check), 0) << check;
+      EXPECT_FALSE(commit_interrupted(out));
+    }
     std::vector<std::string> finals;
     for (const std::string& n : dir_entries(out))
       if (!is_leftover(n)) finals.push_back(n);

@@ -16,6 +16,7 @@
 #include "lidef/errors.h"
 #include "lidef/mesh_io.h"
 #include "lidef/number_format.h"
+#include "lidef/staged_outputs.h"
 #include "lidef/subspace.h"
 
 namespace lidef {
@@ -406,6 +407,8 @@ void write_certificate_files(const std::string& dir, CertificateReport& r) {
 }
 
 CertificateReport read_certificate_json(const std::string& path) {
+  // A run killed while it moved its outputs in withdrew the certificate first; its journal completes it.
+  finish_interrupted_commit(std::filesystem::path(path).parent_path().string());
   const std::string text = read_all(path);
   nlohmann::json root;
   try {

@@ -17,6 +17,7 @@
 #include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "lidef/self_intersections.h"
+#include "lidef/staged_outputs.h"
 
 namespace lidef {
 
@@ -579,6 +580,12 @@ ValidationReport check_model_dir(const std::string& dir, TriMesh* cage_out, TriM
   }
   if (!fs::is_directory(dir, ec)) {
     r.errors.push_back({dir, "", 0, "is not a folder; a model is a folder with cage.obj and mesh.obj"});
+    return r;
+  }
+  try {  // a `lidef cage --out` killed while it moved its files in: its journal says what is left to do
+    finish_interrupted_commit(dir);
+  } catch (const InputError& e) {
+    r.errors.push_back({e.file(), "", 0, e.message()});
     return r;
   }
   auto locate = [&](const std::string& name) -> std::string {

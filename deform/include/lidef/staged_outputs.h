@@ -3,101 +3,72 @@
 // DIR (renames within one file system). If the command fails before commit(), the destructor removes the
 // staging folder — and DIR (with any parents) when this object created it and it is still empty — so nothing
 // new is left behind.
+//
+// A commit is a list of renames, and a process can be killed between two of them. So commit() first writes a
+// journal, DIR/.lidef-commit (atomically), naming the staging folder and every move and removal, and removes
+// it after the last one; a folder holding a journal holds an interrupted commit, which
+// finish_interrupted_commit() completes (every lidef command that writes into the folder, reads a certificate
+// from it or loads it as a model does so first). Meanwhile the files that describe the others
+// (kDescribingOutputs: certificate.json, summary.json, model.json) are withdrawn before the first move and
+// moved in after the last: whenever DIR holds one of them, the other outputs of its run are in place beside
+// it.
 #pragma once
-#include <stdlib.h>
-
-#include <filesystem>
 #include <string>
-#include <system_error>
 #include <vector>
-
-#include "lidef/atomic_file.h"
-#include "lidef/errors.h"
 
 namespace lidef {
 
-// Whether `name` (a folder entry) is what a killed run may leave behind: a staging folder
-// (".lidef-staging-XXXXXX") or an atomic write's temporary ("NAME.tmp.PID.N"). No reader opens these names.
-inline bool is_write_leftover(const std::string& name) {
-  return name.rfind(".lidef-staging-", 0) == 0 || name.find(".tmp.") != std::string::npos;
-}
+// The journal of an interrupted commit in an output folder.
+inline constexpr const char* kCommitJournal = ".lidef-commit";
+
+// Outputs that describe the other files of their folder (a certificate names the coefficients it certifies; a
+// summary names the run; model.json the model's files): withdrawn first and published last by a commit.
+inline constexpr const char* kDescribingOutputs[] = {"certificate.json", "summary.json", "model.json"};
+
+// Whether `name` (a folder entry) is what a killed run may leave behind and no reader opens: a staging folder
+// (".lidef-staging-XXXXXX") or an atomic write's temporary ("NAME.tmp.PID.N"). The commit journal is not one:
+// it stands for files still to be moved in.
+bool is_write_leftover(const std::string& name);
 
 // Whether the folder `dir` holds nothing but the leftovers of killed runs (is_write_leftover).
-inline bool holds_only_leftovers(const std::string& dir) {
-  std::error_code ec;
-  for (const auto& e : std::filesystem::directory_iterator(dir, ec))
-    if (!is_write_leftover(e.path().filename().string())) return false;
-  return !ec;
-}
+bool holds_only_leftovers(const std::string& dir);
+
+// Completes the commit a killed process left unfinished in `dir` (DIR/.lidef-commit): the staged files still
+// in the staging folder are moved in, the stale files removed, then the journal and the staging folder. Safe
+// to repeat and to interrupt again. Returns whether there was one. Throws InputError naming the journal when
+// it cannot be read or its staging folder is gone while files remain to be moved (the folder may then mix two
+// runs; removing the journal by hand accepts that).
+// `max_operations` >= 0 stops after that many file operations (moves and removals), as a kill would: the
+// kill points a test walks through.
+bool finish_interrupted_commit(const std::string& dir, int max_operations = -1);
 
 class StagedOutputs {
  public:
-  explicit StagedOutputs(const std::string& dir) : dir_(dir) {
-    namespace fs = std::filesystem;
-    std::error_code ec;
-    if (fs::exists(dir_, ec) && !fs::is_directory(dir_, ec))
-      throw InputError(dir_, "exists and is not a folder");
-    // The folders this object creates (DIR and missing parents), deepest first, to remove again on failure.
-    for (fs::path p = fs::absolute(fs::path(dir_), ec).lexically_normal(); !p.empty() && !fs::exists(p, ec);
-         p = p.parent_path()) {
-      created_.push_back(p);
-      if (p == p.parent_path()) break;
-    }
-    ensure_directory(dir_);
-    std::string tmpl = (fs::path(dir_) / ".lidef-staging-XXXXXX").string();
-    if (!::mkdtemp(tmpl.data())) {
-      remove_created_dir();
-      throw InputError(dir_, "cannot create a staging folder (not writable?)");
-    }
-    staging_ = tmpl;
-  }
+  // Creates DIR (and parents) when missing and the staging folder in it; completes an interrupted commit
+  // already in DIR first. Throws InputError(DIR, ...) when DIR is not a writable folder.
+  explicit StagedOutputs(const std::string& dir);
   StagedOutputs(const StagedOutputs&) = delete;
   StagedOutputs& operator=(const StagedOutputs&) = delete;
-  ~StagedOutputs() {
-    std::error_code ec;
-    if (!staging_.empty()) std::filesystem::remove_all(staging_, ec);
-    if (!committed_) remove_created_dir();
-  }
+  ~StagedOutputs();
 
   // Where to write the output `name` now (inside the staging folder); it is moved to DIR/name by commit().
-  std::string path(const std::string& name) {
-    names_.push_back(name);
-    return (std::filesystem::path(staging_) / name).string();
-  }
+  std::string path(const std::string& name);
   const std::string& staging_dir() const { return staging_; }
   // Final location of `name`.
-  std::string final_path(const std::string& name) const {
-    return (std::filesystem::path(dir_) / name).string();
-  }
+  std::string final_path(const std::string& name) const;
 
   // Moves every staged file that exists into DIR (replacing older versions), and removes the files listed in
   // `stale` from DIR (outputs of an earlier run that this run did not produce, which would no longer match).
-  void commit(const std::vector<std::string>& stale = {}) {
-    namespace fs = std::filesystem;
-    for (const std::string& name : names_) {
-      const fs::path from = fs::path(staging_) / name;
-      std::error_code ec;
-      if (!fs::exists(from, ec)) continue;
-      commit_temp_file(from.string(), final_path(name));
-    }
-    for (const std::string& name : stale) {
-      std::error_code ec;
-      std::filesystem::remove(fs::path(dir_) / name, ec);
-    }
-    committed_ = true;
-  }
+  // = write_journal(stale) followed by finish_interrupted_commit(DIR).
+  void commit(const std::vector<std::string>& stale = {});
+  // The first half of commit(): the journal only (for tests of the kill points between the two halves).
+  void write_journal(const std::vector<std::string>& stale = {});
 
  private:
-  void remove_created_dir() {
-    for (const std::filesystem::path& p : created_) {
-      std::error_code ec;
-      if (!std::filesystem::is_empty(p, ec) || ec) break;
-      std::filesystem::remove(p, ec);
-    }
-  }
+  void remove_created_dir();
   std::string dir_, staging_;
   std::vector<std::string> names_;
-  std::vector<std::filesystem::path> created_;
+  std::vector<std::string> created_;
   bool committed_ = false;
 };
 
