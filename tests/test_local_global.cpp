@@ -213,3 +213,31 @@ TEST(LocalGlobal, SetReducedMapAcceptsOnlyCertifiedMaps) {
   EXPECT_FALSE(s.set_reduced_map(bad, &why));
   EXPECT_EQ(s.reduced_coefficients(), scaled);
 }
+
+TEST(LocalGlobal, SetReducedMapUnderADistortionTargetHasTheFullCertificatesVerdict) {
+  // Under a distortion target a map is refused at once where a probe proves it beyond the target (its sample
+  // farthest beyond it); the verdict must be the full certificate's on every map, refused or not.
+  DeformParams p = small();
+  p.max_distortion = 1.2;
+  DeformationSolver s(beam().model.cage, p, beam().cache.str());
+  s.set_handles(ends(), ends());
+  const MatS3 id = s.reduced_coefficients();
+  int refused = 0, accepted = 0;
+  for (const double stretch : {1.5, 1.25, 1.21, 1.19, 1.1, 1.0}) {
+    SCOPED_TRACE("stretched by " + std::to_string(stretch));
+    MatS3 y = id;
+    y.col(0) *= stretch;
+    const Certificate full = s.certifier().certify_reduced(y, certify_params_of(s.params(), false, false));
+    const MatS3 before = s.reduced_coefficients();
+    std::string why;
+    const bool set = s.set_reduced_map(y, &why);
+    EXPECT_EQ(set, full.certified) << why << " / " << full.reason;
+    EXPECT_EQ(s.reduced_coefficients(), set ? y : before);
+    if (!set) {
+      EXPECT_NE(why.find("distortion bound 1.2 not proven"), std::string::npos) << why;
+    }
+    (set ? accepted : refused)++;
+  }
+  EXPECT_GE(refused, 3);   // 1.5, 1.25, 1.21: beyond K at every point
+  EXPECT_GE(accepted, 2);  // 1.1 and the identity
+}

@@ -379,6 +379,9 @@ class DeformationSolver {
   double direction_scale_ = 0;
   long targets_version_ = 0, stepped_targets_version_ = 0;  // set_targets calls; as of the last step
   struct Precompute;  // the stages of the constructor (projected_newton.cpp)
+  // Whether a distortion probe proves the map ỹ beyond a target (set_reduced_map's quick refusal; `refusal`
+  // then holds the certificate's reason). False decides nothing.
+  bool distortion_refuted_map(const MatS3& y, Certificate& refusal) const;
   // The plain direction p0 = −(factor)⁻¹ ∇E improved by params_.newton_cg_steps preconditioned CG iterates
   // on the exact Hessian; leaves the kernels' direction set to the result (and direction_scale_).
   VecXd conjugate_gradient_correction(const VecXd& gvec, const VecXd& p0, const MatXd& L,
