@@ -282,6 +282,29 @@ TEST(KillDuringWrite, AJournalThatCannotBeFinishedIsAnErrorNamingIt) {
   expect_error(gone, "is gone");
   // Without a journal there is nothing to finish.
   EXPECT_FALSE(lidef::finish_interrupted_commit(tmp / "garbled_not"));
+
+  // A move that fails (a folder in the way) is an error naming the target; the staged file and the journal
+  // stay, so the commit finishes once the obstacle is gone.
+  const std::string blocked = tmp / "blocked";
+  fs::create_directories(blocked + "/coefficients.txt/inside");
+  {
+    lidef::StagedOutputs staged(blocked);
+    write_text(staged.path("coefficients.txt"), "new");
+    staged.write_journal();
+    try {
+      lidef::finish_interrupted_commit(blocked);
+      ADD_FAILURE() << "no error for a folder in the way";
+    } catch (const lidef::InputError& e) {
+      EXPECT_EQ(e.file(), blocked + "/coefficients.txt");
+    }
+    EXPECT_TRUE(fs::exists(staged.staging_dir() + "/coefficients.txt")) << "the staged file was lost";
+    EXPECT_TRUE(commit_interrupted(blocked));
+    fs::remove_all(blocked + "/coefficients.txt");
+    EXPECT_TRUE(lidef::finish_interrupted_commit(blocked));
+  }
+  EXPECT_EQ(read_text(blocked + "/coefficients.txt"), "new");
+  EXPECT_FALSE(commit_interrupted(blocked));
+  EXPECT_TRUE(leftovers(blocked).empty());
 }
 
 // The subspace line of a deform log says where the subspace came from: "(cache, ..." or "(dense, ...".

@@ -70,6 +70,14 @@ Journal read_journal(const std::string& path) {
   return j;
 }
 
+// Moves a staged file into DIR. Unlike commit_temp_file, a failure keeps the staged file: the journal still
+// lists it, and a later attempt (or the user) can finish the commit without losing it.
+void move_in(const fs::path& from, const fs::path& to) {
+  std::error_code ec;
+  fs::rename(from, to, ec);
+  if (ec) throw InputError(to.string(), "cannot move the staged file into place: " + ec.message());
+}
+
 // Removes DIR/name when it is there; throws InputError naming it when it stays.
 void remove_in(const fs::path& dir, const std::string& name) {
   std::error_code ec;
@@ -118,7 +126,7 @@ bool finish_interrupted_commit(const std::string& dir, int max_operations) {
     for (const std::string& n : j.moves)
       if (describes_others(n) == describing && staged(n)) {
         if (!budget_left()) return true;
-        commit_temp_file((staging / n).string(), (d / n).string()), ++done;
+        move_in(staging / n, d / n), ++done;
       }
     if (describing) break;
     for (const std::string& n : j.removals)
