@@ -362,15 +362,7 @@ const OctreeCertifier::PerturbationConstants& OctreeCertifier::perturbation_cons
         const float* h = blk + row * m;
         gh += (row == 4 || row == 5 || row == 7 ? 2 : 1) * float_dot(h, h, m);
       }
-      double t = 0;
-      if (im.third_finite[i]) {
-        const float* f = factors.row(i).data();
-        const double* w = W.data();
-#pragma omp simd reduction(+ : t)
-        for (long e = 0; e < E; ++e) t += w[e] * static_cast<double>(f[e]);
-      } else {
-        t = kInf;
-      }
+      const double t = im.third_finite[i] ? weighted_float_sum(W.data(), factors.row(i).data(), E) : kInf;
       const double r = sampling_.radius_of(static_cast<int>(i));
       out.g2(i) = std::sqrt(gj) * kStored;
       out.rest(i) = r * (std::sqrt(gh) * kStored + 0.5 * r * t) * kSums;
@@ -823,14 +815,8 @@ struct OctreeCertifier::Run {
   double direction_rest(long i) const {
     double& v = im.direction_rest(i);
     if (!std::isnan(v)) return v;
-    double sum = kInf;
-    if (im.first_finite[i]) {
-      const float* f = im.first.row(i).data();
-      const double* w = im.direction_delta.data();
-      sum = 0;
-#pragma omp simd reduction(+ : sum)
-      for (long e = 0; e < E; ++e) sum += w[e] * static_cast<double>(f[e]);
-    }
+    const double sum =
+        im.first_finite[i] ? weighted_float_sum(im.direction_delta.data(), im.first.row(i).data(), E) : kInf;
     v = oc.sampling_.radius_of(static_cast<int>(i)) * sum;
     return v;
   }
@@ -1105,12 +1091,11 @@ struct OctreeCertifier::Run {
 #pragma omp parallel for schedule(static)
     for (long k = 0; k < ne; ++k) {
       const long i = eval_list[k];
-      double s = 0;
       const float* f = factors.row(i).data();
+      double s = 0;
       if (row_finite[i]) {
-#pragma omp simd reduction(+ : s)
-        for (long e = 0; e < E; ++e) s += dl[e] * static_cast<double>(f[e]);
-      } else {
+        s = weighted_float_sum(dl, f, E);
+      } else {  // an infinite factor counts only where its edge moved (0 · ∞ would be NaN)
         for (long e = 0; e < E; ++e)
           if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
       }

@@ -42,6 +42,16 @@ inline double float_dot(const float* a, const float* b, long m) {
   return acc;
 }
 
+// Σ_k w[k] · f[k] for m double weights and a float row (each float widened, each product rounded once),
+// summed in SIMD lanes like float_dot: the certificate's bound-factor row sums Σ_e w_e Θ_e (callers bound the
+// rounding by (m + 1) u Σ_k |w[k] f[k]|, docs/certificate.md).
+inline double weighted_float_sum(const double* w, const float* f, long m) {
+  double acc = 0;
+#pragma omp simd reduction(+ : acc)
+  for (long k = 0; k < m; ++k) acc += w[k] * static_cast<double>(f[k]);
+  return acc;
+}
+
 // GCC's vector extensions, 4 doubles per operation: the loops below are vectorized by construction, not by
 // the compiler's judgement in each translation unit that inlines them (an `omp simd` reduction of the same
 // loop was vectorized in one caller and left scalar, 5x slower, in another).
