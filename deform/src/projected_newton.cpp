@@ -537,8 +537,8 @@ bool DeformationSolver::distortion_refuted_map(const MatS3& y, Certificate& refu
   // A map beyond a distortion target at some point of the domain is refused by that point's proof alone —
   // the verdict every certificate of it reaches (docs/certificate.md, "Probes") — without its voxels: the
   // continuation's local/global maps and their blends under a binding target took a full certificate each
-  // (0.2–1.1 s on the animal). The probes: the map's sample farthest beyond the targets, then the points
-  // where the last line search's trials failed. Finding no proof decides nothing (the full certificate
+  // (0.16–1.1 s each on the animal). The probes: the map's sample farthest beyond the targets, then the
+  // points where the last line search's trials failed. Finding no proof decides nothing (the full certificate
   // follows).
   CertifyParams cp = certify_params(true, false);
   const DistortionTargets targets = cp.targets();
