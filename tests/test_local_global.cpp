@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/QR>
 #include <Eigen/SVD>
+#include <cstdio>
 #include <random>
 
 #include "lidef/local_global.h"
@@ -172,6 +173,38 @@ TEST(LocalGlobal, EnergyNeverIncreases) {
     EXPECT_LE(e, prev * (1 + 1e-10)) << k;
     prev = e;
   }
+}
+
+// The accelerated solve (Anderson, local_global.cpp) against the plain iteration it accelerates:
+// one-iteration solves are plain (no history), run here until the solve's own stopping rule holds. The
+// accelerated result must be a fixed point of the plain iteration (one more plain step barely moves it), at
+// an E_LG no higher than the plain one's, reached in fewer iterations.
+TEST(LocalGlobal, AcceleratedIterationsReachThePlainIterationsFixedPoint) {
+  const Twist150 t;
+  const LocalGlobalSolver& lg = t.lg;
+  const MatX3d& Q = t.Q;
+  const MatS3 y0 = t.solver.reduced_coefficients();
+  constexpr double kTolerance = 1e-8;
+  MatS3 plain = y0;
+  double e_plain = lg.energy(plain, Q);
+  int plain_iterations = 0;
+  for (; plain_iterations < 2000; ++plain_iterations) {
+    const LocalGlobalResult step = lg.solve(plain, Q, 1, 0);
+    const bool done = e_plain - step.energy <= kTolerance * e_plain;
+    plain = step.y;
+    e_plain = step.energy;
+    if (done) break;
+  }
+  const LocalGlobalResult fast = lg.solve(y0, Q, 2000, kTolerance);
+  ASSERT_TRUE(fast.converged);
+  EXPECT_LT(fast.iterations, plain_iterations) << "plain " << plain_iterations;
+  EXPECT_LE(fast.energy, e_plain * (1 + 1e-9)) << fast.energy << " against " << e_plain;
+  const MatS3 next = lg.solve(fast.y, Q, 1, 0).y;
+  EXPECT_LT((next - fast.y).norm(), 1e-3 * (fast.y - y0).norm());
+  EXPECT_LT((fast.y - plain).norm(), 2e-2 * (fast.y - y0).norm());
+  std::printf(
+      "local/global to %g relative decrease: plain %d iterations, E_LG %.10g; accelerated %d, %.10g\n",
+      kTolerance, plain_iterations + 1, e_plain, fast.iterations, fast.energy);
 }
 
 TEST(LocalGlobal, AStopRequestEndsTheSolveAtTheLastIterate) {

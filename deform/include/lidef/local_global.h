@@ -10,6 +10,8 @@
 // three terms are balanced as in the solver's energy. Local step: R_i = closest rotation to J_i. Global step:
 // the s-by-s normal matrix A = (c/|I|) Gᵀ W G + λ1 DᵀD + (λ2/|E|) diag μ, the same for the three columns, is
 // factored once per handle set (Cholesky); each iteration is one product with G and one back-substitution.
+// The iterations are Anderson-accelerated (the last five image/residual differences; an iterate that does not
+// lower E_LG is replaced by the plain one), so E_LG never increases from one iterate to the next.
 // Nothing here is certified: the continuation accepts a local/global map only through the solver's
 // certificate (DeformationSolver::set_reduced_map).
 #pragma once
