@@ -11,7 +11,8 @@
 // the s-by-s normal matrix A = (c/|I|) Gᵀ W G + λ1 DᵀD + (λ2/|E|) diag μ, the same for the three columns, is
 // factored once per handle set (Cholesky); each iteration is one product with G and one back-substitution.
 // The iterations are Anderson-accelerated (the last five image/residual differences; an iterate that does not
-// lower E_LG is replaced by the plain one), so E_LG never increases from one iterate to the next.
+// lower E_LG is replaced by the plain one, at the cost of one more local step), so E_LG does not increase from
+// one iterate to the next (up to the plain step's rounding).
 // Nothing here is certified: the continuation accepts a local/global map only through the solver's
 // certificate (DeformationSolver::set_reduced_map).
 #pragma once
