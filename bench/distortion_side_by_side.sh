@@ -13,15 +13,15 @@ source "$(dirname "$0")/side_by_side_common.sh"
 ITERATIONS=${ITERATIONS:-8}
 LIMIT="--max-iterations $ITERATIONS"
 [ "$ITERATIONS" = all ] && LIMIT=""
-# scenario and target arguments, one run configuration per line
-CONFIGS="spot_head_turn|--max-distortion 1.169
+# scenario and target arguments, one run configuration per line (CONFIGS in the environment: a subset)
+CONFIGS=${CONFIGS:-"spot_head_turn|--max-distortion 1.169
 bar_bend|--max-distortion 1.477
 horse_leg_lift|--max-distortion 1.1
 animal_tail_lift|--max-distortion 1.31
 bar_twist90|--max-distortion 1.192
 bar_twist180|--max-distortion 1.486
 spot_head_turn|--max-sigma1 1.17 --min-sigma3 0.9101
-bar_bend|--max-sigma1 1.183 --min-sigma3 0.7187"
+bar_bend|--max-sigma1 1.183 --min-sigma3 0.7187"}
 stats() {  # dir: ms/iter, certificate s, iterations, stop, energy, K bound, sigma1 bound, sigma3 bound
   python3 - "$1" <<'PY'
 import csv, json, sys

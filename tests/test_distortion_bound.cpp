@@ -419,6 +419,7 @@ TEST(DistortionBound, ProbesRefuseOnlyWhatTheFullCertificateRefuses) {
 // When no probe proves a violation but one comes within 2% of the target, a short pattern search around it
 // looks for a point that does: a proven violation there refuses the map before any voxel is evaluated, and
 // the full certificate refuses it too; sampled independently, σ1/σ3 at that point is above the target.
+// distortion_refuted searches only when asked.
 TEST(DistortionBound, SearchNearAProbeRefusesOnlyProvenViolations) {
   const Sphere& s = sphere();
   const BentMap& b = bent_map();
@@ -462,6 +463,21 @@ TEST(DistortionBound, SearchNearAProbeRefusesOnlyProvenViolations) {
   EXPECT_GT(K(at), q.max_distortion) << "the refusal names a point beyond the target";
   EXPECT_GE(locate.find(at.transpose())(0), 0) << "a point of the domain";
   EXPECT_EQ(quick.reason, q.targets().reason(DistortionTarget::kDistortion, at));
+  // distortion_refuted (the same map in the subspace, through the reduced certifier): the probe alone proves
+  // nothing; asked to search, the same refusal before any voxel.
+  {
+    const OctreeCertifier red(s.cage, s.sampling, &s.sub.basis);
+    const MatR yr = s.sub.basis.transpose() * b.y;
+    ASSERT_LT((s.sub.basis * yr - b.y).norm(), 1e-9 * b.y.norm()) << "the bent map lies in the subspace";
+    Certificate alone, searched;
+    EXPECT_FALSE(red.distortion_refuted(yr, q, alone));
+    ASSERT_TRUE(red.distortion_refuted(yr, q, searched, /*search=*/true));
+    EXPECT_FALSE(searched.certified);
+    ASSERT_EQ(searched.failing.size(), 1u);
+    EXPECT_GT(K(searched.failing.front().center), q.max_distortion);
+    EXPECT_LE((searched.failing.front().center - probe).norm(), 4 * h);
+    EXPECT_EQ(searched.num_leaves, 0);
+  }
   q.distortion_probes.clear();
   const Certificate full = b.cert.certify(b.y, q);
   EXPECT_FALSE(full.certified) << "the full certificate refuses it too";

@@ -1981,13 +1981,14 @@ struct OctreeCertifier::Run {
 };
 
 bool OctreeCertifier::distortion_refuted(const Eigen::Matrix<double, Eigen::Dynamic, 3>& yr,
-                                         const CertifyParams& params, Certificate& refusal) const {
+                                         const CertifyParams& params, Certificate& refusal,
+                                         bool search) const {
   const auto t_start = Clock::now();
   if (!params.stop_on_failure || !params.targets().any() || params.distortion_probes.empty()) return false;
   const MatX3d y = expand_reduced(yr, "distortion_refuted");
   Run run(*this, y, yr.data(), yr.rows(), params);
   Certificate out;
-  if (!run.distortion_probe(out, false)) return false;
+  if (!run.distortion_probe(out, search)) return false;
   out.ms_total = ms_since(t_start);
   refusal = std::move(out);
   return true;

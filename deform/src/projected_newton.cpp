@@ -538,8 +538,9 @@ bool DeformationSolver::distortion_refuted_map(const MatS3& y, Certificate& refu
   // the verdict every certificate of it reaches (docs/certificate.md, "Probes") — without its voxels: the
   // continuation's local/global maps and their blends under a binding target took a full certificate each
   // (0.16–1.1 s each on the animal). The probes: the map's sample farthest beyond the targets, then the
-  // points where the last line search's trials failed. Finding no proof decides nothing (the full certificate
-  // follows).
+  // points where the last line search's trials failed, and where none proves a violation but the worst comes
+  // near a target, the search near it (a local/global map, which knows no target, often exceeds one between
+  // the samples). Finding no proof decides nothing (the full certificate follows).
   CertifyParams cp = certify_params(true, false);
   const DistortionTargets targets = cp.targets();
   if (!targets.any()) return false;
@@ -547,10 +548,10 @@ bool DeformationSolver::distortion_refuted_map(const MatS3& y, Certificate& refu
   double excess = 0;
   const long i = largest_excess_sample(J, J, 0.0, targets, &excess);
   cp.distortion_probes.clear();
-  if (i >= 0 && excess > 1) cp.distortion_probes.push_back(nsampling_.centers.row(i).transpose());
+  if (i >= 0) cp.distortion_probes.push_back(nsampling_.centers.row(i).transpose());
   for (const Vec3& q : distortion_probes_)
     if (cp.distortion_probes.size() < kMaxDistortionProbes) cp.distortion_probes.push_back(q);
-  return !cp.distortion_probes.empty() && certifier_->distortion_refuted(y, cp, refusal);
+  return !cp.distortion_probes.empty() && certifier_->distortion_refuted(y, cp, refusal, /*search=*/true);
 }
 
 std::string handle_source_problem(const Cage& cage, const Vec3& p) {

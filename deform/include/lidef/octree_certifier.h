@@ -262,12 +262,13 @@ class OctreeCertifier {
                               const CertifyParams& params = {}) const;
   // Only the distortion probes of `params` (CertifyParams::distortion_probes, with stop_on_failure and a
   // target) at the map ỹ (s by 3), evaluated and judged as certify_reduced() judges them
-  // (docs/certificate.md, "Probes"), without the search near them or any voxel: true, with `refusal` filled
-  // as certify_reduced() fills it, when one of them proves a target violated; false decides nothing. The line
-  // search asks this with the points where earlier trials failed before screening its samples for a new
-  // probe.
+  // (docs/certificate.md, "Probes"), without any voxel and, unless `search`, without the search near them
+  // ("The search near a probe"): true, with `refusal` filled as certify_reduced() fills it, when one of them
+  // proves a target violated; false decides nothing. The line search asks this with the points where earlier
+  // trials failed before screening its samples for a new probe; the continuation's maps with their worst
+  // sample and the search.
   bool distortion_refuted(const Eigen::Matrix<double, Eigen::Dynamic, 3>& y_reduced,
-                          const CertifyParams& params, Certificate& refusal) const;
+                          const CertifyParams& params, Certificate& refusal, bool search = false) const;
 
   // Runs the base stage and the evaluation of octree nodes on `backend` from now on (a CPU backend restores
   // the built-in code). Verdicts do not depend on the backend: every decision is taken here, on the host.
