@@ -147,8 +147,11 @@ constexpr int kAndersonDepth = 5;
 class Anderson {
  public:
   explicit Anderson(Eigen::Index n) : dF_(n, kAndersonDepth), dG_(n, kAndersonDepth) {}
-  // The next iterate after g = g(x) (both flattened s by 3 coefficients).
-  VecXd next(const VecXd& x, const VecXd& g) {
+  // The next iterate after g = g(x) (both flattened s by 3 coefficients); *accelerated says whether it is a
+  // combination (false: g itself, before two pairs are known or when the least-squares weights are not
+  // finite).
+  VecXd next(const VecXd& x, const VecXd& g, bool* accelerated) {
+    *accelerated = false;
     const VecXd f = g - x;
     if (have_prev_) {
       const int c = static_cast<int>(count_ % kAndersonDepth);
@@ -164,6 +167,7 @@ class Anderson {
     // θ = argmin ‖f − ΔF θ‖ by QR with column pivoting (nearly dependent differences near convergence).
     const VecXd theta = dF_.leftCols(m).colPivHouseholderQr().solve(f);
     if (!theta.allFinite()) return g;
+    *accelerated = true;
     return g - dG_.leftCols(m) * theta;
   }
   // Forgets the differences (after a rejected iterate); the last pair (x, g(x)) stays, as it is exact.
@@ -213,10 +217,10 @@ LocalGlobalResult LocalGlobalSolver::solve(const MatS3& y0, const MatX3d& Q, int
     // over R; up to rounding).
     const MatS3 g = global_step(T, Q);
     ++r.iterations;
-    MatS3 y = unflat(anderson.next(flat(r.y), flat(g)), s);
+    bool accelerated = false;
+    MatS3 y = unflat(anderson.next(flat(r.y), flat(g), &accelerated), s);
     MatJT Ty;
     double e = local(y, Ty);
-    const bool accelerated = !(y.array() == g.array()).all();
     // The safeguard: an accelerated iterate must lower E_LG, and a small decrease by one is confirmed by the
     // plain step (an accelerated step can stall where the plain one still makes progress); otherwise the
     // plain iterate is taken, whose E_LG is no higher than before up to rounding.
