@@ -14,18 +14,33 @@ class CpuEnergyKernels final : public EnergyKernels {
     J_ = e_.jacobians(y);
     forget_current();
   }
-  void set_direction(const MatS3& d) override { dJ_ = e_.jacobians(d); }
+  void set_direction(const MatS3& d) override {
+    dJ_ = e_.jacobians(d);
+    trial_t_ = 0;
+  }
   double distortion_sum(double t) override {
     if (t == 0) {
       if (!has_sum0_) sum0_ = e_.distortion_sum(J_), has_sum0_ = true;
       return sum0_;
     }
-    const MatJT Jt = J_ + t * dJ_;
-    return e_.distortion_sum(Jt);
+    Jt_.noalias() = J_ + t * dJ_;
+    trial_t_ = t;
+    trial_sum_ = e_.distortion_sum(Jt_);
+    return trial_sum_;
   }
   void accept(double t) override {
-    J_ = (J_ + t * dJ_).eval();
+    // The accepted step is almost always the last trial: its Jacobians (the same expression, the same bits)
+    // and its sum are the new map's, so the next iteration's energy at t = 0 costs no pass.
+    const bool last_trial = t == trial_t_ && Jt_.rows() == J_.rows();
+    if (last_trial)
+      J_.swap(Jt_);
+    else
+      J_ = (J_ + t * dJ_).eval();
     forget_current();
+    if (last_trial) {
+      sum0_ = trial_sum_;
+      has_sum0_ = true;
+    }
   }
   // Kept until the current map changes: an iteration whose direction is recomputed with other weights
   // (dynamic weighting's retries) asks again at the same map, and gets the same values.
@@ -45,18 +60,24 @@ class CpuEnergyKernels final : public EnergyKernels {
     else
       sum_ += alpha * dJ_;
   }
-  void use_accumulated_direction() override { dJ_.swap(sum_); }
+  void use_accumulated_direction() override {
+    dJ_.swap(sum_);
+    trial_t_ = 0;
+  }
   MatJT current_jacobians() override { return J_; }
   const MatJT* direction_jacobians() const override { return &dJ_; }
 
  private:
   void forget_current() {
     has_sum0_ = false;
+    trial_t_ = 0;  // no trial of the new map's direction yet
     gradient_.resize(0, 3);
   }
   const DeformationEnergy& e_;
   MatJT J_, dJ_, sum_;
-  bool has_sum0_ = false;  // sum0_ = distortion_sum(0) at J_
+  MatJT Jt_;                            // J_ + trial_t_ dJ_ of the last trial (a kept buffer)
+  double trial_t_ = 0, trial_sum_ = 0;  // the last trial's step (0: none since the map or dJ changed)
+  bool has_sum0_ = false;               // sum0_ = distortion_sum(0) at J_
   double sum0_ = 0;
   MatS3 gradient_;  // distortion_gradient_sum() at J_ (0 rows: not computed)
 };
