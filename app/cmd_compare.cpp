@@ -84,6 +84,11 @@ void add_compare_options(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--tri-max-iterations", c.tri.max_iterations, "pwl-tri: local/global iteration limit")
       ->capture_default_str();
+  sub->add_option("--repeat", c.repeat,
+                  "Solve with every method this many times, the methods interleaved; the time is the median "
+                  "(table.csv: every run's min and max, and whether all runs ended at the same map)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   add_param_flags(sub, &opts->overrides, "lidef parameters (shared weights/tolerances): ");
   sub->footer(
       "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and "

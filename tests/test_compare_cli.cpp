@@ -162,6 +162,48 @@ TEST(CompareCli, BeamAllMethodsEndToEnd) {
   EXPECT_NEAR(solid, e_dis, 1e-5 * e_dis) << "compare's solid mean vs deform's distortion term";
 }
 
+// --repeat: every method's solve three times, interleaved; the time is the median of the runs (between their
+// min and max, the three columns from the same runs), every run ends at the first run's map, and the
+// results (iterations, handle error) are those of a single run.
+TEST(CompareCli, RepeatTimesTheMedianOfInterleavedRuns) {
+  TempDir dir;
+  const std::string sc = lidef::test::project_data() + "/scenarios/beam_bend.json";
+  std::string log;
+  ASSERT_EQ(
+      run_lidef("compare '" + sc + "' --out '" + dir / "once" + "' --methods lidef,pwl-tet " + kSmall, &log),
+      0)
+      << log;
+  ASSERT_EQ(run_lidef("compare '" + sc + "' --out '" + dir / "rep" + "' --methods lidef,pwl-tet --repeat 3 " +
+                          kSmall,
+                      &log),
+            0)
+      << log;
+  // Interleaved: the second run of lidef starts after PWL(Tet)'s first.
+  const size_t tet_first = log.find("[pwl-tet] starting"), lidef_second = log.find("[lidef] run 2 of 3");
+  ASSERT_NE(lidef_second, std::string::npos) << log;
+  EXPECT_LT(tet_first, lidef_second) << log;
+  std::vector<std::string> header;
+  const auto once = read_table(dir / "once/table.csv", &header);
+  const auto rep = read_table(dir / "rep/table.csv", &header);
+  EXPECT_EQ(header, lidef::comparison_table_columns());
+  for (const char* m : {"lidef", "pwl-tet"}) {
+    const auto a = row_of(once, m), b = row_of(rep, m);
+    EXPECT_EQ(a.at("repeats"), "1") << m;
+    EXPECT_EQ(a.at("repeats_identical"), "") << m;
+    EXPECT_EQ(b.at("repeats"), "3") << m;
+    EXPECT_EQ(b.at("repeats_identical"), "1") << m;
+    EXPECT_LE(num(b, "time_s_min"), num(b, "time_s")) << m;
+    EXPECT_LE(num(b, "time_s"), num(b, "time_s_max")) << m;
+    EXPECT_LT(num(b, "time_s_min"), num(b, "time_s_max")) << m;  // three timings, not one copied
+    EXPECT_EQ(a.at("iterations"), b.at("iterations")) << m;
+    EXPECT_EQ(a.at("max_handle_error"), b.at("max_handle_error")) << m;
+  }
+  EXPECT_DOUBLE_EQ(num(row_of(rep, "lidef"), "time_ratio_to_lidef"), 1.0);
+  EXPECT_NE(lidef::test::read_text(dir / "rep/table.md").find("the median of 3 runs"), std::string::npos);
+  EXPECT_NE(run_lidef("compare '" + sc + "' --out '" + dir / "bad" + "' --repeat 0 " + kSmall, &log), 0);
+  EXPECT_FALSE(fs::exists(dir / "bad/table.csv"));
+}
+
 TEST(CompareCli, FailingMethodIsReportedAndOthersRun) {
   // A tet mesh of one small tet: the mesh vertices lie outside every tet.
   {

@@ -126,33 +126,53 @@ std::string tet_mesh_label(const std::string& method, const std::map<std::string
                                                                         : "; FEWER DOF than the paper's");
 }
 
-// When the model's own tet mesh is coarser than Table 1's PWL(Tet) DOF (the bar's has the cage's 106
-// vertices), PWL(Tet) runs again on a mesh with at least the paper's DOF (`lidef compare --methods pwl-tet
-// --tet-min-dof D`: the model's mesh when fine enough, else TetGen with a searched max volume). Its row
-// becomes `pwl-tet`, the first run's becomes the extra row `pwl-tet-model-mesh`; both time ratios are taken
-// to lidef's time of the first run (the second runs PWL(Tet) alone).
-void run_pwl_tet_at_paper_dof(const Context& ctx, StagedOutputs& out, const ScenarioFile& s,
-                              const PaperRow& p, const std::string& work,
-                              std::map<std::string, std::map<std::string, std::string>>& rows,
-                              FigureOutput& res) {
-  const long paper_dof = p.dof[paper_column("pwl-tet")];
-  const auto coarse = rows.find("pwl-tet");
-  if (coarse == rows.end() || coarse->second.at("status") == "failed" ||
-      csv_number(coarse->second, "dof") >= paper_dof)
-    return;
-  const std::string log = "compare_" + s.name + "_pwl_tet_paper_dof.log";
-  auto fair = run_compare(ctx, out, s.path, s.models_dir, (fs::path(work) / (s.name + "_paper_dof")).string(),
-                          log, {"--methods", "pwl-tet", "--tet-min-dof", std::to_string(paper_dof)});
+// The solve times compared: lidef and PWL(Tet) at the paper's resolution, run kTimingRuns times each, the
+// two interleaved (`lidef compare --methods lidef,pwl-tet --repeat N`), each time the median of its runs —
+// single runs on a shared VM moved by more than the difference between the two (docs/reproduction.md).
+// PWL(Tet) runs on a mesh with at least the paper's DOF (`--tet-min-dof D`: the model's mesh when fine
+// enough, else TetGen with a searched max volume); where the first run's mesh (the model's own) is coarser,
+// that row stays as the extra row `pwl-tet-model-mesh`. Every row's time ratio is then taken to lidef's
+// median.
+int timing_runs(const Context& ctx) {
+  return ctx.quick ? 2 : 5;
+}
+
+void run_timed_pair(const Context& ctx, StagedOutputs& out, const ScenarioFile& s, const PaperRow* p,
+                    const std::string& work, std::map<std::string, std::map<std::string, std::string>>& rows,
+                    FigureOutput& res) {
+  const int runs = timing_runs(ctx);
+  std::vector<std::string> extra = {"--methods", "lidef,pwl-tet", "--repeat", std::to_string(runs)};
+  const long paper_dof = p ? p->dof[paper_column("pwl-tet")] : 0;
+  if (paper_dof > 0) {
+    extra.push_back("--tet-min-dof");
+    extra.push_back(std::to_string(paper_dof));
+  }
+  const std::string log = "compare_" + s.name + "_timed.log";
+  auto timed = run_compare(ctx, out, s.path, s.models_dir, (fs::path(work) / (s.name + "_timed")).string(),
+                           log, extra);
   res.files.push_back(log);
-  const auto it = fair.find("pwl-tet");
-  if (it == fair.end()) throw NumericalError("lidef-compare wrote no pwl-tet row for " + s.path);
-  const auto li = rows.find("lidef");
-  const double lidef_t = li == rows.end() ? NAN : csv_number(li->second, "time_s");
-  const double t = csv_number(it->second, "time_s");
-  it->second["time_ratio_to_lidef"] =
-      std::isfinite(lidef_t) && lidef_t > 0 && std::isfinite(t) ? format_g(t / lidef_t, 6) : "";
-  rows[kModelMeshRow] = coarse->second;
-  rows["pwl-tet"] = it->second;
+  for (const char* m : {"lidef", "pwl-tet"})
+    if (!timed.count(m))
+      throw NumericalError("lidef-compare wrote no " + std::string(m) + " row for " + s.path);
+  const auto coarse = rows.find("pwl-tet");
+  if (coarse != rows.end() && coarse->second.at("status") != "failed" && paper_dof > 0 &&
+      csv_number(coarse->second, "dof") < paper_dof)
+    rows[kModelMeshRow] = coarse->second;
+  rows["lidef"] = timed["lidef"];
+  rows["pwl-tet"] = timed["pwl-tet"];
+  const double lidef_t = rows["lidef"].at("status") == "failed" ? NAN : csv_number(rows["lidef"], "time_s");
+  for (auto& [m, row] : rows) {
+    const double t = row.at("status") == "failed" ? NAN : csv_number(row, "time_s");
+    row["time_ratio_to_lidef"] =
+        std::isfinite(lidef_t) && lidef_t > 0 && std::isfinite(t) ? format_g(t / lidef_t, 6) : "";
+  }
+}
+
+// A cell of a lidef-compare row, or `fallback` where it is empty or absent.
+std::string cell_or(const std::map<std::string, std::string>& row, const std::string& column,
+                    const std::string& fallback) {
+  const auto it = row.find(column);
+  return it == row.end() || it->second.empty() ? fallback : it->second;
 }
 
 }  // namespace
@@ -181,12 +201,13 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
     r.rows = run_compare(ctx, out, s.path, s.models_dir, (fs::path(work) / s.name).string(),
                          "compare_" + s.name + ".log");
     res.files.push_back("compare_" + s.name + ".log");
-    if (const PaperRow* p = paper_row(r.model)) run_pwl_tet_at_paper_dof(ctx, out, s, *p, work, r.rows, res);
+    run_timed_pair(ctx, out, s, paper_row(r.model), work, r.rows, res);
     results.push_back(std::move(r));
   }
   write_file_atomic(out.path("table1.csv"), [&](std::ostream& f) {
     f << "scenario,method,status,dof,iterations,converged,certified,inverted_mesh_vertices,max_handle_error,"
-         "paper_dof,paper_iterations,time_s,time_ratio_to_lidef,paper_time_s,tet_mesh\n";
+         "paper_dof,paper_iterations,time_s,time_ratio_to_lidef,paper_time_s,tet_mesh,time_runs,time_s_min,"
+         "time_s_max\n";
     for (const Result& r : results)
       for (const std::string& m : kTable1Rows) {
         const auto it = r.rows.find(m);
@@ -200,7 +221,9 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
           << (p && col >= 0 ? std::to_string(p->dof[col]) : "") << ','
           << (p && col >= 0 ? std::to_string(p->iterations[col]) : "") << ',' << row.at("time_s") << ','
           << row.at("time_ratio_to_lidef") << ',' << (p && col >= 0 ? format_g(p->time[col]) : "") << ','
-          << tet_mesh_label(m, row, p) << '\n';
+          << tet_mesh_label(m, row, p) << ',' << cell_or(row, "repeats", "1") << ','
+          << cell_or(row, "time_s_min", row.at("time_s")) << ','
+          << cell_or(row, "time_s_max", row.at("time_s")) << '\n';
       }
   });
   res.files.insert(res.files.begin(), "table1.csv");
@@ -293,7 +316,8 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
                           "Sec. 8 (\"designed to produce locally injective maps\")",
                           std::isfinite(cert) ? ojson(cert == 1) : ojson(nullptr), cert == 1});
     res.claims.push_back({"lidef has the shortest solve time on " + r.s.name +
-                              " (other methods' time / lidef's; timing-dependent)",
+                              " (other methods' time / lidef's; lidef and PWL(Tet): medians of " +
+                              std::to_string(timing_runs(ctx)) + " interleaved runs; timing-dependent)",
                           p ? ojson("ratios from Table 1's times") : ojson(nullptr), "Table 1, Sec. 8",
                           lidef_ok ? ratios : ojson(nullptr), lidef_ok && fastest});
   }
@@ -317,9 +341,24 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
         "PWL(Tet) runs at the paper's resolution (Table 1's PWL(Tet) DOF): on the model's tet mesh where it "
         "has "
         "at least those DOF, else on a TetGen mesh of the cage whose max tet volume is searched for them "
-        "(`lidef compare --methods pwl-tet --tet-min-dof D`, docs/compare.md); the claims compare lidef with "
-        "that row. PWL(Tet): " +
+        "(`lidef compare --methods lidef,pwl-tet --tet-min-dof D --repeat N`, docs/compare.md); the claims "
+        "compare lidef with that row. PWL(Tet): " +
         resolution + ".");
+  // The timed runs: their spread, and whether every run of a method ended at the same map.
+  std::string spread, differ;
+  for (const Result& r : results)
+    for (const char* m : {"lidef", "pwl-tet"}) {
+      const auto it = r.rows.find(m);
+      if (it == r.rows.end() || it->second.at("status") == "failed") continue;
+      spread += std::string(spread.empty() ? "" : "; ") + r.s.name + " " + m + " " +
+                cell_or(it->second, "time_s_min", "?") + "–" + cell_or(it->second, "time_s_max", "?");
+      if (cell_or(it->second, "repeats_identical", "1") != "1") differ += " " + r.s.name + " " + m;
+    }
+  if (!spread.empty())
+    res.notes.push_back("lidef's and PWL(Tet)'s times are medians of " + std::to_string(timing_runs(ctx)) +
+                        " runs, the two interleaved (`--repeat`); fastest–slowest run, s: " + spread + "." +
+                        (differ.empty() ? " Every run of each ended at the same map."
+                                        : " NOT every run ended at the first run's map:" + differ + "."));
   res.notes.push_back(
       "VHM and PWL(Tri) carry no guarantee: the CSV's `certified` (VHM: lidef's certificate on lidef's "
       "voxels) "

@@ -114,6 +114,11 @@ struct Shared {
   void say(const std::string& m, const std::string& line) {
     if (progress) progress(m, line);
   }
+  // A repeated run (CompareOptions::repeat): the solve is timed and its map kept for the comparison with the
+  // first run; the fields, certificates and measures of the row come from the first run.
+  bool again = false;
+  // PWL(Tet)'s meshes (coarse, fine) and their descriptions, made once per comparison.
+  std::map<bool, std::pair<TetMesh, std::string>> tets;
 };
 
 void run_lidef(Shared& s, MethodResult& r) {
@@ -148,6 +153,10 @@ void run_lidef(Shared& s, MethodResult& r) {
   r.converged = res.converged();
   r.stop = std::string(to_string(res.reason)) + (res.message.empty() ? "" : ": " + res.message);
   r.dof = 3L * solver.subspace().size();
+  if (s.again) {
+    r.coefficients = solver.coefficients();
+    return;
+  }
   const VecXd he = solver.handle_errors();
   r.max_handle_error = he.size() ? he.maxCoeff() : 0.0;
   const MatX3d y = solver.coefficients();
@@ -167,8 +176,9 @@ void run_lidef(Shared& s, MethodResult& r) {
   r.log = log.str();
 }
 
-void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
-  const auto t0 = Clock::now();
+// PWL(Tet)'s tet mesh: coarse, the model's tet mesh (Table 1's DOF) or TetGen of the cage; fine, TetGen's
+// refinement of the coarse mesh. Sets r.detail to its description.
+TetMesh pwl_tet_mesh(Shared& s, MethodResult& r, bool fine) {
   // Coarse: the model's tet mesh (Table 1's DOF) or TetGen of the cage; fine: TetGen's refinement (-r) of the
   // coarse mesh, which also works where the cage self-intersects slightly (animal) and TetGen -p cannot run.
   TetMesh tets;
@@ -218,6 +228,18 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   }
   r.detail +=
       ": " + std::to_string(tets.num_vertices()) + " vertices, " + std::to_string(tets.num_tets()) + " tets";
+  return tets;
+}
+
+void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
+  const auto t0 = Clock::now();
+  auto kept = s.tets.find(fine);
+  if (kept == s.tets.end()) {
+    TetMesh made = pwl_tet_mesh(s, r, fine);
+    kept = s.tets.emplace(fine, std::make_pair(std::move(made), r.detail)).first;
+  }
+  const TetMesh& tets = kept->second.first;
+  r.detail = kept->second.second;
   s.say(r.method, r.detail);
   const TetEmbedding mesh_embedding =
       embed_points(tets, s.model.mesh.V, s.model.dir + ": PWL(Tet) mesh vertex");
@@ -248,6 +270,10 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   r.converged = res.converged;
   r.stop = res.message;
   r.dof = solver.dof();
+  if (s.again) {
+    r.V = W * solver.positions();
+    return;
+  }
   r.max_handle_error = solver.handle_errors().maxCoeff();
   const MatX3d& X = solver.positions();
   r.inverted = solver.inverted_count(X);
@@ -310,8 +336,9 @@ void run_vhm(Shared& s, MethodResult& r) {
   r.converged = res.converged;
   r.stop = res.message;
   r.dof = solver.dof();
-  r.max_handle_error = solver.handle_errors().maxCoeff();
   r.coefficients = solver.coefficients();
+  if (s.again) return;
+  r.max_handle_error = solver.handle_errors().maxCoeff();
   set_fields(mesh_fields(basis, solver.coefficients(), s.model.mesh.V), r);
   r.mean_e_iso_solid = solid_mean_e_iso(basis, solver.coefficients(), s.get_domain_sampling());
   // Fig. 11: lidef's certificate on lidef's voxels judges VHM's injectivity (not part of VHM's time).
@@ -353,8 +380,9 @@ void run_pwl_tri(Shared& s, MethodResult& r) {
   r.converged = res.converged;
   r.stop = res.message;
   r.dof = solver.dof();
-  r.max_handle_error = solver.handle_errors().maxCoeff();
   r.V = solver.positions();
+  if (s.again) return;
+  r.max_handle_error = solver.handle_errors().maxCoeff();
   r.detail = std::to_string(s.model.mesh.V.rows()) + " mesh vertices";
   r.log = log.str();
 }
@@ -395,50 +423,100 @@ double crease_measure(const TriMesh& rest, const MatX3d& X) {
   return n ? std::sqrt(sum / n) * 180.0 / M_PI : kNaN;
 }
 
+namespace {
+// Runs method m once into r (a failure is caught into the row).
+void run_method(Shared& s, const std::string& m, MethodResult& r) {
+  r.method = m;
+  try {
+    if (m == "lidef")
+      run_lidef(s, r);
+    else if (m == "pwl-tet")
+      run_pwl_tet(s, r, false);
+    else if (m == "pwl-tet-fine")
+      run_pwl_tet(s, r, true);
+    else if (m == "vhm")
+      run_vhm(s, r);
+    else
+      run_pwl_tri(s, r);
+    r.ok = true;
+  } catch (const std::exception& e) {
+    r = MethodResult();
+    r.method = m;
+    r.ok = false;
+    r.error = e.what();
+  }
+}
+
+// A repeated run of first's method: its time, and whether it ended where the first run did (the harmonic
+// methods' coefficients, the others' mesh vertices).
+void add_repeat(MethodResult& first, const MethodResult& again) {
+  if (!first.ok) return;
+  const bool harmonic = first.coefficients.size() > 0;
+  const MatX3d& a = harmonic ? first.coefficients : first.V;
+  const MatX3d& b = harmonic ? again.coefficients : again.V;
+  const bool same = again.ok && again.iterations == first.iterations && a.rows() == b.rows() && a == b;
+  if (again.ok) first.run_seconds.push_back(again.seconds);  // a failed run has no time to count
+  if (!same) first.repeats_identical = 0;
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n == 0 ? kNaN : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+}  // namespace
+
 std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model, const CompareOptions& opt,
                                          const CompareProgress& progress) {
   for (const std::string& m : opt.methods)
     if (std::find(compare_methods().begin(), compare_methods().end(), m) == compare_methods().end())
       throw InputError("--methods",
                        "unknown method '" + m + "' (known: lidef, pwl-tet, pwl-tet-fine, vhm, pwl-tri)");
+  if (opt.repeat < 1) throw InputError("--repeat", "must be at least 1, not " + std::to_string(opt.repeat));
   std::vector<std::string> order;
   for (const std::string& m : compare_methods())  // table order; lidef first
     if (std::find(opt.methods.begin(), opt.methods.end(), m) != opt.methods.end()) order.push_back(m);
-  Shared s{sc, model, opt, progress, nullptr, std::nullopt, std::nullopt};
+  Shared s{sc, model, opt, progress, nullptr, std::nullopt, std::nullopt, false, {}};
   std::vector<MethodResult> rows;
   const double rest_volume = signed_volume(model.mesh.V, model.mesh.F);
   // "Reached" means what `lidef deform` means: max handle error within handle_tolerance of the model's size.
   const double handle_tolerance = sc.params.handle_tolerance * Frame::of(model.cage).scale;
   for (const std::string& m : order) {
     MethodResult r;
-    r.method = m;
-    s.say(m, "starting");
-    try {
-      if (m == "lidef")
-        run_lidef(s, r);
-      else if (m == "pwl-tet")
-        run_pwl_tet(s, r, false);
-      else if (m == "pwl-tet-fine")
-        run_pwl_tet(s, r, true);
-      else if (m == "vhm")
-        run_vhm(s, r);
-      else
-        run_pwl_tri(s, r);
-      r.ok = true;
+    s.say(m, opt.repeat > 1 ? "starting (run 1 of " + std::to_string(opt.repeat) + ")" : "starting");
+    run_method(s, m, r);
+    if (r.ok) {
       r.reached = r.max_handle_error <= handle_tolerance ? 1 : 0;
       r.volume_ratio = signed_volume(r.V, model.mesh.F) / rest_volume;
       r.crease_deg = crease_measure(model.mesh, r.V);
       s.say(m, status_of(r) + " (" + r.stop + ") after " + std::to_string(r.iterations) + " iterations, " +
                    format_g(r.seconds, 3) + " s");
-    } catch (const std::exception& e) {
-      r = MethodResult();
-      r.method = m;
-      r.ok = false;
-      r.error = e.what();
-      s.say(m, std::string("FAILED: ") + e.what());
+    } else {
+      s.say(m, "FAILED: " + r.error);
     }
     rows.push_back(std::move(r));
   }
+  // The repeats, the methods interleaved: run k of every method before run k + 1 of any.
+  s.again = true;
+  for (MethodResult& r : rows)
+    if (r.ok && opt.repeat > 1) {
+      r.run_seconds = {r.seconds};
+      r.repeats_identical = 1;
+    }
+  for (int k = 2; k <= opt.repeat; ++k)
+    for (MethodResult& r : rows) {
+      if (!r.ok) continue;
+      MethodResult again;
+      run_method(s, r.method, again);
+      add_repeat(r, again);
+      s.say(r.method,
+            "run " + std::to_string(k) + " of " + std::to_string(opt.repeat) + ": " +
+                (again.ok ? std::to_string(again.iterations) + " iterations, " + format_g(again.seconds, 3) +
+                                " s" + (r.repeats_identical == 0 ? " (NOT the first run's map)" : "")
+                          : "FAILED: " + again.error));
+    }
+  for (MethodResult& r : rows)
+    if (r.ok && r.run_seconds.size() > 1) r.seconds = median(r.run_seconds);
   double lidef_s = kNaN;
   for (const MethodResult& r : rows)
     if (r.method == "lidef" && r.ok) lidef_s = r.seconds;
@@ -472,7 +550,11 @@ const std::vector<std::string>& comparison_table_columns() {
                                              "local_volume_change_mean",
                                              "time_ratio_to_lidef",
                                              "detail",
-                                             "error"};
+                                             "error",
+                                             "repeats",
+                                             "time_s_min",
+                                             "time_s_max",
+                                             "repeats_identical"};
   return c;
 }
 
@@ -505,6 +587,16 @@ LocalVolume local_volume(const MethodResult& r) {
 }
 }  // namespace
 
+namespace {
+// The fastest and slowest run's solve time (the one run's when not repeated).
+double min_of(const MethodResult& r) {
+  return r.run_seconds.empty() ? r.seconds : *std::min_element(r.run_seconds.begin(), r.run_seconds.end());
+}
+double max_of(const MethodResult& r) {
+  return r.run_seconds.empty() ? r.seconds : *std::max_element(r.run_seconds.begin(), r.run_seconds.end());
+}
+}  // namespace
+
 std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
   std::ostringstream s;
   const auto& cols = comparison_table_columns();
@@ -522,7 +614,9 @@ std::string comparison_table_csv(const std::vector<MethodResult>& rows) {
       << (r.certified >= 0 ? std::to_string(r.certified) : "") << ',' << num(r.min_sigma3) << ','
       << num(r.min_sigma3_bound) << ',' << num(r.crease_deg) << ',' << num(lv.min) << ',' << num(lv.max)
       << ',' << num(lv.mean_change) << ',' << num(r.time_ratio) << ',' << csv_quote(r.detail) << ','
-      << csv_quote(r.error) << "\n";
+      << csv_quote(r.error) << ',' << (r.ok ? std::to_string(std::max<size_t>(1, r.run_seconds.size())) : "")
+      << ',' << num(min_of(r)) << ',' << num(max_of(r)) << ','
+      << (r.repeats_identical >= 0 ? std::to_string(r.repeats_identical) : "") << "\n";
   }
   return s.str();
 }
@@ -555,7 +649,14 @@ std::string comparison_table_md(const std::vector<MethodResult>& rows, const Sce
                           : "NO")
       << " | " << cell(r.min_sigma3) << " | " << cell(r.crease_deg) << " |\n";
   }
-  s << "\nTime = solve time in this run (preprocessing excluded; see table.csv). Details:\n\n";
+  size_t runs = 1;
+  for (const MethodResult& r : rows) runs = std::max(runs, r.run_seconds.size());
+  s << "\nTime = solve time "
+    << (runs > 1 ? "(the median of " + std::to_string(runs) +
+                       " runs, the methods interleaved; each run's time in "
+                       "table.csv)"
+                 : std::string("in this run"))
+    << " (preprocessing excluded; see table.csv). Details:\n\n";
   for (const MethodResult& r : rows)
     if (r.ok) s << "- " << r.method << ": " << r.detail << "; " << r.stop << "\n";
   return s.str();

@@ -809,23 +809,36 @@ bool DeformationSolver::kept_factor_direction(const VecXd& gvec, VecXd& dvec, It
   // The operator the assembly would factor (shifted_hessian in newton_direction, without the extra shifts
   // of a failed factorization), through the per-sample blocks: one pass over the subset's rows of G per
   // product instead of the 36 s²|H| flops of the assembly and the factorization.
+  double ms_operator = 0, ms_preconditioner = 0;  // for the trace: where the CG steps' time goes
   const auto A = [&](const VecXd& p) -> VecXd {
+    const auto ta = Clock::now();
     const Eigen::Map<const MatS3> pm(p.data(), s, 3);
     const MatS3 h =
         energy_->subset_hessian_times(blocks, pm) + energy_->quadratic_hessian_times(pm, weights_);
-    return Eigen::Map<const VecXd>(h.data(), 3 * s) + params_.diagonal_shift * p;
+    VecXd out = Eigen::Map<const VecXd>(h.data(), 3 * s) + params_.diagonal_shift * p;
+    ms_operator += ms_since(ta);
+    return out;
   };
   // The preconditioner: the kept factor, in double precision like the operator. CG amplifies rounding that
   // differs from one direction to the next: with single-precision products or a single-precision factor a
   // copy of bar_bend scaled by 1e-6 ended 2e-3 away from the original (model size 1), in double 5.1e-7.
-  const auto M = [&](VecXd& r) { return cholesky_solve_factored(factor_.L, r); };
+  const auto M = [&](VecXd& r) {
+    const auto tm = Clock::now();
+    const bool ok = cholesky_solve_factored(factor_.L, r);
+    ms_preconditioner += ms_since(tm);
+    return ok;
+  };
   const PcgResult r =
       preconditioned_cg(-gvec, A, M, params_.kept_factor_cg_steps, params_.kept_factor_tolerance);
   rec.kept_factor_steps = r.steps;
   rec.ms_solve += ms_since(t0);
   if (params_.trace_line_search)
-    std::fprintf(stderr, "  kept factor: %d CG steps, relative residual %.3g%s, %.1f ms\n", r.steps,
-                 r.relative_residual, r.converged ? "" : " (assembling)", ms_since(t0));
+    std::fprintf(
+        stderr,
+        "  kept factor: %d CG steps, relative residual %.3g%s, %.1f ms (operator %.1f, factor's solves "
+        "%.1f)\n",
+        r.steps, r.relative_residual, r.converged ? "" : " (assembling)", ms_since(t0), ms_operator,
+        ms_preconditioner);
   if (!r.converged) return false;
   dvec = r.x;
   ++factor_.reuses;

@@ -50,6 +50,11 @@ struct CompareOptions {
   VhmParams vhm;
   // PWL(Tri)
   PwlTriParams tri;
+  // Each method's solve this many times, the methods interleaved (lidef, PWL(Tet), lidef, PWL(Tet), ...) so
+  // that a slow spell of the machine falls on all of them; the row's time is the median. The first run
+  // gives the row's results; the others only time the solve (their meshing and preprocessing are not redone
+  // where they are the same: the tet meshes are kept) and check that they end at the same map.
+  int repeat = 1;
 };
 
 struct MethodResult {
@@ -82,7 +87,11 @@ struct MethodResult {
   double min_sigma3_bound =
       std::numeric_limits<double>::quiet_NaN();                  // certified lower bound (when certified)
   double time_ratio = std::numeric_limits<double>::quiet_NaN();  // seconds / lidef's seconds (same run)
-  std::string detail;                                            // e.g. the tet mesh used
+  // CompareOptions::repeat > 1: every run's solve time in run order (`seconds` is their median), and whether
+  // every run ended at the same map (bit for bit) in the same number of iterations (1 yes, 0 no, -1 one run).
+  std::vector<double> run_seconds;
+  int repeats_identical = -1;
+  std::string detail;  // e.g. the tet mesh used
   // The deformed mesh (#V by 3) and, for volumetric methods, E_iso − 6 and det J (local volume ratio) per
   // vertex.
   MatX3d V;
