@@ -11,6 +11,8 @@
 #include "lidef/errors.h"
 #include "test_support.h"
 
+extern "C" int openblas_get_num_threads(void);
+
 namespace {
 
 TEST(BlasKernel, TheTestProcessRunsKernelsItsCpuSupports) {
@@ -137,3 +139,19 @@ TEST(BlasKernel, ParallelGemmMatchesEigenInEverySplit) {
 }
 
 }  // namespace
+
+// lidef's kernels leave OpenBLAS one thread for the whole process; a comparison method that calls BLAS
+// through CHOLMOD gets the run's threads back for its scope, and lidef its one thread after it.
+TEST(BlasKernel, ScopedBlasThreadsRestoresTheCallingThreadSetting) {
+  lidef::use_blas_in_calling_thread();
+  ASSERT_EQ(openblas_get_num_threads(), 1);
+  {
+    const lidef::ScopedBlasThreads blas(2);
+    EXPECT_EQ(openblas_get_num_threads(), 2);
+  }
+  EXPECT_EQ(openblas_get_num_threads(), 1);
+  {
+    const lidef::ScopedBlasThreads none(0);  // at least one thread
+    EXPECT_EQ(openblas_get_num_threads(), 1);
+  }
+}

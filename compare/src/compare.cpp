@@ -1,5 +1,7 @@
 #include "lidef/compare/compare.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,6 +12,7 @@
 #include <optional>
 #include <sstream>
 
+#include "lidef/blas_kernel.h"
 #include "lidef/continuation.h"
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
@@ -232,6 +235,9 @@ TetMesh pwl_tet_mesh(Shared& s, MethodResult& r, bool fine) {
 }
 
 void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
+  // CHOLMOD's BLAS on the run's threads, as in a process that runs PWL(Tet) alone (after lidef it would
+  // inherit one thread: use_blas_in_calling_thread).
+  const ScopedBlasThreads blas(omp_get_max_threads());
   const auto t0 = Clock::now();
   auto kept = s.tets.find(fine);
   if (kept == s.tets.end()) {
@@ -358,6 +364,7 @@ void run_vhm(Shared& s, MethodResult& r) {
 }
 
 void run_pwl_tri(Shared& s, MethodResult& r) {
+  const ScopedBlasThreads blas(omp_get_max_threads());  // as for PWL(Tet)
   const auto t0 = Clock::now();
   PwlTriParams p = s.opt.tri;
   p.lambda_p2p = s.sc.params.lambda_p2p;

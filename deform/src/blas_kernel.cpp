@@ -14,6 +14,7 @@
 
 extern "C" char* openblas_get_corename(void);
 extern "C" void openblas_set_num_threads(int);
+extern "C" int openblas_get_num_threads(void);
 // OpenBLAS's kernel selection (driver/others/dynamic.c), exported by DYNAMIC_ARCH builds only: weak, so that
 // lidef links against any OpenBLAS and simply cannot select a core where these are missing. quit forgets the
 // selection; init selects again (OPENBLAS_CORETYPE if set, else the CPU model) and initializes the chosen
@@ -160,6 +161,14 @@ void use_blas_in_calling_thread() {
     fix_blas_kernel();
     openblas_set_num_threads(1);
   });
+}
+
+ScopedBlasThreads::ScopedBlasThreads(int threads) : previous_(openblas_get_num_threads()) {
+  openblas_set_num_threads(std::max(1, threads));
+}
+
+ScopedBlasThreads::~ScopedBlasThreads() {
+  openblas_set_num_threads(previous_);
 }
 
 namespace {

@@ -48,13 +48,13 @@ std::vector<std::pair<std::string, std::string>> blas_environment();
 
 // What every lidef program re-executes itself with (reexec_with_environment, first thing in main()):
 // blas_environment(), and GLIBC_TUNABLES (unless the user set it) with glibc.malloc.hugetlb=1, so that malloc
-// backs its large blocks with transparent huge pages, and mmap_threshold 32 MiB, trim_threshold 1 GiB, so that
-// the blocks below 32 MiB come from the heap and freed ones are reused rather than returned. Why: touching fresh
-// memory costs one page fault per 4 KiB, and on a virtual machine each is slow — reopening the animal from the
-// cache (781 MB read into new buffers) took several times as long without huge pages, and a solve's
-// per-iteration arrays faulted in anew each time (docs/benchmarks.md, "Opening a model"). It changes where
-// memory comes from, never a result. A library cannot set it for its host (glibc reads it at startup): the
-// Python module's users set it themselves.
+// backs its large blocks with transparent huge pages, and mmap_threshold 32 MiB, trim_threshold 1 GiB, so
+// that the blocks below 32 MiB come from the heap and freed ones are reused rather than returned. Why:
+// touching fresh memory costs one page fault per 4 KiB, and on a virtual machine each is slow — reopening the
+// animal from the cache (781 MB read into new buffers) took several times as long without huge pages, and a
+// solve's per-iteration arrays faulted in anew each time (docs/benchmarks.md, "Opening a model"). It changes
+// where memory comes from, never a result. A library cannot set it for its host (glibc reads it at startup):
+// the Python module's users set it themselves.
 std::vector<std::pair<std::string, std::string>> process_environment();
 
 // Sets each variable of `env` that is not already set and, when one was set, re-executes /proc/self/exe with
@@ -70,6 +70,20 @@ void reexec_with_environment(char** argv, const std::vector<std::pair<std::strin
 // 8 ms alone, 63-76 ms beside the window; 3.1-3.6 -> 4.2 view updates/s, side by side; CHANGELOG.md).
 // One pool, one wait policy (OMP_WAIT_POLICY, gui/src/omp_wait.h).
 void use_blas_in_calling_thread();
+// OpenBLAS's own thread count set to `threads` for a scope and restored after it: for code that calls BLAS
+// outside lidef's kernels (CHOLMOD's supernodal factorization in the comparison methods), which would
+// otherwise run in the one thread use_blas_in_calling_thread leaves for the whole process once lidef has run
+// in it.
+class ScopedBlasThreads {
+ public:
+  explicit ScopedBlasThreads(int threads);
+  ~ScopedBlasThreads();
+  ScopedBlasThreads(const ScopedBlasThreads&) = delete;
+  ScopedBlasThreads& operator=(const ScopedBlasThreads&) = delete;
+
+ private:
+  int previous_;
+};
 // Column-major C (m by n) = op(A) op(B), op = transpose when the flag is set, as cblas_?gemm with alpha 1 and
 // beta 0, the columns of C (or its rows when n < 2 × threads) split over OpenMP's threads. Each element of C
 // sums over the whole k in one call, as a single call would.
