@@ -179,8 +179,7 @@ void run_lidef(Shared& s, MethodResult& r) {
   r.log = log.str();
 }
 
-// PWL(Tet)'s tet mesh: coarse, the model's tet mesh (Table 1's DOF) or TetGen of the cage; fine, TetGen's
-// refinement of the coarse mesh. Sets r.detail to its description.
+// PWL(Tet)'s tet mesh; r.detail says which.
 TetMesh pwl_tet_mesh(Shared& s, MethodResult& r, bool fine) {
   // Coarse: the model's tet mesh (Table 1's DOF) or TetGen of the cage; fine: TetGen's refinement (-r) of the
   // coarse mesh, which also works where the cage self-intersects slightly (animal) and TetGen -p cannot run.
