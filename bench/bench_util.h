@@ -16,6 +16,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "lidef/internal/median.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "nlohmann/json.hpp"
@@ -68,12 +69,8 @@ inline double cpu_ms() {
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
-// Median (the mean of the two middle values for an even count) and minimum; NaN for no values.
-inline double median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
+// Median (lidef/internal/median.h) and minimum; NaN for no values.
+using lidef::median;
 inline double minimum(const std::vector<double>& v) {
   return v.empty() ? std::nan("") : *std::min_element(v.begin(), v.end());
 }

@@ -126,16 +126,18 @@ std::string tet_mesh_label(const std::string& method, const std::map<std::string
                                                                         : "; FEWER DOF than the paper's");
 }
 
-// The solve times compared: lidef and PWL(Tet) at the paper's resolution, run kTimingRuns times each, the
-// two interleaved (`lidef compare --methods lidef,pwl-tet --repeat N`), each time the median of its runs —
+// Runs of each of the two timed methods (run_timed_pair).
+int timing_runs(const Context& ctx) {
+  return ctx.quick ? 2 : 5;
+}
+
+// The solve times compared: lidef and PWL(Tet) at the paper's resolution, timing_runs times each, the two
+// interleaved (`lidef compare --methods lidef,pwl-tet --repeat N`), each time the median of its runs —
 // single runs on a shared VM moved by more than the difference between the two (docs/reproduction.md).
 // PWL(Tet) runs on a mesh with at least the paper's DOF (`--tet-min-dof D`: the model's mesh when fine
 // enough, else TetGen with a searched max volume); where the first run's mesh (the model's own) is coarser,
 // that row stays as the extra row `pwl-tet-model-mesh`. Every row's time ratio is then taken to lidef's
 // median.
-int timing_runs(const Context& ctx) {
-  return ctx.quick ? 2 : 5;
-}
 
 void run_timed_pair(const Context& ctx, StagedOutputs& out, const ScenarioFile& s, const PaperRow* p,
                     const std::string& work, std::map<std::string, std::map<std::string, std::string>>& rows,

@@ -12,6 +12,7 @@
 #include "lidef/analysis/certificate_verification.h"
 #include "lidef/atomic_file.h"
 #include "lidef/errors.h"
+#include "lidef/internal/median.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/number_format.h"
 #include "lidef/octree_certifier.h"
@@ -20,13 +21,6 @@
 namespace lidef::cli::reproduce {
 
 namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 struct Fig5Case {
   std::string label;  // "with_smoothness" / "without_smoothness"

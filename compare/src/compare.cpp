@@ -17,6 +17,7 @@
 #include "lidef/domain_sampling.h"
 #include "lidef/errors.h"
 #include "lidef/geometry.h"
+#include "lidef/internal/median.h"
 #include "lidef/internal/stopwatch.h"
 #include "lidef/mesh_fields.h"
 #include "lidef/mesh_io.h"
@@ -465,11 +466,6 @@ void add_repeat(MethodResult& first, const MethodResult& again) {
   if (!same) first.repeats_identical = 0;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n == 0 ? kNaN : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 }  // namespace
 
 std::vector<MethodResult> run_comparison(const Scenario& sc, const Model& model, const CompareOptions& opt,
@@ -591,9 +587,7 @@ LocalVolume local_volume(const MethodResult& r) {
   v.mean_change = (r.det_j.array() - 1.0).abs().mean();
   return v;
 }
-}  // namespace
 
-namespace {
 // The fastest and slowest run's solve time (the one run's when not repeated).
 double min_of(const MethodResult& r) {
   return r.run_seconds.empty() ? r.seconds : *std::min_element(r.run_seconds.begin(), r.run_seconds.end());

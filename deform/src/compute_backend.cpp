@@ -31,7 +31,7 @@ class CpuEnergyKernels final : public EnergyKernels {
   void accept(double t) override {
     // The accepted step is almost always the last trial: its Jacobians (the same expression, the same bits)
     // and its sum are the new map's, so the next iteration's energy at t = 0 costs no pass.
-    const bool last_trial = t == trial_t_ && Jt_.rows() == J_.rows();
+    const bool last_trial = trial_t_ != 0 && t == trial_t_ && Jt_.rows() == J_.rows();
     if (last_trial)
       J_.swap(Jt_);
     else
