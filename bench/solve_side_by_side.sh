@@ -2,7 +2,7 @@
 # Two lidef binaries side by side on the shared scenarios without targets: per scenario and round, OLD then NEW
 # (`lidef deform S --threads 2 --quiet`, defaults, full solves), then whether the two runs wrote byte-identical
 # coefficients.txt and certificate.json. Prints per run: iterations, solve s (summary.json time_s.solve), mean
-# ms per iteration and mean certificate ms per iteration (iterations.csv).
+# ms per iteration, mean gradient ms and mean certificate ms per iteration (iterations.csv).
 # Usage, from the repository root after building: bash bench/solve_side_by_side.sh OLD_BINARY NEW_BINARY
 # (SCENARIOS, ROUNDS, SHARED, OUT in the environment).
 set -u
@@ -17,9 +17,9 @@ d = sys.argv[1]
 r = list(csv.DictReader(open(d + "/iterations.csv")))
 j = json.load(open(d + "/summary.json"))
 n = max(1, len(r))
-print("%-28s | %2d it | solve %.3f s | %.1f ms/it | certificate %.1f ms/it" % (
+print("%-28s | %2d it | solve %.3f s | %.1f ms/it | gradient %.1f ms/it | certificate %.1f ms/it" % (
     sys.argv[2], j["iterations"], j["time_s"]["solve"], sum(float(x["ms_total"]) for x in r) / n,
-    sum(float(x["ms_certificate"]) for x in r) / n))
+    sum(float(x["ms_gradient"]) for x in r) / n, sum(float(x["ms_certificate"]) for x in r) / n))
 PY
 }
 compare_round() {  # round: whether OLD and NEW wrote the same map and certificate

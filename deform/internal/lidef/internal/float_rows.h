@@ -133,7 +133,8 @@ inline auto pairwise_sum(const Term& term) {
 // acc_a[j] += Σ_r g_r[j] · q[r][a] for K rows g_r = g + r·m of a row-major float matrix (m entries per row),
 // their coefficients q (K by 3) and 3 contiguous double columns acc_a = acc + a·m; each float widened to
 // double, every product and sum in double, the K terms of an entry added pairwise before the entry.
-// Several rows per pass over acc: one load and store of it per K rows.
+// Several rows per pass over acc: one load and store of it per K rows. `next`: the rows the caller sums next
+// (K·m floats; nullptr: none), prefetched meanwhile.
 template <int K>
 inline void float_rows_transpose_times_group(const float* g, const double (*q)[3], long m, double* acc,
                                              const float* next = nullptr) {
@@ -146,10 +147,10 @@ inline void float_rows_transpose_times_group(const float* g, const double (*q)[3
   double* c[3] = {acc, acc + m, acc + 2 * m};
   long j = 0;
   for (; j + 4 <= m; j += 4) {
-    if (next) {  // the same columns of the next group's first and third rows
-      __builtin_prefetch(next + j);
-      __builtin_prefetch(next + 2 * m + j);
-    }
+    // The next group's K rows (K·m contiguous floats) front to back, K·4 floats per step: the whole group
+    // in order while this one is summed. The hardware prefetcher, left with K interleaved streams, kept
+    // this pass far above a plain read (docs/benchmarks.md, "The transposed pass's prefetch").
+    if (next) __builtin_prefetch(next + K * j);
     V4d x[K];
     for (int k = 0; k < K; ++k) x[k] = widen4(gr[k] + j);
     for (int a = 0; a < 3; ++a) {
