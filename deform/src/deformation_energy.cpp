@@ -247,9 +247,9 @@ MatS3 DeformationEnergy::subset_hessian_times(const std::vector<Mat9>& blocks, c
   // d.col(a)), then B_k vec(dJ_k) (vec order a + 3b) is added back as G_kᵀ P_k while the rows are in cache
   // (float_rows.h). All arithmetic in double: the CG steps need an operator that is linear to working
   // precision (single-precision sums round differently for every direction, and CG amplifies that). Fixed
-  // chunks summed in order: the same bits for every thread count. The subset has a few chunks (6 at the
-  // defaults), so they are dealt out one at a time: in contiguous blocks one of two threads got twice the
-  // other's samples (docs/benchmarks.md, "The subset Hessian's product on two threads").
+  // chunks summed in order: the same bits for every thread count. The subset has few chunks (6–7 at the
+  // defaults), so they are dealt out one at a time: with 7 (bar_bend), contiguous blocks gave one of two
+  // threads twice the other's samples (docs/benchmarks.md, "The subset Hessian's product on two threads").
   const int chunks = (m + kChunk - 1) / kChunk;
   std::vector<MatS3> partial(chunks);
 #pragma omp parallel for schedule(static, 1)

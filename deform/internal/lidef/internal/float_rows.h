@@ -148,8 +148,8 @@ inline void float_rows_transpose_times_group(const float* g, const double (*q)[3
   long j = 0;
   for (; j + 4 <= m; j += 4) {
     // The next group's K rows (K·m contiguous floats) front to back, K·4 floats per step: the whole group
-    // in order while this one is summed. The hardware prefetcher, left with K interleaved streams, kept
-    // this pass far above a plain read (docs/benchmarks.md, "The transposed pass's prefetch").
+    // in order while this one is summed. With two of the K rows prefetched column by column the pass took
+    // 1.5–2.8x a plain read of its bytes (docs/benchmarks.md, "The transposed pass's prefetch").
     if (next) __builtin_prefetch(next + K * j);
     V4d x[K];
     for (int k = 0; k < K; ++k) x[k] = widen4(gr[k] + j);
