@@ -138,7 +138,6 @@ int timing_runs(const Context& ctx) {
 // enough, else TetGen with a searched max volume); where the first run's mesh (the model's own) is coarser,
 // that row stays as the extra row `pwl-tet-model-mesh`. Every row's time ratio is then taken to lidef's
 // median.
-
 void run_timed_pair(const Context& ctx, StagedOutputs& out, const ScenarioFile& s, const PaperRow* p,
                     const std::string& work, std::map<std::string, std::map<std::string, std::string>>& rows,
                     FigureOutput& res) {
