@@ -370,6 +370,55 @@ TEST(CertificatePerturbation, TheRestFromADirectionTakesOverMoreAndStaysSound) {
   EXPECT_EQ(adopted.certify_reduced(y, q).base_lower, along.certify_reduced(y, q).base_lower);
 }
 
+// The voxel groups of the rest from a direction (Step 4e, "Voxel groups"): a partition of the voxels into
+// blocks of 2 x 2 x 2 base cells, each group's factor row and radius bounding every member's (so its rest
+// bounds theirs), formed alike when the factors are built and when they are adopted.
+TEST(CertificatePerturbation, TheVoxelGroupsBoundTheirMembers) {
+  const BentCase b;
+  const long N = b.sampling.size(), E = b.cage.num_edges();
+  ASSERT_EQ(b.sampling.grid_index.rows(), N);
+  const OctreeCertifier along(b.cage, b.sampling, &b.sub.basis);
+  EXPECT_TRUE(along.voxel_groups().start.empty());
+  const OctreeCertifier::FactorMatrix& f = along.factor_matrix(false);
+  const std::vector<char>* finite = nullptr;
+  ASSERT_NE(along.built_factors(false, &finite), nullptr);
+  const OctreeCertifier::VoxelGroups g = along.voxel_groups();
+  const long G = static_cast<long>(g.start.size()) - 1;
+  ASSERT_GT(G, 0);
+  EXPECT_EQ(g.start.front(), 0);
+  EXPECT_EQ(g.start.back(), N);
+  EXPECT_EQ(g.factors.rows(), G);
+  EXPECT_EQ(g.factors.cols(), E);
+  std::vector<int> seen(N, 0);
+  long violations = 0;
+  for (long q = 0; q < G; ++q) {
+    ASSERT_LT(g.start[q], g.start[q + 1]);
+    Eigen::Vector3i lo = Eigen::Vector3i::Constant(1 << 30), hi = -lo;
+    bool all_finite = true;
+    for (long k = g.start[q]; k < g.start[q + 1]; ++k) {
+      const long i = g.voxels[k];
+      ++seen[i];
+      lo = lo.cwiseMin(b.sampling.grid_index.row(i).transpose());
+      hi = hi.cwiseMax(b.sampling.grid_index.row(i).transpose());
+      all_finite = all_finite && (*finite)[i];
+      if (b.sampling.radius_of(static_cast<int>(i)) > g.radius(q)) ++violations;
+      for (long e = 0; e < E; ++e)
+        if (!(f(i, e) <= g.factors(q, e))) ++violations;
+    }
+    EXPECT_LE((hi - lo).maxCoeff(), 1) << "group " << q << " spans more than 2 cells";
+    EXPECT_EQ(g.finite[q] != 0, all_finite);
+  }
+  EXPECT_EQ(violations, 0);
+  EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](int c) { return c == 1; }));
+  EXPECT_GT(static_cast<double>(N) / static_cast<double>(G), 3.0) << "groups of several voxels";
+  OctreeCertifier adopted(b.cage, b.sampling, &b.sub.basis);
+  adopted.adopt_factors(false, f, *finite);
+  const OctreeCertifier::VoxelGroups ga = adopted.voxel_groups();
+  EXPECT_EQ(ga.start, g.start);
+  EXPECT_EQ(ga.voxels, g.voxels);
+  EXPECT_TRUE(ga.factors == g.factors);
+}
+
 // The per-voxel constants of Step 4e: built once, bounded by the stored rows' true norms (Eigen's SVD in
 // double), and adopted by another certifier (what the precomputation cache does) with the same certificates.
 TEST(CertificatePerturbation, ConstantsBoundTheStoredRowsAndAdoptingThemChangesNothing) {

@@ -146,7 +146,7 @@ std::vector<ParamInfo> make_table() {
       {"opencl_gpu_layout", "execution", &D::opencl_gpu_layout, 0, 0,
        "a CPU OpenCL device (PoCL) takes the GPU code paths, to test them without a GPU"},
       {"trace_line_search", "execution", &D::trace_line_search, 0, 0,
-       "print every line-search trial (step, energy, certificate) to stderr"},
+       "print every line-search trial (step, energy, certificate and its stage times) to stderr"},
       // --- Test hooks: failure injection for the test suite (docs/parameters.md).
       {"test_interrupt_after", "testing", &D::test_interrupt_after, 0, 100000,
        "lidef deform raises SIGINT after this many iterations (0 = never)"},

@@ -943,9 +943,12 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   }
   rec.ms_certificate += ms_since(tc);
   if (params_.trace_line_search)
-    std::fprintf(stderr, "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms\n", t,
-                 et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
-                 ms_since(tc));
+    std::fprintf(stderr,
+                 "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms (certifier: J %.1f, "
+                 "sigma %.1f, bounds %.1f, refinement %.1f, the rest %.1f)\n",
+                 t, et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
+                 ms_since(tc), c.ms_jacobian, c.ms_sigma, c.ms_bound, c.ms_refine,
+                 c.ms_total - c.ms_jacobian - c.ms_sigma - c.ms_bound - c.ms_refine);
   return c;
 }
 

@@ -236,6 +236,17 @@ class OctreeCertifier {
   const FactorMatrix* built_factors(bool third_kind, const std::vector<char>** finite) const;
   const FactorMatrix& factor_matrix(bool third_kind) const;  // built on first use
   void adopt_factors(bool third_kind, FactorMatrix factors, std::vector<char> finite);
+  // The voxel groups of the rest from a direction (docs/certificate.md, Step 4e, "Voxel groups"), formed
+  // with the first-order factors (built or adopted): group g holds voxels[start[g] .. start[g + 1]), and its
+  // row of `factors` (#groups by #E) and its `radius` bound every member's first-order factors and radius
+  // (`finite`: no member has a factor +∞). Empty before the factors exist. A copy, for tests and diagnostics.
+  struct VoxelGroups {
+    std::vector<long> start, voxels;
+    FactorMatrix factors;
+    VecXd radius;
+    std::vector<char> finite;
+  };
+  VoxelGroups voxel_groups() const;
   // Whether certifying by perturbation should keep the first-order factors for the rest from a direction
   // (docs/certificate.md, Step 4e): reduced mode, and a factor row (#E floats) at most a third of
   // the voxel's stored Hessian rows (6 s floats), so that bounding a voxel that way costs well below
@@ -290,6 +301,7 @@ class OctreeCertifier {
   struct Impl;
   struct Run;                                // the stages of one certification (octree_certifier.cpp)
   void init_common(const MatXd* reduction);  // checks the sampling, edge endpoints
+  void build_groups() const;                 // the voxel groups of the rest from a direction (Step 4e)
   VecXd delta_norms(const HarmonicBasis::FaceMatrices& fm) const;
   Certificate run(const MatX3d& y, const double* reduced_ptr, long reduced_rows,
                   const CertifyParams& p) const;
