@@ -83,7 +83,7 @@ struct OctreeCertifier::Impl {
   mutable std::mutex direction_mutex;
   mutable Eigen::Matrix<double, Eigen::Dynamic, 3> direction;
   mutable VecXd direction_delta, direction_rest;
-  // The same rest for a group of neighbouring voxels at once (Step 4e, "voxel groups"): the voxels of each
+  // The same rest for a group of neighbouring voxels at once (Step 4e, "Voxel groups"): the voxels of each
   // block of 2 x 2 x 2 base cells (of 8 consecutive voxels without a grid), group g holding
   // group_voxels[group_start[g] .. group_start[g + 1]); per group and edge the largest first-order factor of
   // its voxels and the largest radius, so that one row of #E floats bounds the rest of all of them. Built
