@@ -928,13 +928,20 @@ struct OctreeCertifier::Run {
     return std::isfinite(rho) ? rho : -1;
   }
   // ≥ ‖M‖₂ for a 3 by 3 block (the JT rows of one center): the smaller of ‖M‖_F and the root of Gershgorin's
-  // bound on λ_max(MᵀM).
+  // bound on λ_max(MᵀM). Written out: Eigen's 3 x 3 temporaries of a block with a stride of 3N cost about a
+  // tenth of the perturbation stage's per-voxel loop (docs/benchmarks.md, "The rest from a direction by voxel
+  // groups").
   template <class Block>
   static double spectral_bound(const Block& M) {
-    const Mat3 A = M;
-    const Mat3 gram = A.transpose() * A;
-    const double gersh = gram.cwiseAbs().rowwise().sum().maxCoeff();
-    return std::sqrt(std::min(A.squaredNorm(), gersh));
+    double a[3][3];  // a[c][r] = M(r, c): the columns
+    for (int c = 0; c < 3; ++c)
+      for (int r = 0; r < 3; ++r) a[c][r] = M(r, c);
+    const auto dot = [&](int c, int d) { return a[c][0] * a[d][0] + a[c][1] * a[d][1] + a[c][2] * a[d][2]; };
+    // The Gram matrix MᵀM: its diagonal (the trace is ‖M‖_F²) and off-diagonal magnitudes.
+    const double g00 = dot(0, 0), g11 = dot(1, 1), g22 = dot(2, 2);
+    const double g01 = std::abs(dot(0, 1)), g02 = std::abs(dot(0, 2)), g12 = std::abs(dot(1, 2));
+    const double gersh = std::max({g00 + g01 + g02, g01 + g11 + g12, g02 + g12 + g22});
+    return std::sqrt(std::min(g00 + g11 + g22, gersh));
   }
 
   // --- 1. J and H at the base centers: from the stored derivatives (CPU, or left to the backend's base
