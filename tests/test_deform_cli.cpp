@@ -607,6 +607,32 @@ TEST_F(DeformShared, HorseLegLiftConverges) {
   expect_converged("horse_leg_lift");
 }
 
+// The line searches' spectral fallback (docs/certificate.md, Step 4f) proves base voxels on bar_twist90's way
+// (the trace counts them), and on this scenario changes no verdict: the same map, and the same written
+// certificate, the third-order bound's alone, as with it off.
+TEST_F(DeformShared, BarTwist90LineSearchFallbackKeepsTheMapAndTheWrittenCertificate) {
+  LIDEF_REQUIRE_SHARED();
+  TempDir tmp;
+  long fallback[2] = {0, 0};
+  for (int k = 0; k < 2; ++k) {
+    std::string output;
+    const std::string out = tmp / (k ? "off" : "on");
+    ASSERT_EQ(deform(shared_scenario("bar_twist90"), out, tmp / "cache",
+                     std::string("--threads 2 --trace-line-search true --line-search-spectral-fallback ") +
+                         (k ? "false" : "true"),
+                     &output),
+              0)
+        << output;
+    for (size_t at = output.find("fallback="); at != std::string::npos; at = output.find("fallback=", at + 1))
+      fallback[k] += std::stol(output.substr(at + 9));
+    EXPECT_EQ(read_json(fs::path(out) / "certificate.json")["spectral_fallback"], false);
+  }
+  EXPECT_GT(fallback[0], 0) << "the first line searches leave base voxels to the fallback";
+  EXPECT_EQ(fallback[1], 0);
+  for (const char* f : {"coefficients.txt", "certificate.json", "voxels.csv"})
+    EXPECT_EQ(read_text(fs::path(tmp / "on") / f), read_text(fs::path(tmp / "off") / f)) << f;
+}
+
 // The 180-degree twist is reached (max handle error <= 1e-3), certified, through a planned
 // rotation-aware continuation (docs/solver.md, "Continuation"); before it the run stopped 0.32 short.
 TEST_F(DeformShared, BarTwist180ReachesItsTargetsThroughContinuation) {

@@ -37,8 +37,8 @@ std::string input_error(F&& f) {
 
 TEST(DeformParams, TableListsEveryFieldOnce) {
   // Counted by hand in deform_params.h: 6 sampling + 2 energy + 15 newton (3 of them continuation) +
-  // 11 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
-  const int kFields = 51;
+  // 12 certificate + 9 weighting + 5 execution + 3 testing. A new field must be added here and to the table.
+  const int kFields = 52;
   const auto& table = deform_param_table();
   EXPECT_EQ(static_cast<int>(table.size()), kFields);
   std::set<std::string> names;
@@ -80,6 +80,7 @@ TEST(DeformParams, TableListsEveryFieldOnce) {
                                              "refinement",
                                              "max_refined",
                                              "line_search_max_refined",
+                                             "line_search_spectral_fallback",
                                              "bound_tolerance",
                                              "max_distortion",
                                              "max_sigma1",

@@ -335,6 +335,8 @@ std::string certificate_json(const CertificateReport& r) {
                {"fnv1a64", hex64(r.cage_hash)}};
   j["coefficients_fnv1a64"] = hex64(r.coefficients_hash);
   j["bound"] = to_string(c.bound);
+  // Third order: whether base voxels it left unproven took the spectral bound (Step 4f), and how many did.
+  j["spectral_fallback"] = c.spectral_fallback;
   j["max_depth"] = r.params.max_depth;
   j["max_refined_voxels"] = r.params.max_refined_voxels;
   j["max_children_per_voxel"] = r.params.max_children_per_voxel;
@@ -362,6 +364,7 @@ std::string certificate_json(const CertificateReport& r) {
   j["leaves_certified"] =
       c.leaves.size() == static_cast<size_t>(c.num_leaves) ? ojson(certified_leaves) : ojson();
   j["refined"] = c.refined;
+  j["spectral_fallback_voxels"] = c.fallback_voxels;
   j["max_depth_used"] = c.max_depth_used;
   j["min_sigma3_center"] = num(c.min_sigma3_center);
   j["min_margin"] = num(c.min_margin);
@@ -442,6 +445,11 @@ CertificateReport read_certificate_json(const std::string& path) {
   }
   r.params.bound = c.bound;
   r.params.max_depth = static_cast<int>(rd.integer(root, "max_depth"));
+  if (root.contains("spectral_fallback")) {  // absent in certificates written before it (none used it)
+    c.spectral_fallback = rd.boolean(root, "spectral_fallback");
+    r.params.base_spectral_fallback = c.spectral_fallback;
+    c.fallback_voxels = rd.integer(root, "spectral_fallback_voxels");
+  }
   r.params.max_refined_voxels = rd.integer(root, "max_refined_voxels");
   r.params.max_children_per_voxel = rd.integer(root, "max_children_per_voxel");
   const nlohmann::json& s = rd.at(root, "sampling");

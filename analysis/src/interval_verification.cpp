@@ -732,7 +732,7 @@ JetEnclosure IntervalVerifier::jet(const Vec3& p) const {
 IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double radius_slack,
                                            double claim_distortion, double claim_sigma1) const {
   const Impl& im = *impl_;
-  IntervalLeaf res;
+  IntervalLeaf base;
   // The ball: the voxel of side h around c has circumradius (√3/2) h. voxels.csv holds shortest round-trip
   // decimals, so c and h are the certifier's doubles; should a decimal not be exactly that double, the
   // voxel it describes still lies in the ball widened by one ulp of h and of each coordinate of c.
@@ -740,75 +740,95 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double ra
   const I h = pt(side) + pt(ulp(side));
   const I shift = isqrt(sq(pt(ulp(c.x()))) + sq(pt(ulp(c.y()))) + sq(pt(ulp(c.z()))));
   const double r = hi(isqrt(pt(3)) / pt(2) * h + shift + pt(radius_slack));
-  res.radius_hi = r;
+  base.radius_hi = r;
 
   const bool third = im.bound != LipschitzBound::kFirstOrder;  // ‖H(c)‖ and Σ δ Θ (third, combined)
   // Spectral: the combined L, and the Taylor σ3 bound of Step 3c in intervals (taylor_sigma3_lower_bound_i).
-  const bool combined = im.bound == LipschitzBound::kCombined || im.bound == LipschitzBound::kSpectral;
-  const bool spectral = im.bound == LipschitzBound::kSpectral;
-  double hop = kInf;
-  IM3 J;
-  std::array<IM3, 3> H;
-  im.jet(c, J, H, third);
-  res.sigma3_lo = sigma3_lower_bound_i(J);
+  const bool own_combined = im.bound == LipschitzBound::kCombined || im.bound == LipschitzBound::kSpectral;
+  // The leaf's bounds with the certificate's bound, or (`spectral_terms`) with the spectral bound's.
+  auto bounds = [&](bool spectral_terms) {
+    IntervalLeaf res = base;
+    const bool combined = own_combined || spectral_terms;
+    const bool spectral = im.bound == LipschitzBound::kSpectral || spectral_terms;
+    double hop = kInf;
+    IM3 J;
+    std::array<IM3, 3> H;
+    im.jet(c, J, H, third);
+    res.sigma3_lo = sigma3_lower_bound_i(J);
 
-  I sum = pt(0), sum1 = pt(0);  // Σ δ Θ (third, combined) or Σ δ Γ (first); Σ δ Γ (combined)
-  for (const Impl::Edge& e : im.edges) {
-    sum += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, third));
-    if (combined) sum1 += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, false));
-  }
-  I L = sum;
-  if (third) {
-    std::array<I, 27> hs;
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b)
-        for (int k = 0; k < 3; ++k) hs[9 * a + 3 * b + k] = pt(abs_hi(H[a][b][k]));
-    const double frob = frobenius_hi(hs.begin(), hs.end());
-    L = pt(frob) + pt(r) * sum;
-    // Combined: min(first order, Taylor form ‖H(c)‖_op + ½ r Σ δ Θ); both are upper bounds, so is the min.
-    if (combined) {
-      hop = hessian_operator_norm_hi(H, frob);
-      const I taylor = pt(hop) + pt(r) * sum / pt(2);
-      L = pt(std::min(hi(sum1), hi(taylor)));
+    I sum = pt(0), sum1 = pt(0);  // Σ δ Θ (third, combined) or Σ δ Γ (first); Σ δ Γ (combined)
+    for (const Impl::Edge& e : im.edges) {
+      sum += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, third));
+      if (combined) sum1 += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, false));
     }
-  }
-  res.L_hi = std::isnan(hi(L)) ? kInf : hi(L);
-  const double L_jacobian_hi = res.L_hi;  // bounds J's change too (the spectral term below is σ3's only)
-  const I margin = pt(res.sigma3_lo) - pt(r) * pt(res.L_hi);
-  res.margin_lo = std::isnan(lo(margin)) ? -kInf : lo(margin);
-  // Spectral (Step 3c): σ3 ≥ ℓ − ½ r² Σ δ Θ on the ball; where that is the better margin, L_hi is the loss
-  // over r that gives it from sigma3_lo.
-  if (spectral) {
-    const double ell = taylor_sigma3_lower_bound_i(J, H, r, hop);
-    const I m2 = pt(ell) - pt(r) * pt(r) * pt(hi(sum)) / pt(2);
-    if (ell > -kInf && !std::isnan(lo(m2)) && lo(m2) > res.margin_lo) {
-      res.margin_lo = lo(m2);
-      res.L_hi = hi((pt(res.sigma3_lo) - pt(res.margin_lo)) / pt(r));
-    }
-  }
-  res.proven = res.margin_lo > 0;
-  add_distortion_bound_i(res, J, r, L_jacobian_hi);
-  // Step 3d: the Taylor bounds of σ1, σ3 and σ1/σ3 (third-order sums only: ½ r² Σ δ Θ bounds the
-  // remainder), where the Lipschitz bounds do not re-prove the certifier's claims; the better of each pair
-  // holds; σ3's and σ1/σ3's only where σ3 is proven positive, as the certifier's (which leaves are proven
-  // stays the Lipschitz bound's decision).
-  if (third && (res.distortion_hi > claim_distortion || res.sigma1_hi > claim_sigma1)) {
-    if (!std::isfinite(hop)) {
+    I L = sum;
+    if (third) {
       std::array<I, 27> hs;
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b)
-          for (int k = 0; k < 3; ++k) hs[9 * a + 3 * b + k] = H[a][b][k];
-      hop = hessian_operator_norm_hi(H, frobenius_hi(hs.begin(), hs.end()));
+          for (int k = 0; k < 3; ++k) hs[9 * a + 3 * b + k] = pt(abs_hi(H[a][b][k]));
+      const double frob = frobenius_hi(hs.begin(), hs.end());
+      L = pt(frob) + pt(r) * sum;
+      // Combined: min(first order, Taylor form ‖H(c)‖_op + ½ r Σ δ Θ); both are upper bounds, so is the min.
+      if (combined) {
+        hop = hessian_operator_norm_hi(H, frob);
+        const I taylor = pt(hop) + pt(r) * sum / pt(2);
+        L = pt(std::min(hi(sum1), hi(taylor)));
+      }
     }
-    const double rho = hi(pt(r) * pt(r) * sum / pt(2));
-    double s1 = kInf, s3 = -kInf, k = kInf;
-    taylor_distortion_bound_i(taylor_singular_bounds_i(J, H, r, hop), r, rho, claim_distortion, s1, s3, k);
-    res.sigma1_hi = std::min(res.sigma1_hi, s1);
-    if (res.margin_lo > 0) {
-      res.margin_lo = std::max(res.margin_lo, s3);
-      const double kq = hi(pt(res.sigma1_hi) / pt(res.margin_lo));
-      res.distortion_hi = std::min({res.distortion_hi, std::isnan(kq) ? kInf : kq, k});
+    res.L_hi = std::isnan(hi(L)) ? kInf : hi(L);
+    const I margin = pt(res.sigma3_lo) - pt(r) * pt(res.L_hi);
+    res.margin_lo = std::isnan(lo(margin)) ? -kInf : lo(margin);
+    const double L_jacobian_hi = res.L_hi;  // bounds J's change too (the spectral term below is σ3's only)
+    // Spectral (Step 3c): σ3 ≥ ℓ − ½ r² Σ δ Θ on the ball; where that is the better margin, L_hi is the loss
+    // over r that gives it from sigma3_lo.
+    if (spectral) {
+      const double ell = taylor_sigma3_lower_bound_i(J, H, r, hop);
+      const I m2 = pt(ell) - pt(r) * pt(r) * pt(hi(sum)) / pt(2);
+      if (ell > -kInf && !std::isnan(lo(m2)) && lo(m2) > res.margin_lo) {
+        res.margin_lo = lo(m2);
+        res.L_hi = hi((pt(res.sigma3_lo) - pt(res.margin_lo)) / pt(r));
+      }
     }
+    res.proven = res.margin_lo > 0;
+    add_distortion_bound_i(res, J, r, L_jacobian_hi);
+    // Step 3d: the Taylor bounds of σ1, σ3 and σ1/σ3 (third-order sums only: ½ r² Σ δ Θ bounds the
+    // remainder), where the Lipschitz bounds do not re-prove the certifier's claims; the better of each pair
+    // holds; σ3's and σ1/σ3's only where σ3 is proven positive, as the certifier's (which leaves are proven
+    // stays the Lipschitz bound's decision).
+    if (third && (res.distortion_hi > claim_distortion || res.sigma1_hi > claim_sigma1)) {
+      if (!std::isfinite(hop)) {
+        std::array<I, 27> hs;
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b)
+            for (int k = 0; k < 3; ++k) hs[9 * a + 3 * b + k] = H[a][b][k];
+        hop = hessian_operator_norm_hi(H, frobenius_hi(hs.begin(), hs.end()));
+      }
+      const double rho = hi(pt(r) * pt(r) * sum / pt(2));
+      double s1 = kInf, s3 = -kInf, k = kInf;
+      taylor_distortion_bound_i(taylor_singular_bounds_i(J, H, r, hop), r, rho, claim_distortion, s1, s3, k);
+      res.sigma1_hi = std::min(res.sigma1_hi, s1);
+      if (res.margin_lo > 0) {
+        res.margin_lo = std::max(res.margin_lo, s3);
+        const double kq = hi(pt(res.sigma1_hi) / pt(res.margin_lo));
+        res.distortion_hi = std::min({res.distortion_hi, std::isnan(kq) ? kInf : kq, k});
+      }
+    }
+    return res;
+  };
+  IntervalLeaf res = bounds(false);
+  // Step 4f: a third-order certificate's base voxel may have been proven, or given its σ1 and σ1/σ3 bounds,
+  // by the spectral bound (the certifier's fallback). Where the third-order bound does not re-prove the leaf
+  // or its claims, the spectral bound's are computed too; each is a rigorous bound, so the better of each
+  // holds.
+  if (third && !own_combined &&
+      (!res.proven || res.distortion_hi > claim_distortion || res.sigma1_hi > claim_sigma1)) {
+    const IntervalLeaf s = bounds(true);
+    res.margin_lo = std::max(res.margin_lo, s.margin_lo);
+    res.L_hi = std::min(res.L_hi, s.L_hi);
+    res.sigma1_hi = std::min(res.sigma1_hi, s.sigma1_hi);
+    res.distortion_hi = std::min(res.distortion_hi, s.distortion_hi);
+    res.proven = res.margin_lo > 0;
   }
   return res;
 }

@@ -94,6 +94,10 @@ std::vector<ParamInfo> make_table() {
        "child voxels evaluated per certification of a result at most"},
       {"line_search_max_refined", "certificate", &D::line_search_max_refined, 0, 1e9,
        "the same budget for line-search trials (a trial needing more is rejected, the step halved)"},
+      {"line_search_spectral_fallback", "certificate", &D::line_search_spectral_fallback, 0, 0,
+       "line-search certificates (third-order bound, no distortion target): a base voxel the third-order "
+       "bound leaves unproven takes the spectral bound where that proves it, before any refinement; the "
+       "certificate written stays the third-order bound's (docs/certificate.md, Step 4f)"},
       {"bound_tolerance", "certificate", &D::bound_tolerance, 0, 0.99,
        "above 0: refine a certified map until its lower bound of sigma3 is within this fraction of the "
        "smallest sampled sigma3 (0.1 = 10%); never changes the verdict"},

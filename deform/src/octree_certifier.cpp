@@ -521,6 +521,9 @@ struct OctreeCertifier::Run {
   // bound (its T bounds the Taylor remainder) and distortion targets (without targets the certificates stay
   // those of the Lipschitz bounds alone).
   const bool taylor;
+  // Step 4f: base voxels the third-order bound leaves unproven try the spectral bound's loss before they are
+  // refined (CertifyParams::base_spectral_fallback, where it applies: stored derivatives, no target).
+  const bool fallback;
   const HarmonicBasis::FaceMatrices fm;
   Certificate cert;
   // Base voxels.
@@ -575,6 +578,7 @@ struct OctreeCertifier::Run {
         use_stored(im.mode == Impl::Mode::kFull || (im.mode == Impl::Mode::kReduced && yr)),
         far_mode(params.refinement == RefinementEval::kFarField && third && !combined),
         taylor(third && params.taylor_bounds && params.targets().any()),
+        fallback(params.base_spectral_fallback && third && !combined && use_stored && !taylor),
         fm(o.basis_.face_matrices(y_)) {
     cert.bound = p.bound;
     cert.voxel_side = side;
@@ -967,11 +971,11 @@ struct OctreeCertifier::Run {
       if (im.kernels && !combined) {
         // The backend's base stage also forms T (stage 3). The far field of the few voxels it leaves to
         // refine is built here from their stored rows: the device would evaluate every cage face per child.
-        if (far_mode) stored_cols = Ycols;
+        if (far_mode || fallback) stored_cols = Ycols;
         device_Y = std::move(Ycols);
       } else {
         stored_derivatives(Ycols);
-        if (far_mode) stored_cols = std::move(Ycols);
+        if (far_mode || fallback) stored_cols = std::move(Ycols);
       }
     } else {
 #pragma omp parallel for schedule(dynamic, 64)
@@ -1149,11 +1153,16 @@ struct OctreeCertifier::Run {
                  // (Step 5), which the margin already subtracts; reported like the far field's eps_J.
                  base_storage * scaleJ(i)};
       // J's Lipschitz constant: L without the spectral bound's σ3-specific Taylor term (hop(i) is ‖H‖_op).
-      const double L1 = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
+      double L1 = lipschitz(hnorm(i), hop(i), Tf(i), T(i), r);
+      if (fallback && !(margin > 0) && im.clear[i] && sigma3(i) > 0 && !sign_unresolved[i] &&
+          spectral_fallback(i, r, base_storage, base[i], L1))
+        fallback_count.fetch_add(1, std::memory_order_relaxed);
       set_distortion(base[i], sigma1(i), 0.0, L1, r, scaleJ(i), scaleH(i), base_storage);
       if (taylor && unproven(base[i]) != DistortionTarget::kNone) flags[i] |= kTaylor;
-      if (!(margin > 0)) flags[i] |= kFails;
+      if (!(base[i].margin > 0)) flags[i] |= kFails;
     }
+    cert.fallback_voxels = fallback_count.load();
+    cert.spectral_fallback = fallback;
     for (long i = 0; i < N; ++i) {
       if (flags[i] & kTaylor) taylor_base.push_back(i);
       if (flags[i] & kFails) failing_base.push_back(i);
@@ -1172,26 +1181,51 @@ struct OctreeCertifier::Run {
     taylor_base.clear();
     cert.ms_bound = ms_since(t0) - device_ms;
   }
-  // T_i = Σ_e δ_e F(i, e) for every base voxel. An edge whose factor is +∞ (the voxel's ball may touch it)
-  // makes L infinite unless δ_e = 0 exactly (then H does not depend on it). Rows without an infinite factor
-  // take a branch-free, vectorized dot product.
+  // Step 4f: the spectral bound's loss (Step 3c; the first-order term where its factors are built) at a base
+  // voxel the third-order bound leaves unproven, from the same stored J̃, H̃ and third-order sum T(i) as the
+  // spectral bound's base stage (so the same rounding allowances: τ with the float storage, Step 5). Where
+  // it proves the voxel, `leaf` takes its L and margin and `L1` the combined bound's Lipschitz constant of J
+  // (σ1's bound); true then.
+  std::atomic<long> fallback_count{0};
+  bool spectral_fallback(long i, double r, double storage, CertLeaf& leaf, double& L1) const {
+    std::array<Mat3, 3> H;
+    stored_hessian(i, H);
+    const double hop_i = hessian_operator_norm(H);
+    // J̃ as the base stage formed it (a backend's base stage kept it on the device: the same stored rows
+    // here).
+    const double lb_i = taylor_sigma3_lower_bound(device_Y.empty() ? Jc[i] : stored_jacobian(i), H, r);
+    double t1 = kInf;
+    if (im.first_built.load(std::memory_order_acquire)) t1 = first_order_sum(i);
+    const double L = std::min(t1, taylor_part(hop_i, sigma3(i), lb_i, r) + 0.5 * r * T(i));
+    const double margin = sigma3(i) - r * L - tolerance(scaleJ(i), scaleH(i), sigma3(i), L, r, storage);
+    if (!(margin > 0)) return false;
+    leaf.L = L;
+    leaf.margin = margin;
+    leaf.certified = true;
+    L1 = std::min(t1, hop_i + 0.5 * r * T(i));
+    return true;
+  }
+  // Σ_e δ_e Γ_e(B_i) from voxel i's row of first-order factors (factor_sums for one voxel).
+  double first_order_sum(long i) const { return factor_row_sum(im.first.row(i).data(), im.first_finite[i]); }
+  // Σ_e δ_e f_e for one row of factors. An edge whose factor is +∞ (the voxel's ball may touch it) makes the
+  // sum infinite unless δ_e = 0 exactly (then H does not depend on it). Rows without an infinite factor take a
+  // branch-free, vectorized dot product.
+  double factor_row_sum(const float* f, bool finite) const {
+    if (finite) return weighted_float_sum(delta.data(), f, E);
+    double s = 0;  // an infinite factor counts only where its edge moved (0 · ∞ would be NaN)
+    for (long e = 0; e < E; ++e)
+      if (delta(e) != 0) s += delta(e) * static_cast<double>(f[e]);
+    return s;
+  }
+  // T_i = Σ_e δ_e F(i, e) for every evaluated base voxel (factor_row_sum).
   void factor_sums(const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& factors,
                    const std::vector<char>& row_finite, VecXd& out) const {
     out.setZero(N);
-    const double* dl = delta.data();
     const long ne = static_cast<long>(eval_list.size());
 #pragma omp parallel for schedule(static)
     for (long k = 0; k < ne; ++k) {
       const long i = eval_list[k];
-      const float* f = factors.row(i).data();
-      double s = 0;
-      if (row_finite[i]) {
-        s = weighted_float_sum(dl, f, E);
-      } else {  // an infinite factor counts only where its edge moved (0 · ∞ would be NaN)
-        for (long e = 0; e < E; ++e)
-          if (dl[e] != 0) s += dl[e] * static_cast<double>(f[e]);
-      }
-      out(i) = s;
+      out(i) = factor_row_sum(factors.row(i).data(), row_finite[i] != 0);
     }
   }
   // --- 4. Adaptive refinement of the failing voxels, one octree level at a time: all nodes of a level are

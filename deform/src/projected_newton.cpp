@@ -627,7 +627,16 @@ MatX3d DeformationSolver::coefficients() const {
 }
 
 Certificate DeformationSolver::certify_current(bool keep_leaves) const {
-  return frame_.from_normalized(certifier_->certify_reduced(y_, certify_params(false, keep_leaves)));
+  CertifyParams cp = certify_params(false, keep_leaves);
+  Certificate c = certifier_->certify_reduced(y_, cp);
+  // The line search may have accepted this map with the spectral fallback (Step 4f) where the third-order
+  // bound alone runs out of depth or budget: then the certificate is the fallback's, which proves it too.
+  if (!c.certified && params_.line_search_spectral_fallback) {
+    cp.base_spectral_fallback = true;
+    Certificate f = certifier_->certify_reduced(y_, cp);
+    if (f.certified) c = std::move(f);
+  }
+  return frame_.from_normalized(std::move(c));
 }
 
 EnergyTerms DeformationSolver::energy() const {
@@ -905,6 +914,7 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   const auto tc = Clock::now();
   CertifyParams cp = certify_params(true, false);
   cp.max_refined_voxels = std::min(cp.max_refined_voxels, params_.line_search_max_refined);
+  cp.base_spectral_fallback = params_.line_search_spectral_fallback;
   cp.priority_voxels = line_search_failed_;  // where the last rejected trial failed: checked first
   cp.distortion_probes = distortion_probes_;
   Certificate c;
@@ -944,10 +954,11 @@ Certificate DeformationSolver::certify_trial(const MatS3& yt, double t, const Ma
   rec.ms_certificate += ms_since(tc);
   if (params_.trace_line_search)
     std::fprintf(stderr,
-                 "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld (%s) %.1f ms (certifier: J %.1f, "
+                 "  trial t=%.4g E=%.6g cert=%d refined=%ld taken_over=%ld fallback=%ld (%s) %.1f ms "
+                 "(certifier: J %.1f, "
                  "sigma %.1f, bounds %.1f, refinement %.1f, the rest %.1f)\n",
-                 t, et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.reason.c_str(),
-                 ms_since(tc), c.ms_jacobian, c.ms_sigma, c.ms_bound, c.ms_refine,
+                 t, et.total, c.certified ? 1 : 0, c.refined, c.perturbed_voxels, c.fallback_voxels,
+                 c.reason.c_str(), ms_since(tc), c.ms_jacobian, c.ms_sigma, c.ms_bound, c.ms_refine,
                  c.ms_total - c.ms_jacobian - c.ms_sigma - c.ms_bound - c.ms_refine);
   return c;
 }

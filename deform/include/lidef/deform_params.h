@@ -77,6 +77,7 @@ struct DeformParams {
   long max_refined = 200000;             // child voxels evaluated per certification of a result
   long line_search_max_refined = 20000;  // the same budget for line-search trials: a trial that needs more is
                                          // rejected (sound: "not certified") and the step halved
+  bool line_search_spectral_fallback = true;  // line searches: CertifyParams::base_spectral_fallback
   double bound_tolerance = 0;  // > 0: refine a certified map's leaves until the lower bound of σ3 is within
                                // this fraction of the smallest sampled σ3 (CertifyParams::bound_tolerance)
   double max_distortion =

@@ -102,6 +102,14 @@ struct CertifyParams {
   // bounds σ1 and σ3 on a ball containing it. Points outside the voxels are skipped. Never changes a verdict;
   // saves the full evaluation of trials that fail where the last one did.
   std::vector<Vec3> distortion_probes;
+  // With the third-order bound, stored derivatives and no distortion target: a base voxel that the
+  // third-order bound leaves unproven takes the spectral bound's loss where that proves it
+  // (docs/certificate.md, Step 4f; Steps 3b and 3c are the argument), before it would be refined. Each bound
+  // is a lower bound of σ3 on the voxel, so such a voxel needs no subdivision; but a refined voxel's leaves
+  // often carry higher bounds than the spectral one of the whole voxel, so the certificates written keep the
+  // third-order bound alone (false). The solver's line searches set it
+  // (DeformParams::line_search_spectral_fallback).
+  bool base_spectral_fallback = false;
 };
 
 // One leaf of the certification octree.
@@ -184,7 +192,9 @@ struct Certificate {
   // targets().reason(distortion_failed_on, failing.front().center), and when distortion_budget > 0 that the
   // refinement budget ran out.
   std::string distortion_reason() const;
-  long perturbed_voxels = 0;  // base voxels certified by perturbation (σ3 and L not evaluated: NaN)
+  long perturbed_voxels = 0;       // base voxels certified by perturbation (σ3 and L not evaluated: NaN)
+  long fallback_voxels = 0;        // base voxels proven by the spectral fallback (base_spectral_fallback)
+  bool spectral_fallback = false;  // the fallback applied (CertifyParams::base_spectral_fallback, Step 4f)
   double ms_jacobian = 0, ms_sigma = 0, ms_bound = 0, ms_refine = 0, ms_total = 0;
 };
 

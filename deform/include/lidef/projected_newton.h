@@ -235,7 +235,9 @@ class DeformationSolver {
   const GlobalInjectivity* held_global_injectivity() const {
     return global_y_.rows() == y_.rows() && global_y_ == y_ ? &global_verdict_ : nullptr;
   }
-  // A full certificate of the current map with leaves (for reports), model units.
+  // A full certificate of the current map with leaves (for reports), model units: the third-order bound
+  // alone, or, where that does not certify a map a line search accepted with the spectral fallback
+  // (docs/certificate.md, Step 4f), the fallback's (Certificate::spectral_fallback says which).
   Certificate certify_current(bool keep_leaves = true) const;
   EnergyTerms energy() const;  // at the current map, current weights (E_P2P on normalized distances)
   EnergyWeights weights() const { return weights_; }
