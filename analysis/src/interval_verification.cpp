@@ -745,22 +745,22 @@ IntervalLeaf IntervalVerifier::verify_leaf(const Vec3& c, double side, double ra
   const bool third = im.bound != LipschitzBound::kFirstOrder;  // ‖H(c)‖ and Σ δ Θ (third, combined)
   // Spectral: the combined L, and the Taylor σ3 bound of Step 3c in intervals (taylor_sigma3_lower_bound_i).
   const bool own_combined = im.bound == LipschitzBound::kCombined || im.bound == LipschitzBound::kSpectral;
-  // The leaf's bounds with the certificate's bound, or (`spectral_terms`) with the spectral bound's.
+  IM3 J;
+  std::array<IM3, 3> H;
+  im.jet(c, J, H, third);
+  base.sigma3_lo = sigma3_lower_bound_i(J);
+  I sum = pt(0);  // Σ δ Θ (third, combined) or Σ δ Γ (first)
+  for (const Impl::Edge& e : im.edges) sum += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, third));
+  // The leaf's bounds with the certificate's bound, or (`spectral_terms`) with the spectral bound's; J, H and
+  // the sum above are the same for both.
   auto bounds = [&](bool spectral_terms) {
     IntervalLeaf res = base;
     const bool combined = own_combined || spectral_terms;
     const bool spectral = im.bound == LipschitzBound::kSpectral || spectral_terms;
     double hop = kInf;
-    IM3 J;
-    std::array<IM3, 3> H;
-    im.jet(c, J, H, third);
-    res.sigma3_lo = sigma3_lower_bound_i(J);
-
-    I sum = pt(0), sum1 = pt(0);  // Σ δ Θ (third, combined) or Σ δ Γ (first); Σ δ Γ (combined)
-    for (const Impl::Edge& e : im.edges) {
-      sum += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, third));
-      if (combined) sum1 += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, false));
-    }
+    I sum1 = pt(0);  // Σ δ Γ (combined)
+    if (combined)
+      for (const Impl::Edge& e : im.edges) sum1 += pt(e.delta_hi) * pt(im.edge_factor_hi(e, c, r, false));
     I L = sum;
     if (third) {
       std::array<I, 27> hs;
