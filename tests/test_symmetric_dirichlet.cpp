@@ -14,6 +14,7 @@
 #include <sstream>
 #include <vector>
 
+#include "lidef/internal/sd_lanes.h"
 #include "lidef/signed_svd.h"
 #include "lidef/symmetric_dirichlet.h"
 
@@ -347,4 +348,56 @@ TEST(SymmetricDirichlet, RepeatedSingularValues) {
   const Mat3 RtD = R.transpose() * D;
   const Vec9 vD = Eigen::Map<const Vec9>(D.data()), vRtD = Eigen::Map<const Vec9>(RtD.data());
   EXPECT_NEAR(vD.dot(HR * vD), vRtD.dot(H_identity * vRtD), 1e-12 * vD.squaredNorm());
+}
+
+// The four-sample lanes of the energy passes (sd_lanes.h) against the scalar functions above, with the
+// samples in the JT layout the passes read (J_i(a, b) = JT(3i + b, a)): every test Jacobian in every lane
+// position, a direction per sample, a group cut short by `last` (its extra lanes repeat the last sample), and
+// +∞ / NaN where det J ≤ 0 exactly as sd_energy, sd_gradient and sd_hessian_times give them.
+TEST(SymmetricDirichlet, LanesMatchTheScalarFunctions) {
+  std::vector<Mat3> Js = positive_jacobians();
+  Mat3 flipped = Mat3::Identity();
+  flipped(2, 2) = -1;
+  Js.push_back(flipped);
+  Js.push_back(Mat3::Zero());
+  const long n = static_cast<long>(Js.size());
+  std::mt19937 rng(29);
+  std::normal_distribution<double> nd;
+  MatJT JT(3 * n, 3), DT(3 * n, 3);
+  std::vector<Mat3> Ds(n);
+  for (long i = 0; i < n; ++i) {
+    for (int k = 0; k < 9; ++k) Ds[i](k) = nd(rng);
+    JT.middleRows<3>(3 * i) = Js[i].transpose();
+    DT.middleRows<3>(3 * i) = Ds[i].transpose();
+  }
+  const auto close = [](double got, double want, double scale) {
+    if (std::isnan(want)) return std::isnan(got);
+    if (std::isinf(want)) return got == want;
+    return std::abs(got - want) <= 1e-12 * scale;
+  };
+  int checked = 0;
+  for (long first = 0; first < n; ++first) {
+    sd_lanes::Mat3Lanes J, D, g;
+    const long last = std::min(n - 1, first + 2);  // three samples, then the last one again
+    sd_lanes::load(JT.data(), JT.rows(), first, last, J);
+    sd_lanes::load(DT.data(), DT.rows(), first, last, D);
+    const sd_lanes::Lanes e = sd_lanes::energy(J), c = sd_lanes::curvature(J, D);
+    sd_lanes::gradient(J, g);
+    for (int k = 0; k < 4; ++k) {
+      const long i = std::min(first + k, last);
+      SCOPED_TRACE(show(Js[i]));
+      const double inv_scale = Js[i].determinant() > 0 ? Js[i].inverse().squaredNorm() : 0.0;
+      EXPECT_TRUE(close(e[k], sd_energy(Js[i]), Js[i].squaredNorm() + inv_scale)) << e[k];
+      const Mat3 G = sd_gradient(Js[i]);
+      const double gscale = G.allFinite() ? G.norm() + Js[i].norm() : 0.0;
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) EXPECT_TRUE(close(g[a][b][k], G(a, b), gscale)) << a << b;
+      const Mat3 HD = sd_hessian_times(Js[i], Ds[i]);
+      const double want = Ds[i].cwiseProduct(HD).sum();
+      const double cscale = HD.allFinite() ? Ds[i].norm() * HD.norm() : 0.0;
+      EXPECT_TRUE(close(c[k], want, cscale)) << c[k] << " against " << want;
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 4 * n);
 }

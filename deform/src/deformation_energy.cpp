@@ -10,6 +10,7 @@
 #include "lidef/blas_kernel.h"
 #include "lidef/errors.h"
 #include "lidef/internal/float_rows.h"
+#include "lidef/internal/sd_lanes.h"
 #include "lidef/symmetric_dirichlet.h"
 
 namespace lidef {
@@ -116,16 +117,25 @@ VecXd DeformationEnergy::handle_errors(const MatS3& y) const {
   return (handle_positions(y) - Q_).rowwise().norm();
 }
 
-template <class PerSample>
-double DeformationEnergy::weighted_sample_sum(const PerSample& per_sample) const {
+double DeformationEnergy::sample_weight(int i) const {
+  return w_.size() ? w_(i) : 1.0;
+}
+
+template <class PerLanes>
+double DeformationEnergy::weighted_lane_sum(const PerLanes& per_lanes) const {
   const int n = num_samples();
   const int chunks = (n + kChunk - 1) / kChunk;
   std::vector<double> partial(chunks, 0.0);
 #pragma omp parallel for schedule(static)
   for (int c = 0; c < chunks; ++c) {
     const int b = c * kChunk, e = std::min(n, b + kChunk);
+    double v[kChunk];
+    for (int i = b; i < e; i += 4) {
+      const sd_lanes::Lanes l = per_lanes(i, e - 1);
+      for (int k = 0; k < 4 && i + k < e; ++k) v[i - b + k] = l[k];
+    }
     double sum = 0;
-    for (int i = b; i < e; ++i) sum += (w_.size() ? w_(i) : 1.0) * per_sample(i);
+    for (int i = b; i < e; ++i) sum += sample_weight(i) * v[i - b];
     partial[c] = sum;
   }
   double total = 0;
@@ -134,7 +144,11 @@ double DeformationEnergy::weighted_sample_sum(const PerSample& per_sample) const
 }
 
 double DeformationEnergy::distortion_sum(const MatJT& JT) const {
-  return weighted_sample_sum([&](int i) { return sd_energy(jacobian_at(JT, i)) - 6.0; });
+  return weighted_lane_sum([&](int first, int last) {
+    sd_lanes::Mat3Lanes J;
+    sd_lanes::load(JT.data(), JT.rows(), first, last, J);
+    return sd_lanes::energy(J) - 6.0;
+  });
 }
 
 EnergyTerms DeformationEnergy::terms(double dis_sum, const MatS3& y, const EnergyWeights& w) const {
@@ -151,7 +165,11 @@ EnergyTerms DeformationEnergy::evaluate(const MatJT& JT, const MatS3& y, const E
 }
 
 MatS3 DeformationEnergy::distortion_gradient_sum(const MatJT& JT) const {
-  return weighted_transpose_sum([&](int i) { return sd_gradient(jacobian_at(JT, i)); });
+  return weighted_transpose_lanes([&](int first, int last, sd_lanes::Mat3Lanes g) {
+    sd_lanes::Mat3Lanes J;
+    sd_lanes::load(JT.data(), JT.rows(), first, last, J);
+    sd_lanes::gradient(J, g);
+  });
 }
 
 MatS3 DeformationEnergy::weighted_transpose_times(const MatJT& T) const {
@@ -164,30 +182,52 @@ MatS3 DeformationEnergy::distortion_hessian_times_sum(const MatJT& JT, const Mat
 }
 
 double DeformationEnergy::distortion_curvature(const MatJT& JT, const MatJT& dJ) const {
-  return weighted_sample_sum([&](int i) {
-    const Mat3 D = jacobian_at(dJ, i);
-    return D.cwiseProduct(sd_hessian_times(jacobian_at(JT, i), D)).sum();
+  return weighted_lane_sum([&](int first, int last) {
+    sd_lanes::Mat3Lanes J, D;
+    sd_lanes::load(JT.data(), JT.rows(), first, last, J);
+    sd_lanes::load(dJ.data(), dJ.rows(), first, last, D);
+    return sd_lanes::curvature(J, D);
   });
 }
 
-template <class PerSample>
-MatS3 DeformationEnergy::weighted_transpose_sum(const PerSample& per_sample) const {
+template <class Fill>
+MatS3 DeformationEnergy::transpose_sum(const Fill& fill) const {
   const int n = num_samples(), s = reduced_size();
   const int chunks = (n + kChunk - 1) / kChunk;
   std::vector<MatS3> partial(chunks);
 #pragma omp parallel for schedule(static)
   for (int c = 0; c < chunks; ++c) {
     const int b = c * kChunk, e = std::min(n, b + kChunk);
-    // P rows 3i+b, column a = the per-sample matrix's (a,b): the same transposed layout as JT.
     MatJT P(3 * (e - b), 3);
-    for (int i = b; i < e; ++i)
-      P.middleRows<3>(3 * (i - b)) = (w_.size() ? w_(i) : 1.0) * per_sample(i).transpose();
+    fill(b, e, P);
     partial[c].setZero(s, 3);
     rows_transpose_times(G_, 3 * b, 3 * e, P.data(), P.rows(), partial[c]);
   }
   MatS3 g = MatS3::Zero(s, 3);
   for (const MatS3& p : partial) g += p;
   return g;
+}
+
+template <class PerSample>
+MatS3 DeformationEnergy::weighted_transpose_sum(const PerSample& per_sample) const {
+  return transpose_sum([&](int b, int e, MatJT& P) {
+    for (int i = b; i < e; ++i) P.middleRows<3>(3 * (i - b)) = sample_weight(i) * per_sample(i).transpose();
+  });
+}
+
+template <class PerLanes>
+MatS3 DeformationEnergy::weighted_transpose_lanes(const PerLanes& per_lanes) const {
+  return transpose_sum([&](int b, int e, MatJT& P) {
+    for (int i = b; i < e; i += 4) {
+      sd_lanes::Mat3Lanes m;
+      per_lanes(i, e - 1, m);
+      for (int k = 0; k < 4 && i + k < e; ++k) {
+        const double w = sample_weight(i + k);
+        for (int a = 0; a < 3; ++a)
+          for (int r = 0; r < 3; ++r) P(3 * (i - b + k) + r, a) = w * m[a][r][k];
+      }
+    }
+  });
 }
 
 MatS3 DeformationEnergy::quadratic_hessian_times(const MatS3& d, const EnergyWeights& w) const {

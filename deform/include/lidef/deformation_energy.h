@@ -141,12 +141,22 @@ class DeformationEnergy {
                                   bool projected) const;
   MatXd products(const std::vector<Mat9>& blocks, bool all_samples, bool double_precision) const;
   void add_quadratic_hessian(MatXd& H, const EnergyWeights& w) const;
-  // Σ_i w_i per_sample(i) in fixed chunks added in order (the same bits for every thread count).
-  template <class PerSample>
-  double weighted_sample_sum(const PerSample& per_sample) const;
-  // Σ_i w_i G_iᵀ per_sample(i) (s by 3) for a per-sample 3x3 in J's layout, in fixed chunks.
+  double sample_weight(int i) const;  // w_i (1 without weights)
+  // Σ_i w_i v_i in fixed chunks added in order (the same bits for every thread count), the values v_i four
+  // samples at a time: per_lanes(first, last) returns those of samples first, …, first + 3 (sd_lanes.h;
+  // lanes past last are ignored).
+  template <class PerLanes>
+  double weighted_lane_sum(const PerLanes& per_lanes) const;
+  // Σ_i G_iᵀ P_i (s by 3) in fixed chunks: fill(b, e, P) writes the weighted per-sample 3x3 matrices of
+  // samples [b, e) into P in J's transposed layout (rows 3(i − b) + r, column a: entry (a, r)).
+  template <class Fill>
+  MatS3 transpose_sum(const Fill& fill) const;
+  // transpose_sum of w_i per_sample(i), one 3x3 per sample.
   template <class PerSample>
   MatS3 weighted_transpose_sum(const PerSample& per_sample) const;
+  // transpose_sum of w_i M_i, the matrices four samples at a time: per_lanes(first, last, M) as above.
+  template <class PerLanes>
+  MatS3 weighted_transpose_lanes(const PerLanes& per_lanes) const;
   VecXd all_block_weights() const;  // #samples: w_i / Σ w (1/n without weights)
   MatXfR G_;
   std::vector<int> subset_;
