@@ -375,7 +375,6 @@ TEST(SymmetricDirichlet, LanesMatchTheScalarFunctions) {
     if (std::isinf(want)) return got == want;
     return std::abs(got - want) <= 1e-12 * scale;
   };
-  int checked = 0;
   for (long first = 0; first < n; ++first) {
     sd_lanes::Mat3Lanes J, D, g;
     const long last = std::min(n - 1, first + 2);  // three samples, then the last one again
@@ -396,8 +395,6 @@ TEST(SymmetricDirichlet, LanesMatchTheScalarFunctions) {
       const double want = Ds[i].cwiseProduct(HD).sum();
       const double cscale = HD.allFinite() ? Ds[i].norm() * HD.norm() : 0.0;
       EXPECT_TRUE(close(c[k], want, cscale)) << c[k] << " against " << want;
-      ++checked;
     }
   }
-  EXPECT_EQ(checked, 4 * n);
 }
