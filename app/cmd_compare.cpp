@@ -89,6 +89,12 @@ void add_compare_options(CLI::App& app, Action& action) {
                   "(table.csv: every run's min and max, and whether all runs ended at the same map)")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
+  sub->add_option(
+         "--blas-threads", c.blas_threads,
+         "pwl-tet, pwl-tri: OpenBLAS threads of the CHOLMOD factorizations (0: --threads, as a process "
+         "running them alone; 1: in the calling thread, as lidef's BLAS calls)")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   add_param_flags(sub, &opts->overrides, "lidef parameters (shared weights/tolerances): ");
   sub->footer(
       "Writes into --out (all files together, or none): table.csv, table.md (paper Table 1 columns), and "

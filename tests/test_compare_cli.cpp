@@ -11,6 +11,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <thread>
 
 #include "lidef/compare/compare.h"
 #include "lidef/procedural_models.h"
@@ -239,6 +240,39 @@ TEST(CompareCli, FailingMethodIsReportedAndOthersRun) {
     EXPECT_NE(row_of(rows, "pwl-tet").at("error").find("no tetrahedra"), std::string::npos);
     EXPECT_NE(row_of(rows, "pwl-tri").at("status"), "failed");
   }
+}
+
+// --blas-threads: CHOLMOD's OpenBLAS threads for PWL(Tet) (as OpenBLAS reports them in the run), by default
+// the run's; the solve is the same Newton iteration either way.
+TEST(CompareCli, BlasThreadsSetPwlTetsCholmodThreads) {
+  TempDir dir;
+  const std::string sc = lidef::test::project_data() + "/scenarios/beam_bend.json";
+  std::string one, dflt, bad;
+  ASSERT_EQ(run_lidef("compare '" + sc + "' --out '" + dir / "one" +
+                          "' --methods pwl-tet --threads 2 --blas-threads 1 " + kSmall,
+                      &one),
+            0)
+      << one;
+  ASSERT_EQ(
+      run_lidef("compare '" + sc + "' --out '" + dir / "dflt" + "' --methods pwl-tet --threads 2 " + kSmall,
+                &dflt),
+      0)
+      << dflt;
+  EXPECT_NE(one.find("[pwl-tet] CHOLMOD's BLAS threads: 1\n"), std::string::npos) << one;
+  if (std::thread::hardware_concurrency() >= 2) {  // OpenBLAS caps its threads at the cores it found
+    EXPECT_NE(dflt.find("[pwl-tet] CHOLMOD's BLAS threads: 2\n"), std::string::npos) << dflt;
+  }
+  std::vector<std::string> header;
+  const auto a = row_of(read_table(dir / "one/table.csv", &header), "pwl-tet");
+  const auto b = row_of(read_table(dir / "dflt/table.csv", &header), "pwl-tet");
+  EXPECT_EQ(a.at("status"), "converged");
+  EXPECT_EQ(a.at("iterations"), b.at("iterations"));
+  EXPECT_NEAR(num(a, "max_handle_error"), num(b, "max_handle_error"), 1e-9);
+  EXPECT_EQ(
+      run_lidef("compare '" + sc + "' --out '" + dir / "bad" + "' --methods pwl-tet --blas-threads -1", &bad),
+      2);
+  EXPECT_NE(bad.find("--blas-threads"), std::string::npos) << bad;
+  EXPECT_FALSE(fs::exists(dir / "bad"));
 }
 
 TEST(CompareCli, UnknownMethodIsAnErrorAndWritesNothing) {

@@ -213,7 +213,7 @@ TEST(ReproduceSlow, Table1QuickOnSharedBar) {
       check_structure(tmp / "out/table1", "table1", "table1.csv",
                       "scenario,method,status,dof,iterations,converged,certified,inverted_mesh_vertices,max_"
                       "handle_error,paper_dof,paper_iterations,time_s,time_ratio_to_lidef,paper_time_s,"
-                      "tet_mesh,time_runs,time_s_min,time_s_max");
+                      "tet_mesh,time_runs,time_s_min,time_s_max,pwl_blas_threads");
   const nlohmann::json* c = claim_containing(s, "lidef's result is certified");
   ASSERT_NE(c, nullptr);
   EXPECT_EQ((*c)["measured"], true);  // lidef never returns an uncertified map
@@ -288,6 +288,21 @@ TEST(ReproduceSlow, Table1QuickOnSharedBar) {
     timed += pair;
   }
   EXPECT_EQ(timed, 2);
+  // PWL(Tet)'s row is the faster of its two timed series, BLAS on the run's 2 threads or in the calling
+  // thread.
+  for (const auto& r : rows) {
+    if (r.at("method") == "pwl-tet") {
+      EXPECT_TRUE(r.at("pwl_blas_threads") == "1" || r.at("pwl_blas_threads") == "2")
+          << r.at("pwl_blas_threads");
+    } else {
+      EXPECT_EQ(r.at("pwl_blas_threads"), "") << r.at("method");
+    }
+  }
+  EXPECT_TRUE(fs::exists(tmp / "out/table1/compare_bar_bend_timed_blas1.log"));
+  EXPECT_NE(read_text(tmp / "out/table1/compare_bar_bend_timed_blas1.log").find("CHOLMOD's BLAS threads: 1"),
+            std::string::npos);
+  EXPECT_NE(read_text(tmp / "out/table1/README.md").find("BLAS threads of the series taken: bar_bend "),
+            std::string::npos);
   EXPECT_NE(read_text(tmp / "out/table1/README.md").find("Every run of each ended at the same map"),
             std::string::npos);
 }

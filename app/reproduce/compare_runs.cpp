@@ -1,6 +1,8 @@
 // table1 and fig12: the comparison with PWL(Tet), VHM and PWL(Tri) (paper Table 1, Fig. 12). The methods run
 // in lidef-compare (the one program that links TetGen and CHOLMOD, docs/architecture.md), executed with the
 // same arguments a user would give `lidef compare`; this module reads its table.csv.
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -134,6 +136,8 @@ int timing_runs(const Context& ctx) {
 // The solve times compared: lidef and PWL(Tet) at the paper's resolution, timing_runs times each, the two
 // interleaved (`lidef compare --methods lidef,pwl-tet --repeat N`), each time the median of its runs —
 // single runs on a shared VM moved by more than the difference between the two (docs/reproduction.md).
+// PWL(Tet) runs a second series with CHOLMOD's BLAS in the calling thread (`--blas-threads 1`); its row is
+// the series with the smaller median (table1.csv's `pwl_blas_threads`).
 // PWL(Tet) runs on a mesh with at least the paper's DOF (`--tet-min-dof D`: the model's mesh when fine
 // enough, else TetGen with a searched max volume); where the first run's mesh (the model's own) is coarser,
 // that row stays as the extra row `pwl-tet-model-mesh`. Every row's time ratio is then taken to lidef's
@@ -155,6 +159,23 @@ void run_timed_pair(const Context& ctx, StagedOutputs& out, const ScenarioFile& 
   for (const char* m : {"lidef", "pwl-tet"})
     if (!timed.count(m))
       throw NumericalError("lidef-compare wrote no " + std::string(m) + " row for " + s.path);
+  timed["pwl-tet"]["blas_threads"] = std::to_string(ctx.threads > 0 ? ctx.threads : omp_get_max_threads());
+  // PWL(Tet) again with CHOLMOD's BLAS in the calling thread: which of the two is faster depends on the
+  // machine (docs/compare.md, "Threads"), and the comparison takes PWL(Tet)'s faster series.
+  extra[1] = "pwl-tet";  // the value of --methods
+  extra.push_back("--blas-threads");
+  extra.push_back("1");
+  const std::string log1 = "compare_" + s.name + "_timed_blas1.log";
+  auto blas1 = run_compare(ctx, out, s.path, s.models_dir,
+                           (fs::path(work) / (s.name + "_timed_blas1")).string(), log1, extra);
+  res.files.push_back(log1);
+  const auto b1 = blas1.find("pwl-tet");
+  if (b1 != blas1.end() && b1->second.at("status") != "failed" &&
+      (timed["pwl-tet"].at("status") == "failed" ||
+       csv_number(b1->second, "time_s") < csv_number(timed["pwl-tet"], "time_s"))) {
+    timed["pwl-tet"] = b1->second;
+    timed["pwl-tet"]["blas_threads"] = "1";
+  }
   const auto coarse = rows.find("pwl-tet");
   if (coarse != rows.end() && coarse->second.at("status") != "failed" && paper_dof > 0 &&
       csv_number(coarse->second, "dof") < paper_dof)
@@ -208,7 +229,7 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
   write_file_atomic(out.path("table1.csv"), [&](std::ostream& f) {
     f << "scenario,method,status,dof,iterations,converged,certified,inverted_mesh_vertices,max_handle_error,"
          "paper_dof,paper_iterations,time_s,time_ratio_to_lidef,paper_time_s,tet_mesh,time_runs,time_s_min,"
-         "time_s_max\n";
+         "time_s_max,pwl_blas_threads\n";
     for (const Result& r : results)
       for (const std::string& m : kTable1Rows) {
         const auto it = r.rows.find(m);
@@ -224,7 +245,8 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
           << row.at("time_ratio_to_lidef") << ',' << (p && col >= 0 ? format_g(p->time[col]) : "") << ','
           << tet_mesh_label(m, row, p) << ',' << cell_or(row, "repeats", "1") << ','
           << cell_or(row, "time_s_min", row.at("time_s")) << ','
-          << cell_or(row, "time_s_max", row.at("time_s")) << '\n';
+          << cell_or(row, "time_s_max", row.at("time_s")) << ','
+          << (m == "pwl-tet" ? cell_or(row, "blas_threads", "") : "") << '\n';
       }
   });
   res.files.insert(res.files.begin(), "table1.csv");
@@ -293,6 +315,8 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
                  {"inverted_mesh_vertices", num_json(csv_number(row, "inverted_mesh_vertices"))},
                  {"max_handle_error", num_json(csv_number(row, "max_handle_error"))}};
       if (!tet_mesh_label(m, row, p).empty()) data[m]["tet_mesh"] = tet_mesh_label(m, row, p);
+      if (m == "pwl-tet" && row.count("blas_threads"))
+        data[m]["blas_threads"] = num_json(csv_number(row, "blas_threads"));
       times[m] = {{"time_s", num_json(csv_number(row, "time_s"))},
                   {"time_ratio_to_lidef", num_json(csv_number(row, "time_ratio_to_lidef"))}};
       // The claims compare lidef with the methods at the paper's resolution; the coarser extra row is data.
@@ -316,11 +340,13 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
     res.claims.push_back({"lidef's result is certified locally injective on " + r.s.name, true,
                           "Sec. 8 (\"designed to produce locally injective maps\")",
                           std::isfinite(cert) ? ojson(cert == 1) : ojson(nullptr), cert == 1});
-    res.claims.push_back({"lidef has the shortest solve time on " + r.s.name +
-                              " (other methods' time / lidef's; lidef and PWL(Tet): medians of " +
-                              std::to_string(timing_runs(ctx)) + " interleaved runs; timing-dependent)",
-                          p ? ojson("ratios from Table 1's times") : ojson(nullptr), "Table 1, Sec. 8",
-                          lidef_ok ? ratios : ojson(nullptr), lidef_ok && fastest});
+    res.claims.push_back(
+        {"lidef has the shortest solve time on " + r.s.name +
+             " (other methods' time / lidef's; lidef and PWL(Tet): medians of " +
+             std::to_string(timing_runs(ctx)) +
+             " interleaved runs, PWL(Tet) the faster of its two BLAS settings; timing-dependent)",
+         p ? ojson("ratios from Table 1's times") : ojson(nullptr), "Table 1, Sec. 8",
+         lidef_ok ? ratios : ojson(nullptr), lidef_ok && fastest});
   }
   // PWL(Tet)'s resolution per scenario, next to the paper's.
   std::string resolution;
@@ -355,6 +381,19 @@ void run_table1(const Context& ctx, StagedOutputs& out, FigureOutput& res) {
                 cell_or(it->second, "time_s_min", "?") + "–" + cell_or(it->second, "time_s_max", "?");
       if (cell_or(it->second, "repeats_identical", "1") != "1") differ += " " + r.s.name + " " + m;
     }
+  std::string blas;
+  for (const Result& r : results) {
+    const auto it = r.rows.find("pwl-tet");
+    if (it != r.rows.end() && it->second.count("blas_threads"))
+      blas += std::string(blas.empty() ? "" : ", ") + r.s.name + " " + it->second.at("blas_threads");
+  }
+  if (!blas.empty())
+    res.notes.push_back(
+        "PWL(Tet)'s time is the faster of two series: CHOLMOD's BLAS on the run's threads (as a process "
+        "running "
+        "it alone) and in the calling thread (`--blas-threads 1`, as lidef's BLAS calls); which is faster "
+        "depends on the machine (docs/compare.md, \"Threads\"). BLAS threads of the series taken: " +
+        blas + ".");
   if (!spread.empty())
     res.notes.push_back("lidef's and PWL(Tet)'s times are medians of " + std::to_string(timing_runs(ctx)) +
                         " runs, the two interleaved (`--repeat`); fastest–slowest run, s: " + spread + "." +

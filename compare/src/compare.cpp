@@ -234,10 +234,14 @@ TetMesh pwl_tet_mesh(Shared& s, MethodResult& r, bool fine) {
   return tets;
 }
 
+// CHOLMOD's BLAS threads for PWL(Tet) and PWL(Tri): by default the run's threads, as in a process that runs
+// them alone (after lidef it would inherit one thread: use_blas_in_calling_thread).
+int cholmod_blas_threads(const CompareOptions& opt) {
+  return opt.blas_threads > 0 ? opt.blas_threads : omp_get_max_threads();
+}
+
 void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
-  // CHOLMOD's BLAS on the run's threads, as in a process that runs PWL(Tet) alone (after lidef it would
-  // inherit one thread: use_blas_in_calling_thread).
-  const ScopedBlasThreads blas(omp_get_max_threads());
+  const ScopedBlasThreads blas(cholmod_blas_threads(s.opt));
   const auto t0 = Clock::now();
   auto kept = s.tets.find(fine);
   if (kept == s.tets.end()) {
@@ -247,6 +251,7 @@ void run_pwl_tet(Shared& s, MethodResult& r, bool fine) {
   const TetMesh& tets = kept->second.first;
   r.detail = kept->second.second;
   s.say(r.method, r.detail);
+  s.say(r.method, "CHOLMOD's BLAS threads: " + std::to_string(blas.active()));
   const TetEmbedding mesh_embedding =
       embed_points(tets, s.model.mesh.V, s.model.dir + ": PWL(Tet) mesh vertex");
   const auto W = mesh_embedding.weights();
@@ -364,7 +369,7 @@ void run_vhm(Shared& s, MethodResult& r) {
 }
 
 void run_pwl_tri(Shared& s, MethodResult& r) {
-  const ScopedBlasThreads blas(omp_get_max_threads());  // as for PWL(Tet)
+  const ScopedBlasThreads blas(cholmod_blas_threads(s.opt));
   const auto t0 = Clock::now();
   PwlTriParams p = s.opt.tri;
   p.lambda_p2p = s.sc.params.lambda_p2p;

@@ -167,6 +167,10 @@ ScopedBlasThreads::ScopedBlasThreads(int threads) : previous_(openblas_get_num_t
   openblas_set_num_threads(std::max(1, threads));
 }
 
+int ScopedBlasThreads::active() const {
+  return openblas_get_num_threads();
+}
+
 ScopedBlasThreads::~ScopedBlasThreads() {
   openblas_set_num_threads(previous_);
 }

@@ -80,6 +80,8 @@ class ScopedBlasThreads {
   ~ScopedBlasThreads();
   ScopedBlasThreads(const ScopedBlasThreads&) = delete;
   ScopedBlasThreads& operator=(const ScopedBlasThreads&) = delete;
+  // The thread count OpenBLAS reports in this scope (it may cap the one asked for).
+  int active() const;
 
  private:
   int previous_;

@@ -55,6 +55,11 @@ struct CompareOptions {
   // gives the row's results; the others only time the solve (their meshing and preprocessing are not redone
   // where they are the same: the tet meshes are kept) and check that they end at the same map.
   int repeat = 1;
+  // OpenBLAS threads of PWL(Tet)'s and PWL(Tri)'s CHOLMOD factorizations; 0: the run's threads, as in a
+  // process that runs them alone. 1 runs BLAS in the calling thread, as lidef's own BLAS calls do: with
+  // OpenBLAS's pthread workers beside the OpenMP loops either can be the faster, depending on the machine
+  // (docs/compare.md, "Threads").
+  int blas_threads = 0;
 };
 
 struct MethodResult {
